@@ -1,0 +1,13 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The Curved Reflections engine: numpy only, no bpy.
+
+Everything here takes and returns numpy arrays and small dataclasses, so the hard
+parts (ray tracing of reflectors, the exact reference solver, sample-based cameras)
+are tested with plain pytest.
+"""
+
+from .errors import SceneInputError
+from .scene import DiffuseMesh, Reflector, scene_bounds
+from .view import View, look_at_view
+
+__all__ = ["DiffuseMesh", "Reflector", "SceneInputError", "View", "look_at_view", "scene_bounds"]

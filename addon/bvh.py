@@ -1,0 +1,172 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""A bounding volume hierarchy built and traversed with whole-array numpy operations.
+
+Triangles are sorted along a Morton (Z-order) curve of their centroids and cut into
+leaves of ``leaf_size`` consecutive triangles; the tree is the complete binary tree over
+those leaves (padded to a power of two). Every node at level k then covers one
+contiguous slice of the sorted triangles, so each level's bounds are a single
+reshape-and-reduce, and traversal is breadth-first over (query, node) pairs, one level
+at a time: no per-node or per-ray Python loop. For tessellated surfaces the Morton
+order gives compact leaves, which is what the ray tracer and the exact solver need.
+
+Besides boxes, each node stores a cone bounding the vertex normals of its triangles
+(axis and cosine of the half-angle). Interpolated normals are normalised convex
+combinations of vertex normals, so they stay inside the cone; the exact solver uses
+that to discard nodes where no mirror reflection can occur.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+MORTON_BITS = 10
+
+
+def _spread_bits(values: np.ndarray) -> np.ndarray:
+    """Insert two zero bits between the low 10 bits of each value (for 30-bit Morton codes)."""
+    x = values.astype(np.uint64) & np.uint64(0x3FF)
+    x = (x | (x << np.uint64(16))) & np.uint64(0x030000FF)
+    x = (x | (x << np.uint64(8))) & np.uint64(0x0300F00F)
+    x = (x | (x << np.uint64(4))) & np.uint64(0x030C30C3)
+    x = (x | (x << np.uint64(2))) & np.uint64(0x09249249)
+    return x
+
+
+def morton_codes(points: np.ndarray) -> np.ndarray:
+    """30-bit Morton codes of points, quantised in their own bounding box."""
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    scale = (1 << MORTON_BITS) - 1
+    cells = np.floor((points - lo) / np.maximum(hi - lo, 1e-300) * scale).astype(np.int64)
+    cells = np.clip(cells, 0, scale)
+    return (_spread_bits(cells[:, 0]) << np.uint64(2)) | (_spread_bits(cells[:, 1]) << np.uint64(1)) | _spread_bits(cells[:, 2])
+
+
+@dataclass(frozen=True)
+class BVH:
+    """Complete binary tree over Morton-sorted triangles.
+
+    ``order`` (n_leaves * leaf_size,) maps sorted slots to triangle indices, -1 for
+    padding. Level k has 2**k nodes; ``box_lo[k]``, ``box_hi[k]`` are (2**k, 3) and
+    empty nodes have lo = +inf, hi = -inf, so every box test rejects them.
+    ``cone_axis[k]`` (2**k, 3) and ``cone_cos[k]`` (2**k,) bound the vertex normals;
+    cone_cos = -1 means "any direction".
+    """
+
+    order: np.ndarray
+    leaf_size: int
+    box_lo: tuple
+    box_hi: tuple
+    cone_axis: tuple
+    cone_cos: tuple
+
+    @property
+    def depth(self) -> int:
+        """Index of the leaf level."""
+        return len(self.box_lo) - 1
+
+    @property
+    def nbytes(self) -> int:
+        arrays = [self.order, *self.box_lo, *self.box_hi, *self.cone_axis, *self.cone_cos]
+        return int(sum(a.nbytes for a in arrays))
+
+
+def build_bvh(vertices: np.ndarray, triangles: np.ndarray, normals: np.ndarray | None = None,
+              leaf_size: int = 4) -> BVH:
+    """Build the BVH of a triangle mesh; ``normals`` (N, 3) unit vertex normals for the cones."""
+    corners = vertices[triangles]  # (M, 3, 3)
+    n_triangles = len(triangles)
+    n_leaves = 1 << max(0, int(np.ceil(np.log2(max(1, -(-n_triangles // leaf_size))))))
+    n_slots = n_leaves * leaf_size
+
+    order = np.full(n_slots, -1, dtype=np.int64)
+    order[:n_triangles] = np.argsort(morton_codes(corners.mean(axis=1)), kind="stable")
+    filled = order >= 0
+    slot_triangles = np.where(filled, order, 0)
+
+    slot_lo = np.where(filled[:, None], corners.min(axis=1)[slot_triangles], np.inf)
+    slot_hi = np.where(filled[:, None], corners.max(axis=1)[slot_triangles], -np.inf)
+    if normals is None:
+        slot_normals = np.zeros((n_slots, 3, 3))
+    else:
+        slot_normals = np.where(filled[:, None, None], normals[triangles][slot_triangles], 0.0)
+
+    depth = int(np.log2(n_leaves))
+    box_lo, box_hi, cone_axis, cone_cos = [], [], [], []
+    for level in range(depth + 1):
+        nodes = 1 << level
+        lo = slot_lo.reshape(nodes, -1, 3).min(axis=1)
+        hi = slot_hi.reshape(nodes, -1, 3).max(axis=1)
+        axis, cos = _normal_cones(slot_normals.reshape(nodes, -1, 3), filled.reshape(nodes, -1))
+        box_lo.append(lo)
+        box_hi.append(hi)
+        cone_axis.append(axis)
+        cone_cos.append(cos)
+    return BVH(order, leaf_size, tuple(box_lo), tuple(box_hi), tuple(cone_axis), tuple(cone_cos))
+
+
+def _normal_cones(node_normals: np.ndarray, node_filled: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cone (axis, cos half-angle) around each node's normals.
+
+    ``node_normals`` is (nodes, 3 * slots, 3), three corner normals per triangle slot;
+    ``node_filled`` (nodes, slots) marks the slots holding a triangle.
+    """
+    total = node_normals.sum(axis=1)
+    length = np.linalg.norm(total, axis=1)
+    axis = total / np.maximum(length, 1e-300)[:, None]
+    dots = np.einsum("nsd,nd->ns", node_normals, axis)
+    present = np.repeat(node_filled, 3, axis=1)
+    cos = np.where(present, dots, np.inf).min(axis=1)
+    cos = np.where((length < 1e-9) | ~np.isfinite(cos), -1.0, np.clip(cos, -1.0, 1.0))
+    return axis, cos
+
+
+NodeTest = Callable[[np.ndarray, int, np.ndarray], np.ndarray]
+
+
+def descend(bvh: BVH, query_roots: np.ndarray, node_test: NodeTest) -> tuple[np.ndarray, np.ndarray]:
+    """Breadth-first descent of (query, node) pairs; returns candidate (query, triangle) pairs.
+
+    ``node_test(queries, level, nodes)`` returns a bool mask of the pairs to keep. All
+    queries start at the root; pairs that pass the test at the leaf level expand into
+    their leaf's triangles. Both returned arrays are sorted by query.
+    """
+    queries = np.asarray(query_roots, dtype=np.int64)
+    nodes = np.zeros(len(queries), dtype=np.int64)
+    for level in range(bvh.depth + 1):
+        keep = node_test(queries, level, nodes)
+        queries, nodes = queries[keep], nodes[keep]
+        if level < bvh.depth:
+            queries = np.repeat(queries, 2)
+            nodes = (np.repeat(nodes, 2) << 1) | np.tile(np.array([0, 1]), len(nodes))
+    slots = nodes[:, None] * bvh.leaf_size + np.arange(bvh.leaf_size)
+    triangles = bvh.order[slots]
+    queries = np.broadcast_to(queries[:, None], triangles.shape)
+    present = triangles >= 0
+    return queries[present], triangles[present]
+
+
+def ray_box_test(bvh: BVH, origins: np.ndarray, directions: np.ndarray,
+                 t_min: np.ndarray, t_max: np.ndarray) -> NodeTest:
+    """Slab test of rays against node boxes, for :func:`descend`.
+
+    Zero direction components are replaced by a tiny value of the same sign so that
+    the slab distances stay finite (no 0 * inf NaNs on box faces).
+    """
+    safe = np.where(np.abs(directions) < 1e-30, np.where(directions < 0, -1e-30, 1e-30), directions)
+    inv_directions = 1.0 / safe
+
+    def test(queries: np.ndarray, level: int, nodes: np.ndarray) -> np.ndarray:
+        lo, hi = bvh.box_lo[level][nodes], bvh.box_hi[level][nodes]
+        o = origins[queries]
+        inv = inv_directions[queries]
+        t0 = (lo - o) * inv
+        t1 = (hi - o) * inv
+        near = np.minimum(t0, t1).max(axis=1)
+        far = np.maximum(t0, t1).min(axis=1)
+        non_empty = lo[:, 0] <= hi[:, 0]
+        return non_empty & (near <= far) & (far >= t_min[queries]) & (near <= t_max[queries])
+
+    return test

@@ -1,0 +1,184 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""CPU ray tracing of the reflectors: nearest hits, occlusion, mirror reflection.
+
+All reflectors of a scene are traced together through one :class:`ReflectorSet`, so a
+ray's nearest hit is the nearest over every reflector and occlusion by the other
+reflectors comes for free. Rays are processed in chunks, each chunk as whole arrays
+(breadth-first BVH descent, batched Moller-Trumbore), so full-resolution ray maps are
+practical in numpy.
+
+Surface model (DESIGN.md): flat triangles carrying interpolated vertex normals. Mirrors
+are two-sided, as in Cycles: at a hit, the geometric and the interpolated normal are
+turned toward the side the ray comes from. A reflection is *valid* where the incoming
+ray is in front of the interpolated normal and the reflected ray leaves the front of
+the triangle; near silhouettes, interpolated normals can break either condition.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .bvh import build_bvh, descend, ray_box_test
+from .errors import SceneInputError
+from .scene import Reflector
+
+RAY_CHUNK = 1 << 16
+#: Relative (to the scene size) distance below which a hit is taken as the ray's own origin.
+SELF_HIT_EPSILON = 1e-9
+
+
+@dataclass(frozen=True)
+class RayHits:
+    """Nearest hits of R rays; entries of rays that hit nothing are -1 / inf / NaN."""
+
+    t: np.ndarray  # (R,) distance along the unit ray, inf for a miss
+    triangle: np.ndarray  # (R,) index into ReflectorSet triangles, -1 for a miss
+    reflector: np.ndarray  # (R,) reflector index, -1 for a miss
+    barycentric: np.ndarray  # (R, 3) weights of the triangle's three corners
+    position: np.ndarray  # (R, 3)
+    normal: np.ndarray  # (R, 3) interpolated normal, turned toward the ray's origin
+    face_normal: np.ndarray  # (R, 3) geometric normal, turned toward the ray's origin
+
+    @property
+    def hit(self) -> np.ndarray:
+        return self.triangle >= 0
+
+
+def reflect(directions: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """Mirror directions about unit normals: d - 2 (d . n) n."""
+    return directions - 2.0 * np.einsum("ij,ij->i", directions, normals)[:, None] * normals
+
+
+def reflection_valid(directions: np.ndarray, normals: np.ndarray, face_normals: np.ndarray) -> np.ndarray:
+    """Incoming ray in front of the (oriented) interpolated normal, reflected ray leaving the face."""
+    reflected = reflect(directions, normals)
+    return (np.einsum("ij,ij->i", directions, normals) < 0) & (np.einsum("ij,ij->i", reflected, face_normals) > 0)
+
+
+class ReflectorSet:
+    """All reflectors of a scene, concatenated, with one BVH for tracing and solving."""
+
+    def __init__(self, reflectors: list[Reflector], leaf_size: int = 4):
+        if not reflectors:
+            raise SceneInputError("scene", "has no reflector: mark at least one object as a reflector")
+        self.reflectors = list(reflectors)
+        offsets = np.cumsum([0] + [len(r.vertices) for r in reflectors])
+        self.vertices = np.concatenate([r.vertices for r in reflectors])
+        self.normals = np.concatenate([r.normals for r in reflectors])
+        self.triangles = np.concatenate([r.triangles + o for r, o in zip(reflectors, offsets)])
+        self.owner = np.concatenate(
+            [np.full(len(r.triangles), i, dtype=np.int64) for i, r in enumerate(reflectors)]
+        )
+        corners = self.vertices[self.triangles]
+        self.v0 = corners[:, 0]
+        self.e1 = corners[:, 1] - corners[:, 0]
+        self.e2 = corners[:, 2] - corners[:, 0]
+        cross = np.cross(self.e1, self.e2)
+        self.area2 = np.linalg.norm(cross, axis=1)
+        self.face_normals = cross / np.maximum(self.area2, 1e-300)[:, None]
+        lo, hi = self.vertices.min(axis=0), self.vertices.max(axis=0)
+        self.scale = float(max(np.linalg.norm(hi - lo), 1e-12))
+        # Split vertices (sharp edges, custom normals) share positions: weld them so that
+        # triangles meeting at a split still count as neighbours.
+        _, welded = np.unique(self.vertices, axis=0, return_inverse=True)
+        self.welded_triangles = welded.reshape(-1)[self.triangles]
+        self.bvh = build_bvh(self.vertices, self.triangles, self.normals, leaf_size=leaf_size)
+
+    @property
+    def nbytes(self) -> int:
+        arrays = (self.vertices, self.normals, self.triangles, self.owner, self.v0, self.e1, self.e2,
+                  self.face_normals, self.welded_triangles)
+        return int(sum(a.nbytes for a in arrays)) + self.bvh.nbytes
+
+    def surface(self, triangles: np.ndarray, barycentric: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Positions and unit interpolated normals at barycentric coordinates of triangles."""
+        corners = self.triangles[triangles]
+        positions = np.einsum("ij,ijk->ik", barycentric, self.vertices[corners])
+        normals = np.einsum("ij,ijk->ik", barycentric, self.normals[corners])
+        normals /= np.maximum(np.linalg.norm(normals, axis=1), 1e-300)[:, None]
+        return positions, normals
+
+    def neighbours(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """(K,) bool: triangles a and b share a (welded) vertex; -1 never does."""
+        shared = (self.welded_triangles[a][:, :, None] == self.welded_triangles[b][:, None, :]).any(axis=(1, 2))
+        return shared & (a >= 0) & (b >= 0)
+
+    def intersect(self, origins, directions, t_max=np.inf, source_triangles=None) -> RayHits:
+        """Nearest reflector hit of each ray (unit ``directions``) with t in (eps, t_max].
+
+        ``source_triangles`` (R,) excludes hits on the triangle a ray starts from and its
+        one-ring neighbours (facet self-hits of reflected rays), -1 for none.
+        """
+        origins = np.asarray(origins, dtype=np.float64)
+        directions = np.asarray(directions, dtype=np.float64)
+        n_rays = len(origins)
+        t_max = np.broadcast_to(np.asarray(t_max, dtype=np.float64), (n_rays,))
+        sources = (np.full(n_rays, -1, dtype=np.int64) if source_triangles is None
+                   else np.asarray(source_triangles, dtype=np.int64))
+        best_t = np.full(n_rays, np.inf)
+        best_triangle = np.full(n_rays, -1, dtype=np.int64)
+        best_uv = np.full((n_rays, 2), np.nan)
+        for start in range(0, n_rays, RAY_CHUNK):
+            chunk = slice(start, min(start + RAY_CHUNK, n_rays))
+            rays, t, triangles, uv = self._chunk_hits(
+                origins[chunk], directions[chunk], t_max[chunk], sources[chunk]
+            )
+            best_t[chunk][rays] = t
+            best_triangle[chunk][rays] = triangles
+            best_uv[chunk][rays] = uv
+        return self._hits(origins, directions, best_t, best_triangle, best_uv)
+
+    def occluded(self, origins, directions, distances, source_triangles=None) -> np.ndarray:
+        """(R,) bool: a reflector lies on the segment of length ``distances`` along each ray."""
+        distances = np.asarray(distances, dtype=np.float64) * (1.0 - 1e-9)
+        return self.intersect(origins, directions, distances, source_triangles).hit
+
+    def _chunk_hits(self, origins, directions, t_max, sources):
+        t_min = np.full(len(origins), SELF_HIT_EPSILON * self.scale)
+        test = ray_box_test(self.bvh, origins, directions, t_min, t_max)
+        rays, triangles = descend(self.bvh, np.arange(len(origins)), test)
+        t, u, v = self._moller_trumbore(origins[rays], directions[rays], triangles)
+        with np.errstate(invalid="ignore"):
+            keep = (t > t_min[rays]) & (t <= t_max[rays])
+        keep &= ~self.neighbours(sources[rays], triangles) & (triangles != sources[rays])
+        rays, triangles, t, u, v = rays[keep], triangles[keep], t[keep], u[keep], v[keep]
+        order = np.lexsort((t, rays))
+        rays, triangles, t, u, v = rays[order], triangles[order], t[order], u[order], v[order]
+        first = np.ones(len(rays), dtype=bool)
+        first[1:] = rays[1:] != rays[:-1]
+        return rays[first], t[first], triangles[first], np.stack([u[first], v[first]], axis=1)
+
+    def _moller_trumbore(self, origins, directions, triangles):
+        """Batched Moller-Trumbore; (t, u, v) with t = NaN where a pair misses."""
+        e1, e2 = self.e1[triangles], self.e2[triangles]
+        p = np.cross(directions, e2)
+        det = np.einsum("ij,ij->i", e1, p)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / det
+            s = origins - self.v0[triangles]
+            u = np.einsum("ij,ij->i", s, p) * inv
+            q = np.cross(s, e1)
+            v = np.einsum("ij,ij->i", directions, q) * inv
+            t = np.einsum("ij,ij->i", e2, q) * inv
+        tolerance = 1e-12
+        inside = (np.abs(det) > 1e-300) & (u >= -tolerance) & (v >= -tolerance) & (u + v <= 1 + tolerance)
+        return np.where(inside, t, np.nan), u, v
+
+    def _hits(self, origins, directions, t, triangles, uv) -> RayHits:
+        hit = triangles >= 0
+        barycentric = np.full((len(t), 3), np.nan)
+        barycentric[hit] = np.stack([1 - uv[hit, 0] - uv[hit, 1], uv[hit, 0], uv[hit, 1]], axis=1)
+        position = np.full((len(t), 3), np.nan)
+        normal = np.full((len(t), 3), np.nan)
+        face = np.full((len(t), 3), np.nan)
+        # Positions from the ray (exactly on it), normals from the surface, both-sided.
+        position[hit] = origins[hit] + t[hit, None] * directions[hit]
+        _, normal[hit] = self.surface(triangles[hit], barycentric[hit])
+        face[hit] = self.face_normals[triangles[hit]]
+        flip = np.einsum("ij,ij->i", face[hit], directions[hit]) > 0
+        face[hit] = np.where(flip[:, None], -face[hit], face[hit])
+        normal[hit] = np.where(flip[:, None], -normal[hit], normal[hit])
+        reflector = np.where(hit, self.owner[np.maximum(triangles, 0)], -1)
+        return RayHits(t, triangles, reflector, barycentric, position, normal, face)

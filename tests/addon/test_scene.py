@@ -1,0 +1,53 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+import numpy as np
+import pytest
+
+from curved_reflections.addon import DiffuseMesh, Reflector, SceneInputError, scene_bounds
+
+TRIANGLE = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+UP = np.tile([0.0, 0.0, 2.0], (3, 1))
+
+
+def test_reflector_normalises_normals_and_freezes_arrays():
+    mirror = Reflector("Mirror", TRIANGLE, [[0, 1, 2]], UP)
+    np.testing.assert_allclose(mirror.normals, np.tile([0, 0, 1.0], (3, 1)))
+    with pytest.raises(ValueError):
+        mirror.vertices[0, 0] = 5.0
+
+
+@pytest.mark.parametrize("vertices, triangles, normals, problem", [
+    (TRIANGLE, np.zeros((0, 3), int), UP, "has no faces"),
+    (TRIANGLE, [[0, 1, 2]], np.zeros((3, 3)), "3 vertex normals have zero length"),
+    (np.array([[0.0, 0, 0], [np.nan, 0, 0], [0, 1, 0]]), [[0, 1, 2]], UP, "NaN or infinite"),
+    (TRIANGLE, [[0, 1, 3]], UP, "indices must lie in"),
+    (TRIANGLE, [[0, 1, 2]], UP[:2], "one normal per vertex"),
+    (np.zeros((3, 3)), [[0, 1, 2]], UP, "zero area"),
+])
+def test_bad_reflectors_name_the_object_and_the_problem(vertices, triangles, normals, problem):
+    with pytest.raises(SceneInputError, match=problem) as error:
+        Reflector("Kettle", vertices, triangles, normals)
+    assert error.value.object_name == "Kettle"
+    assert str(error.value).startswith("'Kettle'")
+
+
+def test_unused_vertices_may_have_any_normal():
+    vertices = np.vstack([TRIANGLE, [[5.0, 5, 5]]])
+    normals = np.vstack([UP, [[0.0, 0, 0]]])
+    assert len(Reflector("Mirror", vertices, [[0, 1, 2]], normals).vertices) == 4
+
+
+def test_diffuse_mesh_pads_rgb_to_rgba_and_checks_shape():
+    mesh = DiffuseMesh("Cube", TRIANGLE, [[0, 1, 2]], np.full((3, 3), 0.5))
+    assert mesh.colors.shape == (3, 4) and np.all(mesh.colors[:, 3] == 1)
+    with pytest.raises(SceneInputError, match="colors must be"):
+        DiffuseMesh("Cube", TRIANGLE, [[0, 1, 2]], np.ones((2, 3)))
+
+
+def test_scene_bounds_cover_everything_with_margin():
+    mirror = Reflector("Mirror", TRIANGLE, [[0, 1, 2]], UP)
+    cube = DiffuseMesh("Cube", TRIANGLE + 3, [[0, 1, 2]], np.ones((3, 3)))
+    lo, hi = scene_bounds([mirror], [cube], margin=0.5)
+    np.testing.assert_allclose(lo, [-0.5, -0.5, -0.5])
+    np.testing.assert_allclose(hi, [4.5, 4.5, 3.5])
+    with pytest.raises(SceneInputError, match="empty"):
+        scene_bounds([])
