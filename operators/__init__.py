@@ -1,0 +1,33 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The Blender layer: properties, operators and panels.
+
+As in Blender's bundled ``bl_operators``, each module ends with a ``classes`` tuple;
+they are registered in module order and unregistered in reverse.
+"""
+
+import bpy
+
+from . import demo_scenes, panel, properties, reflectors
+
+_modules = (
+    properties,
+    reflectors,
+    demo_scenes,
+    panel,
+)
+
+
+def _classes():
+    return [cls for module in _modules for cls in module.classes]
+
+
+def register():
+    for cls in _classes():
+        bpy.utils.register_class(cls)
+    properties.register_pointers()
+
+
+def unregister():
+    properties.unregister_pointers()
+    for cls in reversed(_classes()):
+        bpy.utils.unregister_class(cls)

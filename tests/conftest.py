@@ -1,0 +1,85 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Test harness: an isolated Blender user folder, the package import, the GPU fixture.
+
+Engine tests (tests/addon) never import ``bpy``; this file imports it only inside
+fixtures. ``BLENDER_USER_RESOURCES`` is set before any test can import ``bpy`` so that
+no test reads or writes the user's real Blender configuration.
+"""
+
+import atexit
+import importlib.util
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import pytest
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+
+if not os.environ.get("BLENDER_USER_RESOURCES"):
+    _user_resources = tempfile.mkdtemp(prefix="curved_reflections_blender_user_")
+    os.environ["BLENDER_USER_RESOURCES"] = _user_resources
+    atexit.register(shutil.rmtree, _user_resources, ignore_errors=True)
+
+
+def _load_package_link():
+    spec = importlib.util.spec_from_file_location(
+        "curved_reflections_package_link", REPO_ROOT / "scripts" / "package_link.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+_load_package_link().import_as_package(REPO_ROOT)
+
+
+@pytest.fixture(scope="session")
+def repo_root() -> Path:
+    return REPO_ROOT
+
+
+#: Initialises the GPU the way gpu_ready does; run first in a child process, because
+#: without OpenGL Blender aborts the whole process instead of raising.
+_GPU_INIT = """
+import bpy
+scene = bpy.data.scenes.new("gpu_init")
+camera = bpy.data.objects.new("gpu_init_camera", bpy.data.cameras.new("gpu_init_camera"))
+scene.collection.objects.link(camera)
+scene.camera = camera
+scene.render.engine = 'BLENDER_WORKBENCH'
+scene.render.resolution_x = scene.render.resolution_y = 4
+bpy.ops.render.render(scene=scene.name)
+import gpu
+gpu.types.GPUOffScreen(4, 4).free()
+bpy.data.scenes.remove(scene)
+bpy.data.objects.remove(camera)
+"""
+
+
+@pytest.fixture(scope="session")
+def gpu_ready():
+    """Blender's ``gpu`` module, initialised headless by one tiny Workbench render.
+
+    Before anything has rendered, every ``gpu`` call fails in background mode. If the
+    GPU cannot be initialised the test fails (never skips): GPU code must be tested.
+    """
+    probe = subprocess.run(
+        [sys.executable, "-c", _GPU_INIT], capture_output=True, text=True, timeout=120
+    )
+    if probe.returncode != 0:
+        output = "\n".join((probe.stdout + probe.stderr).splitlines()[-8:])
+        pytest.fail(
+            "Could not initialise Blender's GPU module with a Workbench render "
+            f"(exit status {probe.returncode}). GPU tests need OpenGL 4.3+, e.g. Mesa "
+            "llvmpipe (Debian: apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri).\n"
+            + output,
+            pytrace=False,
+        )
+    exec(_GPU_INIT, {})
+    import gpu
+
+    return gpu

@@ -1,0 +1,79 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The extension zip, built and checked by Blender's own CLI, installs, works and uninstalls.
+
+Installing runs in a separate Python (install_probe.py) with its own Blender user
+folder, so the installed add-on (``bl_ext.user_default.curved_reflections``) never
+meets the in-process registration of the other tests: both register the same classes.
+"""
+
+import json
+import os
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import bpy
+import pytest
+
+SCRIPTS = Path(bpy.utils.system_resource('SCRIPTS'))
+BLENDER_EXT = SCRIPTS / "addons_core" / "bl_pkg" / "cli" / "blender_ext.py"
+VALID_TAGS = SCRIPTS / "modules" / "_bpy_internal" / "extensions" / "tags.py"
+
+#: What the zip may hold at its top level: the extension and nothing of its development.
+SHIPPED = {"blender_manifest.toml", "__init__.py", "LICENSE", "addon", "operators", "gpu_shaders"}
+
+
+def blender_ext(*args):
+    """Run Blender's extension CLI (what ``blender --command extension`` runs)."""
+    done = subprocess.run(
+        [sys.executable, str(BLENDER_EXT), *map(str, args)],
+        capture_output=True, text=True, timeout=120,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    return done.stdout
+
+
+@pytest.fixture(scope="module")
+def extension_zip(tmp_path_factory, repo_root):
+    dist = tmp_path_factory.mktemp("dist")
+    blender_ext("build", "--source-dir", repo_root, "--output-dir", dist, "--valid-tags", VALID_TAGS)
+    zips = list(dist.glob("*.zip"))
+    assert [z.name for z in zips] == ["curved_reflections-0.1.0.zip"]
+    return zips[0]
+
+
+def test_manifest_validates(repo_root):
+    assert "Success" in blender_ext("validate", "--valid-tags", VALID_TAGS, repo_root)
+
+
+def test_zip_validates(extension_zip):
+    assert "Success" in blender_ext("validate", "--valid-tags", VALID_TAGS, extension_zip)
+
+
+def test_zip_holds_only_the_extension(extension_zip):
+    names = zipfile.ZipFile(extension_zip).namelist()
+    assert {"blender_manifest.toml", "__init__.py", "addon/__init__.py", "addon/scene.py",
+            "operators/__init__.py", "operators/capture.py"} <= set(names)
+    top_level = {name.split("/")[0] for name in names}
+    assert top_level <= SHIPPED, top_level - SHIPPED
+    assert not [n for n in names if "__pycache__" in n or n.endswith((".pyc", ".blend1"))]
+
+
+def test_installs_enables_works_and_disables(extension_zip, tmp_path):
+    result_path = tmp_path / "result.json"
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "blender_user"))
+    done = subprocess.run(
+        [sys.executable, str(Path(__file__).with_name("install_probe.py")), str(extension_zip), str(result_path)],
+        capture_output=True, text=True, timeout=300, env=env,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    result = json.loads(result_path.read_text())
+
+    assert result["install"] == ["FINISHED"]
+    assert all(result["enabled"].values()), result["enabled"]
+    zip_files = {n for n in zipfile.ZipFile(extension_zip).namelist() if not n.endswith("/")}
+    assert set(result["installed_files"]) == zip_files
+    assert result["poll"] is True
+    assert result["check_scene"] == ["FINISHED"]
+    assert not any(result["disabled"].values()), result["disabled"]
