@@ -7,7 +7,11 @@ are tested with plain pytest.
 """
 
 from .errors import SceneInputError
+from .sbc import SampleBasedCamera, build_sample_based_camera
 from .scene import DiffuseMesh, Reflector, scene_bounds
 from .view import View, look_at_view
 
-__all__ = ["DiffuseMesh", "Reflector", "SceneInputError", "View", "look_at_view", "scene_bounds"]
+__all__ = [
+    "DiffuseMesh", "Reflector", "SampleBasedCamera", "SceneInputError", "View",
+    "build_sample_based_camera", "look_at_view", "scene_bounds",
+]

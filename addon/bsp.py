@@ -1,0 +1,200 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""BSP trees of leaf cameras over one reflection group (SBC paper, section IV, Fig. 10).
+
+    BuildBSP(rays, accuracy):
+        camera = Fit(rays)
+        if Error(camera, rays) < accuracy: return Leaf(camera)
+        (plane, positive, negative) = Split(rays)
+        if the split fails: return Leaf(rays)
+        return Node(plane, BuildBSP(positive), BuildBSP(negative))
+
+The recursion is run breadth-first, one tree level at a time, with every node of the
+level fitted, measured and split in whole-array operations (members are (node, ray)
+rows). The split plane passes through the centroid of the tails, contains the mean ray
+direction and is perpendicular to the tails' diameter (their principal axis across the
+mean direction). A ray goes to the side(s) its *unit frustum* reaches: the tails and
+heads of the ray and of its four diagonal neighbours (u +- 1, v +- 1); rays whose
+frustum straddles the plane go to both children, so a point between rays always finds
+all four rays around it in its leaf. A split fails when one side receives every ray;
+the rays are then kept in a ray-list leaf, whose cells (four member rays around a
+unit square of the ray map) project by bilinear ray patches.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .ray_patch import RayPatches, fit_patches
+from .raymap import RayMap
+from .segments import segment_max, segment_mean, segment_sum
+
+MAX_DEPTH = 40
+CAMERA_LEAF, RAY_LIST_LEAF = 1, 2
+
+
+@dataclass(frozen=True)
+class BSPTree:
+    """Flat arrays of one group's tree; node 0 is the root.
+
+    Internal nodes: ``plane_normal`` . p >= ``plane_offset`` goes to ``left``, else
+    ``right``. Leaf nodes have ``leaf`` >= 0, an index into ``leaf_kind`` and
+    ``leaf_row`` (row in ``cameras`` for camera leaves, in ``cell_start`` for ray lists).
+    """
+
+    plane_normal: np.ndarray
+    plane_offset: np.ndarray
+    left: np.ndarray
+    right: np.ndarray
+    leaf: np.ndarray
+    leaf_kind: np.ndarray
+    leaf_row: np.ndarray
+    leaf_rays: np.ndarray  # (n_leaves,) rays per leaf (duplicates counted)
+    cameras: object  # the leaf model's parameters, one row per camera leaf (None if none)
+    cell_start: np.ndarray  # (n_raylist + 1,) CSR offsets into ``cells``
+    cells: RayPatches | None  # bilinear patches of the ray-list leaves' cells
+    depth: int
+
+    @property
+    def nbytes(self) -> int:
+        arrays = (self.plane_normal, self.plane_offset, self.left, self.right, self.leaf, self.leaf_kind,
+                  self.leaf_row, self.cell_start)
+        models = [m.nbytes for m in (self.cameras, self.cells) if m is not None]
+        return int(sum(a.nbytes for a in arrays)) + int(sum(models))
+
+
+def diagonal_neighbours(ray_map: RayMap, rays: np.ndarray) -> np.ndarray:
+    """(R, 4) ray indices of each ray's unit-frustum corners in its group; itself where missing."""
+    grid = ray_map.group_grid(int(ray_map.group[rays[0]]))
+    i, j = ray_map.cell[rays, 0], ray_map.cell[rays, 1]
+    corners = []
+    for di, dj in ((-1, -1), (1, -1), (-1, 1), (1, 1)):
+        ii, jj = i + di, j + dj
+        ok = (ii >= 0) & (ii < ray_map.columns) & (jj >= 0) & (jj < ray_map.rows)
+        neighbour = np.where(ok, grid[np.clip(jj, 0, ray_map.rows - 1), np.clip(ii, 0, ray_map.columns - 1)], -1)
+        corners.append(np.where(neighbour >= 0, neighbour, rays))
+    return np.stack(corners, axis=1)
+
+
+def build_bsp(ray_map: RayMap, rays: np.ndarray, model, accuracy_px: float) -> BSPTree:
+    """Build the BSP tree of one reflection group's rays (all rays share one history)."""
+    frustum = np.concatenate([rays[:, None], diagonal_neighbours(ray_map, rays)], axis=1)
+    frustum_points = np.concatenate([ray_map.tail[frustum], ray_map.head[frustum]], axis=1)  # (R, 10, 3)
+
+    levels = []  # one record of whole arrays per tree level
+    camera_parts, raylist_rows, raylist_rays = [], [], []
+    n_nodes, n_cameras, n_raylists = 1, 0, 0
+    level_ids = np.zeros(1, dtype=np.int64)
+    member_node = np.zeros(len(rays), dtype=np.int64)  # node rows local to the level
+    member_slot = np.arange(len(rays))
+    for depth in range(MAX_DEPTH + 1):
+        n = len(level_ids)
+        member_ray = rays[member_slot]
+        params = model.fit(ray_map, member_ray, member_node, n)
+        counts = np.bincount(member_node, minlength=n)
+        is_camera = _node_errors(ray_map, model, params, member_ray, member_node, n) <= accuracy_px
+        plane_normal, plane_offset = _split_planes(ray_map, member_ray, member_node, n)
+        side = (np.einsum("mkd,md->mk", frustum_points[member_slot], plane_normal[member_node])
+                - plane_offset[member_node, None])
+        positive, negative = side.max(axis=1) >= 0, side.min(axis=1) < 0
+        fails = ((np.bincount(member_node, weights=positive, minlength=n) == counts)
+                 | (np.bincount(member_node, weights=negative, minlength=n) == counts) | (depth == MAX_DEPTH))
+        kind = np.where(is_camera, CAMERA_LEAF, np.where(fails, RAY_LIST_LEAF, 0))
+
+        row = np.full(n, -1, dtype=np.int64)
+        cameras_here, raylists_here = kind == CAMERA_LEAF, kind == RAY_LIST_LEAF
+        row[cameras_here] = n_cameras + np.arange(cameras_here.sum())
+        row[raylists_here] = n_raylists + np.arange(raylists_here.sum())
+        if cameras_here.any():
+            camera_parts.append(params.take(np.flatnonzero(cameras_here)))
+        in_raylist = raylists_here[member_node]
+        raylist_rows.append(row[member_node[in_raylist]])
+        raylist_rays.append(member_ray[in_raylist])
+        n_cameras += int(cameras_here.sum())
+        n_raylists += int(raylists_here.sum())
+
+        splits = kind == 0
+        child = np.full((n, 2), -1, dtype=np.int64)
+        child[splits] = n_nodes + np.arange(2 * splits.sum()).reshape(-1, 2)
+        levels.append((level_ids, kind, row, counts, plane_normal, plane_offset, child))
+        if not splits.any():
+            break
+        n_nodes += 2 * int(splits.sum())
+        goes_left, goes_right = splits[member_node] & positive, splits[member_node] & negative
+        local_child = np.full((n, 2), -1, dtype=np.int64)
+        local_child[splits] = np.arange(2 * splits.sum()).reshape(-1, 2)
+        member_node = np.concatenate([local_child[member_node[goes_left], 0], local_child[member_node[goes_right], 1]])
+        member_slot = np.concatenate([member_slot[goes_left], member_slot[goes_right]])
+        level_ids = child[splits].reshape(-1)
+
+    cell_start, cells = _raylist_cells(ray_map, np.concatenate(raylist_rows), np.concatenate(raylist_rays), n_raylists)
+    return _assemble_tree(levels, n_nodes, model, camera_parts, cell_start, cells, depth)
+
+
+def _assemble_tree(levels, n_nodes, model, camera_parts, cell_start, cells, depth) -> BSPTree:
+    ids, kind, row, counts, normal, offset, child = (np.concatenate(parts) for parts in zip(*levels))
+    order = np.argsort(ids)
+    kind, row, counts, normal, offset, child = kind[order], row[order], counts[order], normal[order], offset[order], child[order]
+    is_leaf = kind > 0
+    leaf = np.full(n_nodes, -1, dtype=np.int64)
+    leaf[is_leaf] = np.arange(is_leaf.sum())
+    return BSPTree(
+        plane_normal=np.where(is_leaf[:, None], 0.0, normal), plane_offset=np.where(is_leaf, 0.0, offset),
+        left=child[:, 0], right=child[:, 1], leaf=leaf, leaf_kind=kind[is_leaf].astype(np.int8),
+        leaf_row=row[is_leaf], leaf_rays=counts[is_leaf],
+        cameras=model.concatenate(camera_parts) if camera_parts else None,
+        cell_start=cell_start, cells=cells, depth=depth,
+    )
+
+
+def _node_errors(ray_map, model, params, member_ray, member_node, n) -> np.ndarray:
+    """Largest error (desired-view pixels) of each node's model over its error samples."""
+    owner, points = model.error_samples(ray_map, member_ray)
+    cells, inside = model.project(params, member_node[owner], points, ray_map)
+    error = np.linalg.norm(cells - ray_map.cell[member_ray[owner]], axis=1) * ray_map.downsample
+    error = np.where(inside & np.isfinite(error), error, np.inf)
+    return segment_max(error, member_node[owner], n)
+
+
+def _split_planes(ray_map, member_ray, member_node, n):
+    """Plane through the tails' centroid, along the mean direction, across the tails' diameter."""
+    tails = ray_map.tail[member_ray]
+    centroid = segment_mean(tails, member_node, n)
+    mean_direction = segment_mean(ray_map.direction[member_ray], member_node, n)
+    mean_direction /= np.maximum(np.linalg.norm(mean_direction, axis=1), 1e-300)[:, None]
+    offset = tails - centroid[member_node]
+    offset -= np.einsum("md,md->m", offset, mean_direction[member_node])[:, None] * mean_direction[member_node]
+    covariance = segment_sum(offset[:, :, None] * offset[:, None, :], member_node, n)
+    _, vectors = np.linalg.eigh(covariance)
+    normal = vectors[:, :, 2]
+    return normal, np.einsum("nd,nd->n", normal, centroid)
+
+
+def _raylist_cells(ray_map: RayMap, leaf_row, ray, n_raylists):
+    """Unit cells whose four corner rays all belong to one ray-list leaf, as bilinear patches.
+
+    Returns CSR offsets (n_raylists + 1,) and the patches, sorted by ray-list leaf.
+    """
+    if len(ray) == 0:
+        return np.zeros(n_raylists + 1, dtype=np.int64), None
+    grid = ray_map.group_grid(int(ray_map.group[ray[0]]))
+    i, j = ray_map.cell[ray, 0], ray_map.cell[ray, 1]
+    inside = (i + 1 < ray_map.columns) & (j + 1 < ray_map.rows)
+    leaf_row, ray, i, j = leaf_row[inside], ray[inside], i[inside], j[inside]
+    corners = np.stack([ray, grid[j, i + 1], grid[j + 1, i], grid[j + 1, i + 1]], axis=1)
+    member_keys = leaf_row * ray_map.n_rays + ray
+    complete = np.all(corners >= 0, axis=1)
+    for k in range(1, 4):
+        complete &= np.isin(leaf_row * ray_map.n_rays + corners[:, k], member_keys)
+    leaf_row, corners = leaf_row[complete], corners[complete]
+    order = np.argsort(leaf_row, kind="stable")
+    leaf_row, corners = leaf_row[order], corners[order]
+    cell_start = np.concatenate([[0], np.cumsum(np.bincount(leaf_row, minlength=n_raylists))])
+    if len(corners) == 0:
+        return cell_start, None
+    rays = corners.reshape(-1)
+    node = np.repeat(np.arange(len(corners)), 4)
+    patches = fit_patches(ray_map.cell[rays], ray_map.tail[rays], ray_map.direction[rays], node, len(corners),
+                          bilinear=True)
+    return cell_start, patches

@@ -1,0 +1,206 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Our leaf model: a polynomial patch of the reflected-ray field, inverted by Newton.
+
+The paper's leaf (SBC section IV) is a pinhole camera: one centre of projection and a
+quadratic map from its image plane to the first reflector point. Reflected rays are
+far from concurrent, so that model is accurate only over a few rays, and only near the
+depths where it was fitted (tails and heads).
+
+Here a leaf instead models the ray field itself over its patch of the ray map:
+tail t(u, v) and direction r(u, v) are polynomials in the ray-map coordinates (u, v),
+fitted by least squares to the leaf's rays. Projecting a point p means finding the
+ray through it, i.e. solving
+
+    t(u, v) + s r(u, v) = p
+
+for (u, v, s) by Newton's method (three equations, three unknowns; the Jacobian
+columns are t_u + s r_u, t_v + s r_v and r). The answer (u, v) *is* the ray-map
+position, hence the desired-view pixel d (u + 0.5), at every depth s at once, which is
+what the perturbation view of Chen-Arvo (2000) suggests: a smooth local expansion of
+the ray field, not of the projection. Cells of ray-list leaves use the same solver
+with a bilinear patch through their four corner rays (the paper's "interpolate the
+unit frustum that contains the point").
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .segments import segment_max, segment_mean, segment_min, segment_sum, solve_least_squares
+
+NEWTON_ITERATIONS = 8
+#: Newton stops when no chart coordinate moves more than this (charts span [-1, 1]).
+STEP_TOLERANCE = 1e-9
+#: Fractions of the tail-to-head segment where the fit error is measured.
+ERROR_SAMPLE_FRACTIONS = np.array([0.0, 0.01, 0.05, 0.15, 0.35, 0.65, 1.0])
+PROJECT_CHUNK = 8192
+
+
+def quadratic_basis(u, v):
+    """Basis 1, u, v, u^2, uv, v^2 and its u and v derivatives, each (n, 6)."""
+    one, zero = np.ones_like(u), np.zeros_like(u)
+    value = np.stack([one, u, v, u * u, u * v, v * v], axis=1)
+    du = np.stack([zero, one, zero, 2 * u, v, zero], axis=1)
+    dv = np.stack([zero, zero, one, zero, u, 2 * v], axis=1)
+    return value, du, dv
+
+
+@dataclass(frozen=True)
+class RayPatches:
+    """Per-leaf ray-field patches; row n is one leaf.
+
+    Camera-leaf patches are charted on the plane of their tails: local coordinates
+    (a, b) are tail positions projected on the two main axes of the tails, divided by
+    ``scale``; tail, direction and ray-map cell are quadratics in (a, b). Near a
+    silhouette the ray-map position has a square-root singularity as a function of the
+    surface point, but tail, direction and cell are all smooth functions *of* the
+    surface point, so the chart keeps leaves large right up to the reflector's edge.
+    Ray-list cells (``bilinear``) are charted by the ray-map cell itself, (u, v) - lo.
+    """
+
+    origin: np.ndarray  # (n, 3) chart origin (bilinear: unused zeros)
+    axes: np.ndarray  # (n, 2, 3) chart axes (bilinear: unused zeros)
+    scale: np.ndarray  # (n,)
+    tail: np.ndarray  # (n, k, 3)
+    direction: np.ndarray  # (n, k, 3)
+    cell: np.ndarray  # (n, k, 2) ray-map cell as a function of the chart (bilinear: unused)
+    lo: np.ndarray  # (n, 2) member cells' bounds
+    hi: np.ndarray  # (n, 2)
+    bilinear: bool = False
+
+    def take(self, rows: np.ndarray) -> "RayPatches":
+        return RayPatches(*(getattr(self, f)[rows] for f in _ARRAY_FIELDS), self.bilinear)
+
+    @property
+    def nbytes(self) -> int:
+        return int(sum(getattr(self, f).nbytes for f in _ARRAY_FIELDS))
+
+    def cells_at(self, leaf, a, b) -> np.ndarray:
+        """Ray-map cells at chart coordinates (a, b) of leaves."""
+        if self.bilinear:
+            return self.lo[leaf] + np.stack([a, b], axis=1)
+        value, _, _ = quadratic_basis(a, b)
+        return np.einsum("nk,nkd->nd", value, self.cell[leaf])
+
+
+_ARRAY_FIELDS = ("origin", "axes", "scale", "tail", "direction", "cell", "lo", "hi")
+
+
+def concatenate_patches(parts: list[RayPatches]) -> RayPatches:
+    return RayPatches(*(np.concatenate([getattr(p, f) for p in parts]) for f in _ARRAY_FIELDS), parts[0].bilinear)
+
+
+def fit_patches(cells: np.ndarray, tails: np.ndarray, directions: np.ndarray, node: np.ndarray,
+                n_nodes: int, bilinear: bool = False) -> RayPatches:
+    """Least-squares patches of the rays of each node (members as rows, ``node`` their node)."""
+    cells = cells.astype(np.float64)
+    lo, hi = segment_min(cells, node, n_nodes), segment_max(cells, node, n_nodes)
+    if bilinear:
+        origin, axes, scale = np.zeros((n_nodes, 3)), np.zeros((n_nodes, 2, 3)), np.ones(n_nodes)
+        local = cells - lo[node]
+        design, _, _ = quadratic_basis(local[:, 0], local[:, 1])
+        design[:, [3, 5]] = 0.0  # bilinear: 1, u, v, uv in the quadratic layout
+    else:
+        origin = segment_mean(tails, node, n_nodes)
+        offset = tails - origin[node]
+        _, vectors = np.linalg.eigh(segment_sum(offset[:, :, None] * offset[:, None, :], node, n_nodes))
+        axes = np.stack([vectors[:, :, 2], vectors[:, :, 1]], axis=1)
+        local = np.einsum("mkd,md->mk", axes[node], offset)
+        scale = np.maximum(segment_max(np.abs(local).max(axis=1), node, n_nodes), 1e-12)
+        local /= scale[node, None]
+        design, _, _ = quadratic_basis(local[:, 0], local[:, 1])
+    coefficients = solve_least_squares(design, np.concatenate([tails, directions, cells], axis=1), node, n_nodes)
+    return RayPatches(origin, axes, scale, coefficients[:, :, :3], coefficients[:, :, 3:6],
+                      coefficients[:, :, 6:], lo, hi, bilinear)
+
+
+def invert_patches(patches: RayPatches, leaf: np.ndarray, points: np.ndarray):
+    """Ray-map cells (q, 2) and ray distances s (q,) of points, each in the patch ``leaf``.
+
+    Also returns the final residual |t + s r - p| (q,), small where Newton converged.
+    """
+    cells = np.empty((len(points), 2))
+    distance = np.empty(len(points))
+    residual = np.empty(len(points))
+    for start in range(0, len(points), PROJECT_CHUNK):
+        chunk = slice(start, start + PROJECT_CHUNK)
+        cells[chunk], distance[chunk], residual[chunk] = _newton(patches, leaf[chunk], points[chunk])
+    return cells, distance, residual
+
+
+def _newton(patches: RayPatches, leaf: np.ndarray, points: np.ndarray):
+    # Tail and direction coefficients side by side: each term is one (q, 6) array, and
+    # the quadratic and its derivatives are a few fused multiply-adds (no einsum).
+    c = np.concatenate([patches.tail[leaf], patches.direction[leaf]], axis=2)
+    terms = [np.ascontiguousarray(c[:, k]) for k in range(6)]
+    start = 0.5 if patches.bilinear else 0.0
+    u = np.full(len(points), start)
+    v = np.full(len(points), start)
+    value = _quadratic(terms, u, v)
+    direction = value[:, 3:] / np.maximum(np.linalg.norm(value[:, 3:], axis=1), 1e-300)[:, None]
+    s = np.einsum("nd,nd->n", points - value[:, :3], direction)
+    active = np.arange(len(points))
+    for _ in range(NEWTON_ITERATIONS):
+        c0, c1, c2, c3, c4, c5 = (t[active] for t in terms)
+        uc, vc, sc = u[active, None], v[active, None], s[active, None]
+        value = c0 + uc * (c1 + uc * c3 + vc * c4) + vc * (c2 + vc * c5)
+        du = c1 + 2 * uc * c3 + vc * c4
+        dv = c2 + uc * c4 + 2 * vc * c5
+        r = value[:, 3:]
+        a = du[:, :3] + sc * du[:, 3:]
+        b = dv[:, :3] + sc * dv[:, 3:]
+        f = value[:, :3] + sc * r - points[active]
+        bc, ca, ab = np.cross(b, r), np.cross(r, a), np.cross(a, b)
+        det = (a * bc).sum(axis=1)
+        det = np.where(np.abs(det) > 1e-300, det, 1e-300)
+        step_u, step_v = (f * bc).sum(axis=1) / det, (f * ca).sum(axis=1) / det
+        u[active] = np.clip(u[active] - step_u, -4.0, 4.0)
+        v[active] = np.clip(v[active] - step_v, -4.0, 4.0)
+        s[active] -= (f * ab).sum(axis=1) / det
+        active = active[np.abs(step_u) + np.abs(step_v) >= STEP_TOLERANCE]
+        if len(active) == 0:
+            break
+    value = _quadratic(terms, u, v)
+    f = value[:, :3] + s[:, None] * value[:, 3:] - points
+    return patches.cells_at(leaf, u, v), s, np.linalg.norm(f, axis=1)
+
+
+def _quadratic(terms, u, v):
+    uc, vc = u[:, None], v[:, None]
+    c0, c1, c2, c3, c4, c5 = terms
+    return c0 + uc * (c1 + uc * c3 + vc * c4) + vc * (c2 + vc * c5)
+
+
+def project_patches(patches: RayPatches, leaf: np.ndarray, points: np.ndarray, margin: float = 0.5):
+    """Cells, ray distance and an ``inside`` mask: converged, within the leaf's cells, s >= 0."""
+    cells, distance, residual = invert_patches(patches, leaf, points)
+    scale = np.linalg.norm(points, axis=1) + 1.0
+    inside = (
+        (residual < 1e-6 * scale)
+        & np.all(cells >= patches.lo[leaf] - margin, axis=1)
+        & np.all(cells <= patches.hi[leaf] + margin, axis=1)
+    )
+    return cells, distance, inside
+
+
+class RayPatchLeaves:
+    """Leaf-model adapter for the BSP builder: our ray-field patches."""
+
+    name = "ray_patch"
+    concatenate = staticmethod(concatenate_patches)
+
+    def fit(self, ray_map, rays, node, n_nodes) -> RayPatches:
+        return fit_patches(ray_map.cell[rays], ray_map.tail[rays], ray_map.direction[rays], node, n_nodes)
+
+    def project(self, patches: RayPatches, leaf, points, ray_map):
+        cells, _, inside = project_patches(patches, leaf, points)
+        return cells, inside
+
+    def error_samples(self, ray_map, rays):
+        """Points along each ray from tail to head: where points will really be projected."""
+        fractions = np.tile(ERROR_SAMPLE_FRACTIONS, len(rays))
+        owner = np.repeat(np.arange(len(rays)), len(ERROR_SAMPLE_FRACTIONS))
+        r = rays[owner]
+        return owner, ray_map.tail[r] + (fractions * ray_map.head_distance[r])[:, None] * ray_map.direction[r]

@@ -1,0 +1,57 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Reductions over segments: per-node sums and maxima of per-member values.
+
+The BSP builder processes every node of a tree level at once: members (node, ray) are
+rows, and a node's statistics are reductions over the rows that carry its index.
+``np.add.reduceat`` on rows sorted by node does this in one pass, with no per-node loop.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def _sorted_starts(node: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
+    order = np.argsort(node, kind="stable")
+    counts = np.bincount(node, minlength=n_nodes)
+    if np.any(counts == 0):
+        raise ValueError("every node needs at least one member")
+    return order, np.concatenate([[0], np.cumsum(counts)[:-1]])
+
+
+def segment_sum(values: np.ndarray, node: np.ndarray, n_nodes: int) -> np.ndarray:
+    """Sum of ``values`` (m, ...) over rows sharing a node index; (n_nodes, ...)."""
+    order, starts = _sorted_starts(node, n_nodes)
+    return np.add.reduceat(values[order], starts, axis=0)
+
+
+def segment_max(values: np.ndarray, node: np.ndarray, n_nodes: int) -> np.ndarray:
+    """Maximum of ``values`` (m, ...) over rows sharing a node index; (n_nodes, ...)."""
+    order, starts = _sorted_starts(node, n_nodes)
+    return np.maximum.reduceat(values[order], starts, axis=0)
+
+
+def segment_min(values: np.ndarray, node: np.ndarray, n_nodes: int) -> np.ndarray:
+    """Minimum of ``values`` (m, ...) over rows sharing a node index; (n_nodes, ...)."""
+    order, starts = _sorted_starts(node, n_nodes)
+    return np.minimum.reduceat(values[order], starts, axis=0)
+
+
+def segment_mean(values: np.ndarray, node: np.ndarray, n_nodes: int) -> np.ndarray:
+    counts = np.bincount(node, minlength=n_nodes).astype(np.float64)
+    return segment_sum(values, node, n_nodes) / counts.reshape((-1,) + (1,) * (values.ndim - 1))
+
+
+def solve_least_squares(design: np.ndarray, targets: np.ndarray, node: np.ndarray, n_nodes: int,
+                        ridge: float = 1e-10) -> np.ndarray:
+    """Per-node least squares: coefficients (n_nodes, k, t) of design (m, k) -> targets (m, t).
+
+    Normal equations with a small ridge relative to each node's trace, so nodes with
+    fewer members than coefficients still get a (minimum-norm-like) answer.
+    """
+    normal = segment_sum(design[:, :, None] * design[:, None, :], node, n_nodes)
+    rhs = segment_sum(design[:, :, None] * targets[:, None, :], node, n_nodes)
+    k = design.shape[1]
+    trace = np.trace(normal, axis1=1, axis2=2)
+    normal = normal + (ridge * np.maximum(trace, 1e-300) / k)[:, None, None] * np.eye(k)
+    return np.linalg.solve(normal, rhs)

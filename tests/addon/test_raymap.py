@@ -1,0 +1,54 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+import numpy as np
+
+from curved_reflections.addon import look_at_view
+from curved_reflections.addon.raymap import box_exit_distance, trace_ray_map
+from curved_reflections.addon.raytrace import ReflectorSet
+from curved_reflections.addon.sphere import icosphere
+
+BOUNDS = ([-4.0, -4.0, -1.0], [4.0, 4.0, 4.0])
+
+
+def test_first_order_rays_obey_the_reflection_law_on_a_sphere():
+    center = np.array([0.0, 0.0, 1.0])
+    reflectors = ReflectorSet([icosphere(center, 1.0, 4)])
+    view = look_at_view([5, -4, 2.5], center, width=120, height=80)
+    ray_map = trace_ray_map(reflectors, view, BOUNDS, downsample=2)
+    assert ray_map.histories == [(0,)] and ray_map.columns == 60 and ray_map.rows == 40
+    np.testing.assert_array_equal(ray_map.tail, ray_map.first_point)
+    normal = ray_map.tail - center
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    to_eye = view.directions_to_eye(ray_map.tail)
+    # Angle of incidence equals angle of reflection, in the plane of the normal.
+    np.testing.assert_allclose(np.einsum("ij,ij->i", to_eye, normal),
+                               np.einsum("ij,ij->i", ray_map.direction, normal), atol=1e-9)
+    np.testing.assert_allclose(np.cross(to_eye + ray_map.direction, normal), 0, atol=1e-9)
+    # Heads lie on the scene box; first points project to their cells' pixel centres.
+    head = ray_map.head
+    on_face = np.isclose(head, BOUNDS[0], atol=1e-9) | np.isclose(head, BOUNDS[1], atol=1e-9)
+    assert on_face.any(axis=1).all()
+    pixels, _ = view.to_pixels(ray_map.first_point)
+    np.testing.assert_allclose(pixels, ray_map.cell_pixels(ray_map.cell), atol=1e-6)
+
+
+def test_two_spheres_give_histories_up_to_the_max_order_and_clip_heads():
+    a, b = icosphere([0, -1.1, 1], 1.0, 3, name="A"), icosphere([0, 1.1, 1], 1.0, 3, name="B")
+    reflectors = ReflectorSet([a, b])
+    view = look_at_view([6, -1, 2.5], [0, 0, 1], width=160, height=100)
+    ray_map = trace_ray_map(reflectors, view, BOUNDS, downsample=2, max_order=2)
+    assert ray_map.histories == [(0,), (1,), (0, 1), (1, 0)]
+    second = ray_map.order == 2
+    assert second.any()
+    # A first-order ray that goes on to the other sphere ends there, where the second starts.
+    first_then = np.flatnonzero((ray_map.order == 1) & np.isin(ray_map.cell[:, 0] * 1000 + ray_map.cell[:, 1],
+                                                               ray_map.cell[second, 0] * 1000 + ray_map.cell[second, 1]))
+    key = {tuple(c): k for k, c in zip(np.flatnonzero(second), ray_map.cell[second])}
+    follow = np.array([key[tuple(ray_map.cell[k])] for k in first_then])
+    np.testing.assert_allclose(ray_map.head[first_then], ray_map.tail[follow], atol=1e-9)
+    np.testing.assert_array_equal(ray_map.first_point[follow], ray_map.first_point[first_then])
+
+
+def test_box_exit_distance():
+    d = box_exit_distance(np.array([[0.0, 0, 0], [0, 0, 0]]), np.array([[1.0, 0, 0], [0, 0.6, 0.8]]),
+                          [-1, -2, -3], [2, 2, 2])
+    np.testing.assert_allclose(d, [2.0, 2.5])

@@ -1,0 +1,160 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Sample-based cameras against the exact solver, on reflectors the method was not tuned on."""
+
+import numpy as np
+import pytest
+
+from curved_reflections.addon import Reflector, SceneInputError, build_sample_based_camera, look_at_view
+from curved_reflections.addon.exact import solve_reflections
+from curved_reflections.addon.raytrace import ReflectorSet
+from curved_reflections.addon.sphere import icosphere
+
+BOUNDS = (np.array([-4.0, -4.0, -1.0]), np.array([4.0, 4.0, 4.0]))
+
+
+def ellipsoid(center, radii, subdivisions=5, name="Ellipsoid") -> Reflector:
+    """A held-out convex reflector: a stretched icosphere with its exact normals."""
+    unit = icosphere([0, 0, 0], 1.0, subdivisions)
+    radii = np.asarray(radii, dtype=np.float64)
+    return Reflector(name, center + unit.vertices * radii, unit.triangles, unit.vertices / radii)
+
+
+def _measure(reflectors, view, points, **options):
+    sbc = build_sample_based_camera(reflectors, view, BOUNDS, **options)
+    projection = sbc.project(points)
+    exact = solve_reflections(ReflectorSet(reflectors), view, points)
+    return sbc, projection, exact.select(exact.visible)
+
+
+@pytest.fixture(scope="module")
+def ellipsoid_case():
+    reflector = ellipsoid(np.array([0.3, 0.2, 1.1]), [1.3, 0.8, 1.0])
+    view = look_at_view([4.5, -3.5, 2.8], [0.3, 0.2, 1.0], width=480, height=320, fov_y_deg=38)
+    points = np.random.default_rng(7).uniform(BOUNDS[0], BOUNDS[1], (12000, 3))
+    return _measure([reflector], view, points, downsample=2, accuracy_px=1.0), points
+
+
+def test_projection_error_against_the_exact_solver(ellipsoid_case):
+    (sbc, projection, exact), _ = ellipsoid_case
+    both = projection.valid[0, exact.point]
+    error = np.linalg.norm(projection.pixels[0, exact.point[both]] - exact.pixel[both], axis=1)
+    assert len(error) > 5000
+    assert np.percentile(error, 95) <= 0.5
+    assert np.percentile(error, 99) <= 1.0
+
+
+def test_points_reflected_well_inside_the_footprint_are_projected(ellipsoid_case):
+    (sbc, projection, exact), points = ellipsoid_case
+    ray_map = sbc.ray_map
+    footprint = np.zeros((ray_map.rows, ray_map.columns), dtype=bool)
+    footprint[ray_map.cell[:, 1], ray_map.cell[:, 0]] = True
+    inner = footprint.copy()
+    for shift in range(1, 4):  # three ray-map pixels of erosion
+        for axis in (0, 1):
+            for sign in (1, -1):
+                inner &= np.roll(footprint, sign * shift, axis=axis)
+    cells = np.floor(exact.pixel / ray_map.downsample).astype(int)
+    well_inside = inner[cells[:, 1], cells[:, 0]]
+    assert well_inside.sum() > 5000
+    assert projection.valid[0, exact.point[well_inside]].mean() >= 0.99
+    has_exact = np.zeros(len(points), dtype=bool)
+    has_exact[exact.point] = True
+    false = projection.valid[0] & ~has_exact
+    assert false.sum() <= 0.005 * projection.valid[0].sum()
+
+
+def test_tree_is_compact_and_mostly_camera_leaves(ellipsoid_case):
+    (sbc, projection, _), _ = ellipsoid_case
+    stats = sbc.stats
+    assert stats["n_leaves"] <= stats["n_rays"] / 3
+    assert stats["n_camera_leaves"] + stats["n_raylist_leaves"] == stats["n_leaves"]
+    kinds = projection.leaf_kind[0][projection.valid[0]]
+    assert (kinds == 1).mean() >= 0.8
+    assert stats["nbytes"] > 0 and stats["build_seconds"] > 0
+
+
+def test_valid_entries_are_finite_and_invalid_ones_nan(ellipsoid_case):
+    (sbc, projection, _), _ = ellipsoid_case
+    valid = projection.valid
+    assert np.isfinite(projection.reflector_points[valid]).all()
+    assert np.isnan(projection.reflector_points[~valid]).all()
+    assert np.all((projection.leaf_kind > 0) == valid)
+    # First reflector points lie on the reflector and appear at the projected pixels.
+    pixels, _ = sbc.ray_map.view.to_pixels(projection.reflector_points[valid])
+    np.testing.assert_allclose(pixels, projection.pixels[valid], atol=1e-6)
+
+
+def test_two_reflectors_give_one_group_each_and_both_are_accurate():
+    reflectors = [icosphere([0, -1.2, 1], 0.9, 4, name="A"), ellipsoid(np.array([0.2, 1.3, 1.0]), [0.7, 0.9, 1.1], 4, "B")]
+    view = look_at_view([5.5, -0.5, 2.4], [0, 0, 1], width=320, height=240, fov_y_deg=45)
+    points = np.random.default_rng(3).uniform(BOUNDS[0], BOUNDS[1], (6000, 3))
+    sbc, projection, exact = _measure(reflectors, view, points, downsample=2)
+    assert projection.groups == [(0,), (1,)]
+    for group in (0, 1):
+        mine = exact.select(exact.reflector == group)
+        both = projection.valid[group, mine.point]
+        error = np.linalg.norm(projection.pixels[group, mine.point[both]] - mine.pixel[both], axis=1)
+        assert both.sum() > 300 and np.percentile(error, 95) <= 0.5
+
+
+def test_paper_pinhole_leaves_are_the_baseline_and_less_compact():
+    reflector = icosphere([0, 0, 1], 1.0, 4)
+    view = look_at_view([5, -4, 2.5], [0, 0, 1], width=160, height=120, fov_y_deg=35)
+    ours = build_sample_based_camera([reflector], view, BOUNDS, downsample=2, leaf_model="ray_patch")
+    paper = build_sample_based_camera([reflector], view, BOUNDS, downsample=2, leaf_model="pinhole")
+    assert ours.stats["n_rays"] == paper.stats["n_rays"]
+    assert ours.stats["n_leaves"] * 4 < paper.stats["n_leaves"]
+
+
+def test_no_reflector_in_view_gives_an_empty_result():
+    reflector = icosphere([0, 0, 1], 1.0, 3)
+    view = look_at_view([5, -4, 2.5], [0, 0, 1], width=64, height=48)
+    away = look_at_view([5, -4, 2.5], [10, -8, 2.5], width=64, height=48)
+    sbc = build_sample_based_camera([reflector], away, BOUNDS)
+    result = sbc.project(np.zeros((5, 3)))
+    assert result.groups == [] and result.valid.shape == (0, 5) and sbc.stats["n_leaves"] == 0
+    assert view is not away
+
+
+def test_a_reflector_covering_a_single_ray_projects_nothing_or_finite_values():
+    reflector = icosphere([0, 0, 1], 0.45, 2)
+    view = look_at_view([5, -4, 2.5], [0, 0, 1], width=16, height=16, fov_y_deg=20)
+    sbc = build_sample_based_camera([reflector], view, BOUNDS, downsample=4)
+    assert 1 <= sbc.stats["n_rays"] <= 4
+    result = sbc.project(np.random.default_rng(0).uniform(BOUNDS[0], BOUNDS[1], (200, 3)))
+    assert np.isfinite(result.reflector_points[result.valid]).all()
+
+
+def test_a_flat_mirror_is_one_pinhole_camera_at_the_mirrored_eye():
+    """The paper's leaf is exact for a plane: every reflected ray passes through the mirrored eye."""
+    mirror = Reflector("Mirror", [[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]], [[0, 1, 2], [0, 2, 3]],
+                       np.tile([0, 0, 1.0], (4, 1)))
+    view = look_at_view([0, -5, 3], [0, 0, 0], width=160, height=120)
+    points = np.random.default_rng(1).uniform([-2, -2, 0.1], [2, 2, 3], (2000, 3))
+    for model, leaves, tolerance in (("pinhole", 1, 1e-6), ("ray_patch", 16, 0.5)):
+        sbc, projection, exact = _measure([mirror], view, points, downsample=2, leaf_model=model)
+        both = projection.valid[0, exact.point]
+        error = np.linalg.norm(projection.pixels[0, exact.point[both]] - exact.pixel[both], axis=1)
+        assert both.mean() > 0.95 and error.max() < tolerance
+        assert sbc.stats["n_leaves"] <= leaves and sbc.stats["n_raylist_leaves"] == 0
+
+
+def test_a_view_from_inside_the_reflector_is_a_clear_error():
+    reflector = icosphere([0, 0, 1], 1.0, 3, name="Chrome Ball")
+    inside = look_at_view([0.1, 0.2, 1.1], [1, 1, 1], width=32, height=32)
+    with pytest.raises(SceneInputError, match="inside this reflector") as error:
+        build_sample_based_camera([reflector], inside, BOUNDS)
+    assert error.value.object_name == "Chrome Ball"
+
+
+def test_bad_options_are_clear_errors():
+    reflector = icosphere([0, 0, 1], 1.0, 2)
+    view = look_at_view([5, -4, 2.5], [0, 0, 1], width=32, height=32)
+    with pytest.raises(ValueError, match="leaf_model"):
+        build_sample_based_camera([reflector], view, BOUNDS, leaf_model="fisheye")
+    with pytest.raises(ValueError, match="accuracy_px"):
+        build_sample_based_camera([reflector], view, BOUNDS, accuracy_px=0)
+    with pytest.raises(SceneInputError, match="no ray"):
+        build_sample_based_camera([reflector], view, BOUNDS, downsample=64)
+    with pytest.raises(ValueError, match=r"\(P, 3\)"):
+        build_sample_based_camera([reflector], view, BOUNDS).project(np.zeros(3))
