@@ -35,6 +35,8 @@ from .view import View
 LEAF_MODELS = {"ray_patch": RayPatchLeaves(), "pinhole": PinholeLeaves()}
 #: Tolerance (cell units) for a ray-list cell's bilinear coordinates.
 CELL_TOLERANCE = 1e-6
+#: Ray-list cells tried per point, nearest central ray first.
+CANDIDATE_CELLS = 3
 
 
 @dataclass(frozen=True)
@@ -125,11 +127,15 @@ def descend_tree(tree: BSPTree, points: np.ndarray) -> np.ndarray:
 
 
 def _project_ray_lists(tree: BSPTree, row, points):
-    """Find, among a ray-list leaf's cells, the one whose bilinear ray patch holds the point."""
+    """Find, among a ray-list leaf's cells, the one whose bilinear ray patch holds the point.
+
+    Newton runs only on the few cells whose central ray passes closest to the point.
+    """
     start, stop = tree.cell_start[row], tree.cell_start[row + 1]
     count = stop - start
     pair_point = np.repeat(np.arange(len(points)), count)
     pair_cell = np.repeat(start - np.cumsum(count) + count, count) + np.arange(count.sum())
+    pair_point, pair_cell = _closest_cells(tree.cells, pair_point, pair_cell, points)
     cells, distance, residual = invert_patches(tree.cells, pair_cell, points[pair_point])
     local = cells - tree.cells.lo[pair_cell]
     inside = (np.all((local >= -CELL_TOLERANCE) & (local <= 1 + CELL_TOLERANCE), axis=1)
@@ -140,6 +146,23 @@ def _project_ray_lists(tree: BSPTree, row, points):
     result[pair_point[first]] = cells[first]
     found[pair_point[first]] = True
     return result, found
+
+
+def _closest_cells(cells, pair_point, pair_cell, points, keep: int = CANDIDATE_CELLS):
+    """Per point, the ``keep`` (point, cell) pairs whose cell-centre ray passes closest."""
+    tail = cells.tail[pair_cell]
+    direction = cells.direction[pair_cell]
+    # Bilinear patch at the cell centre (0.5, 0.5): c0 + (c1 + c2) / 2 + c4 / 4.
+    centre_tail = tail[:, 0] + 0.5 * (tail[:, 1] + tail[:, 2]) + 0.25 * tail[:, 4]
+    centre_direction = direction[:, 0] + 0.5 * (direction[:, 1] + direction[:, 2]) + 0.25 * direction[:, 4]
+    centre_direction /= np.maximum(np.linalg.norm(centre_direction, axis=1), 1e-300)[:, None]
+    miss = np.linalg.norm(np.cross(points[pair_point] - centre_tail, centre_direction), axis=1)
+    order = np.lexsort((miss, pair_point))
+    sorted_point = pair_point[order]
+    group_start = np.flatnonzero(np.concatenate([[True], sorted_point[1:] != sorted_point[:-1]]))
+    rank = np.arange(len(order)) - np.repeat(group_start, np.diff(np.concatenate([group_start, [len(order)]])))
+    chosen = order[rank < keep]
+    return pair_point[chosen], pair_cell[chosen]
 
 
 def _interpolate_rays(ray_map: RayMap, grid: np.ndarray, cells: np.ndarray, accepted: np.ndarray) -> dict:
