@@ -40,7 +40,7 @@ DIFFUSE_COLOURS = (
     (0.5, 1.0, 0.0), (0.0, 0.5, 1.0), (1.0, 0.5, 1.0), (0.5, 1.0, 1.0), (0.5, 1.0, 0.5),
 )
 LABEL_COLOURS = (WORLD_COLOUR, *FLOOR_COLOURS, *DIFFUSE_COLOURS)
-#: Palette key of the world background (no object can be named with parentheses by us).
+#: Palette key of the world background (no demo object has parentheses in its name).
 WORLD_KEY = "(world)"
 MIRROR_MATERIAL = "CR Mirror"
 
@@ -236,6 +236,8 @@ def build(kind: str, scene=None, width: int = 320, height: int = 240):
     scene = scene if scene is not None else bpy.data.scenes.new(kind)
     _prepare(scene, width, height)
     BUILDERS[kind](scene)
+    for view_layer in scene.view_layers:
+        view_layer.update()  # world matrices are valid from here on, active scene or not
     return scene
 
 

@@ -4,23 +4,10 @@
 import numpy as np
 import pytest
 
-bpy = pytest.importorskip("bpy")
+import bpy
 
-from curved_reflections.addon import metrics, shapes  # noqa: E402
-from curved_reflections.operators import demo_scenes, reference_render  # noqa: E402
-
-
-@pytest.fixture(scope="module")
-def registered():
-    """The extension's classes and properties, registered for this module if not already."""
-    import curved_reflections
-
-    already = hasattr(bpy.types.Object, "curved_reflections")
-    if not already:
-        curved_reflections.register()
-    yield
-    if not already:
-        curved_reflections.unregister()
+from curved_reflections.addon import metrics, shapes
+from curved_reflections.operators import demo_scenes, reference_render
 
 
 @pytest.fixture

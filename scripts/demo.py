@@ -1,0 +1,224 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Build the demo scenes, render them with every renderer, and measure their reflections.
+
+    .venv/bin/python scripts/demo.py --out out/demo [--width 320 --height 240]
+        [--scenes sbc_fig3 teapot two_spheres vase] [--renderers cycles eevee_raytrace ...]
+
+For each scene this saves DIR/<scene>.blend (set up for the Cycles reference), renders
+the reflector mask, Cycles (the reference) and each other renderer, and compares labels
+(which object each pixel shows, ``addon/metrics.py``) against Cycles on all reflector
+pixels and on the near-contact region. It writes the images, one side-by-side PNG per
+scene and DIR/results.md, and prints the table.
+
+A renderer is one :class:`Renderer` entry in :func:`renderers`: a name and a function
+``(scene, reflectors, png_path) -> RenderResult``. Adding one (e.g. our own viewport
+reflections) is adding one entry.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import os
+import sys
+import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+SCENE_NAMES = ("sbc_fig3", "teapot", "two_spheres", "vase")
+REFERENCE = "cycles"
+
+
+def import_package():
+    """Import the repository as ``curved_reflections`` (isolated Blender user folder) and register it."""
+    if not os.environ.get("BLENDER_USER_RESOURCES"):
+        os.environ["BLENDER_USER_RESOURCES"] = tempfile.mkdtemp(prefix="curved_reflections_demo_")
+    spec = importlib.util.spec_from_file_location("_package_link", REPO_ROOT / "scripts" / "package_link.py")
+    link = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(link)
+    package = link.import_as_package(REPO_ROOT)
+    package.register()
+    return package
+
+
+@dataclass(frozen=True)
+class Renderer:
+    """A named way to render a scene's camera view to a PNG, timed."""
+
+    name: str
+    render: Callable  # (scene, reflectors, png_path) -> reference_render.RenderResult
+
+
+def renderers(args) -> list[Renderer]:
+    """The reference (Cycles) first, then every renderer compared with it."""
+    from curved_reflections.operators import reference_render as rr
+
+    def eevee(variant):
+        return lambda scene, reflectors, path: rr.render_eevee(
+            scene, variant, path, reflectors, args.eevee_samples, args.frames)
+
+    entries = [Renderer(REFERENCE, lambda scene, reflectors, path: rr.render_cycles(
+        scene, path, args.cycles_samples, args.bounces, args.frames))]
+    entries += [Renderer(variant, eevee(variant)) for variant in rr.EEVEE_VARIANTS]
+    wanted = set(args.renderers or [e.name for e in entries]) | {REFERENCE}
+    return [e for e in entries if e.name in wanted]
+
+
+@dataclass
+class Row:
+    scene: str
+    renderer: str
+    seconds: float
+    first_seconds: float | None
+    all_reflector: float
+    near_contact: float
+    notes: str
+
+
+def measure(kind: str, results, mask, palette) -> tuple[list[Row], dict]:
+    """Label disagreement of every result with the reference, on the mask and near contact."""
+    from curved_reflections.addon import metrics
+    from curved_reflections.operators.demo_scenes import WORLD_KEY
+
+    names = metrics.palette_names(palette)
+    reference = metrics.label_image(results[0].image, palette)
+    contact = metrics.contact_region(mask, reference, [names.index(WORLD_KEY)])
+    rows, differences = [], {}
+    for result in results:
+        labels = metrics.label_image(result.image, palette)
+        differences[result.name] = (labels != reference) & mask
+        rows.append(Row(kind, result.name, result.seconds, result.first_seconds,
+                        metrics.share_differing(labels, reference, mask),
+                        metrics.share_differing(labels, reference, contact), result.notes))
+    return rows, {"contact": contact, "differences": differences}
+
+
+def side_by_side(results, mask, contact, differences):
+    """Top row: the renders; bottom row: mask and near-contact region, then each difference map.
+
+    Difference maps show the reference dimmed, reflector pixels light grey, and in red the
+    reflector pixels whose label differs from the reference.
+    """
+    import numpy as np
+
+    reference = results[0].image[..., :3]
+    top = [r.image[..., :3] for r in results]
+    region = np.zeros_like(reference)
+    region[mask] = 0.6
+    region[contact] = (1.0, 0.8, 0.0)
+    bottom = [region]
+    for result in results[1:]:
+        panel = 0.35 * reference
+        panel[mask] = 0.85
+        panel[differences[result.name]] = (1.0, 0.0, 0.0)
+        bottom.append(panel)
+    bottom += [np.zeros_like(reference)] * (len(top) - len(bottom))
+    # Rows are stored bottom to top: the first block in the array is the bottom row.
+    return np.concatenate([np.concatenate(bottom, axis=1), np.concatenate(top, axis=1)], axis=0)
+
+
+def run_scene(kind: str, args, out: Path) -> list[Row]:
+    """Build, save, render and measure one demo scene."""
+    import bpy
+    from curved_reflections.operators import demo_scenes, reference_render as rr
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.context.scene.name = kind  # before building: camera and world are named after it
+    scene = demo_scenes.build(kind, bpy.context.scene, args.width, args.height)
+    rr.configure_cycles(scene, args.cycles_samples, args.bounces)
+    bpy.ops.wm.save_as_mainfile(filepath=str((out / f"{kind}.blend").resolve()), copy=True)
+    reflectors = demo_scenes.reflectors(scene)
+    palette = demo_scenes.palette(scene)
+    mask, _ = rr.render_mask(scene, out / f"{kind}_mask.png", reflectors)
+    results = []
+    for entry in renderers(args):
+        print(f"[demo] {kind}: {entry.name} ...", flush=True)
+        results.append(entry.render(scene, reflectors, out / f"{kind}_{entry.name}.png"))
+    rows, maps = measure(kind, results, mask, palette)
+    rr.write_png(out / f"{kind}_side_by_side.png",
+                 side_by_side(results, mask, maps["contact"], maps["differences"]))
+    for row in rows:
+        row.notes += f"; {int(mask.sum())} reflector px, {int(maps['contact'].sum())} near contact"
+    return rows
+
+
+def _percent(value: float) -> str:
+    return "n/a" if value != value else f"{100.0 * value:.1f}"
+
+
+def table(rows: list[Row]) -> str:
+    """The results as a markdown table (disagreement in % of pixels)."""
+    lines = ["| scene | renderer | time per frame (s) | label disagreement, all reflector px (%) "
+             "| near contact (%) |", "|---|---|---:|---:|---:|"]
+    for row in rows:
+        lines.append(f"| {row.scene} | {row.renderer} | {row.seconds:.2f} | "
+                     f"{_percent(row.all_reflector)} | {_percent(row.near_contact)} |")
+    return "\n".join(lines)
+
+
+def details(rows: list[Row]) -> str:
+    lines = ["| scene | renderer | first frame (s) | settings |", "|---|---|---:|---|"]
+    for row in rows:
+        first = "" if row.first_seconds is None else f"{row.first_seconds:.2f}"
+        lines.append(f"| {row.scene} | {row.renderer} | {first} | {row.notes} |")
+    return "\n".join(lines)
+
+
+def report(rows: list[Row], args) -> str:
+    from curved_reflections.addon.metrics import CONTACT_RADIUS_FRACTION
+
+    radius = CONTACT_RADIUS_FRACTION * args.width
+    return "\n\n".join([
+        "# Curved Reflections demo: reference renderers",
+        f"Resolution {args.width}x{args.height}, {os.cpu_count()} CPU cores. Label disagreement: "
+        "share of reflector pixels (Workbench mask) that show another object than Cycles "
+        "shows there (every object and the world have a distinct flat emission colour). "
+        f"Near contact: reflector pixels within {radius:.1f} px ({CONTACT_RADIUS_FRACTION:.4f} of "
+        "the width) of a non-reflector pixel showing a diffuse object. Cycles is the "
+        "reference, so its own row is 0 by definition.",
+        table(rows),
+        f"Time per frame is the wall time of one `render.render` call, PNG writing included "
+        f"(median of {args.frames} frame(s)); EEVEE renders a warm-up frame first (shader "
+        "compilation, faster when Mesa's shader cache is warm), shown below as the first frame. "
+        "EEVEE's probe variants capture their sphere probes in every frame.",
+        details(rows),
+        "Images: `<scene>_side_by_side.png`, top row the renders in table order, bottom row "
+        "the mask (grey) with the near-contact region (yellow), then per renderer its "
+        "disagreeing reflector pixels in red.",
+    ]) + "\n"
+
+
+def parse_args(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, default=REPO_ROOT / "out" / "demo")
+    parser.add_argument("--width", type=int, default=320)
+    parser.add_argument("--height", type=int, default=240)
+    parser.add_argument("--scenes", nargs="+", choices=SCENE_NAMES, default=list(SCENE_NAMES))
+    parser.add_argument("--renderers", nargs="+", default=None,
+                        help="renderers to run besides the Cycles reference (default: all)")
+    parser.add_argument("--cycles-samples", type=int, default=16)
+    parser.add_argument("--eevee-samples", type=int, default=16)
+    parser.add_argument("--bounces", type=int, default=8, help="Cycles glossy bounces")
+    parser.add_argument("--frames", type=int, default=1,
+                        help="timed frames per renderer; the time is their median")
+    return parser.parse_args(argv)
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    args.out.mkdir(parents=True, exist_ok=True)
+    import_package()
+    rows = []
+    for kind in args.scenes:
+        rows += run_scene(kind, args, args.out)
+    text = report(rows, args)
+    (args.out / "results.md").write_text(text)
+    print(table(rows))
+    print(f"[demo] wrote {args.out / 'results.md'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
