@@ -172,6 +172,7 @@ def report(rows: list[Row], args) -> str:
     radius = CONTACT_RADIUS_FRACTION * args.width
     return "\n\n".join([
         "# Curved Reflections demo: reference renderers",
+        "Produced by `make demo`, i.e. `.venv/bin/python scripts/demo.py " + " ".join(sys.argv[1:]) + "`.",
         f"Resolution {args.width}x{args.height}, {os.cpu_count()} CPU cores. Label disagreement: "
         "share of reflector pixels (Workbench mask) that show another object than Cycles "
         "shows there (every object and the world have a distinct flat emission colour). "
