@@ -131,46 +131,48 @@ def invert_patches(patches: RayPatches, leaf: np.ndarray, points: np.ndarray):
 
 
 def _newton(patches: RayPatches, leaf: np.ndarray, points: np.ndarray):
-    # Tail and direction coefficients side by side: each term is one (q, 6) array, and
-    # the quadratic and its derivatives are a few fused multiply-adds (no einsum).
-    c = np.concatenate([patches.tail[leaf], patches.direction[leaf]], axis=2)
-    terms = [np.ascontiguousarray(c[:, k]) for k in range(6)]
+    # Structure of arrays: every coefficient component is one contiguous 1-D array, so
+    # each step is a few dozen fused 1-D operations (no cross/einsum over tiny axes).
+    c = np.concatenate([patches.tail[leaf], patches.direction[leaf]], axis=2)  # (q, term, component)
+    k = [[np.ascontiguousarray(c[:, term, d]) for d in range(6)] for term in range(6)]
+    p = [np.ascontiguousarray(points[:, d]) for d in range(3)]
     start = 0.5 if patches.bilinear else 0.0
     u = np.full(len(points), start)
     v = np.full(len(points), start)
-    value = _quadratic(terms, u, v)
-    direction = value[:, 3:] / np.maximum(np.linalg.norm(value[:, 3:], axis=1), 1e-300)[:, None]
-    s = np.einsum("nd,nd->n", points - value[:, :3], direction)
-    active = np.arange(len(points))
+
+    def value(d):
+        return k[0][d] + u * (k[1][d] + u * k[3][d] + v * k[4][d]) + v * (k[2][d] + v * k[5][d])
+
+    ray = [value(d) for d in range(6)]
+    s = _dot([p[d] - ray[d] for d in range(3)], ray[3:]) / np.maximum(np.sqrt(_dot(ray[3:], ray[3:])), 1e-300)
     for _ in range(NEWTON_ITERATIONS):
-        c0, c1, c2, c3, c4, c5 = (t[active] for t in terms)
-        uc, vc, sc = u[active, None], v[active, None], s[active, None]
-        value = c0 + uc * (c1 + uc * c3 + vc * c4) + vc * (c2 + vc * c5)
-        du = c1 + 2 * uc * c3 + vc * c4
-        dv = c2 + uc * c4 + 2 * vc * c5
-        r = value[:, 3:]
-        a = du[:, :3] + sc * du[:, 3:]
-        b = dv[:, :3] + sc * dv[:, 3:]
-        f = value[:, :3] + sc * r - points[active]
-        bc, ca, ab = np.cross(b, r), np.cross(r, a), np.cross(a, b)
-        det = (a * bc).sum(axis=1)
+        ray = [value(d) for d in range(6)]
+        du = [k[1][d] + 2 * u * k[3][d] + v * k[4][d] for d in range(6)]
+        dv = [k[2][d] + u * k[4][d] + 2 * v * k[5][d] for d in range(6)]
+        r = ray[3:]
+        a = [du[d] + s * du[d + 3] for d in range(3)]
+        b = [dv[d] + s * dv[d + 3] for d in range(3)]
+        f = [ray[d] + s * r[d] - p[d] for d in range(3)]
+        bc, ca, ab = _cross(b, r), _cross(r, a), _cross(a, b)
+        det = _dot(a, bc)
         det = np.where(np.abs(det) > 1e-300, det, 1e-300)
-        step_u, step_v = (f * bc).sum(axis=1) / det, (f * ca).sum(axis=1) / det
-        u[active] = np.clip(u[active] - step_u, -4.0, 4.0)
-        v[active] = np.clip(v[active] - step_v, -4.0, 4.0)
-        s[active] -= (f * ab).sum(axis=1) / det
-        active = active[np.abs(step_u) + np.abs(step_v) >= STEP_TOLERANCE]
-        if len(active) == 0:
+        step_u, step_v = _dot(f, bc) / det, _dot(f, ca) / det
+        u = np.clip(u - step_u, -4.0, 4.0)
+        v = np.clip(v - step_v, -4.0, 4.0)
+        s = s - _dot(f, ab) / det
+        if np.max(np.abs(step_u) + np.abs(step_v), initial=0.0) < STEP_TOLERANCE:
             break
-    value = _quadratic(terms, u, v)
-    f = value[:, :3] + s[:, None] * value[:, 3:] - points
-    return patches.cells_at(leaf, u, v), s, np.linalg.norm(f, axis=1)
+    ray = [value(d) for d in range(6)]
+    miss = [ray[d] + s * ray[d + 3] - p[d] for d in range(3)]
+    return patches.cells_at(leaf, u, v), s, np.sqrt(_dot(miss, miss))
 
 
-def _quadratic(terms, u, v):
-    uc, vc = u[:, None], v[:, None]
-    c0, c1, c2, c3, c4, c5 = terms
-    return c0 + uc * (c1 + uc * c3 + vc * c4) + vc * (c2 + vc * c5)
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _cross(a, b):
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
 def project_patches(patches: RayPatches, leaf: np.ndarray, points: np.ndarray, margin: float = 0.5):
