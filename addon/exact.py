@@ -31,10 +31,15 @@ import numpy as np
 
 from .bvh import descend
 from .raytrace import ReflectorSet
+from .vectors import dot, lengths, normalized
 from .view import View
 
 NEWTON_ITERATIONS = 24
 NEWTON_TOLERANCE = 1e-12
+#: Newton gives up on a pair this far outside its triangle (barycentric units) ...
+ABANDON_DISTANCE = 0.5
+#: ... after this many iterations.
+ABANDON_AFTER = 4
 #: Barycentric slack for accepting a root on a triangle's edge (duplicates are merged).
 INSIDE_TOLERANCE = 1e-9
 #: Extra angle (radians) added to the culling cones against rounding.
@@ -100,7 +105,7 @@ def _candidates(reflector_set: ReflectorSet, view: View, points: np.ndarray):
     bvh = reflector_set.bvh
     boxes = [(np.where(lo <= hi, lo, 0.0), np.where(lo <= hi, hi, 0.0)) for lo, hi in zip(bvh.box_lo, bvh.box_hi)]
     centres = [0.5 * (lo + hi) for lo, hi in boxes]
-    radii = [0.5 * np.linalg.norm(hi - lo, axis=1) for lo, hi in boxes]
+    radii = [0.5 * lengths(hi - lo) for lo, hi in boxes]
 
     def node_test(queries, level, nodes):
         lo, hi = bvh.box_lo[level][nodes], bvh.box_hi[level][nodes]
@@ -113,9 +118,9 @@ def _candidates(reflector_set: ReflectorSet, view: View, points: np.ndarray):
     lo, hi = corners.min(axis=1), corners.max(axis=1)
     normals = reflector_set.normals[reflector_set.triangles[triangle]]
     axis = normals.sum(axis=1)
-    axis /= np.maximum(np.linalg.norm(axis, axis=1), 1e-300)[:, None]
+    axis = normalized(axis)
     cos = np.einsum("tkd,td->tk", normals, axis).min(axis=1)
-    keep = _may_reflect(view, points[point], 0.5 * (lo + hi), 0.5 * np.linalg.norm(hi - lo, axis=1), axis, cos)
+    keep = _may_reflect(view, points[point], 0.5 * (lo + hi), 0.5 * lengths(hi - lo), axis, cos)
     return point[keep], triangle[keep]
 
 
@@ -123,23 +128,23 @@ def _may_reflect(view, points, centres, radii, cone_axis, cone_cos) -> np.ndarra
     """Conservative test: some x within ``radii`` of ``centres`` may reflect the point."""
     to_eye = view.directions_to_eye(centres)
     if view.is_perspective:
-        eye_distance = np.linalg.norm(view.eye - centres, axis=1)
+        eye_distance = lengths(view.eye - centres)
         eye_turn = np.arcsin(np.clip(radii / np.maximum(eye_distance, 1e-300), 0.0, 1.0))
         eye_turn = np.where(eye_distance > radii, eye_turn, np.pi)
     else:
         eye_turn = np.zeros(len(centres))
     to_point = points - centres
-    point_distance = np.linalg.norm(to_point, axis=1)
+    point_distance = lengths(to_point)
     to_point /= np.maximum(point_distance, 1e-300)[:, None]
     point_turn = np.where(point_distance > radii,
                           np.arcsin(np.clip(radii / np.maximum(point_distance, 1e-300), 0.0, 1.0)), np.pi)
     half = to_eye + to_point
-    half_length = np.linalg.norm(half, axis=1)
+    half_length = lengths(half)
     chord = 2 * np.sin(eye_turn / 2) + 2 * np.sin(point_turn / 2)
     bounded = chord < half_length
     half_turn = np.arcsin(np.clip(chord / np.maximum(half_length, 1e-300), 0.0, 1.0))
     spread = np.arccos(np.clip(cone_cos, -1.0, 1.0)) + half_turn + CONE_SLACK
-    alignment = np.abs(np.einsum("ij,ij->i", half, cone_axis)) / np.maximum(half_length, 1e-300)
+    alignment = np.abs(dot(half, cone_axis)) / np.maximum(half_length, 1e-300)
     return ~bounded | (spread >= np.pi / 2) | (alignment >= np.cos(np.minimum(spread, np.pi / 2)))
 
 
@@ -154,37 +159,49 @@ def _newton(reflector_set: ReflectorSet, view: View, points: np.ndarray, triangl
     v0, e1, e2 = reflector_set.v0[triangles], reflector_set.e1[triangles], reflector_set.e2[triangles]
     n0, n1, n2 = (reflector_set.normals[corners[:, k]] for k in range(3))
     face = reflector_set.face_normals[triangles]
-    axis_u = e1 / np.maximum(np.linalg.norm(e1, axis=1), 1e-300)[:, None]
+    axis_u = normalized(e1)
     axis_v = np.cross(face, axis_u)
     centroid = v0 + (e1 + e2) / 3
-    orientation = np.where(np.einsum("ij,ij->i", view.directions_to_eye(centroid), face) >= 0, 1.0, -1.0)
+    orientation = np.where(dot(view.directions_to_eye(centroid), face) >= 0, 1.0, -1.0)
 
-    def residual(uv):
-        x = v0 + uv[:, :1] * e1 + uv[:, 1:] * e2
-        n = n0 + uv[:, :1] * (n1 - n0) + uv[:, 1:] * (n2 - n0)
-        n *= orientation[:, None] / np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None]
-        to_point = points - x
-        to_point /= np.maximum(np.linalg.norm(to_point, axis=1), 1e-300)[:, None]
+    def residual(uv, k):
+        """Residual of the pairs ``k`` at their barycentric ``uv``."""
+        x = v0[k] + uv[:, :1] * e1[k] + uv[:, 1:] * e2[k]
+        n = n0[k] + uv[:, :1] * (n1[k] - n0[k]) + uv[:, 1:] * (n2[k] - n0[k])
+        n = normalized(n) * orientation[k, None]
+        to_point = points[k] - x
+        to_point = normalized(to_point)
         half = view.directions_to_eye(x) + to_point
-        half /= np.maximum(np.linalg.norm(half, axis=1), 1e-300)[:, None]
+        half = normalized(half)
         r = half - n
-        return np.stack([np.einsum("ij,ij->i", r, axis_u), np.einsum("ij,ij->i", r, axis_v)], axis=1)
+        return np.stack([dot(r, axis_u[k]), dot(r, axis_v[k])], axis=1)
 
     uv = np.full((len(triangles), 2), 1.0 / 3.0)
     h = 1e-7
     du, dv = np.array([h, 0.0]), np.array([0.0, h])
-    for _ in range(NEWTON_ITERATIONS):
-        g = residual(uv)
-        jacobian = np.stack([(residual(uv + du) - residual(uv - du)) / (2 * h),
-                             (residual(uv + dv) - residual(uv - dv)) / (2 * h)], axis=2)
+    # Pairs leave the active set once converged, or once Newton has carried them well
+    # outside their triangle (their root, if any, belongs to a neighbour).
+    active = np.arange(len(triangles))
+    for iteration in range(NEWTON_ITERATIONS):
+        a = uv[active]
+        g = residual(a, active)
+        jacobian = np.stack([(residual(a + du, active) - residual(a - du, active)) / (2 * h),
+                             (residual(a + dv, active) - residual(a - dv, active)) / (2 * h)], axis=2)
         det = jacobian[:, 0, 0] * jacobian[:, 1, 1] - jacobian[:, 0, 1] * jacobian[:, 1, 0]
         safe = np.where(np.abs(det) > 1e-300, det, 1e-300)
         step = np.stack([jacobian[:, 1, 1] * g[:, 0] - jacobian[:, 0, 1] * g[:, 1],
                          -jacobian[:, 1, 0] * g[:, 0] + jacobian[:, 0, 0] * g[:, 1]], axis=1) / safe[:, None]
-        length = np.linalg.norm(step, axis=1)
+        length = lengths(step)
         step *= np.minimum(1.0, 0.5 / np.maximum(length, 1e-300))[:, None]
-        uv = np.clip(uv - step, -2.0, 3.0)
-    converged = np.linalg.norm(residual(uv), axis=1) < 1e-9
+        a = np.clip(a - step, -2.0, 3.0)
+        uv[active] = a
+        far_outside = (a.min(axis=1) < -ABANDON_DISTANCE) | (a.sum(axis=1) > 1 + ABANDON_DISTANCE)
+        keep = (length > NEWTON_TOLERANCE) & ~(far_outside & (iteration >= ABANDON_AFTER))
+        active = active[keep]
+        if len(active) == 0:
+            break
+    everything = np.arange(len(triangles))
+    converged = lengths(residual(uv, everything)) < 1e-9
     return uv, converged, orientation
 
 
@@ -194,7 +211,7 @@ def _first_of_duplicates(point, reflector, position, scale) -> np.ndarray:
         return np.zeros(0, dtype=bool)
     order = np.lexsort((position[:, 0], reflector, point))
     p, r, x = point[order], reflector[order], position[order]
-    same = (p[1:] == p[:-1]) & (r[1:] == r[:-1]) & (np.linalg.norm(x[1:] - x[:-1], axis=1) < 1e-7 * scale)
+    same = (p[1:] == p[:-1]) & (r[1:] == r[:-1]) & (lengths(x[1:] - x[:-1]) < 1e-7 * scale)
     keep_sorted = np.concatenate([[True], ~same])
     keep = np.zeros(len(point), dtype=bool)
     keep[order[keep_sorted]] = True
@@ -210,14 +227,14 @@ def _with_visibility(reflector_set, view, points, found) -> Reflections:
     to_eye = view.directions_to_eye(position)
 
     to_point = points[found["point"]] - position
-    point_distance = np.linalg.norm(to_point, axis=1)
+    point_distance = lengths(to_point)
     to_point /= np.maximum(point_distance, 1e-300)[:, None]
     sees_point = ~reflector_set.occluded(position, to_point, point_distance, triangle)
     # The ray from the eye must hit the front of its facet, and the reflected ray leave it.
     face = reflector_set.face_normals[triangle] * np.sign(
-        np.einsum("ij,ij->i", reflector_set.face_normals[triangle], to_eye))[:, None]
-    leaves_face = np.einsum("ij,ij->i", to_point, face) > 0
-    faces_eye = np.einsum("ij,ij->i", normal, face) > 0
+        dot(reflector_set.face_normals[triangle], to_eye))[:, None]
+    leaves_face = dot(to_point, face) > 0
+    faces_eye = dot(normal, face) > 0
     return Reflections(
         point=found["point"], reflector=reflector_set.owner[triangle], triangle=triangle,
         barycentric=found["barycentric"], position=position, normal=normal, pixel=pixel,
@@ -232,7 +249,7 @@ def _first_hit_of_view_ray(reflector_set, view, position, pixel) -> np.ndarray:
     a silhouette the occluder of a back-facing x is x's own neighbour.
     """
     origins, directions = view.pixel_rays(np.nan_to_num(pixel))
-    expected = np.einsum("ij,ij->i", position - origins, directions)
+    expected = dot(position - origins, directions)
     hits = reflector_set.intersect(origins, directions, expected * (1 + 1e-6) + 1e-9 * reflector_set.scale)
     return hits.hit & (np.abs(hits.t - expected) <= 1e-7 * reflector_set.scale + 1e-9 * np.abs(expected))
 
