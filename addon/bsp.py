@@ -31,6 +31,17 @@ from .raymap import RayMap
 from .segments import segment_max, segment_mean, segment_sum
 
 MAX_DEPTH = 40
+#: A tree whose leaves hold, in all, more than this many times the group's rays is
+#: abandoned: its rays cross in space (several images, caustics) and no plane separates them.
+MAX_DUPLICATION = 6.0
+
+
+#: A split that fails on a node of more rays than this means crossing rays too.
+MAX_RAY_LIST_RAYS = 64
+
+
+class RaysCrossError(Exception):
+    """The rays of a group overlap in space too much for planes to separate them."""
 CAMERA_LEAF, RAY_LIST_LEAF = 1, 2
 
 
@@ -77,10 +88,31 @@ def diagonal_neighbours(ray_map: RayMap, rays: np.ndarray) -> np.ndarray:
     return np.stack(corners, axis=1)
 
 
-def build_bsp(ray_map: RayMap, rays: np.ndarray, model, accuracy_px: float) -> BSPTree:
-    """Build the BSP tree of one reflection group's rays (all rays share one history)."""
+def half_frustum_points(ray_map: RayMap, rays: np.ndarray) -> np.ndarray:
+    """(R, 10, 3): tail and head of each ray and the midpoints toward its diagonal neighbours.
+
+    The paper assigns a ray to every side its unit frustum (the four diagonal
+    neighbours) reaches, so that a leaf holds every ray around any point in it. Leaves
+    here accept points up to half a cell beyond their rays, and every projection is
+    checked against the ray map itself, so half the frustum suffices; near grazing
+    angles, where neighbouring rays fan far apart at their heads, this cuts the
+    duplication of rays across split planes several times over.
+    """
     frustum = np.concatenate([rays[:, None], diagonal_neighbours(ray_map, rays)], axis=1)
-    frustum_points = np.concatenate([ray_map.tail[frustum], ray_map.head[frustum]], axis=1)  # (R, 10, 3)
+    tails = 0.5 * (ray_map.tail[frustum] + ray_map.tail[rays][:, None])
+    heads = 0.5 * (ray_map.head[frustum] + ray_map.head[rays][:, None])
+    return np.concatenate([tails, heads], axis=1)
+
+
+def build_bsp(ray_map: RayMap, rays: np.ndarray, model, accuracy_px: float,
+              max_duplication: float | None = MAX_DUPLICATION) -> BSPTree:
+    """Build the BSP tree of one reflection group's rays (all rays share one history).
+
+    Raises :class:`RaysCrossError` when the rays held by the nodes of a level exceed
+    ``max_duplication`` times the input, or a split fails on more than
+    ``MAX_RAY_LIST_RAYS`` rays (with ``max_duplication=None`` neither is checked).
+    """
+    frustum_points = half_frustum_points(ray_map, rays)
 
     levels = []  # one record of whole arrays per tree level
     camera_parts, raylist_rows, raylist_rays = [], [], []
@@ -93,14 +125,18 @@ def build_bsp(ray_map: RayMap, rays: np.ndarray, model, accuracy_px: float) -> B
         member_ray = rays[member_slot]
         params = model.fit(ray_map, member_ray, member_node, n)
         counts = np.bincount(member_node, minlength=n)
-        is_camera = _node_errors(ray_map, model, params, member_ray, member_node, n) <= accuracy_px
+        well_posed = model.well_posed(params, counts)
+        is_camera = (_node_errors(ray_map, model, params, member_ray, member_node, n) <= accuracy_px) & well_posed
         plane_normal, plane_offset = _split_planes(ray_map, member_ray, member_node, n)
         side = (np.einsum("mkd,md->mk", frustum_points[member_slot], plane_normal[member_node])
                 - plane_offset[member_node, None])
         positive, negative = side.max(axis=1) >= 0, side.min(axis=1) < 0
         fails = ((np.bincount(member_node, weights=positive, minlength=n) == counts)
-                 | (np.bincount(member_node, weights=negative, minlength=n) == counts) | (depth == MAX_DEPTH))
+                 | (np.bincount(member_node, weights=negative, minlength=n) == counts) | (depth == MAX_DEPTH)
+                 | ~well_posed)  # subsets of an ill-posed node are ill-posed too: stop here
         kind = np.where(is_camera, CAMERA_LEAF, np.where(fails, RAY_LIST_LEAF, 0))
+        if max_duplication is not None and np.any((kind == RAY_LIST_LEAF) & (counts > MAX_RAY_LIST_RAYS)):
+            raise RaysCrossError(f"a split of {counts[kind == RAY_LIST_LEAF].max()} rays failed at depth {depth}")
 
         row = np.full(n, -1, dtype=np.int64)
         cameras_here, raylists_here = kind == CAMERA_LEAF, kind == RAY_LIST_LEAF
@@ -126,6 +162,8 @@ def build_bsp(ray_map: RayMap, rays: np.ndarray, model, accuracy_px: float) -> B
         local_child[splits] = np.arange(2 * splits.sum()).reshape(-1, 2)
         member_node = np.concatenate([local_child[member_node[goes_left], 0], local_child[member_node[goes_right], 1]])
         member_slot = np.concatenate([member_slot[goes_left], member_slot[goes_right]])
+        if max_duplication is not None and len(member_slot) > max_duplication * len(rays):
+            raise RaysCrossError(f"{len(member_slot)} memberships for {len(rays)} rays at depth {depth + 1}")
         level_ids = child[splits].reshape(-1)
 
     cell_start, cells = _raylist_cells(ray_map, np.concatenate(raylist_rows), np.concatenate(raylist_rays), n_raylists)

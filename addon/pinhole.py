@@ -111,6 +111,10 @@ class PinholeLeaves:
     name = "pinhole"
     concatenate = staticmethod(concatenate_cameras)
 
+    def well_posed(self, cameras: PinholeCameras, counts: np.ndarray) -> np.ndarray:
+        """Every camera is usable, as in the paper (its error decides)."""
+        return np.ones(len(counts), dtype=bool)
+
     def fit(self, ray_map, rays, node, n_nodes) -> PinholeCameras:
         return fit_cameras(ray_map.tail[rays], ray_map.direction[rays], ray_map.head[rays],
                            ray_map.first_point[rays], node, n_nodes)

@@ -36,6 +36,8 @@ STEP_TOLERANCE = 1e-9
 #: Fractions of the tail-to-head segment where the fit error is measured.
 ERROR_SAMPLE_FRACTIONS = np.array([0.0, 0.01, 0.05, 0.15, 0.35, 0.65, 1.0])
 PROJECT_CHUNK = 8192
+#: Fewest rays a camera-leaf patch is fitted to: the six coefficients of a quadratic.
+MIN_PATCH_RAYS = 6
 
 
 def quadratic_basis(u, v):
@@ -192,6 +194,15 @@ class RayPatchLeaves:
 
     name = "ray_patch"
     concatenate = staticmethod(concatenate_patches)
+
+    def well_posed(self, patches: RayPatches, counts: np.ndarray) -> np.ndarray:
+        """Enough rays, spread in two directions, to fix a quadratic between them.
+
+        Errors are measured on the leaf's own rays; a quadratic through fewer, or through
+        rays along one line, can pass through them all and still be wrong in between.
+        """
+        extent = patches.hi - patches.lo
+        return (counts >= MIN_PATCH_RAYS) & (extent.min(axis=1) >= 1) & (extent.max(axis=1) >= 2)
 
     def fit(self, ray_map, rays, node, n_nodes) -> RayPatches:
         return fit_patches(ray_map.cell[rays], ray_map.tail[rays], ray_map.direction[rays], node, n_nodes)

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .bsp import CAMERA_LEAF, RAY_LIST_LEAF, BSPTree, build_bsp
+from .bsp import CAMERA_LEAF, MAX_DUPLICATION, RAY_LIST_LEAF, BSPTree, RaysCrossError, build_bsp
 from .errors import SceneInputError
 from .pinhole import PinholeLeaves
 from .ray_patch import RayPatchLeaves, invert_patches
@@ -35,6 +35,10 @@ from .view import View
 LEAF_MODELS = {"ray_patch": RayPatchLeaves(), "pinhole": PinholeLeaves()}
 #: Tolerance (cell units) for a ray-list cell's bilinear coordinates.
 CELL_TOLERANCE = 1e-6
+#: A projected point may lie off the ray map's interpolated ray by this many cell spacings.
+MISS_CELLS = 1.0
+#: Groups of at most this many rays are never split into sheets.
+MIN_SHEET_RAYS = 64
 #: Ray-list cells tried per point, nearest central ray first.
 CANDIDATE_CELLS = 3
 
@@ -59,11 +63,12 @@ class SampleBasedCamera:
     trees: list
     grids: list
     model_name: str
+    histories: list  # one reflection history per tree (a history repeats once per sheet)
     stats: dict = field(default_factory=dict)
 
     @property
     def groups(self) -> list:
-        return list(self.ray_map.histories)
+        return list(self.histories)
 
     def project(self, points) -> Projection:
         points = np.asarray(points, dtype=np.float64)
@@ -99,9 +104,14 @@ class SampleBasedCamera:
             cells[on_list], accepted[on_list] = _project_ray_lists(tree, row[on_list], points[on_list])
 
         sample = _interpolate_rays(self.ray_map, grid, cells, accepted)
-        s = np.einsum("pd,pd->p", points - sample["tail"], sample["direction"])
+        offset = points - sample["tail"]
+        s = np.einsum("pd,pd->p", offset, sample["direction"])
         tolerance = 1e-6 * (1.0 + sample["head_distance"])
-        ok = sample["complete"] & (s >= -tolerance) & (s <= sample["head_distance"] + tolerance)
+        # The point must lie on the ray map's own ray at that cell, within one cell's
+        # spacing: this checks every leaf's answer against the traced rays themselves.
+        miss = np.linalg.norm(offset - s[:, None] * sample["direction"], axis=1)
+        on_ray = miss <= MISS_CELLS * _cell_spacing(sample, s) + tolerance
+        ok = sample["complete"] & on_ray & (s >= -tolerance) & (s <= sample["head_distance"] + tolerance)
         hits = np.flatnonzero(ok)
         pixels = self.ray_map.cell_pixels(cells[hits])
         origins, directions = self.ray_map.view.pixel_rays(pixels)
@@ -182,11 +192,44 @@ def _interpolate_rays(ray_map: RayMap, grid: np.ndarray, cells: np.ndarray, acce
     direction /= np.maximum(np.linalg.norm(direction, axis=1), 1e-300)[:, None]
     return {
         "complete": complete,
+        "corner_tails": ray_map.tail[corners],
+        "corner_directions": ray_map.direction[corners],
         "tail": np.einsum("pk,pkd->pd", weights, ray_map.tail[corners]),
         "direction": direction,
         "head_distance": np.einsum("pk,pk->p", weights, ray_map.head_distance[corners]),
         "first_depth": np.einsum("pk,pk->p", weights, ray_map.first_depth[corners]),
     }
+
+
+def _cell_spacing(sample: dict, s: np.ndarray) -> np.ndarray:
+    """Distance between neighbouring rays of the cell at ray distance ``s`` (the larger axis)."""
+    ends = sample["corner_tails"] + s[:, None, None] * sample["corner_directions"]
+    along_u = np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1)
+    along_v = np.linalg.norm(ends[:, 2] - ends[:, 0], axis=1)
+    return np.maximum(along_u, along_v)
+
+
+def _build_sheets(ray_map: RayMap, rays: np.ndarray, model, accuracy_px: float) -> list:
+    """Trees for one group's rays, split into sheets where the rays cross in space.
+
+    Where rays of one history cross (a concave mirror's caustic, or two parts of a
+    mirror reflecting the same region: the Chen-Arvo vase shows points twice), no
+    plane separates them and the BSP duplicates rays without end. The rays are then
+    halved in ray-map space (at the median cell along the longer side) and each half
+    gets its own tree, its own *sheet*, recursively. A point may project in several
+    sheets of one history: those are its several images.
+    """
+    try:
+        return [build_bsp(ray_map, rays, model, accuracy_px,
+                          max_duplication=None if len(rays) <= MIN_SHEET_RAYS else MAX_DUPLICATION)]
+    except RaysCrossError:
+        cells = ray_map.cell[rays]
+        axis = int(np.argmax(cells.max(axis=0) - cells.min(axis=0)))
+        low = cells[:, axis] <= np.median(cells[:, axis])
+        if low.all() or not low.any():
+            return [build_bsp(ray_map, rays, model, accuracy_px, max_duplication=None)]
+        return (_build_sheets(ray_map, rays[low], model, accuracy_px)
+                + _build_sheets(ray_map, rays[~low], model, accuracy_px))
 
 
 def build_from_ray_map(ray_map: RayMap, accuracy_px: float = 1.0, leaf_model: str = "ray_patch") -> SampleBasedCamera:
@@ -196,13 +239,15 @@ def build_from_ray_map(ray_map: RayMap, accuracy_px: float = 1.0, leaf_model: st
     if not accuracy_px > 0:
         raise ValueError(f"accuracy_px must be positive, got {accuracy_px}")
     start = time.perf_counter()
-    trees, grids = [], []
-    for g in range(len(ray_map.histories)):
-        rays = np.flatnonzero(ray_map.group == g)
-        trees.append(build_bsp(ray_map, rays, LEAF_MODELS[leaf_model], accuracy_px))
-        grids.append(ray_map.group_grid(g))
+    trees, grids, histories = [], [], []
+    for g, history in enumerate(ray_map.histories):
+        grid = ray_map.group_grid(g)
+        for tree in _build_sheets(ray_map, np.flatnonzero(ray_map.group == g), LEAF_MODELS[leaf_model], accuracy_px):
+            trees.append(tree)
+            grids.append(grid)
+            histories.append(history)
     seconds = time.perf_counter() - start
-    sbc = SampleBasedCamera(ray_map, trees, grids, leaf_model)
+    sbc = SampleBasedCamera(ray_map, trees, grids, leaf_model, histories)
     sbc.stats = _stats(ray_map, trees, grids, seconds)
     return sbc
 
@@ -252,7 +297,8 @@ def _stats(ray_map: RayMap, trees: list, grids: list, seconds: float) -> dict:
     kinds = np.concatenate([t.leaf_kind for t in trees]) if trees else np.zeros(0, np.int8)
     rays_in_leaves = np.concatenate([t.leaf_rays for t in trees]) if trees else np.zeros(0)
     return {
-        "n_groups": len(trees),
+        "n_groups": len(set(ray_map.histories)),
+        "n_sheets": len(trees),
         "n_rays": int(ray_map.n_rays),
         "n_leaves": int(len(kinds)),
         "n_camera_leaves": int((kinds == CAMERA_LEAF).sum()),

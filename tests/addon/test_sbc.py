@@ -4,7 +4,7 @@
 import numpy as np
 import pytest
 
-from curved_reflections.addon import Reflector, SceneInputError, build_sample_based_camera, look_at_view
+from curved_reflections.addon import Reflector, SceneInputError, build_sample_based_camera, look_at_view, shapes
 from curved_reflections.addon.exact import solve_reflections
 from curved_reflections.addon.raytrace import ReflectorSet
 from curved_reflections.addon.sphere import icosphere
@@ -158,3 +158,39 @@ def test_bad_options_are_clear_errors():
         build_sample_based_camera([reflector], view, BOUNDS, downsample=64)
     with pytest.raises(ValueError, match=r"\(P, 3\)"):
         build_sample_based_camera([reflector], view, BOUNDS).project(np.zeros(3))
+
+
+def test_the_vase_gets_one_sheet_per_image_and_both_images_project():
+    vase = shapes.vase(segments=64, rings=48)
+    reflectors = [Reflector("Vase", vase.vertices, vase.triangles, vase.normals)]
+    view = look_at_view([5.0, -2.0, 1.6], [0, 0, 1], width=320, height=240, fov_y_deg=35)
+    bounds = (np.array([-3.0, -3.0, -0.5]), np.array([3.0, 3.0, 3.5]))
+    points = np.random.default_rng(4).uniform(bounds[0], bounds[1], (2500, 3))
+    sbc = build_sample_based_camera(reflectors, view, bounds, downsample=2)
+    projection = sbc.project(points)
+    exact = solve_reflections(ReflectorSet(reflectors), view, points)
+    exact = exact.select(exact.visible)
+    assert set(projection.groups) == {(0,)} and sbc.stats["n_sheets"] == len(projection.groups) > 1
+    two_images = np.flatnonzero(np.bincount(exact.point, minlength=len(points)) == 2)
+    assert len(two_images) > 500
+    assert (projection.valid[:, two_images].sum(axis=0) >= 2).mean() > 0.7
+    # Each projection lies next to one of its point's exact images.
+    g, p = np.nonzero(projection.valid)
+    nearest = np.full(len(p), np.inf)
+    for k in range(2):
+        order = np.argsort(exact.point, kind="stable")
+        first = np.searchsorted(exact.point[order], p) + k
+        ok = (first < len(order)) & (exact.point[order][np.minimum(first, len(order) - 1)] == p)
+        d = np.linalg.norm(exact.pixel[order][np.minimum(first, len(order) - 1)] - projection.pixels[g, p], axis=1)
+        nearest = np.where(ok, np.minimum(nearest, d), nearest)
+    assert np.percentile(nearest, 99) <= 1.0
+    assert sbc.stats["n_leaves"] <= sbc.stats["n_rays"] / 3
+
+
+def test_camera_leaves_are_fitted_to_enough_rays_in_two_directions(ellipsoid_case):
+    (sbc, _, _), _ = ellipsoid_case
+    for tree in sbc.trees:
+        cameras = tree.leaf_kind == 1
+        assert np.all(tree.leaf_rays[cameras] >= 6)
+        extent = tree.cameras.hi - tree.cameras.lo
+        assert np.all(extent.min(axis=1) >= 1) and np.all(extent.max(axis=1) >= 2)

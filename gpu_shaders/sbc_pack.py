@@ -1,0 +1,268 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""A sample-based camera packed into float textures, for projection in a vertex shader.
+
+SBC paper (Popescu, Sacks, Mei 2006), section V-A: scene points are projected by the
+sample-based camera in the vertex shader, so the camera's data (BSP trees, leaf
+models, ray map) must live in GPU memory; section VII-B: "the BSP trees are packed and
+loaded into texture memory using the vertex texture technique". Storage buffers are
+not exposed to Python in Blender, so everything goes into RGBA32F textures read with
+``texelFetch`` (which works in vertex shaders, see BLENDER_HEADLESS.md).
+
+Every array is a list of *records* of a fixed number of texels (RGBA, float32). Record
+texel ``k`` sits at texel index ``i`` and texel index ``i`` at (i % W, i // W) of a 2D
+texture ``TEXTURE_WIDTH`` (W) texels wide. Integers (children, leaf ids, offsets, ray
+indices) are stored as floats, which is exact below 2^24; packing refuses larger ones.
+
+Textures (names as the GLSL samplers, ``sbc_`` + name):
+
+``groups``  3 texels per reflection group (the group's offsets into the shared arrays)
+    0: (node offset, leaf offset, camera-patch offset, cell-patch offset)  [records]
+    1: (cell-start offset, grid offset, tree depth, number of ray-list leaves) [scalars]
+    2: (ray-map columns, rows, down-sampling factor, number of groups)
+``nodes``   2 texels per BSP node: (plane normal xyz, plane offset), (left, right, leaf, 0);
+            children and leaf ids are local to the group's tree, -1 where none.
+``leaves``  1 texel per leaf: (kind, row, rays in leaf, 0); row local to the group
+            (camera-leaf patch or ray-list leaf).
+``patches`` 16 texels per ray patch; the camera-leaf patches of all groups, then the
+            bilinear ray-list cell patches of all groups (offsets in ``groups``):
+    0: (chart origin xyz, 1 if bilinear else 0)
+    1..6: (tail coefficient k xyz, cell coefficient k x), k = 1, u, v, u^2, uv, v^2
+    7..12: (direction coefficient k xyz, cell coefficient k y)
+    13: (lo.x, lo.y, hi.x, hi.y) the member cells' bounds
+    14: (cell-centre tail xyz, 0), relative to the origin (bilinear cells only)
+    15: (cell-centre unit direction xyz, 0) (bilinear cells only)
+``scalars`` 1 float per entry, 4 per texel: each group's ray-list CSR offsets
+            ``cell_start`` and its ray grid (rows x columns, row-major, ray index or -1).
+``rays``    2 texels per ray of the ray map: (tail xyz, head distance),
+            (unit direction xyz, first-hit depth).
+
+Why relative coordinates: float32 has about 7 digits, and a point's projection is a
+Newton solve whose answer is a small correction to a position of the size of the
+scene. Tails are therefore stored relative to a chart origin near them: the constant
+tail coefficient has the (float32-rounded) origin subtracted in float64 before
+rounding, and the shader solves for ``p - origin``. Camera leaves use their chart
+origin (the tails' centroid); bilinear cells, which have no chart, use the tail of
+their first corner ray. The chart axes and scale are not stored: projection needs only
+the coefficients, which are already functions of the chart coordinates.
+
+:func:`pack_sample_based_camera` is plain numpy (testable without a GPU);
+:func:`unpack_sample_based_camera` reads the arrays back for tests;
+:func:`build_textures` makes the ``gpu`` textures.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..addon.bsp import CAMERA_LEAF
+
+#: Texels per row of every packed texture; index i lives at (i % W, i // W).
+TEXTURE_WIDTH = 4096
+GROUP_TEXELS, NODE_TEXELS, LEAF_TEXELS, PATCH_TEXELS, RAY_TEXELS = 3, 2, 1, 16, 2
+#: Floats hold integers exactly below this.
+EXACT_INTEGER_LIMIT = 1 << 24
+#: Largest texture height assumed available (OpenGL 4.5 guarantees at least 16384).
+MAX_TEXTURE_HEIGHT = 16384
+TEXTURE_NAMES = ("groups", "nodes", "leaves", "patches", "scalars", "rays")
+
+
+@dataclass(frozen=True)
+class PackedSBC:
+    """Texel arrays of one sample-based camera, each (n_texels, 4) float32 (``scalars`` (n,))."""
+
+    groups: np.ndarray
+    nodes: np.ndarray
+    leaves: np.ndarray
+    patches: np.ndarray
+    scalars: np.ndarray
+    rays: np.ndarray
+    n_groups: int
+    columns: int
+    rows: int
+    downsample: int
+
+    def texture_arrays(self) -> dict:
+        """Each array as a (height, TEXTURE_WIDTH, 4) float32 image, zero-padded (at least one row)."""
+        images = {}
+        for name in TEXTURE_NAMES:
+            texels = getattr(self, name)
+            if name == "scalars":
+                texels = np.pad(texels, (0, -len(texels) % 4)).reshape(-1, 4)
+            height = max(1, -(-len(texels) // TEXTURE_WIDTH))
+            if height > MAX_TEXTURE_HEIGHT:
+                raise ValueError(f"{name}: {len(texels)} texels need a texture {height} rows high "
+                                 f"(at most {MAX_TEXTURE_HEIGHT})")
+            image = np.zeros((height * TEXTURE_WIDTH, 4), dtype=np.float32)
+            image[:len(texels)] = texels
+            images[name] = image.reshape(height, TEXTURE_WIDTH, 4)
+        return images
+
+    @property
+    def nbytes(self) -> int:
+        return int(sum(getattr(self, name).nbytes for name in TEXTURE_NAMES))
+
+
+def _exact(name: str, values) -> np.ndarray:
+    values = np.asarray(values)
+    if values.size and np.abs(values).max() >= EXACT_INTEGER_LIMIT:
+        raise ValueError(f"{name}: {int(np.abs(values).max())} is too large to store exactly in float32")
+    return values.astype(np.float32)
+
+
+def _pack_patches(patches, bilinear: bool) -> np.ndarray:
+    """(n * PATCH_TEXELS, 4) float32 texels of ray patches, tails relative to their origin."""
+    n = len(patches.lo)
+    tail = patches.tail.astype(np.float64).copy()
+    if bilinear:
+        origin = tail[:, 0].astype(np.float32)
+    else:
+        origin = patches.origin.astype(np.float32)
+    tail[:, 0] -= origin.astype(np.float64)  # in float64, then rounded: the GPU works near zero
+    out = np.zeros((n, PATCH_TEXELS, 4), dtype=np.float64)
+    out[:, 0, :3] = origin
+    out[:, 0, 3] = 1.0 if bilinear else 0.0
+    out[:, 1:7, :3] = tail
+    out[:, 1:7, 3] = patches.cell[:, :, 0]
+    out[:, 7:13, :3] = patches.direction
+    out[:, 7:13, 3] = patches.cell[:, :, 1]
+    out[:, 13, :2] = patches.lo
+    out[:, 13, 2:] = patches.hi
+    if bilinear:
+        # The cell-centre ray of sbc._closest_cells: patch at (0.5, 0.5) = c0 + (c1 + c2) / 2 + c4 / 4.
+        t, d = patches.tail, patches.direction
+        centre_tail = t[:, 0] + 0.5 * (t[:, 1] + t[:, 2]) + 0.25 * t[:, 4]
+        centre_direction = d[:, 0] + 0.5 * (d[:, 1] + d[:, 2]) + 0.25 * d[:, 4]
+        centre_direction /= np.maximum(np.linalg.norm(centre_direction, axis=1), 1e-300)[:, None]
+        out[:, 14, :3] = centre_tail - origin.astype(np.float64)
+        out[:, 15, :3] = centre_direction
+    return out.reshape(-1, 4).astype(np.float32)
+
+
+def pack_sample_based_camera(sbc) -> PackedSBC:
+    """Pack every reflection group of ``sbc`` (a :class:`addon.sbc.SampleBasedCamera`).
+
+    Only the ``"ray_patch"`` leaf model is supported (the paper's pinhole leaves are a
+    CPU baseline).
+    """
+    if sbc.model_name != "ray_patch":
+        raise ValueError(f"GPU projection supports the 'ray_patch' leaf model only, not {sbc.model_name!r}")
+    ray_map = sbc.ray_map
+    groups, nodes, leaves, camera_patches, cell_patches, scalars = [], [], [], [], [], []
+    n_cameras = sum(0 if t.cameras is None else len(t.cameras.lo) for t in sbc.trees)
+    cell_base = n_cameras  # cell patches follow all camera patches
+    n_scalars = n_cells = 0
+    n_nodes = n_leaves = n_camera_rows = 0
+    for tree, grid in zip(sbc.trees, sbc.grids):
+        n_raylists = len(tree.cell_start) - 1
+        header = np.zeros((GROUP_TEXELS, 4))
+        header[0] = (n_nodes, n_leaves, n_camera_rows, cell_base + n_cells)
+        header[1] = (n_scalars, n_scalars + n_raylists + 1, tree.depth, n_raylists)
+        header[2] = (ray_map.columns, ray_map.rows, ray_map.downsample, len(sbc.trees))
+        groups.append(header)
+
+        node = np.zeros((len(tree.leaf), NODE_TEXELS, 4))
+        node[:, 0, :3] = tree.plane_normal
+        node[:, 0, 3] = tree.plane_offset
+        node[:, 1, 0] = tree.left
+        node[:, 1, 1] = tree.right
+        node[:, 1, 2] = tree.leaf
+        nodes.append(node.reshape(-1, 4))
+        leaf = np.zeros((len(tree.leaf_kind), 4))
+        leaf[:, 0], leaf[:, 1], leaf[:, 2] = tree.leaf_kind, tree.leaf_row, tree.leaf_rays
+        leaves.append(leaf)
+        if tree.cameras is not None:
+            camera_patches.append(_pack_patches(tree.cameras, bilinear=False))
+            n_camera_rows += len(tree.cameras.lo)
+        if tree.cells is not None:
+            cell_patches.append(_pack_patches(tree.cells, bilinear=True))
+            n_cells += len(tree.cells.lo)
+        scalars.append(_exact("cell_start", tree.cell_start))
+        scalars.append(_exact("grid", grid.reshape(-1)))
+        n_scalars += n_raylists + 1 + grid.size
+        n_nodes += len(tree.leaf)
+        n_leaves += len(tree.leaf_kind)
+
+    def stack(parts):
+        return np.concatenate(parts).astype(np.float32) if parts else np.zeros((0, 4), np.float32)
+
+    group_texels = stack(groups)
+    node_texels = stack(nodes)
+    _exact("offsets", group_texels)
+    _exact("tree indices", node_texels[1::2, :3])
+    rays = np.zeros((ray_map.n_rays, RAY_TEXELS, 4))
+    rays[:, 0, :3], rays[:, 0, 3] = ray_map.tail, ray_map.head_distance
+    rays[:, 1, :3], rays[:, 1, 3] = ray_map.direction, ray_map.first_depth
+    _exact("ray count", [ray_map.n_rays])
+    _exact("patch count", [n_cameras + n_cells])
+    return PackedSBC(
+        groups=group_texels, nodes=node_texels, leaves=_exact("leaves", stack(leaves)),
+        patches=np.concatenate(camera_patches + cell_patches) if (camera_patches or cell_patches)
+        else np.zeros((0, 4), np.float32),
+        scalars=np.concatenate(scalars) if scalars else np.zeros(0, np.float32),
+        rays=rays.reshape(-1, 4).astype(np.float32), n_groups=len(sbc.trees),
+        columns=int(ray_map.columns), rows=int(ray_map.rows), downsample=int(ray_map.downsample),
+    )
+
+
+def _unpack_patches(texels: np.ndarray) -> dict:
+    patch = texels.astype(np.float64).reshape(-1, PATCH_TEXELS, 4)
+    origin = patch[:, 0, :3]
+    tail = patch[:, 1:7, :3].copy()
+    tail[:, 0] += origin
+    return {
+        "origin": origin, "bilinear": patch[:, 0, 3] > 0.5, "tail": tail, "direction": patch[:, 7:13, :3],
+        "cell": np.stack([patch[:, 1:7, 3], patch[:, 7:13, 3]], axis=2), "lo": patch[:, 13, :2],
+        "hi": patch[:, 13, 2:], "centre_tail": patch[:, 14, :3] + origin, "centre_direction": patch[:, 15, :3],
+    }
+
+
+def unpack_sample_based_camera(packed: PackedSBC) -> tuple[list, dict]:
+    """The arrays read back from the texels (the inverse of packing): per group a dict
+    (tree, patches, CSR offsets, grid), and a dict of the per-ray arrays.
+
+    Integer arrays come back exactly; float arrays at float32 precision (tails relative
+    to their origin, which is added back here).
+    """
+    out = []
+    rays = packed.rays.astype(np.float64).reshape(-1, RAY_TEXELS, 4)
+    header = packed.groups.astype(np.int64).reshape(-1, GROUP_TEXELS, 4)
+    for g in range(packed.n_groups):
+        node_start, leaf_start, camera_start, cell_start = header[g, 0]
+        scalar_start, grid_start, depth, n_raylists = header[g, 1]
+        node_stop = header[g + 1, 0, 0] if g + 1 < packed.n_groups else len(packed.nodes) // NODE_TEXELS
+        leaf_stop = header[g + 1, 0, 1] if g + 1 < packed.n_groups else len(packed.leaves)
+        node = packed.nodes.reshape(-1, NODE_TEXELS, 4)[node_start:node_stop].astype(np.float64)
+        leaf = packed.leaves[leaf_start:leaf_stop].astype(np.float64)
+        kind = leaf[:, 0].astype(np.int8)
+        row = leaf[:, 1].astype(np.int64)
+        offsets = packed.scalars[scalar_start:grid_start].astype(np.int64)
+        n_cameras = int(row[kind == CAMERA_LEAF].max() + 1) if np.any(kind == CAMERA_LEAF) else 0
+        n_cells = int(offsets[-1])
+        patches = packed.patches.reshape(-1, PATCH_TEXELS, 4)
+        grid = packed.scalars[grid_start:grid_start + packed.rows * packed.columns].astype(np.int64)
+        out.append({
+            "plane_normal": node[:, 0, :3], "plane_offset": node[:, 0, 3],
+            "left": node[:, 1, 0].astype(np.int64), "right": node[:, 1, 1].astype(np.int64),
+            "leaf": node[:, 1, 2].astype(np.int64), "leaf_kind": kind, "leaf_row": row,
+            "leaf_rays": leaf[:, 2].astype(np.int64), "depth": int(depth), "cell_start": offsets,
+            "n_raylists": int(n_raylists),
+            "cameras": _unpack_patches(patches[camera_start:camera_start + n_cameras].reshape(-1, 4)),
+            "cells": _unpack_patches(patches[cell_start:cell_start + n_cells].reshape(-1, 4)),
+            "grid": grid.reshape(packed.rows, packed.columns),
+        })
+    return out, {"tail": rays[:, 0, :3], "head_distance": rays[:, 0, 3], "direction": rays[:, 1, :3],
+                 "first_depth": rays[:, 1, 3]}
+
+
+def build_textures(packed: PackedSBC) -> dict:
+    """``gpu`` RGBA32F textures of the packed arrays, by name (needs an initialised GPU)."""
+    import gpu
+
+    textures = {}
+    for name, image in packed.texture_arrays().items():
+        height, width, _ = image.shape
+        data = gpu.types.Buffer('FLOAT', image.size, image.reshape(-1))
+        textures[name] = gpu.types.GPUTexture((width, height), format='RGBA32F', data=data)
+    return textures

@@ -1,0 +1,197 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Sample-based camera projection in a vertex shader agrees with the numpy reference.
+
+SBC paper section V-A: scene points are projected by the sample-based camera on the
+GPU. ``gpu_shaders/glsl/sbc_projection.glsl`` reimplements
+:meth:`addon.sbc.SampleBasedCamera.project` in float32 on textures packed by
+``gpu_shaders/sbc_pack.py``. Each point is drawn as one point primitive into its own
+texel of a float target, and the texels are compared with numpy on the same
+(float32-rounded) points: the accept/reject decision, the pixel, the leaf kind, the
+first-reflector depth and the distance along the reflected ray.
+
+The packing itself is checked without a GPU: unpacked arrays equal the camera's.
+"""
+
+import dataclasses
+import time
+
+import numpy as np
+import pytest
+
+from curved_reflections.addon import Reflector, build_sample_based_camera, look_at_view, scene_bounds
+from curved_reflections.addon.shapes import vase
+from curved_reflections.addon.sphere import icosphere
+from curved_reflections.gpu_shaders import sbc_pack
+
+#: Share of (group, point) decisions allowed to differ: only points a hair from a
+#: decision boundary (split plane, segment end, cell bound, Newton's residual threshold)
+#: may fall on the other side in float32.
+DECISION_SHARE = 0.001
+PIXEL_TOLERANCE = 0.05  # desired-view pixels, largest difference
+DEPTH_TOLERANCE = 1e-5  # relative, first-reflector depth
+DISTANCE_TOLERANCE = 2e-5  # scene units, distance along the reflected ray
+
+
+def _sphere():
+    reflectors = [icosphere((0.0, 0.0, 0.0), 1.0, 4)]
+    view = look_at_view((0.0, -4.0, 1.5), (0.0, 0.0, 0.0), width=320, height=240)
+    return reflectors, view
+
+
+def _vase_and_ball():
+    """Two reflectors, two reflection groups; the open vase's inside gives many ray-list leaves."""
+    shape = vase(segments=48, rings=32).moved(offset=(0.0, 0.0, -1.0), scale=0.8)
+    reflectors = [Reflector("Vase", shape.vertices, shape.triangles, shape.normals),
+                  icosphere((0.7, -1.2, -0.2), 0.45, 3, name="Ball")]
+    view = look_at_view((0.8, -5.0, 2.2), (0.0, 0.0, -0.1), width=320, height=240)
+    return reflectors, view
+
+
+def _points(reflectors, bounds, rng, n_random=3000, n_near=1000):
+    """Random points in the scene box, and points just off each reflector (both sides)."""
+    parts = [rng.uniform(bounds[0], bounds[1], (n_random, 3))]
+    for reflector in reflectors:
+        k = rng.integers(0, len(reflector.vertices), n_near)
+        offset = rng.uniform(-0.05, 0.3, (n_near, 1)) * reflector.normals[k]
+        parts.append(reflector.vertices[k] + offset)
+    return np.concatenate(parts).astype(np.float32)  # what the GPU sees; numpy gets the same values
+
+
+@pytest.fixture(scope="module", params=["sphere", "vase_and_ball"])
+def case(request):
+    reflectors, view = {"sphere": _sphere, "vase_and_ball": _vase_and_ball}[request.param]()
+    bounds = scene_bounds(reflectors, margin=3.0)
+    sbc = build_sample_based_camera(reflectors, view, bounds, downsample=2)
+    points = _points(reflectors, bounds, np.random.default_rng(11))
+    return request.param, sbc, points
+
+
+def test_gpu_projection_matches_numpy(gpu_ready, case):
+    from curved_reflections.gpu_shaders.projection import SBCTextures, project_points
+
+    name, sbc, points = case
+    textures = SBCTextures(sbc)
+    project_points(textures, points[:8])  # builds the shader: not part of the timing
+    start = time.perf_counter()
+    gpu = project_points(textures, points)
+    gpu_seconds = time.perf_counter() - start
+    start = time.perf_counter()
+    cpu = sbc.project(points.astype(np.float64))
+    cpu_seconds = time.perf_counter() - start
+    print(f"\n{name}: {len(points)} points x {len(cpu.groups)} groups, GPU {gpu_seconds:.4f} s, "
+          f"numpy {cpu_seconds:.4f} s")
+
+    assert gpu.groups == cpu.groups and len(set(cpu.groups)) == (1 if name == "sphere" else 2)
+    differ = gpu.valid != cpu.valid
+    assert differ.sum() <= DECISION_SHARE * differ.size, (
+        f"{differ.sum()} of {differ.size} decisions differ: points {points[np.nonzero(differ)[1]][:10]}")
+    both = gpu.valid & cpu.valid
+    assert both.sum() > 0.5 * cpu.valid.sum() > 0
+
+    pixel_error = np.abs(gpu.pixels[both] - cpu.pixels[both]).max()
+    assert pixel_error <= PIXEL_TOLERANCE, pixel_error
+    np.testing.assert_array_equal(gpu.leaf_kind[both], cpu.leaf_kind[both])
+    assert set(np.unique(cpu.leaf_kind[both])) == {1, 2}  # both leaf kinds are exercised
+
+    # The first reflector point is origin + first_depth * direction of the pixel's view ray.
+    origins, directions = sbc.ray_map.view.pixel_rays(cpu.pixels[both])
+    first_depth = np.einsum("ij,ij->i", cpu.reflector_points[both] - origins, directions)
+    np.testing.assert_allclose(gpu.first_depth[both], first_depth, rtol=DEPTH_TOLERANCE)
+    np.testing.assert_allclose(gpu.ray_distance[both], cpu.ray_distance[both], atol=DISTANCE_TOLERANCE)
+    assert np.isnan(gpu.pixels[~gpu.valid]).all() and (gpu.leaf_kind[~gpu.valid] == 0).all()
+
+
+def test_packing_round_trip(case):
+    """Unpacked texels give back every array the projection reads (integers exactly)."""
+    _, sbc, _ = case
+    packed = sbc_pack.pack_sample_based_camera(sbc)
+    groups, rays = sbc_pack.unpack_sample_based_camera(packed)
+    assert len(groups) == len(sbc.trees) == packed.n_groups
+    assert (packed.columns, packed.rows, packed.downsample) == (sbc.ray_map.columns, sbc.ray_map.rows, 2)
+
+    def close(actual, expected, scale=1.0):
+        np.testing.assert_allclose(actual, expected, rtol=1e-6, atol=1e-6 * scale)
+
+    for unpacked, tree, grid in zip(groups, sbc.trees, sbc.grids):
+        for name in ("left", "right", "leaf", "leaf_kind", "leaf_row", "leaf_rays", "cell_start"):
+            np.testing.assert_array_equal(unpacked[name], getattr(tree, name), err_msg=name)
+        np.testing.assert_array_equal(unpacked["grid"], grid)
+        assert unpacked["depth"] == tree.depth
+        close(unpacked["plane_normal"], tree.plane_normal)
+        close(unpacked["plane_offset"], tree.plane_offset, 10.0)
+        for key, patches in (("cameras", tree.cameras), ("cells", tree.cells)):
+            if patches is None:
+                assert len(unpacked[key]["lo"]) == 0
+                continue
+            got = unpacked[key]
+            assert got["bilinear"].all() == patches.bilinear and len(got["lo"]) == len(patches.lo)
+            if not patches.bilinear:
+                close(got["origin"], patches.origin, 10.0)
+            for field in ("tail", "direction", "cell", "lo", "hi"):
+                close(got[field], getattr(patches, field), 200.0)
+        if tree.cells is not None:  # the cell-centre rays of sbc._closest_cells
+            t, d = tree.cells.tail, tree.cells.direction
+            centre = d[:, 0] + 0.5 * (d[:, 1] + d[:, 2]) + 0.25 * d[:, 4]
+            close(unpacked["cells"]["centre_tail"], t[:, 0] + 0.5 * (t[:, 1] + t[:, 2]) + 0.25 * t[:, 4], 10.0)
+            close(unpacked["cells"]["centre_direction"], centre / np.linalg.norm(centre, axis=1)[:, None])
+    ray_map = sbc.ray_map
+    for name in ("tail", "direction", "head_distance", "first_depth"):
+        close(rays[name], getattr(ray_map, name), 10.0)
+
+
+def test_tails_are_stored_relative_to_their_origin(case):
+    """The GPU works near zero: constant tail terms are small offsets from the patch origin."""
+    _, sbc, _ = case
+    packed = sbc_pack.pack_sample_based_camera(sbc)
+    patches = packed.patches.reshape(-1, sbc_pack.PATCH_TEXELS, 4)
+    extent = np.ptp(sbc.ray_map.tail, axis=0).max()
+    # Camera patches (all trees), then ray-list cells: a camera patch's constant tail term
+    # lies within its chart's extent of its origin; a cell's origin is its first corner's tail.
+    bound = np.concatenate([t.cameras.scale for t in sbc.trees if t.cameras is not None]
+                           + [np.full(len(t.cells.lo), 1e-6 * extent) for t in sbc.trees if t.cells is not None])
+    assert np.all(np.linalg.norm(patches[:, 1, :3], axis=1) <= 2 * bound)
+    assert np.abs(patches[:, 0, :3]).max() > 0.1 * extent  # origins themselves are not small
+
+
+def test_texture_layout_and_limits(case):
+    """Texel i of every array sits at (i % W, i // W); scalars four to a texel; bad input refused."""
+    _, sbc, _ = case
+    packed = sbc_pack.pack_sample_based_camera(sbc)
+    images = packed.texture_arrays()
+    width = sbc_pack.TEXTURE_WIDTH
+    for name in sbc_pack.TEXTURE_NAMES:
+        texels = getattr(packed, name)
+        if name == "scalars":
+            texels = np.pad(texels, (0, -len(texels) % 4)).reshape(-1, 4)
+        image = images[name]
+        assert image.dtype == np.float32 and image.shape[1:] == (width, 4)
+        assert image.shape[0] == max(1, -(-len(texels) // width))
+        index = np.unique(np.linspace(0, len(texels) - 1, 50).astype(np.int64))
+        np.testing.assert_array_equal(image[index // width, index % width], texels[index])
+    with pytest.raises(ValueError, match="ray_patch"):
+        sbc_pack.pack_sample_based_camera(dataclasses.replace(sbc, model_name="pinhole"))
+    with pytest.raises(ValueError, match="exactly"):
+        sbc_pack._exact("grid", [0, 1 << 24])
+
+
+def _looking_away():
+    reflectors = [icosphere((0.0, 0.0, 1.0), 1.0, 3)]
+    view = look_at_view((5.0, -4.0, 2.5), (10.0, -8.0, 2.5), width=32, height=24)
+    return build_sample_based_camera(reflectors, view, scene_bounds(reflectors, margin=1.0), downsample=2)
+
+
+def test_no_reflector_in_view_packs_empty_textures():
+    sbc = _looking_away()
+    packed = sbc_pack.pack_sample_based_camera(sbc)
+    assert packed.n_groups == 0
+    assert all(image.shape == (1, sbc_pack.TEXTURE_WIDTH, 4) and not image.any()
+               for image in packed.texture_arrays().values())
+    groups, rays = sbc_pack.unpack_sample_based_camera(packed)
+    assert groups == [] and len(rays["tail"]) == 0
+
+
+def test_no_reflector_in_view_projects_nothing(gpu_ready):
+    from curved_reflections.gpu_shaders.projection import SBCTextures, project_points
+
+    result = project_points(SBCTextures(_looking_away()), np.zeros((5, 3)))
+    assert result.groups == [] and result.valid.shape == (0, 5) and result.pixels.shape == (0, 5, 2)
