@@ -215,9 +215,10 @@ def _build_sheets(ray_map: RayMap, rays: np.ndarray, model, accuracy_px: float) 
     Where rays of one history cross (a concave mirror's caustic, or two parts of a
     mirror reflecting the same region: the Chen-Arvo vase shows points twice), no
     plane separates them and the BSP duplicates rays without end. The rays are then
-    halved in ray-map space (at the median cell along the longer side) and each half
-    gets its own tree, its own *sheet*, recursively. A point may project in several
-    sheets of one history: those are its several images.
+    halved in ray-map space (at the median cell along the longer side, both halves
+    keeping the seam's line of rays) and each half gets its own tree, its own *sheet*,
+    recursively. A point may project in several sheets of one history: those are its
+    several images (or, right at a seam, one image twice).
     """
     try:
         return [build_bsp(ray_map, rays, model, accuracy_px,
@@ -225,11 +226,14 @@ def _build_sheets(ray_map: RayMap, rays: np.ndarray, model, accuracy_px: float) 
     except RaysCrossError:
         cells = ray_map.cell[rays]
         axis = int(np.argmax(cells.max(axis=0) - cells.min(axis=0)))
-        low = cells[:, axis] <= np.median(cells[:, axis])
-        if low.all() or not low.any():
+        seam = np.floor(np.median(cells[:, axis]))
+        # Both halves keep the seam's line of rays, so the cells across the seam (four
+        # corner rays, two on each side) belong to the upper sheet: no line of holes.
+        low, high = cells[:, axis] <= seam, cells[:, axis] >= seam
+        if low.all() or high.all():
             return [build_bsp(ray_map, rays, model, accuracy_px, max_duplication=None)]
         return (_build_sheets(ray_map, rays[low], model, accuracy_px)
-                + _build_sheets(ray_map, rays[~low], model, accuracy_px))
+                + _build_sheets(ray_map, rays[high], model, accuracy_px))
 
 
 def build_from_ray_map(ray_map: RayMap, accuracy_px: float = 1.0, leaf_model: str = "ray_patch") -> SampleBasedCamera:

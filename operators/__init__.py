@@ -7,12 +7,13 @@ they are registered in module order and unregistered in reverse.
 
 import bpy
 
-from . import demo_scenes, panel, properties, reflectors
+from . import demo_scenes, panel, properties, reflectors, render_image
 
 _modules = (
     properties,
     reflectors,
     demo_scenes,
+    render_image,
     panel,
 )
 

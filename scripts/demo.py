@@ -3,6 +3,7 @@
 
     .venv/bin/python scripts/demo.py --out out/demo [--width 320 --height 240]
         [--scenes sbc_fig3 teapot two_spheres vase] [--renderers cycles eevee_raytrace ...]
+        [--max-order 2] [--trace-edges]
 
 For each scene this saves DIR/<scene>.blend (set up for the Cycles reference), renders
 the reflector mask, Cycles (the reference) and each other renderer, and compares labels
@@ -11,8 +12,8 @@ pixels and on the near-contact region. It writes the images, one side-by-side PN
 scene and DIR/results.md, and prints the table.
 
 A renderer is one :class:`Renderer` entry in :func:`renderers`: a name and a function
-``(scene, reflectors, png_path) -> RenderResult``. Adding one (e.g. our own viewport
-reflections) is adding one entry.
+``(scene, reflectors, png_path) -> RenderResult``. Ours, ``curved_reflections``
+(:func:`render_ours`), is one such entry.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import importlib.util
 import os
 import sys
 import tempfile
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,6 +31,7 @@ from pathlib import Path
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SCENE_NAMES = ("sbc_fig3", "teapot", "two_spheres", "vase")
 REFERENCE = "cycles"
+OURS = "curved_reflections"
 
 
 def import_package():
@@ -62,8 +65,44 @@ def renderers(args) -> list[Renderer]:
     entries = [Renderer(REFERENCE, lambda scene, reflectors, path: rr.render_cycles(
         scene, path, args.cycles_samples, args.bounces, args.frames))]
     entries += [Renderer(variant, eevee(variant)) for variant in rr.EEVEE_VARIANTS]
+    entries.append(Renderer(OURS, lambda scene, reflectors, path: render_ours(scene, path, args)))
     wanted = set(args.renderers or [e.name for e in entries]) | {REFERENCE}
     return [e for e in entries if e.name in wanted]
+
+
+def render_ours(scene, path, args):
+    """Our reflections (``operators/render_image.py``): capture, sample-based camera and
+    GPU drawing, timed together per frame with the PNG writing, as the other renderers.
+
+    A warm-up frame first (shader compilation), timed separately as the first frame.
+    Settings are the scene's (``scene.curved_reflections``) except the highest order,
+    ``--max-order``. The notes split the last frame's time into its stages.
+    """
+    import bpy
+    import numpy as np
+    from curved_reflections.operators import reference_render as rr, render_image
+
+    depsgraph = bpy.context.evaluated_depsgraph_get()  # run_scene builds into the context's scene
+
+    def frame():
+        start = time.perf_counter()
+        result = render_image.render_scene(scene, depsgraph, max_order=args.max_order,
+                                           trace_edges=args.trace_edges)
+        rr.write_png(path, result.display)
+        return time.perf_counter() - start, result
+
+    first, _ = frame()
+    frames = [frame() for _ in range(max(1, args.frames))]
+    seconds = float(np.median([f[0] for f in frames]))
+    result = frames[-1][1]
+    settings = scene.curved_reflections
+    s, stats = result.seconds, result.stats
+    notes = (f"d = {settings.downsample}, accuracy {settings.accuracy_px:g} px, max order {args.max_order}, "
+             f"{stats['traced_pixels']} px traced{' (edges too)' if args.trace_edges else ''}; "
+             f"last frame: capture {s['capture']:.2f} s, sample-based camera {s['sbc']:.2f} s "
+             f"(ray map {s['trace']:.2f} s), drawing {s['draw']:.2f} s; {stats['n_sheets']} sheet(s), "
+             f"{stats['reflected_triangles']} reflected triangles")
+    return rr.RenderResult(OURS, rr.read_png(path), seconds, path, first, notes)
 
 
 @dataclass
@@ -171,7 +210,7 @@ def report(rows: list[Row], args) -> str:
 
     radius = CONTACT_RADIUS_FRACTION * args.width
     return "\n\n".join([
-        "# Curved Reflections demo: reference renderers",
+        "# Curved Reflections demo: our reflections and the reference renderers",
         "Produced by `make demo`, i.e. `.venv/bin/python scripts/demo.py " + " ".join(sys.argv[1:]) + "`.",
         f"Resolution {args.width}x{args.height}, {os.cpu_count()} CPU cores. Label disagreement: "
         "share of reflector pixels (Workbench mask) that show another object than Cycles "
@@ -183,7 +222,10 @@ def report(rows: list[Row], args) -> str:
         f"Time per frame is the wall time of one `render.render` call, PNG writing included "
         f"(median of {args.frames} frame(s)); EEVEE renders a warm-up frame first (shader "
         "compilation, faster when Mesa's shader cache is warm), shown below as the first frame. "
-        "EEVEE's probe variants capture their sphere probes in every frame.",
+        "EEVEE's probe variants capture their sphere probes in every frame. Ours "
+        f"(`{OURS}`, `operators/render_image.py`) is timed from capture to PNG: the scene "
+        "capture, the sample-based camera (ray map and trees) and the GPU drawing, on "
+        "Mesa llvmpipe (CPU) here; a warm-up frame first (shader compilation).",
         details(rows),
         "Images: `<scene>_side_by_side.png`, top row the renders in table order, bottom row "
         "the mask (grey) with the near-contact region (yellow), then per renderer its "
@@ -202,6 +244,10 @@ def parse_args(argv=None):
     parser.add_argument("--cycles-samples", type=int, default=16)
     parser.add_argument("--eevee-samples", type=int, default=16)
     parser.add_argument("--bounces", type=int, default=8, help="Cycles glossy bounces")
+    parser.add_argument("--max-order", type=int, default=2,
+                        help="highest reflection order drawn by our renderer (curved_reflections)")
+    parser.add_argument("--trace-edges", action="store_true",
+                        help="our renderer also ray traces mirror pixels next to a drawn reflection that got none")
     parser.add_argument("--frames", type=int, default=1,
                         help="timed frames per renderer; the time is their median")
     return parser.parse_args(argv)

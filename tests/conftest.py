@@ -42,21 +42,15 @@ def repo_root() -> Path:
     return REPO_ROOT
 
 
-#: Initialises the GPU the way gpu_ready does; run first in a child process, because
-#: without OpenGL Blender aborts the whole process instead of raising.
-_GPU_INIT = """
-import bpy
-scene = bpy.data.scenes.new("gpu_init")
-camera = bpy.data.objects.new("gpu_init_camera", bpy.data.cameras.new("gpu_init_camera"))
-scene.collection.objects.link(camera)
-scene.camera = camera
-scene.render.engine = 'BLENDER_WORKBENCH'
-scene.render.resolution_x = scene.render.resolution_y = 4
-bpy.ops.render.render(scene=scene.name)
-import gpu
-gpu.types.GPUOffScreen(4, 4).free()
-bpy.data.scenes.remove(scene)
-bpy.data.objects.remove(camera)
+#: Initialises the GPU the way gpu_ready does (operators/gpu_init.py, loaded by file path:
+#: it imports only bpy and gpu); run first in a child process, because without OpenGL
+#: Blender aborts the whole process instead of raising.
+_GPU_INIT = f"""
+import importlib.util
+spec = importlib.util.spec_from_file_location("gpu_init", {str(REPO_ROOT / "operators" / "gpu_init.py")!r})
+gpu_init = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(gpu_init)
+gpu_init.ensure_gpu()
 """
 
 
@@ -79,7 +73,9 @@ def gpu_ready():
             + output,
             pytrace=False,
         )
-    exec(_GPU_INIT, {})
+    from curved_reflections.operators.gpu_init import ensure_gpu
+
+    ensure_gpu()
     import gpu
 
     return gpu

@@ -1,0 +1,72 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later */
+/* Composite, fragment stage (gpu_shaders/reflection_draw.py), one full-screen triangle.
+ *
+ * On reflector pixels (pre-pass id > 0): the reflected colour where a reflection was
+ * drawn (reflection alpha 1), else the world colour (the reflected ray leaves the
+ * scene), blended with the reflector's own colour by its reflectivity (1 = perfect
+ * mirror; SBC paper, Popescu, Sacks, Mei 2006, section V-D: "the diffuse component
+ * and the reflection are blended with a simple shader"). Elsewhere the pre-pass
+ * colour (the world where nothing was drawn), or nothing when `reflectors_only`
+ * (a viewport overlay over Blender's own drawing).
+ *
+ * The band along the footprint's edge: a sample-based camera projects a point only
+ * between four rays of its group (addon/sbc.py), so no reflection can land in the last
+ * ray-map cell (up to the down-sampling factor d, in pixels) before the reflector's
+ * silhouette or an object in front of it. Where the caller traced those pixels
+ * (gpu_shaders/band_trace.py), `traced_colors` holds them (alpha 1). Without tracing
+ * (`fill_radius` > 0, e.g. d), a reflector pixel within `fill_radius` of its
+ * footprint's edge that has no reflection takes the reflection of the nearest pixel
+ * within `fill_radius` that has one on the same reflector, a cheap guess. Elsewhere, or
+ * where there is none, it shows the world. */
+
+void main()
+{
+  ivec2 texel = ivec2(gl_FragCoord.xy) - origin;  /* the view's pixel, wherever its viewport is */
+  vec4 label = texelFetch(prepass_labels, texel, 0);
+  vec4 base = texelFetch(prepass_colors, texel, 0);
+  if (label.x < 0.5) {
+    if (reflectors_only != 0) {
+      discard;
+    }
+    color_out = base.a > 0.5 ? vec4(base.rgb, 1.0) : vec4(world_color.rgb, 1.0);
+    return;
+  }
+  vec4 reflection = texelFetch(reflection_colors, texel, 0);
+  vec4 traced = texelFetch(traced_colors, texel, 0);
+  vec3 reflected = world_color.rgb;
+  if (reflection.a > 0.5) {
+    reflected = reflection.rgb;
+  }
+  else if (traced.a > 0.5) {
+    reflected = traced.rgb;
+  }
+  else if (fill_radius > 0) {
+    /* Only in the band along the footprint's edge: elsewhere a missing reflection is
+     * the world seen in the mirror. */
+    ivec2 size = textureSize(reflection_colors, 0);
+    int best = 1 << 30;
+    bool near_edge = false;
+    vec3 nearest = reflected;
+    for (int dy = -fill_radius; dy <= fill_radius; dy++) {
+      for (int dx = -fill_radius; dx <= fill_radius; dx++) {
+        ivec2 other = texel + ivec2(dx, dy);
+        if (any(lessThan(other, ivec2(0))) || any(greaterThanEqual(other, size))) {
+          near_edge = true;
+          continue;
+        }
+        bool same = abs(texelFetch(prepass_labels, other, 0).x - label.x) < 0.5;
+        near_edge = near_edge || !same;
+        int distance2 = dx * dx + dy * dy;
+        vec4 candidate = texelFetch(reflection_colors, other, 0);
+        if (same && candidate.a > 0.5 && distance2 < best) {
+          best = distance2;
+          nearest = candidate.rgb;
+        }
+      }
+    }
+    if (near_edge) {
+      reflected = nearest;
+    }
+  }
+  color_out = vec4(mix(base.rgb, reflected, clamp(label.y, 0.0, 1.0)), 1.0);
+}

@@ -1,0 +1,7 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later */
+/* Vertex projection pass, fragment stage: the point's texel gets its projection. */
+
+void main()
+{
+  projected_out = projected;
+}

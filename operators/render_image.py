@@ -1,0 +1,183 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Render the scene camera with curved reflections, offscreen, to a PNG.
+
+The whole pipeline of ``docs/overview.md`` for one frame: capture the evaluated scene
+(:mod:`.capture`), build the camera view's sample-based camera (SBC paper, Popescu,
+Sacks, Mei 2006, sections III-IV; ``addon/sbc.py``), and draw the scene with its
+reflections on the GPU (section V; ``gpu_shaders/reflection_draw.py``) at the scene's
+render resolution. It works in background mode too (``blender -b``, ``import bpy``):
+the GPU is initialised first when needed (:mod:`.gpu_init`).
+
+:func:`render_scene` is what the operator and ``scripts/demo.py`` call; it returns the
+linear image and the time of each stage. The PNG holds display sRGB values (the
+"Standard" view transform), as Blender's own renders of the demo scenes do.
+
+Settings come from ``scene.curved_reflections`` (down-sampling, accuracy, highest
+order) and, per reflector, ``obj.curved_reflections.reflectivity``; reflected rays that
+leave the scene show the world's Background colour.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import bpy
+import numpy as np
+from bpy.props import StringProperty
+
+from ..addon.errors import SceneInputError
+from ..addon.metrics import linear_to_srgb
+from ..addon.sbc import build_sample_based_camera
+from ..addon.scene import scene_bounds
+from ..addon.view import View
+from .capture import capture_scene, view_from_camera
+from .gpu_init import ensure_gpu
+from .material_color import material_color
+from .reference_render import write_png
+
+#: Scene box margin (share of its diagonal) where reflected rays end: points on the
+#: scene's outer faces (a floor's edge) must lie well inside it, since a projection
+#: interpolates the ray ends of four neighbouring rays, which may leave by different faces.
+BOUNDS_MARGIN = 0.05
+
+
+@dataclass
+class ReflectionRender:
+    """One rendered frame: (H, W, 4) float32 linear RGBA, rows bottom to top, and timings.
+
+    ``seconds`` holds ``capture`` (scene and view), ``sbc`` (ray map and BSP trees),
+    ``draw`` (geometry, textures, the passes and the read-back) and ``total``.
+    """
+
+    image: np.ndarray
+    view: View
+    seconds: dict = field(default_factory=dict)
+    stats: dict = field(default_factory=dict)
+
+    @property
+    def display(self) -> np.ndarray:
+        """Display sRGB in [0, 1] (Standard view transform), alpha 1."""
+        rgb = linear_to_srgb(self.image[..., :3]).astype(np.float32)
+        return np.concatenate([rgb, np.ones(rgb.shape[:2] + (1,), np.float32)], axis=2)
+
+
+def world_color(scene) -> tuple[float, float, float, float]:
+    """Linear RGBA of the world's background: the Background node's colour times its
+    strength when nothing is linked into it, else the world's viewport colour."""
+    world = scene.world
+    if world is None:
+        return (0.0, 0.0, 0.0, 1.0)
+    tree = world.node_tree
+    node = None if tree is None else next((n for n in tree.nodes if n.type == 'BACKGROUND'), None)
+    if node is not None and not node.inputs["Color"].is_linked and not node.inputs["Strength"].is_linked:
+        strength = float(node.inputs["Strength"].default_value)
+        rgb = [strength * float(c) for c in node.inputs["Color"].default_value[:3]]
+        return (*rgb, 1.0)
+    return (*(float(c) for c in world.color[:3]), 1.0)
+
+
+def reflector_appearance(reflectors, scene) -> tuple[np.ndarray, np.ndarray]:
+    """Own colour (R, 4) linear and reflectivity (R,) of each captured reflector.
+
+    Captured names are object names (an instance's is not an object's: it gets white
+    and reflectivity 1). The colour is what the material shows (``material_color``).
+    """
+    colors = np.ones((len(reflectors), 4), np.float32)
+    reflectivity = np.ones(len(reflectors), np.float32)
+    for k, reflector in enumerate(reflectors):
+        obj = scene.objects.get(reflector.name)
+        if obj is None:
+            continue
+        reflectivity[k] = obj.curved_reflections.reflectivity
+        color = material_color(obj.active_material)
+        colors[k] = color.rgba if color is not None else tuple(obj.color)
+    return colors, reflectivity
+
+
+def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: int | None = None,
+                 accuracy_px: float | None = None, trace_edges: bool = False) -> ReflectionRender:
+    """Render ``scene.camera`` at the render resolution with reflections (offscreen).
+
+    Settings not given come from ``scene.curved_reflections``. The band along each
+    reflector's visible edge, which a sample-based camera cannot reach, is ray traced;
+    ``trace_edges`` also traces the mirror pixels next to a drawn reflection that got
+    none (dropped mixed triangles, creases of the mirror; see
+    ``gpu_shaders/reflection_draw.py``). Bad input (no camera, no reflector, a reflector
+    without faces, the camera inside a reflector) raises :class:`SceneInputError`
+    naming the object; the GPU is initialised if needed.
+    """
+    from ..gpu_shaders.reflection_draw import ReflectionRenderer
+
+    settings = scene.curved_reflections
+    max_order = settings.max_order if max_order is None else max_order
+    downsample = settings.downsample if downsample is None else downsample
+    accuracy_px = settings.accuracy_px if accuracy_px is None else accuracy_px
+    start = time.perf_counter()
+    view = view_from_camera(scene.camera, scene, depsgraph)
+    captured = capture_scene(depsgraph)
+    captured_at = time.perf_counter()
+    lo, hi = scene_bounds(captured.reflectors, captured.meshes)
+    bounds = scene_bounds(captured.reflectors, captured.meshes, BOUNDS_MARGIN * float(np.linalg.norm(hi - lo)))
+    sbc = build_sample_based_camera(captured.reflectors, view, bounds, max_order=max_order,
+                                    downsample=downsample, accuracy_px=accuracy_px)
+    built_at = time.perf_counter()
+    ensure_gpu()
+    colors, reflectivity = reflector_appearance(captured.reflectors, scene)
+    renderer = ReflectionRenderer(captured.reflectors, captured.meshes, colors, reflectivity)
+    image = renderer.render(view, sbc, world_color(scene), trace_edges=trace_edges)
+    end = time.perf_counter()
+    seconds = {"capture": captured_at - start, "sbc": built_at - captured_at, "draw": end - built_at,
+               "total": end - start, "trace": sbc.stats.get("trace_seconds", float("nan"))}
+    stats = {**sbc.stats, **renderer.stats}
+    return ReflectionRender(image, view, seconds, stats)
+
+
+class CURVED_REFLECTIONS_OT_render_image(bpy.types.Operator):
+    """Render the scene camera with curved reflections to a PNG image"""
+
+    bl_idname = "curved_reflections.render_image"
+    bl_label = "Render Reflections Image"
+    bl_options = {'REGISTER'}
+
+    filepath: StringProperty(name="File Path", description="PNG file to write", subtype='FILE_PATH')
+    filter_glob: StringProperty(default="*.png", options={'HIDDEN'})
+
+    @classmethod
+    def poll(cls, context):
+        return context.scene is not None
+
+    def invoke(self, context, event):
+        if not self.filepath:
+            self.filepath = "//reflections.png"
+        context.window_manager.fileselect_add(self)
+        return {'RUNNING_MODAL'}
+
+    def execute(self, context):
+        if not self.filepath:
+            self.report({'ERROR'}, "No file path given for the image")
+            return {'CANCELLED'}
+        path = Path(bpy.path.abspath(bpy.path.ensure_ext(self.filepath, ".png")))
+        try:
+            result = render_scene(context.scene, context.evaluated_depsgraph_get())
+        except SceneInputError as error:
+            self.report({'ERROR'}, str(error))
+            return {'CANCELLED'}
+        except RuntimeError as error:  # the GPU could not be initialised
+            self.report({'ERROR'}, str(error))
+            return {'CANCELLED'}
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_png(path, result.display)
+        except (OSError, RuntimeError) as error:
+            self.report({'ERROR'}, f"Could not write {str(path)!r}: {error}")
+            return {'CANCELLED'}
+        view, seconds = result.view, result.seconds
+        self.report({'INFO'}, f"Rendered {view.width}x{view.height} with reflections to {str(path)!r} in "
+                              f"{seconds['total']:.2f} s (camera {seconds['sbc']:.2f} s, "
+                              f"drawing {seconds['draw']:.2f} s)")
+        return {'FINISHED'}
+
+
+classes = (CURVED_REFLECTIONS_OT_render_image,)

@@ -1,0 +1,270 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The offscreen reflection renderer draws what Cycles shows in curved mirrors.
+
+``gpu_shaders/reflection_draw.py`` (SBC paper, Popescu, Sacks, Mei 2006, section V)
+renders a demo scene at a small size; its labels (which object each pixel shows, the
+demo scenes' flat colours, ``addon/metrics.py``) are compared with a Cycles render on
+the reflector pixels (Workbench mask). A synthetic scene checks the depth order of
+reflections (SBC V-A, case 2: within a reflection group the point nearer the mirror
+hides the farther one). The numpy helpers (pre-subdivision, SBC V-B; the band of
+pixels along a footprint's edge) are checked without a GPU.
+"""
+
+import time
+
+import numpy as np
+import pytest
+
+from curved_reflections.addon import DiffuseMesh, build_sample_based_camera, look_at_view, scene_bounds
+from curved_reflections.addon.sphere import icosphere
+from curved_reflections.addon import band_trace, subdivision
+
+WIDTH, HEIGHT = 128, 96
+#: Measured on sbc_fig3 at 128x96 (d = 2, accuracy 1 px, max order 1): 1.6 % of the
+#: 1801 reflector pixels disagree with Cycles (on tile edges, and on the rim where
+#: floor tiles are a pixel wide). Bound with margin:
+MAX_DISAGREEMENT = 0.03
+
+
+# --- numpy helpers ------------------------------------------------------------------
+
+
+def _edges(triangles):
+    pairs = np.sort(np.stack([triangles, np.roll(triangles, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
+    return np.unique(pairs, axis=0, return_counts=True)
+
+
+def test_subdivision_is_conforming_and_bounds_edges():
+    """A closed mesh stays closed (every edge in two triangles: no T-junction), keeps its
+    area and orientation, and meets each edge's limit fraction * max(radius, distance)."""
+    sphere = icosphere((0.0, 0.0, 0.0), 1.0, 1)
+    colors = np.random.default_rng(1).random((len(sphere.vertices), 4)).astype(np.float32)
+    centres, radii = np.array([[3.0, 0.0, 0.0]]), np.array([0.5])
+    vertices, triangles, new_colors = subdivision.subdivide(sphere.vertices, sphere.triangles, colors,
+                                                           centres, radii, fraction=0.1)
+    edges, counts = _edges(triangles)
+    assert set(counts.tolist()) == {2}
+    length = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
+    middle = 0.5 * (vertices[edges[:, 0]] + vertices[edges[:, 1]])
+    assert np.all(length <= subdivision.edge_limits(middle, centres, radii, 0.1) + 1e-12)
+    # Uneven refinement: edges near the reflector are much shorter than far ones.
+    near = np.linalg.norm(middle - centres[0], axis=1) < 2.3
+    assert length[near].max() < 0.6 * length[~near].max()
+
+    def signed_volume(v, t):
+        return np.einsum("ij,ij->i", v[t[:, 0]], np.cross(v[t[:, 1]], v[t[:, 2]])).sum() / 6
+
+    np.testing.assert_allclose(signed_volume(vertices, triangles),
+                               signed_volume(sphere.vertices, sphere.triangles), rtol=1e-12)
+    np.testing.assert_array_equal(vertices[:len(sphere.vertices)], sphere.vertices)  # originals kept
+    # Midpoint colours are the mean of their edge's ends: colours stay in the hull.
+    assert new_colors.min() >= colors.min() and new_colors.max() <= colors.max()
+    assert len(triangles) > 4 * len(sphere.triangles)
+
+
+def test_subdivision_leaves_short_edges_alone():
+    sphere = icosphere((0.0, 0.0, 0.0), 1.0, 1)
+    colors = np.ones((len(sphere.vertices), 4), np.float32)
+    vertices, triangles, _ = subdivision.subdivide(sphere.vertices, sphere.triangles, colors,
+                                                   np.zeros((1, 3)), np.array([100.0]), fraction=0.1)
+    np.testing.assert_array_equal(triangles, sphere.triangles)
+    assert len(vertices) == len(sphere.vertices)
+
+
+def test_band_pixels_are_missing_reflections_along_the_footprint_edge():
+    labels = np.zeros((12, 12))
+    labels[2:10, 2:10] = 1.0  # a reflector's footprint
+    drawn = np.zeros((12, 12), bool)
+    drawn[3:9, 3:9] = True  # reflection everywhere but the footprint's outer ring...
+    drawn[5, 5] = False  # ...and one hole in the middle, which is not in the band
+    pixels = band_trace.band_pixels(labels, drawn, radius=1)
+    ring = {(x, y) for y in range(2, 10) for x in range(2, 10) if x in (2, 9) or y in (2, 9)}
+    assert {tuple(p) for p in pixels.tolist()} == ring
+    # With the edges of drawn reflections, the hole beside them is traced too.
+    pixels = band_trace.band_pixels(labels, drawn, radius=1, edges_of_drawn=True)
+    assert {tuple(p) for p in pixels.tolist()} == ring | {(5, 5)}
+
+
+def test_push_constants_stay_small():
+    from curved_reflections.gpu_shaders import reflection_draw
+
+    assert max(reflection_draw.PUSH_CONSTANT_BYTES.values()) <= 128
+
+
+# --- on the GPU ---------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def fig3(gpu_ready, tmp_path_factory):
+    """sbc_fig3 at 128x96: our render, Cycles, the reflector mask and the palette."""
+    import bpy
+
+    import curved_reflections
+    from curved_reflections.operators import demo_scenes, reference_render, render_image
+
+    out = tmp_path_factory.mktemp("reflection_draw")
+    curved_reflections.register()
+    try:
+        bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+        scene = demo_scenes.build("sbc_fig3", bpy.context.scene, WIDTH, HEIGHT)
+        start = time.perf_counter()
+        ours = render_image.render_scene(scene, bpy.context.evaluated_depsgraph_get(), max_order=1)
+        seconds = time.perf_counter() - start
+        reference_render.write_png(out / "ours.png", ours.display)
+        image = reference_render.read_png(out / "ours.png")  # 8-bit, as the references
+        reflectors = demo_scenes.reflectors(scene)
+        mask, _ = reference_render.render_mask(scene, out / "mask.png", reflectors)
+        cycles = reference_render.render_cycles(scene, out / "cycles.png", samples=4, bounces=4)
+        palette = demo_scenes.palette(scene)
+    finally:
+        curved_reflections.unregister()
+    print(f"\nsbc_fig3 {WIDTH}x{HEIGHT}: ours {seconds:.2f} s ({ours.seconds}), Cycles {cycles.seconds:.2f} s")
+    return {"ours": image, "result": ours, "cycles": cycles.image, "mask": mask, "palette": palette}
+
+
+def _labels(image, palette):
+    from curved_reflections.addon import metrics
+
+    return metrics.label_image(image, palette)
+
+
+def test_reflections_agree_with_cycles_on_the_mirror(fig3):
+    from curved_reflections.addon import metrics
+
+    ours, cycles = _labels(fig3["ours"], fig3["palette"]), _labels(fig3["cycles"], fig3["palette"])
+    mask = fig3["mask"]
+    share = metrics.share_differing(ours, cycles, mask)
+    print(f"label disagreement on {int(mask.sum())} reflector px: {100 * share:.2f} %")
+    assert share <= MAX_DISAGREEMENT
+
+
+def test_mirror_shows_the_columns_and_the_cube(fig3):
+    names = list(fig3["palette"])
+    ours = _labels(fig3["ours"], fig3["palette"])[fig3["mask"]]
+    shown = {names[k] for k in np.unique(ours)}
+    assert {"Cube", "FloorA", "FloorB", "(world)"} <= shown
+    assert sum(name.startswith("Column") for name in shown) >= 4
+    cube = (ours == names.index("Cube")).sum()
+    assert cube >= 20  # the cube's reflection, beside the cube itself
+
+
+def test_pixels_off_the_mirror_show_the_objects_themselves(fig3):
+    """Outside the reflectors' footprint the image is the diffuse scene (and the world),
+    as Cycles shows it; the cube in front of the sphere stays in front of it."""
+    from curved_reflections.addon import metrics
+
+    ours, cycles = _labels(fig3["ours"], fig3["palette"]), _labels(fig3["cycles"], fig3["palette"])
+    off = ~fig3["mask"]
+    assert metrics.share_differing(ours, cycles, off) <= 0.002
+    names = list(fig3["palette"])
+    cube_in_front = (cycles == names.index("Cube")) & off
+    assert cube_in_front.sum() > 20 and (ours[cube_in_front] == names.index("Cube")).all()
+
+
+def test_timings_are_reported(fig3):
+    seconds, stats = fig3["result"].seconds, fig3["result"].stats
+    assert set(seconds) >= {"capture", "sbc", "draw", "total"}
+    assert stats["reflected_triangles"] > stats["mesh_triangles"]  # pre-subdivided
+    assert stats["traced_pixels"] > 0  # the rim was traced
+
+
+def _square(name, x, size, colour):
+    """A square in the plane x = ``x``, centred on the x axis, one flat colour."""
+    h = size / 2
+    vertices = np.array([[x, -h, -h], [x, h, -h], [x, h, h], [x, -h, h]])
+    return DiffuseMesh(name, vertices, np.array([[0, 1, 2], [0, 2, 3]]), np.tile([*colour, 1.0], (4, 1)),
+                       emissive=True)
+
+
+def _render_squares(meshes):
+    from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
+
+    mirror = icosphere((0.0, 0.0, 0.0), 1.0, 4, name="Mirror")
+    view = look_at_view((0.0, -6.0, 0.3), (0.0, 0.0, 0.0), fov_y_deg=25.0, width=96, height=96)
+    bounds = scene_bounds([mirror], meshes, margin=1.0)
+    sbc = build_sample_based_camera([mirror], view, bounds, downsample=2)
+    image = ReflectionRenderer([mirror], meshes).render(view, sbc, world_color=(0.0, 0.0, 1.0, 1.0))
+    return image, sbc
+
+
+def test_reflection_nearer_the_mirror_hides_the_farther(gpu_ready):
+    """Two squares beside a mirror sphere (out of the camera's sight), a small one 2.5 from
+    its centre and a large one behind it at 4: in the mirror the near square's reflection
+    covers the far one's centre (SBC V-A, case 2: the point nearer the mirror along the
+    reflected ray wins), and the far square shows around it. Drawing the meshes in the
+    other order gives the same image: the depth test decides, not the order."""
+    red, green = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
+    near = _square("Near", 2.5, 1.0, red)
+    far = _square("Far", 4.0, 4.0, green)
+    image, sbc = _render_squares([near, far])
+    swapped, _ = _render_squares([far, near])
+    np.testing.assert_array_equal(image, swapped)
+
+    projected = sbc.project(np.array([[2.5, 0.0, 0.0], [4.0, 0.0, 0.0]]))
+    assert projected.valid[0].all()
+    for pixel in projected.pixels[0]:
+        x, y = np.floor(pixel).astype(int)
+        np.testing.assert_allclose(image[y, x, :3], red, atol=1e-6)
+    shown = image[..., :3].reshape(-1, 3)
+    assert (np.abs(shown - red).max(axis=1) < 1e-6).sum() > 10
+    assert (np.abs(shown - green).max(axis=1) < 1e-6).sum() > 2 * (np.abs(shown - red).max(axis=1) < 1e-6).sum()
+
+
+def test_mirror_colour_and_reflectivity_blend_with_the_world(gpu_ready):
+    """A half-reflective grey mirror with nothing to reflect shows the mix of its own colour
+    and the world (SBC V-D); with no reflection group in view the image is the world."""
+    from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
+
+    mirror = icosphere((0.0, 0.0, 0.0), 1.0, 3, name="Mirror")
+    square = _square("Square", -3.0, 0.5, (1.0, 0.0, 0.0))  # reflected on the left, not at the centre
+    view = look_at_view((0.0, -5.0, 0.0), (0.0, 0.0, 0.0), width=48, height=48)
+    bounds = scene_bounds([mirror], [square], margin=1.0)
+    sbc = build_sample_based_camera([mirror], view, bounds, downsample=2)
+    world = np.array([0.0, 0.0, 1.0])
+    renderer = ReflectionRenderer([mirror], [square], reflector_colors=[(0.5, 0.5, 0.5)], reflectivity=[0.25])
+    image = renderer.render(view, sbc, world_color=(*world, 1.0))
+    centre = image[24, 24, :3]
+    np.testing.assert_allclose(centre, 0.75 * 0.5 + 0.25 * world, atol=1e-6)
+    np.testing.assert_allclose(image[1, 1, :3], world, atol=1e-6)  # background
+
+    away = look_at_view((0.0, -5.0, 0.0), (0.0, -10.0, 0.0), width=32, height=32)
+    empty = build_sample_based_camera([mirror], away, bounds, downsample=2)
+    assert empty.groups == []
+    np.testing.assert_allclose(renderer.render(away, empty, world_color=(*world, 1.0))[..., :3],
+                               np.broadcast_to(world, (32, 32, 3)), atol=1e-6)
+
+
+def test_draw_into_a_bound_offscreen_as_a_draw_handler_would(gpu_ready):
+    """``draw`` composites into whatever framebuffer is bound (no read-back): the same
+    image as ``render`` without band tracing; with ``reflectors_only`` it leaves every
+    pixel off the mirrors as it was (an overlay over Blender's own viewport drawing)."""
+    import gpu
+
+    from curved_reflections.gpu_shaders.projection import SBCTextures
+    from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
+
+    meshes = [_square("Near", 2.5, 1.0, (1.0, 0.0, 0.0)), _square("Far", 4.0, 4.0, (0.0, 1.0, 0.0))]
+    mirror = icosphere((0.0, 0.0, 0.0), 1.0, 3, name="Mirror")
+    view = look_at_view((0.0, -6.0, 0.3), (0.0, 0.0, 0.0), fov_y_deg=25.0, width=64, height=48)
+    sbc = build_sample_based_camera([mirror], view, scene_bounds([mirror], meshes, margin=1.0), downsample=2)
+    renderer = ReflectionRenderer([mirror], meshes)
+    world = (0.0, 0.0, 1.0, 1.0)
+    expected = renderer.render(view, sbc, world_color=world, trace=False)
+    textures = SBCTextures(sbc)
+    offscreen = gpu.types.GPUOffScreen(view.width, view.height, format='RGBA32F')
+    try:
+        images = []
+        for overlay in (False, True):
+            with offscreen.bind():
+                framebuffer = gpu.state.active_framebuffer_get()
+                framebuffer.clear(color=(0.25, 0.5, 0.75, 1.0))
+                renderer.draw(view, textures, world, reflectors_only=overlay)
+                pixels = framebuffer.read_color(0, 0, view.width, view.height, 4, 0, 'FLOAT')
+            pixels.dimensions = view.width * view.height * 4
+            images.append(np.array(pixels, dtype=np.float32).reshape(view.height, view.width, 4))
+    finally:
+        offscreen.free()
+    np.testing.assert_allclose(images[0], expected, atol=1e-6)
+    on_mirror = np.any(np.abs(expected[..., :3] - world[:3]) > 1e-6, axis=2)  # the reflections
+    np.testing.assert_allclose(images[1][on_mirror], expected[on_mirror], atol=1e-6)
+    np.testing.assert_allclose(images[1][0, 0], (0.25, 0.5, 0.75, 1.0), atol=1e-6)  # untouched

@@ -1,0 +1,71 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The Render Reflections Image operator: a PNG of the render size, in background mode,
+and clean error reports (``bpy.ops`` raises ``RuntimeError`` with the message, no
+traceback) naming the object at fault."""
+
+import bpy
+import numpy as np
+import pytest
+
+from curved_reflections.operators import demo_scenes, reference_render
+
+
+@pytest.fixture
+def fig3(empty_scene, registered):
+    """sbc_fig3 at 80x60 in the context's scene."""
+    return demo_scenes.build("sbc_fig3", bpy.context.scene, 80, 60)
+
+
+def test_writes_a_png_of_the_render_size(fig3, tmp_path, capfd):
+    fig3.render.resolution_percentage = 50
+    path = tmp_path / "out" / "reflections.png"
+    assert bpy.ops.curved_reflections.render_image(filepath=str(path)) == {'FINISHED'}
+    image = reference_render.read_png(path)
+    assert image.shape == (30, 40, 4)
+    assert "Info: Rendered 40x30 with reflections" in capfd.readouterr().out
+    # Not blank: the floor's two colours, the world and the columns all show.
+    assert len(np.unique(image[..., :3].reshape(-1, 3), axis=0)) >= 6
+
+
+def test_adds_the_png_extension(fig3, tmp_path):
+    assert bpy.ops.curved_reflections.render_image(filepath=str(tmp_path / "frame")) == {'FINISHED'}
+    assert (tmp_path / "frame.png").is_file()
+
+
+def _error(capfd, tmp_path) -> str:
+    with pytest.raises(RuntimeError) as error:
+        bpy.ops.curved_reflections.render_image(filepath=str(tmp_path / "never.png"))
+    captured = capfd.readouterr()
+    assert "Traceback" not in captured.out + captured.err
+    assert not (tmp_path / "never.png").exists()
+    return str(error.value)
+
+
+def test_no_camera(fig3, tmp_path, capfd):
+    fig3.camera = None
+    assert _error(capfd, tmp_path).startswith("Error: 'Scene': has no camera")
+
+
+def test_camera_that_is_not_a_camera(fig3, tmp_path, capfd):
+    fig3.camera = bpy.data.objects["Cube"]
+    assert _error(capfd, tmp_path).startswith("Error: 'Cube': is not a camera (it is a mesh object)")
+
+
+def test_no_reflector(fig3, tmp_path, capfd):
+    bpy.data.objects["MirrorSphere"].curved_reflections.is_reflector = False
+    assert _error(capfd, tmp_path).startswith("Error: 'Scene': has no visible object marked as a reflector")
+
+
+def test_reflector_without_faces(fig3, tmp_path, capfd):
+    mesh = bpy.data.meshes.new("Points")
+    mesh.from_pydata([(0, 0, 3), (1, 0, 3), (0, 1, 3)], [], [])
+    points = bpy.data.objects.new("Points", mesh)
+    fig3.collection.objects.link(points)
+    points.curved_reflections.is_reflector = True
+    assert _error(capfd, tmp_path).startswith("Error: 'Points': has no faces")
+
+
+def test_camera_inside_a_reflector(fig3, tmp_path, capfd):
+    fig3.camera.location = (0.0, 0.1, 1.0)  # inside the mirror sphere (centre (0, 0, 1), radius 1)
+    message = _error(capfd, tmp_path)
+    assert message.startswith("Error: 'MirrorSphere': the view is inside this reflector")
