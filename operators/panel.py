@@ -44,6 +44,7 @@ class VIEW3D_PT_curved_reflections(bpy.types.Panel):
         column.prop(scene_settings, "max_order")
         column.prop(scene_settings, "auto_refresh")
         layout.operator("curved_reflections.check_scene", icon='VIEWZOOM')
+        layout.operator("curved_reflections.render_image", icon='RENDER_STILL')
         layout.operator_menu_enum("curved_reflections.add_demo_scene", "demo", text="Add Demo Scene",
                                   icon='SCENE_DATA')
 
