@@ -36,6 +36,8 @@ from .view import View
 
 NEWTON_ITERATIONS = 24
 NEWTON_TOLERANCE = 1e-12
+#: Step halvings tried per Newton iteration before a step is taken anyway.
+BACKTRACK_HALVINGS = 6
 #: Newton gives up on a pair this far outside its triangle (barycentric units) ...
 ABANDON_DISTANCE = 0.5
 #: ... after this many iterations.
@@ -88,7 +90,14 @@ def solve_reflections(reflector_set: ReflectorSet, view: View, points: np.ndarra
 
 def _solve_chunk(reflector_set, view, points, offset) -> dict:
     candidates_point, candidates_triangle = _candidates(reflector_set, view, points)
-    uv, converged, orientation = _newton(reflector_set, view, points[candidates_point], candidates_triangle)
+    # Two starts per candidate: the centroid, and the point's foot on the triangle. For a
+    # point close to the mirror the direction to it swings fast across the triangle and
+    # Newton from the centroid can fail; the reflection then lies near the foot.
+    starts = np.concatenate([np.full((len(candidates_triangle), 2), 1.0 / 3.0),
+                             _foot(reflector_set, points[candidates_point], candidates_triangle)])
+    candidates_point = np.concatenate([candidates_point, candidates_point])
+    candidates_triangle = np.concatenate([candidates_triangle, candidates_triangle])
+    uv, converged, orientation = _newton(reflector_set, view, points[candidates_point], candidates_triangle, starts)
     u, v = uv[:, 0], uv[:, 1]
     inside = converged & (u >= -INSIDE_TOLERANCE) & (v >= -INSIDE_TOLERANCE) & (u + v <= 1 + INSIDE_TOLERANCE)
     point, triangle, u, v = candidates_point[inside], candidates_triangle[inside], u[inside], v[inside]
@@ -98,6 +107,20 @@ def _solve_chunk(reflector_set, view, points, offset) -> dict:
     keep = _first_of_duplicates(point, reflector_set.owner[triangle], position, reflector_set.scale)
     return {"point": point[keep] + offset, "triangle": triangle[keep], "barycentric": barycentric[keep],
             "position": position[keep], "normal": normal[keep]}
+
+
+def _foot(reflector_set: ReflectorSet, points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Barycentric (u, v) of each point's orthogonal projection on its triangle's plane,
+    pulled inside the triangle."""
+    e1, e2 = reflector_set.e1[triangles], reflector_set.e2[triangles]
+    w = points - reflector_set.v0[triangles]
+    d11, d12, d22 = dot(e1, e1), dot(e1, e2), dot(e2, e2)
+    b1, b2 = dot(w, e1), dot(w, e2)
+    det = np.maximum(d11 * d22 - d12 * d12, 1e-300)
+    u = np.clip((d22 * b1 - d12 * b2) / det, 0.0, 1.0)
+    v = np.clip((d11 * b2 - d12 * b1) / det, 0.0, 1.0)
+    total = np.maximum(u + v, 1.0)
+    return np.stack([u / total, v / total], axis=1)
 
 
 def _candidates(reflector_set: ReflectorSet, view: View, points: np.ndarray):
@@ -148,7 +171,8 @@ def _may_reflect(view, points, centres, radii, cone_axis, cone_cos) -> np.ndarra
     return ~bounded | (spread >= np.pi / 2) | (alignment >= np.cos(np.minimum(spread, np.pi / 2)))
 
 
-def _newton(reflector_set: ReflectorSet, view: View, points: np.ndarray, triangles: np.ndarray):
+def _newton(reflector_set: ReflectorSet, view: View, points: np.ndarray, triangles: np.ndarray,
+            starts: np.ndarray):
     """Newton's method on the reflection law in each triangle's barycentric (u, v).
 
     The residual is the difference between the half vector and the normal (turned
@@ -176,7 +200,7 @@ def _newton(reflector_set: ReflectorSet, view: View, points: np.ndarray, triangl
         r = half - n
         return np.stack([dot(r, axis_u[k]), dot(r, axis_v[k])], axis=1)
 
-    uv = np.full((len(triangles), 2), 1.0 / 3.0)
+    uv = np.array(starts, dtype=np.float64)
     h = 1e-7
     du, dv = np.array([h, 0.0]), np.array([0.0, h])
     # Pairs leave the active set once converged, or once Newton has carried them well
@@ -193,7 +217,7 @@ def _newton(reflector_set: ReflectorSet, view: View, points: np.ndarray, triangl
                          -jacobian[:, 1, 0] * g[:, 0] + jacobian[:, 0, 0] * g[:, 1]], axis=1) / safe[:, None]
         length = lengths(step)
         step *= np.minimum(1.0, 0.5 / np.maximum(length, 1e-300))[:, None]
-        a = np.clip(a - step, -2.0, 3.0)
+        a = _backtrack(residual, active, a, step, lengths(g))
         uv[active] = a
         far_outside = (a.min(axis=1) < -ABANDON_DISTANCE) | (a.sum(axis=1) > 1 + ABANDON_DISTANCE)
         keep = (length > NEWTON_TOLERANCE) & ~(far_outside & (iteration >= ABANDON_AFTER))
@@ -203,6 +227,24 @@ def _newton(reflector_set: ReflectorSet, view: View, points: np.ndarray, triangl
     everything = np.arange(len(triangles))
     converged = lengths(residual(uv, everything)) < 1e-9
     return uv, converged, orientation
+
+
+def _backtrack(residual, active, start, step, size, halvings: int = BACKTRACK_HALVINGS):
+    """Newton steps shortened by halving until the residual shrinks (backtracking line search).
+
+    Near a mirror the direction to the point swings fast across a triangle and full
+    steps overshoot; a pair whose residual never shrinks keeps the shortest step.
+    """
+    scale = np.ones(len(active))
+    pending = np.arange(len(active))
+    for _ in range(halvings):
+        trial = np.clip(start[pending] - scale[pending, None] * step[pending], -2.0, 3.0)
+        worse = lengths(residual(trial, active[pending])) >= size[pending]
+        if not worse.any():
+            break
+        pending = pending[worse]
+        scale[pending] *= 0.5
+    return np.clip(start - scale[:, None] * step, -2.0, 3.0)
 
 
 def _first_of_duplicates(point, reflector, position, scale) -> np.ndarray:

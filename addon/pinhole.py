@@ -110,6 +110,8 @@ class PinholeLeaves:
 
     name = "pinhole"
     concatenate = staticmethod(concatenate_cameras)
+    #: The baseline is built as the paper builds it: one tree per reflection group.
+    splits_into_sheets = False
 
     def well_posed(self, cameras: PinholeCameras, counts: np.ndarray) -> np.ndarray:
         """Every camera is usable, as in the paper (its error decides)."""

@@ -212,6 +212,7 @@ class RayPatchLeaves:
 
     name = "ray_patch"
     concatenate = staticmethod(concatenate_patches)
+    splits_into_sheets = True
 
     def well_posed(self, patches: RayPatches, counts: np.ndarray) -> np.ndarray:
         """Enough rays, spread in two directions, to fix a quadratic between them.

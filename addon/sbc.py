@@ -246,7 +246,10 @@ def build_from_ray_map(ray_map: RayMap, accuracy_px: float = 1.0, leaf_model: st
     trees, grids, histories = [], [], []
     for g, history in enumerate(ray_map.histories):
         grid = ray_map.group_grid(g)
-        for tree in _build_sheets(ray_map, np.flatnonzero(ray_map.group == g), LEAF_MODELS[leaf_model], accuracy_px):
+        model, rays = LEAF_MODELS[leaf_model], np.flatnonzero(ray_map.group == g)
+        sheets = (_build_sheets(ray_map, rays, model, accuracy_px) if model.splits_into_sheets
+                  else [build_bsp(ray_map, rays, model, accuracy_px, max_duplication=None)])
+        for tree in sheets:
             trees.append(tree)
             grids.append(grid)
             histories.append(history)

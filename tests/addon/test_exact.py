@@ -117,7 +117,10 @@ def test_the_chen_arvo_vase_shows_some_points_twice():
     assert len(twice) > 100
     visible = found.select(found.visible)
     heights = visible.position[np.isin(visible.point, twice), 2].reshape(-1, 2)
-    assert np.all(heights.max(axis=1) - heights.min(axis=1) > 0.3)  # one image low, one high
+    spread = heights.max(axis=1) - heights.min(axis=1)
+    # Mostly one image low on the belly, one high on the lip (80 % here); the others are
+    # pairs close together on either side of the fold, where two images merge.
+    assert (spread > 0.3).mean() > 0.7
     miss, along = _miss_distance(reflectors, view, visible, points)
     assert miss.max() < 1e-9 and np.all(along > 0)
 
@@ -134,3 +137,20 @@ def test_orthographic_views_obey_the_reflection_law():
     assert len(visible.point) > 250
     miss, along = _miss_distance(reflectors, ortho, visible, points)
     assert miss.max() < 1e-9 and np.all(along > 0)
+
+
+@pytest.mark.parametrize("height", [0.02, 0.005])
+def test_points_hugging_the_mirror_keep_their_reflections(view, height):
+    """Close to the surface the direction to the point swings fast: Newton needs its foot
+    start and a line search there (points 0.005 above a sphere were missed 65% of the time)."""
+    reflectors = ReflectorSet([icosphere(CENTER, 1.0, 4)])
+    points = _random_points_around(CENTER, 1500, 1.0 + height, 1.0 + height, seed=21)
+    closed_form, visible = sphere_reflection(CENTER, 1.0, EYE, points)
+    normal = closed_form - CENTER
+    to_eye = (EYE - closed_form) / np.linalg.norm(EYE - closed_form, axis=1, keepdims=True)
+    to_point = (points - closed_form) / np.linalg.norm(points - closed_form, axis=1, keepdims=True)
+    margin = np.minimum(np.einsum("ij,ij->i", normal, to_eye), np.einsum("ij,ij->i", normal, to_point))
+    clearly_seen = visible & (margin > 0.1)
+    count = solve_reflections(reflectors, view, points).count_per_point(len(points))
+    assert clearly_seen.sum() > 400
+    assert (count[clearly_seen] == 0).mean() <= 0.005
