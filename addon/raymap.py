@@ -45,6 +45,7 @@ class RayMap:
     direction: np.ndarray  # (R, 3) unit
     head_distance: np.ndarray  # (R,) length of the segment from tail to head
     triangle: np.ndarray  # (R,) triangle of the tail
+    blocked: np.ndarray  # (R,) bool: the head is on a reflector (else where the ray leaves the box)
 
     @property
     def head(self) -> np.ndarray:
@@ -118,7 +119,8 @@ def reflect_primary_hits(reflector_set, view, bounds, downsample, max_order, hit
         box = box_exit_distance(tail, outgoing, lo, hi)
         nxt = reflector_set.intersect(tail, outgoing, box, source)
         head_distance = np.where(nxt.hit, nxt.t, box)
-        rays.append((alive, order, history, first_point, first_depth, tail, outgoing, head_distance, source))
+        rays.append((alive, order, history, first_point, first_depth, tail, outgoing, head_distance, source,
+                     nxt.hit.copy()))
         more = np.flatnonzero(nxt.hit)
         alive, tail, incoming, source = alive[more], nxt.position[more], outgoing[more], nxt.triangle[more]
         normal, face = nxt.normal[more], nxt.face_normal[more]
@@ -146,5 +148,5 @@ def _assemble(view, downsample, columns, rows, cells, rays) -> RayMap:
         view=view, downsample=downsample, columns=columns, rows=rows, histories=histories,
         cell=cells[stacked(0)], order=np.concatenate([np.full(len(r[0]), r[1]) for r in rays]).astype(np.int64),
         group=renumber[group.reshape(-1)], first_point=stacked(3), first_depth=stacked(4), tail=stacked(5),
-        direction=stacked(6), head_distance=stacked(7), triangle=stacked(8),
+        direction=stacked(6), head_distance=stacked(7), triangle=stacked(8), blocked=stacked(9),
     )

@@ -10,8 +10,8 @@ the point, and the first reflector point is the point on the desired view ray of
 
 A projection is accepted where the four rays around (u, v) exist in the group (the
 point reflects inside the reflector's footprint, not across its silhouette) and the
-point lies on their segment between tail and head (in front of the mirror, before the
-next reflector and inside the scene box).
+point lies on their interpolated ray: in front of the mirror, and before the next
+reflector where one of the four rays meets one.
 
 ``leaf_model="ray_patch"`` (default) uses our ray-field patches; ``"pinhole"`` the
 paper's pinhole cameras, kept as the baseline.
@@ -111,7 +111,10 @@ class SampleBasedCamera:
         # spacing: this checks every leaf's answer against the traced rays themselves.
         miss = np.linalg.norm(offset - s[:, None] * sample["direction"], axis=1)
         on_ray = miss <= MISS_CELLS * _cell_spacing(sample, s) + tolerance
-        ok = sample["complete"] & on_ray & (s >= -tolerance) & (s <= sample["head_distance"] + tolerance)
+        # Only a head on another reflector limits the segment: where a ray merely leaves
+        # the scene box, every scene point along it is in front of its end.
+        before_head = ~sample["blocked"] | (s <= sample["head_distance"] + tolerance)
+        ok = sample["complete"] & on_ray & (s >= -tolerance) & before_head
         hits = np.flatnonzero(ok)
         pixels = self.ray_map.cell_pixels(cells[hits])
         origins, directions = self.ray_map.view.pixel_rays(pixels)
@@ -197,6 +200,7 @@ def _interpolate_rays(ray_map: RayMap, grid: np.ndarray, cells: np.ndarray, acce
         "tail": np.einsum("pk,pkd->pd", weights, ray_map.tail[corners]),
         "direction": direction,
         "head_distance": np.einsum("pk,pk->p", weights, ray_map.head_distance[corners]),
+        "blocked": ray_map.blocked[corners].any(axis=1),
         "first_depth": np.einsum("pk,pk->p", weights, ray_map.first_depth[corners]),
     }
 

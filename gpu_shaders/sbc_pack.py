@@ -33,7 +33,8 @@ Textures (names as the GLSL samplers, ``sbc_`` + name):
     15: (cell-centre unit direction xyz, 0) (bilinear cells only)
 ``scalars`` 1 float per entry, 4 per texel: each group's ray-list CSR offsets
             ``cell_start`` and its ray grid (rows x columns, row-major, ray index or -1).
-``rays``    2 texels per ray of the ray map: (tail xyz, head distance),
+``rays``    2 texels per ray of the ray map: (tail xyz, head distance, negative where
+            the head is where the ray leaves the scene box rather than on a reflector),
             (unit direction xyz, first-hit depth).
 
 Why relative coordinates: float32 has about 7 digits, and a point's projection is a
@@ -192,7 +193,9 @@ def pack_sample_based_camera(sbc) -> PackedSBC:
     _exact("offsets", group_texels)
     _exact("tree indices", node_texels[1::2, :3])
     rays = np.zeros((ray_map.n_rays, RAY_TEXELS, 4))
-    rays[:, 0, :3], rays[:, 0, 3] = ray_map.tail, ray_map.head_distance
+    # The head distance's sign says whether the head is on a reflector (+) or where the
+    # ray leaves the scene box (-): only the former limits projection (sbc._project_group).
+    rays[:, 0, :3], rays[:, 0, 3] = ray_map.tail, np.where(ray_map.blocked, 1.0, -1.0) * ray_map.head_distance
     rays[:, 1, :3], rays[:, 1, 3] = ray_map.direction, ray_map.first_depth
     _exact("ray count", [ray_map.n_rays])
     _exact("patch count", [n_cameras + n_cells])
@@ -252,8 +255,8 @@ def unpack_sample_based_camera(packed: PackedSBC) -> tuple[list, dict]:
             "cells": _unpack_patches(patches[cell_start:cell_start + n_cells].reshape(-1, 4)),
             "grid": grid.reshape(packed.rows, packed.columns),
         })
-    return out, {"tail": rays[:, 0, :3], "head_distance": rays[:, 0, 3], "direction": rays[:, 1, :3],
-                 "first_depth": rays[:, 1, 3]}
+    return out, {"tail": rays[:, 0, :3], "head_distance": np.abs(rays[:, 0, 3]), "blocked": rays[:, 0, 3] > 0,
+                 "direction": rays[:, 1, :3], "first_depth": rays[:, 1, 3]}
 
 
 def build_textures(packed: PackedSBC) -> dict:

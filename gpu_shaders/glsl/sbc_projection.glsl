@@ -256,6 +256,7 @@ bool sbc_project(vec3 p, int group, out vec2 pixel, out float first_depth, out f
   vec3 to_point = vec3(0.0);
   vec3 direction = vec3(0.0);
   float head = 0.0;
+  bool blocked = false;
   float depth_first = 0.0;
   vec3 corner_tail[4];
   vec3 corner_direction[4];
@@ -265,14 +266,16 @@ bool sbc_project(vec3 p, int group, out vec2 pixel, out float first_depth, out f
     corner_tail[k] = tail_head.xyz;
     corner_direction[k] = direction_first.xyz;
     to_point += weight[k] * (p - tail_head.xyz);
-    head += weight[k] * tail_head.w;
+    head += weight[k] * abs(tail_head.w);
+    blocked = blocked || tail_head.w > 0.0;
     direction += weight[k] * direction_first.xyz;
     depth_first += weight[k] * direction_first.w;
   }
   direction /= max(length(direction), 1e-30);
   float s = dot(to_point, direction);
   float tolerance = SBC_DISTANCE_TOLERANCE * (1.0 + head);
-  if (!(s >= -tolerance && s <= head + tolerance)) {
+  /* Only a head on another reflector limits the segment (sbc._project_group). */
+  if (!(s >= -tolerance && (!blocked || s <= head + tolerance))) {
     return false;
   }
   /* The point lies on the ray map's own ray within one cell spacing (sbc._cell_spacing). */

@@ -45,6 +45,10 @@ def test_two_spheres_give_histories_up_to_the_max_order_and_clip_heads():
     key = {tuple(c): k for k, c in zip(np.flatnonzero(second), ray_map.cell[second])}
     follow = np.array([key[tuple(ray_map.cell[k])] for k in first_then])
     np.testing.assert_allclose(ray_map.head[first_then], ray_map.tail[follow], atol=1e-9)
+    assert ray_map.blocked[first_then].all()
+    free = ~ray_map.blocked
+    on_box = np.isclose(ray_map.head[free], BOUNDS[0], atol=1e-9) | np.isclose(ray_map.head[free], BOUNDS[1], atol=1e-9)
+    assert free.any() and on_box.any(axis=1).all()
     np.testing.assert_array_equal(ray_map.first_point[follow], ray_map.first_point[first_then])
 
 

@@ -137,6 +137,7 @@ def test_packing_round_trip(case):
     ray_map = sbc.ray_map
     for name in ("tail", "direction", "head_distance", "first_depth"):
         close(rays[name], getattr(ray_map, name), 10.0)
+    np.testing.assert_array_equal(rays["blocked"], ray_map.blocked)
 
 
 def test_tails_are_stored_relative_to_their_origin(case):
