@@ -22,7 +22,6 @@ import argparse
 import importlib.util
 import os
 import sys
-import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -35,15 +34,11 @@ OURS = "curved_reflections"
 
 
 def import_package():
-    """Import the repository as ``curved_reflections`` (isolated Blender user folder) and register it."""
-    if not os.environ.get("BLENDER_USER_RESOURCES"):
-        os.environ["BLENDER_USER_RESOURCES"] = tempfile.mkdtemp(prefix="curved_reflections_demo_")
+    """The repository as ``curved_reflections`` (isolated Blender user folder), registered."""
     spec = importlib.util.spec_from_file_location("_package_link", REPO_ROOT / "scripts" / "package_link.py")
     link = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(link)
-    package = link.import_as_package(REPO_ROOT)
-    package.register()
-    return package
+    return link.import_registered(REPO_ROOT, prefix="curved_reflections_demo_")
 
 
 @dataclass(frozen=True)

@@ -49,3 +49,24 @@ def import_as_package(repo_root, name: str = "curved_reflections"):
         del sys.modules[name]
         raise
     return module
+
+
+def isolate_blender_user_folder(prefix: str = "curved_reflections_blender_user_") -> None:
+    """Point ``BLENDER_USER_RESOURCES`` at a temporary folder, removed at exit, unless set.
+
+    Call before ``bpy`` is imported, so no script or test reads or writes the user's
+    real Blender configuration.
+    """
+    if not os.environ.get("BLENDER_USER_RESOURCES"):
+        folder = tempfile.mkdtemp(prefix=prefix)
+        os.environ["BLENDER_USER_RESOURCES"] = folder
+        atexit.register(shutil.rmtree, folder, ignore_errors=True)
+
+
+def import_registered(repo_root, prefix: str = "curved_reflections_blender_user_"):
+    """The repository imported as ``curved_reflections`` and registered with Blender,
+    in an isolated Blender user folder (for scripts: the demo, the benchmarks)."""
+    isolate_blender_user_folder(prefix)
+    package = import_as_package(repo_root)
+    package.register()
+    return package

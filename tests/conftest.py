@@ -6,23 +6,14 @@ fixtures. ``BLENDER_USER_RESOURCES`` is set before any test can import ``bpy`` s
 no test reads or writes the user's real Blender configuration.
 """
 
-import atexit
 import importlib.util
-import os
-import shutil
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 import pytest
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-
-if not os.environ.get("BLENDER_USER_RESOURCES"):
-    _user_resources = tempfile.mkdtemp(prefix="curved_reflections_blender_user_")
-    os.environ["BLENDER_USER_RESOURCES"] = _user_resources
-    atexit.register(shutil.rmtree, _user_resources, ignore_errors=True)
 
 
 def _load_package_link():
@@ -34,7 +25,9 @@ def _load_package_link():
     return module
 
 
-_load_package_link().import_as_package(REPO_ROOT)
+_package_link = _load_package_link()
+_package_link.isolate_blender_user_folder()
+_package_link.import_as_package(REPO_ROOT)
 
 
 @pytest.fixture(scope="session")

@@ -44,7 +44,6 @@ Every cell runs in a forked child process; a cell whose first build takes longer
 from __future__ import annotations
 
 import argparse
-import atexit
 import datetime
 import importlib.util
 import json
@@ -53,10 +52,8 @@ import multiprocessing
 import os
 import platform
 import shlex
-import shutil
 import subprocess
 import sys
-import tempfile
 import time
 import zlib
 from dataclasses import dataclass
@@ -99,16 +96,10 @@ TARGETS = (
 
 def import_package():
     """The repository as ``curved_reflections`` (isolated Blender user folder), registered."""
-    if not os.environ.get("BLENDER_USER_RESOURCES"):
-        folder = tempfile.mkdtemp(prefix="curved_reflections_bench_")
-        os.environ["BLENDER_USER_RESOURCES"] = folder
-        atexit.register(shutil.rmtree, folder, ignore_errors=True)
     spec = importlib.util.spec_from_file_location("_package_link", REPO_ROOT / "scripts" / "package_link.py")
     link = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(link)
-    package = link.import_as_package(REPO_ROOT)
-    package.register()
-    return package
+    return link.import_registered(REPO_ROOT, prefix="curved_reflections_bench_")
 
 
 @dataclass
