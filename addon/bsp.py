@@ -88,6 +88,13 @@ def diagonal_neighbours(ray_map: RayMap, rays: np.ndarray) -> np.ndarray:
     return np.stack(corners, axis=1)
 
 
+def unit_frustum_points(ray_map: RayMap, rays: np.ndarray) -> np.ndarray:
+    """(R, 10, 3): tails and heads of each ray and its four diagonal neighbours (the paper's
+    unit frustum)."""
+    frustum = np.concatenate([rays[:, None], diagonal_neighbours(ray_map, rays)], axis=1)
+    return np.concatenate([ray_map.tail[frustum], ray_map.head[frustum]], axis=1)
+
+
 def half_frustum_points(ray_map: RayMap, rays: np.ndarray) -> np.ndarray:
     """(R, 10, 3): tail and head of each ray and the midpoints toward its diagonal neighbours.
 
@@ -112,7 +119,8 @@ def build_bsp(ray_map: RayMap, rays: np.ndarray, model, accuracy_px: float,
     ``max_duplication`` times the input, or a split fails on more than
     ``MAX_RAY_LIST_RAYS`` rays (with ``max_duplication=None`` neither is checked).
     """
-    frustum_points = half_frustum_points(ray_map, rays)
+    frustum_points = (half_frustum_points(ray_map, rays) if model.half_frustum
+                      else unit_frustum_points(ray_map, rays))
 
     levels = []  # one record of whole arrays per tree level
     camera_parts, raylist_rows, raylist_rays = [], [], []

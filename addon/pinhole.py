@@ -112,6 +112,7 @@ class PinholeLeaves:
     concatenate = staticmethod(concatenate_cameras)
     #: The baseline is built as the paper builds it: one tree per reflection group.
     splits_into_sheets = False
+    half_frustum = False  # the paper's unit frustum
 
     def well_posed(self, cameras: PinholeCameras, counts: np.ndarray) -> np.ndarray:
         """Every camera is usable, as in the paper (its error decides)."""

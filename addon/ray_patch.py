@@ -213,6 +213,9 @@ class RayPatchLeaves:
     name = "ray_patch"
     concatenate = staticmethod(concatenate_patches)
     splits_into_sheets = True
+    #: Leaves accept half a cell beyond their rays and every answer is checked against
+    #: the ray map, so rays are assigned by their half frustum (bsp.half_frustum_points).
+    half_frustum = True
 
     def well_posed(self, patches: RayPatches, counts: np.ndarray) -> np.ndarray:
         """Enough rays, spread in two directions, to fix a quadratic between them.
