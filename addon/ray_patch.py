@@ -24,6 +24,7 @@ unit frustum that contains the point").
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,6 +81,22 @@ class RayPatches:
     @property
     def nbytes(self) -> int:
         return int(sum(getattr(self, f).nbytes for f in _ARRAY_FIELDS))
+
+    @functools.cached_property
+    def centre_rays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Bilinear cells only: each cell's central ray (tail, unit direction) at (0.5, 0.5),
+        and how far its corner rays' tails and directions stray from it (the cell's size
+        at the tail, and its growth per unit of distance along the ray)."""
+        t, d = self.tail, self.direction
+        centre_tail = t[:, 0] + 0.5 * (t[:, 1] + t[:, 2]) + 0.25 * t[:, 4]
+        centre_direction = d[:, 0] + 0.5 * (d[:, 1] + d[:, 2]) + 0.25 * d[:, 4]
+        centre_direction = centre_direction / np.maximum(np.linalg.norm(centre_direction, axis=1), 1e-300)[:, None]
+        corners = [t[:, 0], t[:, 0] + t[:, 1], t[:, 0] + t[:, 2], t[:, 0] + t[:, 1] + t[:, 2] + t[:, 4]]
+        turns = [d[:, 0], d[:, 0] + d[:, 1], d[:, 0] + d[:, 2], d[:, 0] + d[:, 1] + d[:, 2] + d[:, 4]]
+        size = np.max([np.linalg.norm(c - centre_tail, axis=1) for c in corners], axis=0)
+        spread = np.max([np.linalg.norm(r / np.linalg.norm(r, axis=1)[:, None] - centre_direction, axis=1)
+                         for r in turns], axis=0)
+        return centre_tail, centre_direction, size, spread
 
     def cells_at(self, leaf, a, b) -> np.ndarray:
         """Ray-map cells at chart coordinates (a, b) of leaves."""

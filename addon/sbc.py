@@ -162,14 +162,18 @@ def _project_ray_lists(tree: BSPTree, row, points):
 
 
 def _closest_cells(cells, pair_point, pair_cell, points, keep: int = CANDIDATE_CELLS):
-    """Per point, the ``keep`` (point, cell) pairs whose cell-centre ray passes closest."""
-    tail = cells.tail[pair_cell]
-    direction = cells.direction[pair_cell]
-    # Bilinear patch at the cell centre (0.5, 0.5): c0 + (c1 + c2) / 2 + c4 / 4.
-    centre_tail = tail[:, 0] + 0.5 * (tail[:, 1] + tail[:, 2]) + 0.25 * tail[:, 4]
-    centre_direction = direction[:, 0] + 0.5 * (direction[:, 1] + direction[:, 2]) + 0.25 * direction[:, 4]
-    centre_direction /= np.maximum(np.linalg.norm(centre_direction, axis=1), 1e-300)[:, None]
-    miss = np.linalg.norm(np.cross(points[pair_point] - centre_tail, centre_direction), axis=1)
+    """Per point, the ``keep`` (point, cell) pairs whose cell-centre ray passes closest.
+
+    Cells whose central ray passes farther from the point than twice the cell's size at
+    that depth cannot hold it and are dropped first (no effect on the result, only on
+    the work: a point usually lies near few of a ray-list leaf's cells).
+    """
+    centre_tail, centre_direction, size, spread = cells.centre_rays
+    offset = points[pair_point] - centre_tail[pair_cell]
+    along = np.maximum(np.einsum("ij,ij->i", offset, centre_direction[pair_cell]), 0.0)
+    miss = np.linalg.norm(np.cross(offset, centre_direction[pair_cell]), axis=1)
+    near = miss <= 2.0 * (size[pair_cell] + along * spread[pair_cell])
+    pair_point, pair_cell, miss = pair_point[near], pair_cell[near], miss[near]
     order = np.lexsort((miss, pair_point))
     sorted_point = pair_point[order]
     group_start = np.flatnonzero(np.concatenate([[True], sorted_point[1:] != sorted_point[:-1]]))

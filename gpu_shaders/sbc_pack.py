@@ -131,11 +131,7 @@ def _pack_patches(patches, bilinear: bool) -> np.ndarray:
     out[:, 13, :2] = patches.lo
     out[:, 13, 2:] = patches.hi
     if bilinear:
-        # The cell-centre ray of sbc._closest_cells: patch at (0.5, 0.5) = c0 + (c1 + c2) / 2 + c4 / 4.
-        t, d = patches.tail, patches.direction
-        centre_tail = t[:, 0] + 0.5 * (t[:, 1] + t[:, 2]) + 0.25 * t[:, 4]
-        centre_direction = d[:, 0] + 0.5 * (d[:, 1] + d[:, 2]) + 0.25 * d[:, 4]
-        centre_direction /= np.maximum(np.linalg.norm(centre_direction, axis=1), 1e-300)[:, None]
+        centre_tail, centre_direction, _, _ = patches.centre_rays  # as sbc._closest_cells uses them
         out[:, 14, :3] = centre_tail - origin.astype(np.float64)
         out[:, 15, :3] = centre_direction
     return out.reshape(-1, 4).astype(np.float32)
