@@ -19,7 +19,9 @@ paper's pinhole cameras, kept as the baseline.
 
 from __future__ import annotations
 
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -37,6 +39,9 @@ LEAF_MODELS = {"ray_patch": RayPatchLeaves(), "pinhole": PinholeLeaves()}
 CELL_TOLERANCE = 1e-6
 #: A projected point may lie off the ray map's interpolated ray by this many cell spacings.
 MISS_CELLS = 1.0
+#: Threads that project parts of the points at once, and the fewest points per thread.
+PROJECT_THREADS = 4
+THREAD_MIN_POINTS = 20000
 #: Groups of at most this many rays are never split into sheets.
 MIN_SHEET_RAYS = 64
 #: Ray-list cells tried per point, nearest central ray first.
@@ -84,9 +89,20 @@ class SampleBasedCamera:
             ray_distance=np.full((n_groups, n_points), np.nan),
         )
         finite = np.flatnonzero(np.isfinite(points).all(axis=1))
-        for g, (tree, grid) in enumerate(zip(self.trees, self.grids)):
-            self._project_group(g, tree, grid, points[finite], finite, result)
+        # numpy releases the GIL inside its array operations, so parts of the points
+        # project in parallel on threads; each part writes its own rows of the result.
+        workers = min(PROJECT_THREADS, os.cpu_count() or 1, max(1, len(finite) // THREAD_MIN_POINTS))
+        parts = np.array_split(finite, workers)
+        if workers == 1:
+            self._project_points(points, parts[0], result)
+        else:
+            with ThreadPoolExecutor(workers) as pool:
+                list(pool.map(lambda part: self._project_points(points, part, result), parts))
         return result
+
+    def _project_points(self, points, index, result: Projection):
+        for g, (tree, grid) in enumerate(zip(self.trees, self.grids)):
+            self._project_group(g, tree, grid, points[index], index, result)
 
     def _project_group(self, g, tree: BSPTree, grid, points, point_index, result: Projection):
         leaf = tree.leaf[descend_tree(tree, points)]

@@ -194,3 +194,18 @@ def test_camera_leaves_are_fitted_to_enough_rays_in_two_directions(ellipsoid_cas
         assert np.all(tree.leaf_rays[cameras] >= 6)
         extent = tree.cameras.hi - tree.cameras.lo
         assert np.all(extent.min(axis=1) >= 1) and np.all(extent.max(axis=1) >= 2)
+
+
+def test_projection_on_threads_equals_projection_on_one(ellipsoid_case, monkeypatch):
+    from curved_reflections.addon import sbc as sbc_module
+
+    (sbc, single, _), points = ellipsoid_case  # projected with the default settings
+    monkeypatch.setattr(sbc_module, "THREAD_MIN_POINTS", 1000)
+    monkeypatch.setattr(sbc_module, "PROJECT_THREADS", 4)
+    threaded = sbc.project(points)
+    monkeypatch.setattr(sbc_module, "PROJECT_THREADS", 1)
+    one = sbc.project(points)
+    for result in (threaded, single):
+        np.testing.assert_array_equal(result.valid, one.valid)
+        np.testing.assert_array_equal(result.leaf_kind, one.leaf_kind)
+        np.testing.assert_array_equal(result.pixels, one.pixels)
