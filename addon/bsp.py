@@ -75,9 +75,11 @@ class BSPTree:
         return int(sum(a.nbytes for a in arrays)) + int(sum(models))
 
 
-def diagonal_neighbours(ray_map: RayMap, rays: np.ndarray) -> np.ndarray:
-    """(R, 4) ray indices of each ray's unit-frustum corners in its group; itself where missing."""
-    grid = ray_map.group_grid(int(ray_map.group[rays[0]]))
+def diagonal_neighbours(ray_map: RayMap, grid: np.ndarray, rays: np.ndarray) -> np.ndarray:
+    """(R, 4) ray indices of each ray's unit-frustum corners in its group; itself where missing.
+
+    ``grid`` is the group's ray index per cell (RayMap.group_grid).
+    """
     i, j = ray_map.cell[rays, 0], ray_map.cell[rays, 1]
     corners = []
     for di, dj in ((-1, -1), (1, -1), (-1, 1), (1, 1)):
@@ -88,14 +90,14 @@ def diagonal_neighbours(ray_map: RayMap, rays: np.ndarray) -> np.ndarray:
     return np.stack(corners, axis=1)
 
 
-def unit_frustum_points(ray_map: RayMap, rays: np.ndarray) -> np.ndarray:
+def unit_frustum_points(ray_map: RayMap, grid: np.ndarray, rays: np.ndarray) -> np.ndarray:
     """(R, 10, 3): tails and heads of each ray and its four diagonal neighbours (the paper's
     unit frustum)."""
-    frustum = np.concatenate([rays[:, None], diagonal_neighbours(ray_map, rays)], axis=1)
+    frustum = np.concatenate([rays[:, None], diagonal_neighbours(ray_map, grid, rays)], axis=1)
     return np.concatenate([ray_map.tail[frustum], ray_map.head[frustum]], axis=1)
 
 
-def half_frustum_points(ray_map: RayMap, rays: np.ndarray) -> np.ndarray:
+def half_frustum_points(ray_map: RayMap, grid: np.ndarray, rays: np.ndarray) -> np.ndarray:
     """(R, 10, 3): tail and head of each ray and the midpoints toward its diagonal neighbours.
 
     The paper assigns a ray to every side its unit frustum (the four diagonal
@@ -105,22 +107,21 @@ def half_frustum_points(ray_map: RayMap, rays: np.ndarray) -> np.ndarray:
     angles, where neighbouring rays fan far apart at their heads, this cuts the
     duplication of rays across split planes several times over.
     """
-    frustum = np.concatenate([rays[:, None], diagonal_neighbours(ray_map, rays)], axis=1)
-    tails = 0.5 * (ray_map.tail[frustum] + ray_map.tail[rays][:, None])
-    heads = 0.5 * (ray_map.head[frustum] + ray_map.head[rays][:, None])
-    return np.concatenate([tails, heads], axis=1)
+    own = np.repeat(np.stack([ray_map.tail[rays], ray_map.head[rays]], axis=1), 5, axis=1)
+    return 0.5 * (unit_frustum_points(ray_map, grid, rays) + own)
 
 
-def build_bsp(ray_map: RayMap, rays: np.ndarray, model, accuracy_px: float,
+def build_bsp(ray_map: RayMap, rays: np.ndarray, grid: np.ndarray, model, accuracy_px: float,
               max_duplication: float | None = MAX_DUPLICATION) -> BSPTree:
-    """Build the BSP tree of one reflection group's rays (all rays share one history).
+    """Build the BSP tree of rays that share one history; ``grid`` is that group's
+    ray index per cell (RayMap.group_grid).
 
     Raises :class:`RaysCrossError` when the rays held by the nodes of a level exceed
     ``max_duplication`` times the input, or a split fails on more than
     ``MAX_RAY_LIST_RAYS`` rays (with ``max_duplication=None`` neither is checked).
     """
-    frustum_points = (half_frustum_points(ray_map, rays) if model.half_frustum
-                      else unit_frustum_points(ray_map, rays))
+    frustum_points = (half_frustum_points(ray_map, grid, rays) if model.half_frustum
+                      else unit_frustum_points(ray_map, grid, rays))
 
     levels = []  # one record of whole arrays per tree level
     camera_parts, raylist_rows, raylist_rays = [], [], []
@@ -174,7 +175,8 @@ def build_bsp(ray_map: RayMap, rays: np.ndarray, model, accuracy_px: float,
             raise RaysCrossError(f"{len(member_slot)} memberships for {len(rays)} rays at depth {depth + 1}")
         level_ids = child[splits].reshape(-1)
 
-    cell_start, cells = _raylist_cells(ray_map, np.concatenate(raylist_rows), np.concatenate(raylist_rays), n_raylists)
+    cell_start, cells = _raylist_cells(ray_map, grid, np.concatenate(raylist_rows), np.concatenate(raylist_rays),
+                                       n_raylists)
     return _assemble_tree(levels, n_nodes, model, camera_parts, cell_start, cells, depth)
 
 
@@ -217,14 +219,13 @@ def _split_planes(ray_map, member_ray, member_node, n):
     return normal, np.einsum("nd,nd->n", normal, centroid)
 
 
-def _raylist_cells(ray_map: RayMap, leaf_row, ray, n_raylists):
+def _raylist_cells(ray_map: RayMap, grid: np.ndarray, leaf_row, ray, n_raylists):
     """Unit cells whose four corner rays all belong to one ray-list leaf, as bilinear patches.
 
     Returns CSR offsets (n_raylists + 1,) and the patches, sorted by ray-list leaf.
     """
     if len(ray) == 0:
         return np.zeros(n_raylists + 1, dtype=np.int64), None
-    grid = ray_map.group_grid(int(ray_map.group[ray[0]]))
     i, j = ray_map.cell[ray, 0], ray_map.cell[ray, 1]
     inside = (i + 1 < ray_map.columns) & (j + 1 < ray_map.rows)
     leaf_row, ray, i, j = leaf_row[inside], ray[inside], i[inside], j[inside]

@@ -233,7 +233,7 @@ def _cell_spacing(sample: dict, s: np.ndarray) -> np.ndarray:
     return np.maximum(along_u, along_v)
 
 
-def _build_sheets(ray_map: RayMap, rays: np.ndarray, model, accuracy_px: float) -> list:
+def _build_sheets(ray_map: RayMap, rays: np.ndarray, grid: np.ndarray, model, accuracy_px: float) -> list:
     """Trees for one group's rays, split into sheets where the rays cross in space.
 
     Where rays of one history cross (a concave mirror's caustic, or two parts of a
@@ -245,7 +245,7 @@ def _build_sheets(ray_map: RayMap, rays: np.ndarray, model, accuracy_px: float) 
     several images (or, right at a seam, one image twice).
     """
     try:
-        return [build_bsp(ray_map, rays, model, accuracy_px,
+        return [build_bsp(ray_map, rays, grid, model, accuracy_px,
                           max_duplication=None if len(rays) <= MIN_SHEET_RAYS else MAX_DUPLICATION)]
     except RaysCrossError:
         cells = ray_map.cell[rays]
@@ -255,9 +255,9 @@ def _build_sheets(ray_map: RayMap, rays: np.ndarray, model, accuracy_px: float) 
         # corner rays, two on each side) belong to the upper sheet: no line of holes.
         low, high = cells[:, axis] <= seam, cells[:, axis] >= seam
         if low.all() or high.all():
-            return [build_bsp(ray_map, rays, model, accuracy_px, max_duplication=None)]
-        return (_build_sheets(ray_map, rays[low], model, accuracy_px)
-                + _build_sheets(ray_map, rays[high], model, accuracy_px))
+            return [build_bsp(ray_map, rays, grid, model, accuracy_px, max_duplication=None)]
+        return (_build_sheets(ray_map, rays[low], grid, model, accuracy_px)
+                + _build_sheets(ray_map, rays[high], grid, model, accuracy_px))
 
 
 def build_from_ray_map(ray_map: RayMap, accuracy_px: float = 1.0, leaf_model: str = "ray_patch") -> SampleBasedCamera:
@@ -271,8 +271,8 @@ def build_from_ray_map(ray_map: RayMap, accuracy_px: float = 1.0, leaf_model: st
     for g, history in enumerate(ray_map.histories):
         grid = ray_map.group_grid(g)
         model, rays = LEAF_MODELS[leaf_model], np.flatnonzero(ray_map.group == g)
-        sheets = (_build_sheets(ray_map, rays, model, accuracy_px) if model.splits_into_sheets
-                  else [build_bsp(ray_map, rays, model, accuracy_px, max_duplication=None)])
+        sheets = (_build_sheets(ray_map, rays, grid, model, accuracy_px) if model.splits_into_sheets
+                  else [build_bsp(ray_map, rays, grid, model, accuracy_px, max_duplication=None)])
         for tree in sheets:
             trees.append(tree)
             grids.append(grid)
