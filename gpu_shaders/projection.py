@@ -65,7 +65,6 @@ DISTANCE_TOLERANCE = 1e-6
 
 SAMPLERS = tuple(f"sbc_{name}" for name in sbc_pack.TEXTURE_NAMES)
 _GLSL_FILE = Path(__file__).resolve().parent / "glsl" / "sbc_projection.glsl"
-_SHADERS: dict = {}
 
 
 def _float(value: float) -> str:
@@ -152,27 +151,25 @@ void main()
 """
 
 
+@functools.cache
 def _point_shader():
-    """Projects each vertex and writes its result to the texel of its index (cached)."""
-    shader = _SHADERS.get("points")
-    if shader is None:
-        import gpu
+    """Projects each vertex and writes its result to the texel of its index (built on first use)."""
+    import gpu
 
-        interface = gpu.types.GPUStageInterfaceInfo("curved_reflections_sbc_points_interface")
-        interface.flat('VEC4', "projected")
-        interface.flat('FLOAT', "distance_out")
-        info = gpu.types.GPUShaderCreateInfo()
-        info.push_constant('INT', "group")
-        info.push_constant('IVEC2', "target_size")
-        declare_samplers(info)
-        info.vertex_in(0, 'VEC3', "position")
-        info.vertex_out(interface)
-        info.fragment_out(0, 'VEC4', "projected_out")
-        info.fragment_out(1, 'VEC4', "distance_target")
-        info.vertex_source(library_source() + _POINT_VERTEX)
-        info.fragment_source(_POINT_FRAGMENT)
-        shader = _SHADERS["points"] = gpu.shader.create_from_info(info)
-    return shader
+    interface = gpu.types.GPUStageInterfaceInfo("curved_reflections_sbc_points_interface")
+    interface.flat('VEC4', "projected")
+    interface.flat('FLOAT', "distance_out")
+    info = gpu.types.GPUShaderCreateInfo()
+    info.push_constant('INT', "group")
+    info.push_constant('IVEC2', "target_size")
+    declare_samplers(info)
+    info.vertex_in(0, 'VEC3', "position")
+    info.vertex_out(interface)
+    info.fragment_out(0, 'VEC4', "projected_out")
+    info.fragment_out(1, 'VEC4', "distance_target")
+    info.vertex_source(library_source() + _POINT_VERTEX)
+    info.fragment_source(_POINT_FRAGMENT)
+    return gpu.shader.create_from_info(info)
 
 
 #: Bytes of push constants of the point projector: int group + ivec2 target size.

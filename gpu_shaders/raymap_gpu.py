@@ -29,6 +29,8 @@ beyond it are not in the ray map (nor visible in the view).
 
 from __future__ import annotations
 
+import functools
+
 import gpu
 import numpy as np
 from mathutils import Matrix
@@ -37,8 +39,6 @@ from ..addon.raymap import RayMap, reflect_primary_hits
 from ..addon.raytrace import ReflectorSet
 from ..addon.view import View
 
-#: Shaders built on first use (never at import or register time), by name.
-_SHADERS: dict = {}
 
 #: Clear value of the position target; w = -1 marks pixels that no reflector covers.
 _EMPTY = (0.0, 0.0, 0.0, -1.0)
@@ -62,26 +62,24 @@ void main()
 """
 
 
+@functools.cache
 def _first_hit_shader():
-    """The shader writing position + triangle and normal into two float targets (cached)."""
-    shader = _SHADERS.get("first_hit")
-    if shader is None:
-        interface = gpu.types.GPUStageInterfaceInfo("curved_reflections_first_hit_interface")
-        interface.smooth('VEC3', "world_position")
-        interface.smooth('VEC3', "world_normal")
-        interface.flat('FLOAT', "triangle_id")
-        info = gpu.types.GPUShaderCreateInfo()
-        info.push_constant('MAT4', "view_projection")
-        info.vertex_in(0, 'VEC3', "position")
-        info.vertex_in(1, 'VEC3', "normal")
-        info.vertex_in(2, 'FLOAT', "triangle")
-        info.vertex_out(interface)
-        info.fragment_out(0, 'VEC4', "position_out")
-        info.fragment_out(1, 'VEC4', "normal_out")
-        info.vertex_source(_VERTEX_SOURCE)
-        info.fragment_source(_FRAGMENT_SOURCE)
-        shader = _SHADERS["first_hit"] = gpu.shader.create_from_info(info)
-    return shader
+    """The shader writing position + triangle and normal into two float targets (built on first use)."""
+    interface = gpu.types.GPUStageInterfaceInfo("curved_reflections_first_hit_interface")
+    interface.smooth('VEC3', "world_position")
+    interface.smooth('VEC3', "world_normal")
+    interface.flat('FLOAT', "triangle_id")
+    info = gpu.types.GPUShaderCreateInfo()
+    info.push_constant('MAT4', "view_projection")
+    info.vertex_in(0, 'VEC3', "position")
+    info.vertex_in(1, 'VEC3', "normal")
+    info.vertex_in(2, 'FLOAT', "triangle")
+    info.vertex_out(interface)
+    info.fragment_out(0, 'VEC4', "position_out")
+    info.fragment_out(1, 'VEC4', "normal_out")
+    info.vertex_source(_VERTEX_SOURCE)
+    info.fragment_source(_FRAGMENT_SOURCE)
+    return gpu.shader.create_from_info(info)
 
 
 def target_projection(view: View, downsample: int) -> np.ndarray:

@@ -66,6 +66,7 @@ textures (``projection.SBCTextures``).
 from __future__ import annotations
 
 import contextlib
+import functools
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -76,7 +77,6 @@ from ..addon import band_trace, subdivision
 from . import projection
 
 _GLSL = Path(__file__).resolve().parent / "glsl"
-_SHADERS: dict = {}
 
 #: Bytes of push constants per shader (Vulkan guarantees 128): the pre-pass's matrix is
 #: the largest; everything bigger (the cameras, the pre-pass images) is in textures.
@@ -112,12 +112,10 @@ def _source(name: str) -> str:
 
 def _shader(name: str):
     """The named shader of this module, built on first use and cached."""
-    shader = _SHADERS.get(name)
-    if shader is None:
-        shader = _SHADERS[name] = _BUILDERS[name]()
-    return shader
+    return _BUILDERS[name]()
 
 
+@functools.cache
 def _build_prepass():
     import gpu
 
@@ -137,6 +135,7 @@ def _build_prepass():
     return gpu.shader.create_from_info(info)
 
 
+@functools.cache
 def _build_project():
     import gpu
 
@@ -158,6 +157,7 @@ def _build_project():
     return gpu.shader.create_from_info(info)
 
 
+@functools.cache
 def _build_mesh():
     import gpu
 
@@ -183,6 +183,7 @@ def _build_mesh():
     return gpu.shader.create_from_info(info)
 
 
+@functools.cache
 def _build_composite():
     import gpu
 
