@@ -139,7 +139,7 @@ class ReflectorSet:
         t_min = np.full(len(origins), SELF_HIT_EPSILON * self.scale)
         test = ray_box_test(self.bvh, origins, directions, t_min, t_max)
         rays, triangles = descend(self.bvh, np.arange(len(origins)), test)
-        t, u, v = self._moller_trumbore(origins[rays], directions[rays], triangles)
+        t, u, v, _ = self.hit_triangles(origins[rays], directions[rays], triangles)
         with np.errstate(invalid="ignore"):
             keep = (t > t_min[rays]) & (t <= t_max[rays])
         keep &= ~self.neighbours(sources[rays], triangles) & (triangles != sources[rays])
@@ -150,8 +150,13 @@ class ReflectorSet:
         first[1:] = rays[1:] != rays[:-1]
         return rays[first], t[first], triangles[first], np.stack([u[first], v[first]], axis=1)
 
-    def _moller_trumbore(self, origins, directions, triangles):
-        """Batched Moller-Trumbore; (t, u, v) with t = NaN where a pair misses."""
+    def hit_triangles(self, origins, directions, triangles):
+        """Batched Moller-Trumbore of ray i against triangle i.
+
+        Returns (t, u, v, det): t is NaN where the pair misses (outside the triangle, or
+        the ray parallel to its plane); u, v weigh corners 1 and 2; det is the test's
+        determinant, -(d . face normal) times twice the area.
+        """
         e1, e2 = self.e1[triangles], self.e2[triangles]
         p = np.cross(directions, e2)
         det = np.einsum("ij,ij->i", e1, p)
@@ -164,7 +169,7 @@ class ReflectorSet:
             t = np.einsum("ij,ij->i", e2, q) * inv
         tolerance = 1e-12
         inside = (np.abs(det) > 1e-300) & (u >= -tolerance) & (v >= -tolerance) & (u + v <= 1 + tolerance)
-        return np.where(inside, t, np.nan), u, v
+        return np.where(inside, t, np.nan), u, v, det
 
     def _hits(self, origins, directions, t, triangles, uv) -> RayHits:
         hit = triangles >= 0

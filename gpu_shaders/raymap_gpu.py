@@ -185,21 +185,14 @@ def refine_on_triangles(reflector_set: ReflectorSet, origins: np.ndarray, direct
     """Exact (float64) hits of rays on the triangles the rasteriser chose.
 
     Returns ``(depth (K,), normal (K, 3), inside (K,))``: the distance along each unit
-    ray to its triangle's plane, the unit interpolated normal there, and whether the
-    hit lies inside the triangle (with the CPU tracer's tolerance) and is well defined.
+    ray to its triangle (NaN where the ray misses it), the unit interpolated normal
+    there, and whether the hit lies inside the triangle (the CPU tracer's own test,
+    ``ReflectorSet.hit_triangles``) and is well defined.
     """
-    v0, e1, e2 = reflector_set.v0[triangle], reflector_set.e1[triangle], reflector_set.e2[triangle]
-    p = np.cross(directions, e2)
-    det = np.einsum("ij,ij->i", e1, p)
-    inside = np.abs(det) > 1e-12 * np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
-    inv = 1.0 / np.where(inside, det, 1.0)
-    s = origins - v0
-    u = np.einsum("ij,ij->i", s, p) * inv
-    q = np.cross(s, e1)
-    v = np.einsum("ij,ij->i", directions, q) * inv
-    depth = np.einsum("ij,ij->i", e2, q) * inv
-    tolerance = 1e-12  # as ReflectorSet._moller_trumbore
-    inside &= (u >= -tolerance) & (v >= -tolerance) & (u + v <= 1 + tolerance) & (depth > 0)
+    depth, u, v, det = reflector_set.hit_triangles(origins, directions, triangle)
+    e1, e2 = reflector_set.e1[triangle], reflector_set.e2[triangle]
+    # Stricter than the tracer about rays nearly parallel to the plane: those are re-traced.
+    inside = (np.abs(det) > 1e-12 * np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)) & (depth > 0)
     corners = reflector_set.triangles[triangle]
     normal = np.einsum("ij,ijk->ik", np.stack([1 - u - v, u, v], axis=1), reflector_set.normals[corners])
     length = np.linalg.norm(normal, axis=1)
