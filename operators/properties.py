@@ -2,7 +2,7 @@
 """Settings stored in the .blend: per object and per scene PropertyGroups."""
 
 import bpy
-from bpy.props import BoolProperty, FloatProperty, IntProperty, PointerProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, IntVectorProperty, PointerProperty
 
 
 class CurvedReflectionsObjectSettings(bpy.types.PropertyGroup):
@@ -17,6 +17,31 @@ class CurvedReflectionsObjectSettings(bpy.types.PropertyGroup):
         name="Reflectivity",
         description="Share of the reflected image in the mirror's colour (1 = perfect mirror)",
         default=1.0, min=0.0, max=1.0, subtype='FACTOR',
+    )
+    use_fresnel: BoolProperty(
+        name="Fresnel",
+        description="Reflect more at grazing angles (Schlick's approximation, SBC paper V-D)",
+        default=False,
+    )
+    fresnel_f0: FloatProperty(
+        name="Facing Reflectance",
+        description="Share reflected when looking straight at the surface; rises to 1 at grazing angles",
+        default=0.04, min=0.0, max=1.0, subtype='FACTOR',
+    )
+    attenuation_distance: FloatProperty(
+        name="Fade Distance",
+        description="Reflected objects fade out over this distance from the mirror (0: no fading)",
+        default=0.0, min=0.0, soft_max=100.0, subtype='DISTANCE',
+    )
+    mode: EnumProperty(
+        name="Mode",
+        description="How this reflector's reflections are computed",
+        items=(
+            ('RUNTIME', "Runtime", "Rebuild the sample-based camera for every new view (SBC paper IV)"),
+            ('MORPHING', "Morphing", "Bake a grid of panoramic cameras around the reflector and blend them "
+                                     "as the view moves (SBC paper VI)"),
+        ),
+        default='RUNTIME',
     )
 
 
@@ -42,6 +67,16 @@ class CurvedReflectionsSceneSettings(bpy.types.PropertyGroup):
         name="Auto Refresh",
         description="Rebuild reflections when the view or the scene changes",
         default=True,
+    )
+    morph_grid: IntVectorProperty(
+        name="Morph Grid",
+        description="Nodes of the morphing grid around each morphing reflector along X, Y and Z",
+        size=3, default=(9, 9, 5), min=2, max=64,
+    )
+    morph_margin: FloatProperty(
+        name="Morph Margin",
+        description="How far the morphing grid reaches beyond the reflector, in reflector sizes",
+        default=1.0, min=0.05, soft_max=10.0,
     )
 
 
