@@ -11,9 +11,12 @@ and on small images it is a large share of a mirror (the whole rim of a sphere).
 The reflected rays of those few pixels are traced instead, as the ray map itself is
 traced (``addon/raymap.py``, SBC section III-B), but against the diffuse meshes too:
 the view ray's first hit, then reflections off the reflectors up to the highest order
-drawn; the colour is the diffuse mesh's interpolated vertex colour where a reflected
-ray meets one, and the world's where it leaves the scene (or would need a higher
-order). The work is proportional to the perimeter of the footprint, not its area.
+drawn; the colour is the diffuse mesh's, shaded as the GPU shades it (:func:`shade`,
+``gpu_shaders/glsl/reflection_shading.glsl``: interpolated vertex colour times its image
+texture, lit along the true eye vector, the reversed reflected ray, SBC section V-C),
+where a reflected ray meets one, and the world's where it leaves the scene (or would
+need a higher order). The work is proportional to the perimeter of the footprint, not
+its area.
 """
 
 from __future__ import annotations
@@ -21,7 +24,35 @@ from __future__ import annotations
 import numpy as np
 
 from .raytrace import ReflectorSet, reflect, reflection_valid
-from .scene import Reflector
+from .scene import Reflector, vertex_normals
+
+#: Ambient share of the headlight Lambert shading (SBC V-C; glsl/reflection_shading.glsl).
+SHADE_AMBIENT = 0.3
+
+
+def shade(albedo: np.ndarray, lit: np.ndarray, normals: np.ndarray, to_eye: np.ndarray) -> np.ndarray:
+    """Headlight Lambert, two-sided: albedo (K, C) times AMBIENT + (1 - AMBIENT) |n . e|
+    where ``lit``, the albedo itself elsewhere (emission); the GLSL ``shade`` in numpy."""
+    lengths = np.linalg.norm(normals, axis=1) * np.linalg.norm(to_eye, axis=1)
+    cosine = np.divide(np.abs(np.einsum("ij,ij->i", normals, to_eye)), lengths, out=np.ones(len(lengths)),
+                       where=lengths > 1e-30)
+    factor = np.where(np.asarray(lit) > 0.5, SHADE_AMBIENT + (1.0 - SHADE_AMBIENT) * cosine, 1.0)
+    return albedo * factor[:, None]
+
+
+def sample_image(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Bilinear lookup of an (H, W, 4) image at texture coordinates (K, 2), repeating,
+    texel centres at (k + 0.5) / size (as the GPU's linear filter)."""
+    height, width = image.shape[:2]
+    x = np.asarray(uv[:, 0]) * width - 0.5
+    y = np.asarray(uv[:, 1]) * height - 0.5
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+    x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
+    x1, y1 = (x0 + 1) % width, (y0 + 1) % height
+    x0, y0 = x0 % width, y0 % height
+    return ((1 - fy) * ((1 - fx) * image[y0, x0] + fx * image[y0, x1])
+            + fy * ((1 - fx) * image[y1, x0] + fx * image[y1, x1]))
 
 
 class BandTracer:
@@ -34,15 +65,24 @@ class BandTracer:
 
     def __init__(self, reflectors, meshes):
         self.n_reflectors = len(reflectors)
-        pseudo = [Reflector(f"{m.name} (diffuse)", m.vertices, m.triangles,
-                            np.tile([0.0, 0.0, 1.0], (len(m.vertices), 1))) for m in meshes]
+        pseudo = []
+        for m in meshes:
+            normals = m.normals if getattr(m, "normals", None) is not None else vertex_normals(m.vertices, m.triangles)
+            normals = np.where((np.linalg.norm(normals, axis=1) > 1e-8)[:, None], normals, [0.0, 0.0, 1.0])
+            pseudo.append(Reflector(f"{m.name} (diffuse)", m.vertices, m.triangles, normals))
         self.everything = ReflectorSet(list(reflectors) + pseudo)
-        self.colors = [np.asarray(m.colors, dtype=np.float64) for m in meshes]
+        self.meshes = list(meshes)
         self.offsets = np.cumsum([0] + [len(r.vertices) for r in list(reflectors) + pseudo])
-        self.mesh_colors = np.concatenate(self.colors) if self.colors else np.zeros((0, 4))
+        self.mesh_colors = (np.concatenate([np.asarray(m.colors, dtype=np.float64) for m in meshes])
+                            if meshes else np.zeros((0, 4)))
+        self.mesh_uvs = (np.concatenate([np.zeros((len(m.vertices), 2)) if m.uvs is None else m.uvs for m in meshes])
+                         if meshes else np.zeros((0, 2)))
+        self.vertex_mesh = np.repeat(np.arange(len(meshes)), [len(m.vertices) for m in meshes])
 
     def trace(self, view, pixels: np.ndarray, max_order: int, world_color) -> np.ndarray:
-        """Linear RGBA (K, 4) seen through pixel centres ``pixels`` (K, 2), mirrors included.
+        """Linear RGB seen through pixel centres ``pixels`` (K, 2), mirrors included, and in
+        the fourth column the distance from the last mirror to the diffuse point (0 for a
+        point seen directly, inf where the world shows): (K, 4).
 
         Paths stop at the first diffuse hit, when they leave the scene (world colour), at
         an invalid reflection (a grazing ray turned into the mirror: world colour), or
@@ -51,6 +91,7 @@ class BandTracer:
         """
         pixels = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
         out = np.tile(np.asarray(world_color, dtype=np.float64)[:4], (len(pixels), 1))
+        out[:, 3] = np.inf
         if len(pixels) == 0:
             return out
         origins, directions = view.pixel_rays(pixels)
@@ -61,7 +102,9 @@ class BandTracer:
             owner = np.where(hit, hits.reflector, -1)
             diffuse = hit & (owner >= self.n_reflectors)
             if diffuse.any():
-                out[alive[diffuse]] = self._color(hits.triangle[diffuse], hits.barycentric[diffuse])
+                out[alive[diffuse], :3] = self._color(hits.triangle[diffuse], hits.barycentric[diffuse],
+                                                      hits.normal[diffuse], -directions[diffuse])
+                out[alive[diffuse], 3] = hits.t[diffuse] if order > 0 else 0.0
             mirror = hit & (owner >= 0) & (owner < self.n_reflectors)
             if order == max_order:
                 break
@@ -75,16 +118,59 @@ class BandTracer:
             hits = self.everything.intersect(origins, directions, source_triangles=hits.triangle[keep])
         return out
 
-    def _color(self, triangles: np.ndarray, barycentric: np.ndarray) -> np.ndarray:
-        """Barycentric mix of the diffuse triangle's vertex colours."""
+    def _color(self, triangles: np.ndarray, barycentric: np.ndarray, normals: np.ndarray,
+               to_eye: np.ndarray) -> np.ndarray:
+        """Shaded RGB of diffuse hits: barycentric mix of the triangle's vertex colours, times
+        its mesh's image at the interpolated UVs, lit along ``to_eye`` (:func:`shade`)."""
         corners = self.everything.triangles[triangles] - self.offsets[self.n_reflectors]
-        return np.einsum("ij,ijk->ik", barycentric, self.mesh_colors[corners])
+        albedo = np.einsum("ij,ijk->ik", barycentric, self.mesh_colors[corners])[:, :3]
+        mesh = self.vertex_mesh[corners[:, 0]]
+        for index in np.unique(mesh):
+            image = getattr(self.meshes[index], "image", None)
+            if image is None:
+                continue
+            rows = mesh == index
+            uv = np.einsum("ij,ijk->ik", barycentric[rows], self.mesh_uvs[corners[rows]])
+            albedo[rows] *= sample_image(np.asarray(image, dtype=np.float64), uv)[:, :3]
+        lit = np.array([0.0 if m.emissive else 1.0 for m in self.meshes])[mesh]
+        return shade(albedo, lit, normals, to_eye)
 
 
-def band_pixels(labels: np.ndarray, drawn: np.ndarray, radius: int, edges_of_drawn: bool = False) -> np.ndarray:
+def history_boundary(ray_map, width: int, height: int, max_order: int) -> np.ndarray:
+    """(H, W) bool: pixels between ray-map cells whose deepest ray (of order <= max_order)
+    has different reflection histories, or where one of those cells has no ray.
+
+    A pixel is drawn from the four cells around its centre (a projection needs four rays
+    of one group). Where those cells end in different histories (inside a footprint: the
+    silhouette of another reflector seen in this one, where the rays go on to a second
+    order) no group has all four rays there, so neither side's reflection reaches the
+    pixel: the same band as along a footprint's edge, inside it (SBC section IV).
+    """
+    d = ray_map.downsample
+    columns, rows = ray_map.columns, ray_map.rows
+    n_groups = max(1, len(ray_map.histories))
+    keep = ray_map.order <= max_order
+    key = np.full((rows, columns), -1, dtype=np.int64)
+    cells = ray_map.cell[keep]
+    np.maximum.at(key, (cells[:, 1], cells[:, 0]), ray_map.order[keep] * n_groups + ray_map.group[keep])
+    final = np.where(key >= 0, key % n_groups, -1)
+
+    def brackets(n_pixels, n_cells):
+        low = np.clip(np.floor((np.arange(n_pixels) + 0.5) / d - 0.5).astype(np.int64), 0, n_cells - 1)
+        return low, np.minimum(low + 1, n_cells - 1)
+
+    i0, i1 = brackets(width, columns)
+    j0, j1 = brackets(height, rows)
+    corners = [final[np.ix_(j, i)] for j in (j0, j1) for i in (i0, i1)]
+    return ~((corners[0] == corners[1]) & (corners[0] == corners[2]) & (corners[0] == corners[3]))
+
+
+def band_pixels(labels: np.ndarray, drawn: np.ndarray, radius: int, edges_of_drawn: bool = False,
+                boundary: np.ndarray | None = None) -> np.ndarray:
     """(K, 2) integer pixels (x, y) of reflector pixels without a drawn reflection that lie
     within ``radius`` pixels (Chebyshev) of a pixel with another id (or the image edge),
-    and with ``edges_of_drawn`` also those within ``radius`` of a drawn reflection.
+    or in ``boundary`` (:func:`history_boundary`), and with ``edges_of_drawn`` also those
+    within ``radius`` of a drawn reflection.
 
     ``labels`` (H, W) ids of the pre-pass (0 none or diffuse, reflector index + 1);
     ``drawn`` (H, W) bool where the reflection pass drew.
@@ -101,5 +187,7 @@ def band_pixels(labels: np.ndarray, drawn: np.ndarray, radius: int, edges_of_dra
             near_edge |= padded[window] != ids
             if edges_of_drawn:
                 near_edge |= padded_drawn[window]
+    if boundary is not None:
+        near_edge |= boundary
     rows, columns = np.nonzero((ids > 0) & ~drawn & near_edge)
     return np.stack([columns, rows], axis=1)

@@ -113,9 +113,19 @@ class DiffuseMesh:
     colors: np.ndarray  # (N, 4) float32
     emissive: bool = False
     uvs: np.ndarray | None = field(default=None)  # (N, 2) or None
+    #: (N, 3) shading normals (Blender's corner normals), or None for smooth ones from the faces.
+    normals: np.ndarray | None = field(default=None)
+    #: (H, W, 4) float32 linear RGBA image texture read through ``uvs`` (rows bottom to top), or None.
+    image: np.ndarray | None = field(default=None)
 
     def __post_init__(self):
         vertices = _as_points(self.name, "vertices", self.vertices)
+        for what, value, width in (("uvs", self.uvs, 2), ("normals", self.normals, 3)):
+            if value is not None and np.shape(value) != (len(vertices), width):
+                raise SceneInputError(self.name, f"{what} must be (N, {width}) with N = {len(vertices)}, "
+                                                 f"got shape {np.shape(value)}")
+        if self.image is not None and (np.ndim(self.image) != 3 or np.shape(self.image)[2] != 4):
+            raise SceneInputError(self.name, f"image must be (H, W, 4), got shape {np.shape(self.image)}")
         triangles = _as_triangles(self.name, self.triangles, len(vertices))
         colors = np.ascontiguousarray(self.colors, dtype=np.float32)
         if colors.ndim == 2 and colors.shape[1] == 3:
@@ -130,6 +140,20 @@ class DiffuseMesh:
         object.__setattr__(self, "vertices", vertices)
         object.__setattr__(self, "triangles", triangles)
         object.__setattr__(self, "colors", colors)
+
+
+def vertex_normals(vertices, triangles) -> np.ndarray:
+    """Smooth unit normals (N, 3): the area-weighted sum of each vertex's face normals
+    (zero for a vertex in no face)."""
+    vertices = np.asarray(vertices, dtype=np.float64)
+    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    a, b, c = (vertices[triangles[:, k]] for k in range(3))
+    face = np.cross(b - a, c - a)  # length = twice the area
+    normals = np.zeros_like(vertices)
+    for k in range(3):
+        np.add.at(normals, triangles[:, k], face)
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    return np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
 
 
 def scene_bounds(reflectors, meshes=(), margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:

@@ -127,3 +127,27 @@ def _apply(triangles: np.ndarray, mid: np.ndarray, rotation: np.ndarray, table: 
     mids = np.take_along_axis(mid, order, axis=1)
     local = np.concatenate([corners, mids], axis=1)  # slots 0-2 corners, 3-5 midpoints
     return local[:, table].reshape(-1, 3)
+
+
+def barycentric_grid(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """A triangle cut into n^2 sub-triangles by a regular grid (SBC V-B, mixed triangles).
+
+    Returns the (n + 1)(n + 2) / 2 grid points as barycentric weights of corners 0 and 1,
+    (K, 2) (corner 2's is one minus their sum), and the (n^2, 3) sub-triangles over them,
+    wound as the triangle (0, 1, 2).
+    """
+    n = max(1, int(n))
+    i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+    keep = (i + j) <= n
+    i, j = i[keep], j[keep]  # i steps toward corner 1, j toward corner 2
+    index = np.full((n + 1, n + 1), -1, dtype=np.int64)
+    index[i, j] = np.arange(len(i))
+    points = np.stack([(n - i - j) / n, i / n], axis=1)
+    a, b = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    up = (a + b) <= n - 1
+    a_up, b_up = a[up], b[up]
+    upward = np.stack([index[a_up, b_up], index[a_up + 1, b_up], index[a_up, b_up + 1]], axis=1)
+    down = (a + b) <= n - 2
+    a_dn, b_dn = a[down], b[down]
+    downward = np.stack([index[a_dn + 1, b_dn], index[a_dn + 1, b_dn + 1], index[a_dn, b_dn + 1]], axis=1)
+    return points, np.concatenate([upward, downward])

@@ -219,25 +219,65 @@ def _reflector(name: str, mesh, matrix: np.ndarray) -> Reflector:
 
 
 def _diffuse_mesh(name: str, obj, mesh, matrix: np.ndarray) -> DiffuseMesh | None:
-    """The object as a reflected mesh, or ``None`` when it has no faces (nothing to show)."""
+    """The object as a reflected mesh, or ``None`` when it has no faces (nothing to show).
+
+    Besides the colours: Blender's corner normals (shading, SBC paper V-C) and, when a
+    material's colour comes from an image texture, the active UV map and that image."""
     if mesh is None or len(mesh.loop_triangles) == 0:
         return None
     loops, corner_vertex = _corners(mesh)
     triangle_material = _read(mesh.loop_triangles, "material_index", 1, np.int32)
-    colors, emissive = _corner_colors(obj, mesh, loops, corner_vertex, triangle_material)
-    first, triangles = _weld(corner_vertex, colors)
+    colors, emissive, image = _corner_colors(obj, mesh, loops, corner_vertex, triangle_material)
+    normals = _read(mesh.corner_normals, "vector", 3, np.float32)[loops]
+    values = [colors, normals]
+    uvs = None
+    if image is not None and mesh.uv_layers.active is not None:
+        uvs = _read(mesh.uv_layers.active.uv, "vector", 2, np.float32)[loops]
+        values.append(uvs)
+    else:
+        image = None
+    first, triangles = _weld(corner_vertex, *values)
     vertices = _to_world(mesh, corner_vertex, first, matrix)
-    if np.linalg.det(matrix[:3, :3]) < 0:
+    linear = matrix[:3, :3]
+    world_normals = normals[first].astype(np.float64) @ np.linalg.inv(linear)
+    lengths = np.linalg.norm(world_normals, axis=1, keepdims=True)
+    world_normals = np.divide(world_normals, lengths, out=np.zeros_like(world_normals), where=lengths > 0)
+    if np.linalg.det(linear) < 0:
         triangles = triangles[:, ::-1]
-    return DiffuseMesh(name, vertices, np.ascontiguousarray(triangles), colors[first], emissive=emissive)
+    return DiffuseMesh(name, vertices, np.ascontiguousarray(triangles), colors[first], emissive=emissive,
+                       uvs=None if uvs is None else uvs[first].astype(np.float64), normals=world_normals,
+                       image=None if image is None else _image_pixels(image))
 
 
-def _corner_colors(obj, mesh, loops, corner_vertex, triangle_material) -> tuple[np.ndarray, bool]:
-    """Linear RGBA per triangle corner (3T, 4), and whether every triangle glows.
+def _image_pixels(image) -> np.ndarray:
+    """(H, W, 4) float32 linear RGBA of a ``bpy.types.Image``, rows bottom to top.
+
+    Byte images store display values in their colour space; an sRGB one is linearised."""
+    from ..addon.metrics import srgb_to_linear
+
+    width, height = image.size
+    if width == 0 or height == 0:
+        raise SceneInputError(image.name, "is an image texture without pixels (missing file?)")
+    pixels = np.empty(width * height * int(image.channels), dtype=np.float32)
+    image.pixels.foreach_get(pixels)
+    pixels = pixels.reshape(height, width, int(image.channels))
+    rgba = np.ones((height, width, 4), np.float32)
+    rgba[..., :min(4, pixels.shape[2])] = pixels[..., :4]
+    if pixels.shape[2] < 3:
+        rgba[..., 1:3] = rgba[..., :1]
+    if not image.is_float and image.colorspace_settings.name == 'sRGB':
+        rgba[..., :3] = srgb_to_linear(rgba[..., :3])
+    return rgba
+
+
+def _corner_colors(obj, mesh, loops, corner_vertex, triangle_material):
+    """Linear RGBA per triangle corner (3T, 4), whether every triangle glows, and the image
+    texture of the mesh (or ``None``).
 
     Per material slot: its emission or base colour, or a colour attribute it reads.
     An empty slot (or no material at all) shows the mesh's colour attribute if it has
-    one, else the object colour.
+    one, else the object colour. A mesh carries one image: it is used when every
+    triangle's slot reads that same image (else the slots show their flat colours).
     """
     slots = [material_color(slot.material) for slot in obj.material_slots] or [None]
     # Blender draws an out-of-range material index with the last slot.
@@ -246,6 +286,7 @@ def _corner_colors(obj, mesh, loops, corner_vertex, triangle_material) -> tuple[
     colors = np.empty((n_triangles, 3, 4), dtype=np.float32)
     emissive = np.zeros(n_triangles, dtype=bool)
     attribute_values = {}
+    images = set()
     for index, color in enumerate(slots):
         chosen = slot_of_triangle == index
         if not chosen.any():
@@ -262,7 +303,11 @@ def _corner_colors(obj, mesh, loops, corner_vertex, triangle_material) -> tuple[
         else:
             colors[chosen] = values.reshape(n_triangles, 3, 4)[chosen]
         emissive[chosen] = color.emissive
-    return colors.reshape(-1, 4), bool(emissive.all())
+        images.add(color.image)
+    image = images.pop() if len(images) == 1 else None
+    if image is not None:  # the image's texels are the colour: vertex colours white
+        colors[..., :3] = 1.0
+    return colors.reshape(-1, 4), bool(emissive.all()), image
 
 
 def _attribute_colors(mesh, name: str, loops, corner_vertex) -> np.ndarray | None:

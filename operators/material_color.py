@@ -4,8 +4,9 @@
 Reflected meshes are drawn with one colour per vertex, so a material is reduced to what
 its surface shader shows at a glance: the emission colour when it glows (drawn unlit,
 e.g. the demo scenes' labels), else the base colour, else the viewport display colour
-(``material.diffuse_color``). Textures are not sampled; a base colour that comes from a
-colour attribute node is reported so the caller can read that attribute per vertex.
+(``material.diffuse_color``). A base colour that comes from a colour attribute node is
+reported so the caller can read that attribute per vertex, and one that comes from an
+Image Texture node names the image (sampled through the mesh's UVs, SBC paper V-C).
 """
 
 from __future__ import annotations
@@ -19,11 +20,14 @@ import bpy
 class MaterialColor:
     """``rgba`` is linear; ``attribute`` names a colour attribute to read instead
     (``""``: the mesh's default colour attribute), ``None`` when the colour is flat.
-    When the attribute is missing on a mesh, ``rgba`` is shown."""
+    When the attribute is missing on a mesh, ``rgba`` is shown. ``image`` is the
+    ``bpy.types.Image`` of an Image Texture node feeding the colour (``rgba`` is then the
+    viewport display colour, shown where the image cannot be used), else ``None``."""
 
     rgba: tuple[float, float, float, float]
     emissive: bool = False
     attribute: str | None = None
+    image: object = None
 
 
 def material_color(material) -> MaterialColor | None:
@@ -103,5 +107,7 @@ def _socket_color(socket, alpha: float, fallback, *, emissive: bool) -> Material
         return MaterialColor(fallback, emissive, node.layer_name)
     if node.bl_idname == 'ShaderNodeAttribute' and node.attribute_type == 'GEOMETRY':
         return MaterialColor(fallback, emissive, node.attribute_name)
+    if node.bl_idname == 'ShaderNodeTexImage' and node.image is not None:
+        return MaterialColor((*fallback[:3], alpha), emissive, image=node.image)
     return None
 

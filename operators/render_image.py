@@ -13,8 +13,10 @@ linear image and the time of each stage. The PNG holds display sRGB values (the
 "Standard" view transform), as Blender's own renders of the demo scenes do.
 
 Settings come from ``scene.curved_reflections`` (down-sampling, accuracy, highest
-order) and, per reflector, ``obj.curved_reflections.reflectivity``; reflected rays that
-leave the scene show the world's Background colour.
+order) and, per reflector, ``obj.curved_reflections`` (reflectivity, Fresnel, fade
+distance: :func:`reflector_properties`); reflected rays that leave the scene show the
+world's Background colour. Real objects are drawn by the renderer's pre-pass with the
+same shading as their reflections (a headlight Lambert, ``addon/band_trace.shade``).
 """
 
 from __future__ import annotations
@@ -78,22 +80,39 @@ def world_color(scene) -> tuple[float, float, float, float]:
     return (*(float(c) for c in world.color[:3]), 1.0)
 
 
-def reflector_appearance(reflectors, scene) -> tuple[np.ndarray, np.ndarray]:
-    """Own colour (R, 4) linear and reflectivity (R,) of each captured reflector.
+def reflector_properties(reflectors, scene) -> dict:
+    """Surface properties of each captured reflector (SBC paper, section V-D), as the
+    keyword arguments of ``ReflectionRenderer``: ``reflector_colors`` (R, 4) linear (what
+    the material shows, ``material_color``), ``reflectivity`` (R,), ``fresnel_f0`` (R,)
+    (NaN where ``use_fresnel`` is off) and ``attenuation_distance`` (R,) (0: no fading).
 
-    Captured names are object names (an instance's is not an object's: it gets white
-    and reflectivity 1). The colour is what the material shows (``material_color``).
+    Captured names are object names (an instance's is not an object's: it gets white,
+    reflectivity 1, no Fresnel, no fading).
     """
     colors = np.ones((len(reflectors), 4), np.float32)
     reflectivity = np.ones(len(reflectors), np.float32)
+    fresnel_f0 = np.full(len(reflectors), np.nan, np.float32)
+    attenuation = np.zeros(len(reflectors), np.float32)
     for k, reflector in enumerate(reflectors):
         obj = scene.objects.get(reflector.name)
         if obj is None:
             continue
-        reflectivity[k] = obj.curved_reflections.reflectivity
+        settings = obj.curved_reflections
+        reflectivity[k] = settings.reflectivity
+        if settings.use_fresnel:
+            fresnel_f0[k] = settings.fresnel_f0
+        attenuation[k] = settings.attenuation_distance
         color = material_color(obj.active_material)
         colors[k] = color.rgba if color is not None else tuple(obj.color)
-    return colors, reflectivity
+    return {"reflector_colors": colors, "reflectivity": reflectivity, "fresnel_f0": fresnel_f0,
+            "attenuation_distance": attenuation}
+
+
+def reflector_appearance(reflectors, scene) -> tuple[np.ndarray, np.ndarray]:
+    """Own colour (R, 4) linear and reflectivity (R,) of each captured reflector
+    (:func:`reflector_properties` has Fresnel and attenuation too)."""
+    properties = reflector_properties(reflectors, scene)
+    return properties["reflector_colors"], properties["reflectivity"]
 
 
 def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: int | None = None,
@@ -124,8 +143,8 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
                                     downsample=downsample, accuracy_px=accuracy_px)
     built_at = time.perf_counter()
     ensure_gpu()
-    colors, reflectivity = reflector_appearance(captured.reflectors, scene)
-    renderer = ReflectionRenderer(captured.reflectors, captured.meshes, colors, reflectivity)
+    renderer = ReflectionRenderer(captured.reflectors, captured.meshes,
+                                  **reflector_properties(captured.reflectors, scene))
     image = renderer.render(view, sbc, world_color(scene), trace_edges=trace_edges)
     end = time.perf_counter()
     seconds = {"capture": captured_at - start, "sbc": built_at - captured_at, "draw": end - built_at,

@@ -96,7 +96,8 @@ def render_ours(scene, path, args):
              f"{stats['traced_pixels']} px traced{' (edges too)' if args.trace_edges else ''}; "
              f"last frame: capture {s['capture']:.2f} s, sample-based camera {s['sbc']:.2f} s "
              f"(ray map {s['trace']:.2f} s), drawing {s['draw']:.2f} s; {stats['n_sheets']} sheet(s), "
-             f"{stats['reflected_triangles']} reflected triangles")
+             f"{stats['reflected_triangles']} reflected triangles, {stats.get('mixed_triangles', 0)} mixed "
+             f"(subdivided, SBC V-B)")
     return rr.RenderResult(OURS, rr.read_png(path), seconds, path, first, notes)
 
 
@@ -153,6 +154,60 @@ def side_by_side(results, mask, contact, differences):
     return np.concatenate([np.concatenate(bottom, axis=1), np.concatenate(top, axis=1)], axis=0)
 
 
+#: Causes of a disagreeing reflector pixel (:func:`causes`), in the order they are tested,
+#: with the colour each gets in ``<scene>_causes.png``.
+CAUSES = {
+    "silhouette band": (1.0, 0.85, 0.0),  # within d px of the mirror's footprint edge
+    "reflection missing": (1.0, 0.0, 0.0),  # ours shows the world, the reference an object
+    "reflection where the reference shows world": (0.0, 0.4, 1.0),
+    "wrong object, at an edge": (1.0, 0.0, 1.0),  # within 1 px of a label edge of the reference
+    "wrong object, inside": (0.0, 0.8, 0.0),
+}
+
+
+def causes(ours, reference, mask, world: int, band_px: int):
+    """Why each reflector pixel of ``ours`` (labels) disagrees with ``reference``: (H, W)
+    int, -1 where they agree, else the index into :data:`CAUSES` of the first that applies.
+
+    The silhouette band is the reflector pixels within ``band_px`` (Chebyshev) of a
+    non-reflector pixel; "at an edge" means within 1 px of a change of reference label.
+    """
+    import numpy as np
+
+    def near(binary, radius):
+        padded = np.pad(binary, radius, constant_values=False)
+        out = np.zeros_like(binary)
+        h, w = binary.shape
+        for dy in range(-radius, radius + 1):
+            for dx in range(-radius, radius + 1):
+                out |= padded[radius + dy:radius + dy + h, radius + dx:radius + dx + w]
+        return out
+
+    differ = (ours != reference) & mask
+    band = near(~mask, max(1, band_px)) & mask
+    edge = np.zeros_like(mask)
+    edge[:, 1:] |= reference[:, 1:] != reference[:, :-1]
+    edge[:, :-1] |= reference[:, 1:] != reference[:, :-1]
+    edge[1:] |= reference[1:] != reference[:-1]
+    edge[:-1] |= reference[1:] != reference[:-1]
+    tests = [band, (ours == world) & (reference != world), (ours != world) & (reference == world), edge,
+             np.ones_like(mask)]
+    out = np.full(mask.shape, -1, dtype=np.int64)
+    for index, test in reversed(list(enumerate(tests))):
+        out[differ & test] = index
+    return out
+
+
+def causes_image(reference_image, cause):
+    """The reference dimmed, each disagreeing pixel in its cause's colour (:data:`CAUSES`)."""
+    import numpy as np
+
+    panel = 0.35 * reference_image[..., :3].copy()
+    for index, colour in enumerate(CAUSES.values()):
+        panel[cause == index] = colour
+    return panel
+
+
 def run_scene(kind: str, args, out: Path) -> list[Row]:
     """Build, save, render and measure one demo scene."""
     import bpy
@@ -175,6 +230,18 @@ def run_scene(kind: str, args, out: Path) -> list[Row]:
                  side_by_side(results, mask, maps["contact"], maps["differences"]))
     for row in rows:
         row.notes += f"; {int(mask.sum())} reflector px, {int(maps['contact'].sum())} near contact"
+    ours = next((r for r in results if r.name == OURS), None)
+    if ours is not None:
+        from curved_reflections.addon import metrics
+        from curved_reflections.operators.demo_scenes import WORLD_KEY
+
+        cause = causes(metrics.label_image(ours.image, palette), metrics.label_image(results[0].image, palette),
+                       mask, metrics.palette_names(palette).index(WORLD_KEY), scene.curved_reflections.downsample)
+        rr.write_png(out / f"{kind}_causes.png", causes_image(results[0].image, cause))
+        counts = ", ".join(f"{name} {100.0 * (cause == k).sum() / max(1, mask.sum()):.2f} %"
+                           for k, name in enumerate(CAUSES))
+        next(r for r in rows if r.renderer == OURS).notes += f"; disagreement by cause: {counts}"
+        print(f"[demo] {kind}: {counts}", flush=True)
     return rows
 
 

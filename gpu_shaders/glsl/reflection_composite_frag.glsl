@@ -17,7 +17,22 @@
  * (`fill_radius` > 0, e.g. d), a reflector pixel within `fill_radius` of its
  * footprint's edge that has no reflection takes the reflection of the nearest pixel
  * within `fill_radius` that has one on the same reflector, a cheap guess. Elsewhere, or
- * where there is none, it shows the world. */
+ * where there is none, it shows the world.
+ *
+ * Reflector properties (SBC V-D): the label's y is the reflection weight (reflectivity,
+ * times Fresnel where asked, reflection_prepass_frag.glsl) and z the attenuation
+ * distance A (0: none). A reflection's alpha (and a traced one's) is 1 + its distance d
+ * from the mirror along the reflected ray; it fades to the world colour by
+ * min(1, (d / A)^2), the paper's quadratic fall-off with distance. */
+
+vec3 attenuated(vec3 reflected, float alpha, float attenuation)
+{
+  if (attenuation <= 0.0) {
+    return reflected;
+  }
+  float fade = min(1.0, pow(max(alpha - 1.0, 0.0) / attenuation, 2.0));
+  return mix(reflected, world_color.rgb, fade);
+}
 
 void main()
 {
@@ -35,10 +50,10 @@ void main()
   vec4 traced = texelFetch(traced_colors, texel, 0);
   vec3 reflected = world_color.rgb;
   if (reflection.a > 0.5) {
-    reflected = reflection.rgb;
+    reflected = attenuated(reflection.rgb, reflection.a, label.z);
   }
   else if (traced.a > 0.5) {
-    reflected = traced.rgb;
+    reflected = attenuated(traced.rgb, traced.a, label.z);
   }
   else if (fill_radius > 0) {
     /* Only in the band along the footprint's edge: elsewhere a missing reflection is
@@ -46,7 +61,7 @@ void main()
     ivec2 size = textureSize(reflection_colors, 0);
     int best = 1 << 30;
     bool near_edge = false;
-    vec3 nearest = reflected;
+    vec4 nearest = vec4(reflected, 0.0);
     for (int dy = -fill_radius; dy <= fill_radius; dy++) {
       for (int dx = -fill_radius; dx <= fill_radius; dx++) {
         ivec2 other = texel + ivec2(dx, dy);
@@ -60,12 +75,12 @@ void main()
         vec4 candidate = texelFetch(reflection_colors, other, 0);
         if (same && candidate.a > 0.5 && distance2 < best) {
           best = distance2;
-          nearest = candidate.rgb;
+          nearest = candidate;
         }
       }
     }
-    if (near_edge) {
-      reflected = nearest;
+    if (near_edge && nearest.a > 0.5) {
+      reflected = attenuated(nearest.rgb, nearest.a, label.z);
     }
   }
   color_out = vec4(mix(base.rgb, reflected, clamp(label.y, 0.0, 1.0)), 1.0);

@@ -1,18 +1,32 @@
 /* SPDX-License-Identifier: GPL-3.0-or-later */
-/* Reflected-mesh pass, fragment stage.
+/* Reflected-mesh pass, fragment stage (also of the mixed-triangle pass).
  *
  * A reflection is kept only on pixels where the pre-pass saw this sheet's first
  * reflector (id = history[0] + 1): that confines it to the visible footprint of the
  * reflector, and real objects in front of the mirror stay in front, their pre-pass id
  * being 0 (Roger & Holzschuch 2006, section 3.3.6, with an id texture for the stencil).
  * Hidden-surface removal between reflected points is the depth test on the depth
- * written by the vertex stage (SBC paper section V-A, cases 2 and 3). */
+ * written by the vertex stage (SBC paper section V-A, cases 2 and 3).
+ *
+ * Colour: the mesh's own (vertex colour times its image texture, if any) lit with the
+ * true eye vector (SBC V-C, reflection_shading.glsl). Alpha is 1 + the distance from the
+ * mirror along the reflected ray: > 0.5 marks a drawn reflection, and the composite
+ * fades it with that distance (SBC V-D). */
 
 void main()
 {
+#ifdef SUBDIVIDED
+  if (valid_interp < 0.9999) {
+    discard; /* a sub-triangle with a corner that does not project */
+  }
+#endif
   float id = texelFetch(prepass_labels, ivec2(gl_FragCoord.xy), 0).x;
   if (abs(id - float(first_reflector_id)) > 0.5) {
     discard;
   }
-  color_out = vec4(color_interp.rgb, 1.0);
+  vec4 albedo = color_interp;
+  if (use_image != 0) {
+    albedo *= texture(image, uv_interp);
+  }
+  color_out = vec4(shade(albedo.rgb, lit_interp, normal_interp, eye_interp), 1.0 + max(distance_interp, 0.0));
 }

@@ -23,7 +23,12 @@
  * projects in some sheet of the history.
  *
  * The position is the projected pixel in the desired view's NDC, with w = 1 and the
- * order-and-distance depth of reflection_project_vert.glsl (SBC V-A). */
+ * order-and-distance depth of reflection_project_vert.glsl (SBC V-A). The vertex keeps
+ * its mesh's colour, normal and texture coordinates and gets its eye vector and
+ * reflected distance from the projection (SBC V-C; shaded in reflection_mesh_frag.glsl).
+ *
+ * Mixed triangles (one or two corners projected, none stitched) are not drawn here but
+ * subdivided by reflection_mixed_vert.glsl. */
 
 vec4 fetch_projected(int layer, int index)
 {
@@ -31,8 +36,15 @@ vec4 fetch_projected(int layer, int index)
   return texelFetch(projected_vertices, ivec2(texel % projected_size.x, texel / projected_size.x), 0);
 }
 
-/* The corner's projection from another layer nearest to `anchor`, within stitch_px. */
-bool stitched(int index, vec2 anchor, out vec4 result)
+vec4 fetch_eye(int layer, int index)
+{
+  int texel = layer * layer_size + index;
+  return texelFetch(projected_eyes, ivec2(texel % projected_size.x, texel / projected_size.x), 0);
+}
+
+/* The corner's projection from another layer nearest to `anchor`, within stitch_px;
+ * `from_layer` the layer it came from. */
+bool stitched(int index, vec2 anchor, out vec4 result, inout int from_layer)
 {
   float best = stitch_px * stitch_px;
   bool found = false;
@@ -47,6 +59,7 @@ bool stitched(int index, vec2 anchor, out vec4 result)
     if (other.w > 0.5 && distance2 <= best) {
       best = distance2;
       result = other;
+      from_layer = layer;
       found = true;
     }
   }
@@ -56,6 +69,10 @@ bool stitched(int index, vec2 anchor, out vec4 result)
 void main()
 {
   color_interp = color;
+  normal_interp = normal_lit.xyz;
+  lit_interp = normal_lit.w;
+  uv_interp = uv;
+  int layer[3] = int[3](own_layer, own_layer, own_layer);
   vec4 p[3];
   p[0] = fetch_projected(own_layer, corners.x);
   p[1] = fetch_projected(own_layer, corners.y);
@@ -64,13 +81,17 @@ void main()
   bool drawn = any(own);
   if (drawn && !all(own)) {
     vec2 anchor = own.x ? p[0].xy : (own.y ? p[1].xy : p[2].xy);
-    drawn = (own.x || stitched(corners.x, anchor, p[0])) && (own.y || stitched(corners.y, anchor, p[1])) &&
-            (own.z || stitched(corners.z, anchor, p[2]));
+    drawn = (own.x || stitched(corners.x, anchor, p[0], layer[0])) &&
+            (own.y || stitched(corners.y, anchor, p[1], layer[1])) &&
+            (own.z || stitched(corners.z, anchor, p[2], layer[2]));
   }
   if (!drawn) {
     gl_Position = vec4(2.0, 2.0, 2.0, 1.0);
     return;
   }
   vec4 mine = p[corner];
+  vec4 eye = fetch_eye(layer[corner], corner == 0 ? corners.x : (corner == 1 ? corners.y : corners.z));
+  eye_interp = eye.xyz;
+  distance_interp = eye.w;
   gl_Position = vec4(mine.xy / view_size * 2.0 - 1.0, mine.z * 2.0 - 1.0, 1.0);
 }

@@ -1,9 +1,31 @@
 /* SPDX-License-Identifier: GPL-3.0-or-later */
-/* Pre-pass, fragment stage: flat (unlit) colour into target 0, (id, reflectivity) into
- * target 1 (see reflection_prepass_vert.glsl). */
+/* Pre-pass, fragment stage (see reflection_prepass_vert.glsl).
+ *
+ * Target 0, the colour: a diffuse mesh lit as its reflections are (reflection_shading.glsl,
+ * with the desired view's eye vector), a reflector at its own flat colour. Target 1, the
+ * label: (id, reflection weight, attenuation distance, 1). The weight is the reflector's
+ * reflectivity, times Schlick's Fresnel term F0 + (1 - F0)(1 - cos t)^5 with cos t = |n . e|
+ * when F0 is given (SBC paper, section V-D: the reflected share grows at grazing angles). */
 
 void main()
 {
-  color_out = vec4(color_interp.rgb, 1.0);
-  label_out = vec4(label_interp, 0.0, 1.0);
+  /* `camera` is the eye (w 1, perspective) or the direction toward it (w 0, orthographic). */
+  vec3 to_eye = camera.w > 0.5 ? camera.xyz - position_interp : camera.xyz;
+  float weight = label_interp.y;
+  vec3 rgb = color_interp.rgb;
+  if (label_interp.x < 0.5) {
+    vec4 albedo = color_interp;
+    if (use_image != 0) {
+      albedo *= texture(image, uv_interp);
+    }
+    rgb = shade(albedo.rgb, lit_interp, normal_interp, to_eye);
+  }
+  else if (label_interp.z >= 0.0) {
+    float lengths = length(normal_interp) * length(to_eye);
+    float cosine = lengths > 1e-30 ? min(abs(dot(normal_interp, to_eye)) / lengths, 1.0) : 1.0;
+    float f0 = label_interp.z;
+    weight *= f0 + (1.0 - f0) * pow(1.0 - cosine, 5.0);
+  }
+  color_out = vec4(rgb, 1.0);
+  label_out = vec4(label_interp.x, weight, label_interp.w, 1.0);
 }

@@ -1,7 +1,8 @@
 /* SPDX-License-Identifier: GPL-3.0-or-later */
-/* Vertex projection pass, fragment stage: the point's texel gets its projection. */
+/* Vertex projection pass, fragment stage: the point's texels get its projection. */
 
 void main()
 {
   projected_out = projected;
+  eye_out = projected_eye;
 }

@@ -85,6 +85,37 @@ def test_band_pixels_are_missing_reflections_along_the_footprint_edge():
     assert {tuple(p) for p in pixels.tolist()} == ring | {(5, 5)}
 
 
+def test_history_boundary_marks_pixels_between_cells_of_different_histories():
+    """Cells 0-1 of a 4 x 2 ray map end in history 0, cells 2-3 go on to history 1
+    (second order): at d = 2 the pixels x = 3, 4 lie between cells 1 and 2."""
+    from types import SimpleNamespace
+
+    cells = np.array([(i, j) for j in range(2) for i in range(4)])
+    second = cells[cells[:, 0] >= 2]
+    ray_map = SimpleNamespace(downsample=2, columns=4, rows=2, histories=[(0,), (0, 1)],
+                              cell=np.concatenate([cells, second]),
+                              order=np.r_[np.ones(len(cells), int), np.full(len(second), 2)],
+                              group=np.r_[np.zeros(len(cells), int), np.ones(len(second), int)])
+    boundary = band_trace.history_boundary(ray_map, 8, 4, max_order=2)
+    assert set(np.flatnonzero(boundary.any(axis=0)).tolist()) == {3, 4}
+    assert boundary[:, [3, 4]].all()
+    assert not band_trace.history_boundary(ray_map, 8, 4, max_order=1).any()  # one history at order 1
+    labels, drawn = np.ones((4, 8)), np.zeros((4, 8), bool)
+    drawn[:, 4] = True  # a pixel with a reflection is not traced
+    pixels = band_trace.band_pixels(labels, drawn, radius=0, boundary=boundary)
+    assert {tuple(p) for p in pixels.tolist()} == {(3, y) for y in range(4)}
+
+
+def test_barycentric_grid_tiles_the_triangle():
+    points, triangles = subdivision.barycentric_grid(4)
+    assert len(points) == 15 and len(triangles) == 16
+    corners = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    xy = points[:, :1] * corners[0] + points[:, 1:2] * corners[1] + (1 - points.sum(axis=1))[:, None] * corners[2]
+    a, b, c = xy[triangles[:, 0]], xy[triangles[:, 1]], xy[triangles[:, 2]]
+    areas = 0.5 * ((b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0])
+    np.testing.assert_allclose(areas, 0.5 / 16)  # equal, same winding as the triangle, covering it
+
+
 def test_push_constants_stay_small():
     from curved_reflections.gpu_shaders import reflection_draw
 

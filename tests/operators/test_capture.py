@@ -238,6 +238,32 @@ def test_textured_base_colour_falls_back_to_viewport_display_colour(empty_scene)
     np.testing.assert_allclose(capture()[1]["Crate"].colors, [[0.3, 0.3, 0.1, 1.0]] * 8, atol=1e-6)
 
 
+def test_image_texture_in_base_colour_is_captured_with_uvs(empty_scene):
+    """An Image Texture into Base Color: the mesh carries the image (linear), its active
+    UV map per corner and white vertex colours; every diffuse mesh carries its normals."""
+    reflector(folded_quads("Mirror"))
+    image = bpy.data.images.new("Checker", 4, 2, alpha=True)
+    pixels = np.tile([0.5, 0.25, 1.0, 1.0], 8).astype(np.float32)
+    image.pixels.foreach_set(pixels)
+    mat = material("Textured")
+    texture = mat.node_tree.nodes.new('ShaderNodeTexImage')
+    texture.image = image
+    mat.node_tree.links.new(texture.outputs["Color"], mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
+    quads = folded_quads("Crate")
+    quads.data.materials.append(mat)
+    layer = quads.data.uv_layers.new(name="UVMap")
+    uvs = np.array([[0, 0], [1, 0], [1, 1], [0, 1], [0, 0], [1, 0], [1, 1], [0, 1]], np.float32) * 0.5
+    layer.uv.foreach_set("vector", uvs.ravel())
+    mesh = capture()[1]["Crate"]
+    assert mesh.image.shape == (2, 4, 4)
+    from curved_reflections.addon.metrics import srgb_to_linear
+    np.testing.assert_allclose(mesh.image[0, 0, :3], srgb_to_linear([0.5, 0.25, 1.0]), atol=5e-3)  # 8-bit
+    assert mesh.uvs.shape == (len(mesh.vertices), 2)
+    assert {tuple(np.round(uv, 3)) for uv in mesh.uvs} == {tuple(uv) for uv in np.round(uvs, 3)}
+    np.testing.assert_allclose(mesh.colors[:, :3], 1.0)
+    np.testing.assert_allclose(np.linalg.norm(mesh.normals, axis=1), 1.0, atol=1e-6)
+
+
 def test_no_material_uses_object_colour_or_colour_attribute(empty_scene):
     reflector(folded_quads("Mirror"))
     cube_object("Tinted").color = (0.5, 0.25, 0.125, 1.0)

@@ -69,3 +69,23 @@ def test_camera_inside_a_reflector(fig3, tmp_path, capfd):
     fig3.camera.location = (0.0, 0.1, 1.0)  # inside the mirror sphere (centre (0, 0, 1), radius 1)
     message = _error(capfd, tmp_path)
     assert message.startswith("Error: 'MirrorSphere': the view is inside this reflector")
+
+
+def test_reflector_settings_reach_the_renderer(fig3):
+    """``obj.curved_reflections`` Fresnel and fade distance become the renderer's per
+    reflector arguments (SBC V-D): F0 where Fresnel is on, NaN where off."""
+    from curved_reflections.operators.capture import capture_scene
+    from curved_reflections.operators.render_image import reflector_appearance, reflector_properties
+
+    reflectors = capture_scene(bpy.context.evaluated_depsgraph_get()).reflectors
+    names = [r.name for r in reflectors]
+    settings = fig3.objects[names[0]].curved_reflections
+    settings.use_fresnel, settings.fresnel_f0, settings.attenuation_distance = True, 0.3, 2.5
+    settings.reflectivity = 0.75
+    properties = reflector_properties(reflectors, fig3)
+    assert properties["fresnel_f0"][0] == pytest.approx(0.3)
+    assert properties["attenuation_distance"][0] == pytest.approx(2.5)
+    assert properties["reflectivity"][0] == pytest.approx(0.75)
+    assert np.isnan(properties["fresnel_f0"][1:]).all() and (properties["attenuation_distance"][1:] == 0).all()
+    colors, reflectivity = reflector_appearance(reflectors, fig3)  # the older two-value form
+    np.testing.assert_array_equal(reflectivity, properties["reflectivity"])

@@ -1,0 +1,32 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later */
+/* Shading shared by the pre-pass, the reflected meshes and the mixed-triangle pass
+ * (gpu_shaders/reflection_draw.py; numpy twin in addon/band_trace.py, `shade`).
+ *
+ * SBC paper (Popescu, Sacks, Mei 2006), section V-C: a reflected vertex keeps the data
+ * of the unreflected mesh (colour, normal, texture coordinates) and is lit with the
+ * *true* eye vector, from the reflector point toward the original vertex, not from the
+ * desired view's eye. The light is a headlight along that eye vector (Blender's Solid
+ * mode studio light is also fixed to the view): Lambert with an ambient floor,
+ * albedo * (SHADE_AMBIENT + (1 - SHADE_AMBIENT) |n . e|), two-sided. Emission-only
+ * materials (`lit` 0) show their emission colour unlit. */
+
+vec3 shade(vec3 albedo, float lit, vec3 normal, vec3 to_eye)
+{
+  if (lit < 0.5) {
+    return albedo;
+  }
+  float lengths = length(normal) * length(to_eye);
+  float cosine = lengths > 1e-30 ? abs(dot(normal, to_eye)) / lengths : 1.0;
+  return albedo * (SHADE_AMBIENT + (1.0 - SHADE_AMBIENT) * cosine);
+}
+
+/* The world point at `first_depth` along the desired view's ray through `pixel`
+ * (View.pixel_rays: from the near plane, unit direction). */
+vec3 view_ray_point(mat4 inverse_view_projection, vec2 view_size, vec2 pixel, float first_depth)
+{
+  vec2 ndc = pixel / view_size * 2.0 - 1.0;
+  vec4 near = inverse_view_projection * vec4(ndc, -1.0, 1.0);
+  vec4 far = inverse_view_projection * vec4(ndc, 1.0, 1.0);
+  vec3 origin = near.xyz / near.w;
+  return origin + first_depth * normalize(far.xyz / far.w - origin);
+}
