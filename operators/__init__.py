@@ -7,13 +7,14 @@ they are registered in module order and unregistered in reverse.
 
 import bpy
 
-from . import demo_scenes, panel, properties, reflectors, render_image
+from . import bake, demo_scenes, live, panel, properties, reflectors, render_image
 
 _modules = (
     properties,
     reflectors,
     demo_scenes,
     render_image,
+    bake,
     panel,
 )
 
@@ -26,9 +27,11 @@ def register():
     for cls in _classes():
         bpy.utils.register_class(cls)
     properties.register_pointers()
+    live.register()
 
 
 def unregister():
+    live.unregister()
     properties.unregister_pointers()
     for cls in reversed(_classes()):
         bpy.utils.unregister_class(cls)

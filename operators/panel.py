@@ -1,13 +1,65 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""The "Reflections" tab of the 3D viewport's sidebar (N panel)."""
+"""The "Reflections" tab of the 3D viewport's sidebar (N panel).
+
+Top to bottom: the active object's reflector settings, the scene's reflectors, the
+method settings, the live reflections (**Bake**, **Refresh**, **Clear**, their stats and
+a status line, :mod:`.live`), then the scene checks and the offscreen render. Settings
+that do not apply are greyed, not hidden, so the layout does not jump.
+"""
 
 import bpy
 
+from . import live
 from .capture import SURFACE_TYPES
+
+_STATUS_ICONS = {'INFO': 'INFO', 'WARNING': 'ERROR', 'ERROR': 'CANCEL'}
+
+
+def _reflector_settings(layout, obj) -> None:
+    settings = obj.curved_reflections
+    column = layout.column(heading=obj.name)
+    column.prop(settings, "is_reflector")
+    details = column.column()
+    details.active = settings.is_reflector
+    details.prop(settings, "reflectivity")
+    details.prop(settings, "use_fresnel")
+    facing = details.row()
+    facing.active = settings.is_reflector and settings.use_fresnel
+    facing.prop(settings, "fresnel_f0")
+    details.prop(settings, "attenuation_distance")
+    details.prop(settings, "mode")
+
+
+def _live_section(layout, scene) -> None:
+    row = layout.row(align=True)
+    row.operator("curved_reflections.bake", icon='RENDER_STILL')
+    row.operator("curved_reflections.refresh", icon='FILE_REFRESH')
+    row.operator("curved_reflections.clear", icon='X')
+    state = live.state_of(scene)
+    if state is None:
+        layout.label(text="Not baked: no live reflections", icon='INFO')
+        return
+    stats = state.stats
+    if "rays" in stats:
+        grid = layout.grid_flow(row_major=True, columns=2, even_columns=True, align=True)
+        for label, text in (
+            ("Rays", f"{stats['rays']:,}"),
+            ("Leaves", f"{stats['leaves']:,}"),
+            ("Build", f"{stats['build_ms']:.0f} ms"),
+            ("Draw", f"{stats['draw_ms']:.1f} ms" if "draw_ms" in stats else "-"),
+            ("Memory", f"{stats['memory_mb']:.1f} MB"),
+            ("Views", f"{stats['views']}"),
+        ):
+            grid.label(text=label)
+            grid.label(text=text)
+    if state.jobs or state.requests:
+        layout.label(text="Updating...", icon='SORTTIME')
+    if state.status:
+        layout.label(text=state.status, icon=_STATUS_ICONS.get(state.level, 'INFO'))
 
 
 class VIEW3D_PT_curved_reflections(bpy.types.Panel):
-    """Curved mirror reflections: which objects are mirrors, and the method settings"""
+    """Curved mirror reflections: which objects are mirrors, the method settings and live drawing"""
 
     bl_label = "Curved Reflections"
     bl_space_type = 'VIEW_3D'
@@ -18,17 +70,13 @@ class VIEW3D_PT_curved_reflections(bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         layout.use_property_decorate = False
+        scene = context.scene
 
         obj = context.active_object
         if obj is not None and obj.type in SURFACE_TYPES:
-            settings = obj.curved_reflections
-            column = layout.column(heading=obj.name)
-            column.prop(settings, "is_reflector")
-            reflectivity = column.row()
-            reflectivity.active = settings.is_reflector
-            reflectivity.prop(settings, "reflectivity")
+            _reflector_settings(layout, obj)
 
-        reflectors = [o for o in context.scene.objects if o.curved_reflections.is_reflector]
+        reflectors = [o for o in scene.objects if o.curved_reflections.is_reflector]
         box = layout.box()
         if reflectors:
             for reflector in reflectors:
@@ -37,12 +85,22 @@ class VIEW3D_PT_curved_reflections(bpy.types.Panel):
             box.label(text="No reflector marked", icon='INFO')
         layout.operator("curved_reflections.mark_reflector", icon='MOD_MIRROR')
 
-        scene_settings = context.scene.curved_reflections
+        scene_settings = scene.curved_reflections
         column = layout.column()
         column.prop(scene_settings, "downsample")
         column.prop(scene_settings, "accuracy_px")
         column.prop(scene_settings, "max_order")
         column.prop(scene_settings, "auto_refresh")
+        morphing = any(o.curved_reflections.mode == 'MORPHING' for o in reflectors)
+        morph = column.column()
+        morph.active = morphing
+        morph.prop(scene_settings, "morph_grid")
+        morph.prop(scene_settings, "morph_margin")
+        if morphing:
+            column.label(text="Live view draws Runtime cameras for every reflector", icon='INFO')
+
+        _live_section(layout.box(), scene)
+
         layout.operator("curved_reflections.check_scene", icon='VIEWZOOM')
         layout.operator("curved_reflections.render_image", icon='RENDER_STILL')
         layout.operator_menu_enum("curved_reflections.add_demo_scene", "demo", text="Add Demo Scene",

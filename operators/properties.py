@@ -5,6 +5,18 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, IntVectorProperty, PointerProperty
 
 
+def _reflector_toggled(self, context):
+    from . import live
+
+    live.on_setting_changed(context, reflectors=True)
+
+
+def _appearance_changed(self, context):
+    from . import live
+
+    live.on_setting_changed(context, meshes=True)
+
+
 class CurvedReflectionsObjectSettings(bpy.types.PropertyGroup):
     """Per-object settings, as ``obj.curved_reflections``."""
 
@@ -12,26 +24,31 @@ class CurvedReflectionsObjectSettings(bpy.types.PropertyGroup):
         name="Reflector",
         description="Treat this object as a curved mirror: nearby objects are reflected in it",
         default=False,
+        update=_reflector_toggled,
     )
     reflectivity: FloatProperty(
         name="Reflectivity",
         description="Share of the reflected image in the mirror's colour (1 = perfect mirror)",
         default=1.0, min=0.0, max=1.0, subtype='FACTOR',
+        update=_appearance_changed,
     )
     use_fresnel: BoolProperty(
         name="Fresnel",
         description="Reflect more at grazing angles (Schlick's approximation, SBC paper V-D)",
         default=False,
+        update=_appearance_changed,
     )
     fresnel_f0: FloatProperty(
         name="Facing Reflectance",
         description="Share reflected when looking straight at the surface; rises to 1 at grazing angles",
         default=0.04, min=0.0, max=1.0, subtype='FACTOR',
+        update=_appearance_changed,
     )
     attenuation_distance: FloatProperty(
         name="Fade Distance",
         description="Reflected objects fade out over this distance from the mirror (0: no fading)",
         default=0.0, min=0.0, soft_max=100.0, subtype='DISTANCE',
+        update=_appearance_changed,
     )
     mode: EnumProperty(
         name="Mode",

@@ -1,0 +1,578 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Live reflections in the 3D viewport: per-scene state, draw handler, timers, depsgraph handler.
+
+The pipeline of :mod:`.render_image`, split by what changes how often (SBC paper,
+Popescu, Sacks, Mei 2006, section IV: the sample-based camera belongs to one view; V:
+projection runs per draw on the GPU):
+
+- **capture** (main thread, needs ``bpy``): the evaluated scene as reflectors and
+  diffuse meshes (:mod:`.capture`), and a :class:`ReflectionRenderer` holding the
+  meshes' GPU batches. Moving or editing a *diffuse* object re-captures and re-uploads
+  only this: projection happens per draw, so the cameras stay valid (unless the object
+  leaves the camera's scene box, which ends its reflected rays: then they are rebuilt).
+- **camera** per view (worker thread, bpy-free): the ray map and BSP trees of
+  ``build_sample_based_camera``. A view change asks for a new one, debounced
+  (:data:`DEBOUNCE_SECONDS` after the last change); while it builds, the previous
+  camera keeps drawing. Editing a *reflector* (geometry, transform, marking or
+  unmarking one) re-bakes: capture again and rebuild every view's camera.
+- **draw** (``SpaceView3D`` POST_VIEW handler, every redraw): the reflections of the
+  region's view over the reflectors (``reflectors_only``), with the last camera built
+  for that region. Exceptions never escape a redraw: they stop drawing for the scene
+  and become its status line in the panel.
+
+Background mode (``blender -b``, ``import bpy``) has neither 3D views nor a running
+timer loop, so everything also works with explicit views (:class:`~..addon.view.View`
+from the scene camera or from matrices) and ``wait=True`` (the camera is built in the
+calling thread); there the depsgraph handler processes a change at once instead of
+leaving it to the timer. Nothing here keeps a ``bpy`` object: state is keyed by the
+scene's ``session_uid`` and holds numpy arrays and GPU resources only, and all of it is
+dropped when a file is loaded.
+"""
+
+from __future__ import annotations
+
+import time
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+import bpy
+import numpy as np
+from bpy.app.handlers import persistent
+
+from ..addon.errors import SceneInputError
+from ..addon.raytrace import ReflectorSet
+from ..addon.sbc import build_sample_based_camera
+from ..addon.scene import scene_bounds
+from ..addon.view import View
+from .capture import capture_scene, view_from_camera, view_from_region
+from .render_image import BOUNDS_MARGIN, reflector_appearance, world_color
+
+#: Seconds after the last view change before its camera is rebuilt.
+DEBOUNCE_SECONDS = 0.15
+#: Interval of the timer that starts debounced builds, collects finished ones and
+#: processes scene edits; it unregisters itself when nothing is pending.
+POLL_SECONDS = 0.05
+#: Viewport shading modes drawn over (Wireframe and Rendered are left alone).
+SHADING_TYPES = frozenset({'SOLID', 'MATERIAL'})
+#: Cameras kept per scene (one per 3D view region); the least recently drawn goes first.
+MAX_VIEWS = 8
+#: Views whose matrices differ by less than this are the same view (no rebuild).
+VIEW_TOLERANCE = 1e-6
+#: Key of the view a Bake or Refresh uses when there is no 3D view (background mode).
+CAMERA_KEY = "scene camera"
+
+
+@dataclass
+class ViewCamera:
+    """The sample-based camera of one view, and its textures once uploaded (main thread)."""
+
+    view: View
+    sbc: object
+    bounds: tuple
+    settings: tuple
+    generation: int
+    textures: object = None
+    last_drawn: float = 0.0
+
+
+@dataclass
+class LiveScene:
+    """Everything live about one scene (keyed by ``scene.session_uid``)."""
+
+    settings: tuple = ()
+    captured: object = None
+    renderer: object = None
+    reflector_set: object = None
+    reflector_names: frozenset = frozenset()
+    bounds: tuple | None = None
+    world: tuple = (0.0, 0.0, 0.0, 1.0)
+    cameras: dict = field(default_factory=dict)  # view key -> ViewCamera
+    jobs: dict = field(default_factory=dict)  # view key -> (Future, View, generation)
+    requests: dict = field(default_factory=dict)  # view key -> (View, time of the request)
+    failed: dict = field(default_factory=dict)  # view key -> View whose camera could not be built
+    generation: int = 0  # bumped by every capture of the reflectors: older cameras are stale
+    dirty_reflectors: bool = False
+    dirty_meshes: bool = False
+    drawing: bool = True  # False after a draw failed, until the next bake or refresh
+    status: str = ""
+    level: str = 'INFO'  # 'INFO', 'WARNING' or 'ERROR'
+    stats: dict = field(default_factory=dict)
+    counts: dict = field(default_factory=lambda: {"bakes": 0, "remeshes": 0, "builds": 0, "draws": 0})
+
+    def report(self, level: str, message: str) -> None:
+        self.level, self.status = level, message
+
+
+_states: dict[int, LiveScene] = {}
+_executor: ThreadPoolExecutor | None = None
+_draw_handle = None
+
+
+def state_of(scene) -> LiveScene | None:
+    """The live state of ``scene``, or ``None`` when it is not baked."""
+    return _states.get(scene.session_uid)
+
+
+def scene_settings(scene) -> tuple:
+    """(max order, down-sampling, accuracy px): what a camera is built with."""
+    s = scene.curved_reflections
+    return int(s.max_order), int(s.downsample), float(s.accuracy_px)
+
+
+# --- capture (main thread) -----------------------------------------------------------
+
+
+def _capture(state: LiveScene, scene, depsgraph, reflectors: bool) -> None:
+    """Capture the scene into ``state``: a new renderer; with ``reflectors`` also a new
+    reflector set (a new generation: every camera is rebuilt)."""
+    from ..gpu_shaders.reflection_draw import ReflectionRenderer
+
+    captured = capture_scene(depsgraph)
+    lo, hi = scene_bounds(captured.reflectors, captured.meshes)
+    colors, reflectivity = reflector_appearance(captured.reflectors, scene)
+    state.renderer = ReflectionRenderer(captured.reflectors, captured.meshes, colors, reflectivity)
+    state.captured = captured
+    state.world = world_color(scene)
+    state.bounds = (lo, hi)
+    state.drawing = True
+    if reflectors or state.reflector_set is None:
+        state.reflector_set = ReflectorSet(list(captured.reflectors))
+        state.reflector_names = _marked_reflectors(scene)
+        state.generation += 1
+        state.counts["bakes"] += 1
+    else:
+        state.counts["remeshes"] += 1
+
+
+def _marked_reflectors(scene) -> frozenset:
+    return frozenset(o.name for o in scene.objects if o.curved_reflections.is_reflector)
+
+
+def _inside(bounds, camera_bounds) -> bool:
+    return bool(np.all(bounds[0] >= camera_bounds[0]) and np.all(bounds[1] <= camera_bounds[1]))
+
+
+# --- cameras (worker thread) ---------------------------------------------------------
+
+
+def _build_camera(reflector_set, view: View, bounds, settings: tuple):
+    """The bpy-free part, run on the worker: the view's ray map and BSP trees."""
+    max_order, downsample, accuracy_px = settings
+    return build_sample_based_camera(reflector_set, view, bounds, max_order=max_order,
+                                     downsample=downsample, accuracy_px=accuracy_px)
+
+
+def _camera_bounds(state: LiveScene) -> tuple:
+    lo, hi = state.bounds
+    margin = BOUNDS_MARGIN * float(np.linalg.norm(hi - lo))
+    return lo - margin, hi + margin
+
+
+def _executor_get() -> ThreadPoolExecutor:
+    global _executor
+    if _executor is None:
+        _executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="curved_reflections")
+    return _executor
+
+
+def _start(state: LiveScene, key, view: View, wait: bool) -> None:
+    """Build ``view``'s camera: on the worker, or here and now with ``wait``."""
+    state.requests.pop(key, None)
+    bounds, settings, generation = _camera_bounds(state), state.settings, state.generation
+    if wait:
+        future = Future()
+        try:
+            future.set_result(_build_camera(state.reflector_set, view, bounds, settings))
+        except Exception as error:  # noqa: BLE001 - reported as the status line
+            future.set_exception(error)
+    else:
+        future = _executor_get().submit(_build_camera, state.reflector_set, view, bounds, settings)
+    state.jobs[key] = (future, view, bounds, settings, generation)
+    if wait:
+        _collect(state)
+
+
+def _collect(state: LiveScene) -> bool:
+    """Store the cameras that finished; returns whether any did."""
+    finished = False
+    for key, (future, view, bounds, settings, generation) in list(state.jobs.items()):
+        if not future.done():
+            continue
+        del state.jobs[key]
+        finished = True
+        try:
+            sbc = future.result()
+        except Exception as error:  # noqa: BLE001 - a bug must not stop the viewport either
+            message = str(error) if isinstance(error, SceneInputError) else (
+                f"Building the reflections failed: {type(error).__name__}: {error}")
+            state.report('ERROR', message)
+            # Nothing is drawn for this view, and it is not retried until it changes.
+            state.cameras.pop(key, None)
+            state.failed[key] = view
+            continue
+        if generation != state.generation:
+            continue  # built for reflectors that have changed since
+        state.failed.pop(key, None)
+        state.cameras[key] = ViewCamera(view, sbc, bounds, settings, generation, last_drawn=time.monotonic())
+        state.counts["builds"] += 1
+        _update_stats(state, sbc)
+        _report_visibility(state, sbc)
+    while len(state.cameras) > MAX_VIEWS:
+        oldest = min(state.cameras, key=lambda k: state.cameras[k].last_drawn)
+        del state.cameras[oldest]
+    return finished
+
+
+def _update_stats(state: LiveScene, sbc) -> None:
+    s = sbc.stats
+    geometry = state.renderer.geometry
+    mesh_bytes = geometry.vertices.nbytes + geometry.colors.nbytes + geometry.triangles.nbytes
+    camera_bytes = sum(c.sbc.stats.get("nbytes", 0) for c in state.cameras.values())
+    state.stats.update({
+        "rays": int(s.get("n_rays", 0)),
+        "leaves": int(s.get("n_leaves", 0)),
+        "build_ms": 1000.0 * (s.get("trace_seconds", 0.0) + s.get("build_seconds", 0.0)),
+        "memory_mb": (camera_bytes + mesh_bytes) / 2.0 ** 20,
+        "views": len(state.cameras),
+        "reflected_triangles": int(len(geometry.triangles)),
+    })
+
+
+def _report_visibility(state: LiveScene, sbc) -> None:
+    """Reflectors the view does not see: a warning when none is seen (nothing to draw)."""
+    names = [r.name for r in state.captured.reflectors]
+    seen = {int(history[0]) for history in sbc.groups}
+    unseen = [name for k, name in enumerate(names) if k not in seen]
+    quoted = ", ".join(repr(n) for n in unseen)
+    if not seen:
+        state.report('WARNING', f"{quoted}: out of view, no reflection to draw (turn the view toward it)")
+    elif unseen:
+        state.report('INFO', f"{quoted}: out of view; reflections drawn in the others")
+    else:
+        state.report('INFO', "Reflections up to date")
+
+
+# --- the public operations ------------------------------------------------------------
+
+
+def bake(scene, depsgraph, views: dict | None = None, wait: bool = False) -> LiveScene:
+    """Capture ``scene`` and build a camera for each of ``views`` ({key: View}).
+
+    Without views, the regions already drawn keep their keys and get new cameras; with
+    none at all (background mode), the scene camera's view under :data:`CAMERA_KEY`.
+    Bad input raises :class:`SceneInputError` (also kept as the status line).
+    """
+    state = _states.setdefault(scene.session_uid, LiveScene())
+    state.settings = scene_settings(scene)
+    state.dirty_reflectors = state.dirty_meshes = False
+    try:
+        _capture(state, scene, depsgraph, reflectors=True)
+        if views is None:
+            views = {key: camera.view for key, camera in state.cameras.items()}
+            views.update({key: job[1] for key, job in state.jobs.items()})
+            views.update(state.failed)
+            if not views:
+                views = {CAMERA_KEY: view_from_camera(scene.camera, scene, depsgraph)}
+    except SceneInputError as error:
+        state.report('ERROR', str(error))
+        raise
+    state.failed.clear()
+    state.report('INFO', "Building reflections...")
+    for key, view in views.items():
+        _start(state, key, view, wait)
+    if not wait:
+        _ensure_timer()
+    return state
+
+
+def refresh(scene, depsgraph, views: dict | None = None, wait: bool = False) -> LiveScene:
+    """Re-capture the scene and rebuild every view's camera now (what **Refresh** does)."""
+    return bake(scene, depsgraph, views, wait)
+
+
+def clear(scene) -> bool:
+    """Forget ``scene``'s live state: nothing is drawn until the next bake."""
+    state = _states.pop(scene.session_uid, None)
+    if state is not None:
+        for future, *_ in state.jobs.values():
+            future.cancel()
+    tag_redraw()
+    return state is not None
+
+
+def clear_all() -> None:
+    for state in _states.values():
+        for future, *_ in state.jobs.values():
+            future.cancel()
+    _states.clear()
+
+
+def request_view(state: LiveScene, key, view: View) -> None:
+    """Ask for ``view``'s camera after the debounce delay (a newer request restarts it)."""
+    previous = state.requests.get(key)
+    if previous is None or not _same_view(previous[0], view):
+        state.requests[key] = (view, time.monotonic())
+    _ensure_timer()
+
+
+def process(scene, depsgraph, wait: bool = False, now: float | None = None) -> bool:
+    """One step of live work for ``scene``: edits, due view requests, finished cameras.
+
+    What the timer runs; returns whether work is still pending.
+    """
+    state = state_of(scene)
+    if state is None:
+        return False
+    now = time.monotonic() if now is None else now
+    try:
+        settings = scene_settings(scene)
+        if settings != state.settings:  # a method setting changed: new cameras for every view
+            state.settings = settings
+            state.dirty_reflectors = True
+        if state.dirty_reflectors or state.dirty_meshes:
+            reflectors = state.dirty_reflectors
+            state.dirty_reflectors = state.dirty_meshes = False
+            _capture(state, scene, depsgraph, reflectors)
+            stale = {key: c.view for key, c in state.cameras.items()
+                     if reflectors or not _inside(state.bounds, c.bounds)}
+            for key, view in stale.items():
+                if key not in state.requests:
+                    _start(state, key, view, wait)
+        for key, (view, asked) in list(state.requests.items()):
+            if wait or (now - asked >= DEBOUNCE_SECONDS and key not in state.jobs):
+                _start(state, key, view, wait)
+    except SceneInputError as error:
+        state.report('ERROR', str(error))
+    if _collect(state):
+        tag_redraw()
+    return bool(state.jobs or state.requests or state.dirty_meshes or state.dirty_reflectors)
+
+
+def draw(scene, key, view: View) -> bool:
+    """Draw ``scene``'s reflections of ``view`` over its reflectors into the bound
+    framebuffer (viewport = the view's rectangle), with the camera built for ``key``.
+
+    A view that differs from the camera's asks for a new camera (with Auto Refresh);
+    meanwhile the old one draws when the view size is unchanged. Returns whether
+    anything was drawn. Raises what drawing raises (the callers catch it).
+    """
+    from ..gpu_shaders.projection import SBCTextures
+
+    state = state_of(scene)
+    if state is None or state.renderer is None or not state.drawing:
+        return False
+    failed = state.failed.get(key)
+    if failed is not None and _same_view(failed, view):
+        return False  # the status line says why; a new view or a Refresh tries again
+    camera = state.cameras.get(key)
+    current = camera is not None and camera.generation == state.generation and camera.settings == state.settings
+    if (camera is None or not current or not _same_view(camera.view, view)) and key not in state.jobs:
+        if scene.curved_reflections.auto_refresh or camera is None:
+            request_view(state, key, view)
+    if camera is None or (camera.view.width, camera.view.height) != (view.width, view.height):
+        return False
+    if camera.textures is None:
+        camera.textures = SBCTextures(camera.sbc)
+    start = time.perf_counter()
+    state.renderer.draw(view, camera.textures, state.world, reflectors_only=True)
+    camera.last_drawn = time.monotonic()
+    state.stats["draw_ms"] = 1000.0 * (time.perf_counter() - start)
+    state.counts["draws"] += 1
+    return True
+
+
+def _same_view(a: View, b: View) -> bool:
+    return ((a.width, a.height) == (b.width, b.height)
+            and np.allclose(a.view_matrix, b.view_matrix, atol=VIEW_TOLERANCE, rtol=0.0)
+            and np.allclose(a.projection_matrix, b.projection_matrix, atol=VIEW_TOLERANCE, rtol=0.0))
+
+
+# --- Blender callbacks ---------------------------------------------------------------
+
+
+def draw_safely(scene, key, view: View) -> bool:
+    """:func:`draw` for a draw handler: an exception stops drawing for the scene and
+    becomes its status line (one message, not a traceback on every redraw)."""
+    state = state_of(scene)
+    if state is None or not state.drawing:
+        return False
+    try:
+        return draw(scene, key, view)
+    except Exception as error:  # noqa: BLE001
+        state.drawing = False
+        state.report('ERROR', f"Drawing stopped: {type(error).__name__}: {error} (Refresh to retry)")
+        return False
+
+
+def _draw_viewport() -> None:
+    """POST_VIEW handler of every 3D view."""
+    context = bpy.context
+    scene, space, region, rv3d = context.scene, context.space_data, context.region, context.region_data
+    if scene is None or space is None or rv3d is None or region is None:
+        return
+    if space.type != 'VIEW_3D' or space.shading.type not in SHADING_TYPES or state_of(scene) is None:
+        return
+    if region.width < 2 or region.height < 2:
+        return
+    draw_safely(scene, region.as_pointer(), view_from_region(region, rv3d))
+
+
+def _tick():
+    """The timer: process the context scene's live work; unregisters when idle."""
+    try:
+        context = bpy.context
+        scene = context.scene
+        pending = False
+        for uid, state in list(_states.items()):
+            if scene is not None and scene.session_uid == uid:
+                pending |= process(scene, context.evaluated_depsgraph_get())
+            elif _collect(state):
+                tag_redraw()
+                pending |= bool(state.jobs)
+        return POLL_SECONDS if pending else None
+    except Exception as error:  # noqa: BLE001 - a timer that raises is dropped by Blender silently
+        for state in _states.values():
+            state.report('ERROR', f"Live update failed: {type(error).__name__}: {error}")
+        return None
+
+
+def _ensure_timer() -> None:
+    if not bpy.app.timers.is_registered(_tick):
+        bpy.app.timers.register(_tick, first_interval=POLL_SECONDS)
+
+
+def tag_redraw() -> None:
+    window_manager = getattr(bpy.context, "window_manager", None)
+    if window_manager is None:
+        return
+    for window in window_manager.windows:
+        for area in window.screen.areas:
+            if area.type == 'VIEW_3D':
+                area.tag_redraw()
+
+
+def classify_updates(scene, state: LiveScene, updates) -> tuple[bool, bool]:
+    """(reflectors changed, diffuse meshes changed) for a depsgraph's ``updates``.
+
+    A reflector changes when one is moved or its geometry edited, when the set of
+    marked objects differs from the baked one, or when a method setting changed (a new
+    camera for every view); any other object's geometry or transform, a material, a
+    world or a collection (objects added, removed, hidden) changes the meshes. Setting
+    a property, from the UI or from Python, tags its object (or scene) for the
+    depsgraph with geometry and transform updated (checked in the bpy module), so a
+    reflector's Reflectivity re-bakes too: the flags cannot tell it from an edit.
+    """
+    reflectors = _marked_reflectors(scene) != state.reflector_names or scene_settings(scene) != state.settings
+    meshes = False
+    for update in updates:
+        data = update.id
+        if isinstance(data, bpy.types.Object):
+            if not (update.is_updated_geometry or update.is_updated_transform):
+                continue
+            if data.original.curved_reflections.is_reflector:
+                reflectors = True
+            else:
+                meshes = True
+        elif isinstance(data, (bpy.types.Material, bpy.types.World, bpy.types.Collection)):
+            meshes = True
+    return reflectors, meshes
+
+
+@persistent
+def on_depsgraph_update(scene, depsgraph) -> None:
+    """``depsgraph_update_post``: mark the baked scene's changes for the timer (with a
+    window) or process them now (background mode, where timers never run)."""
+    state = state_of(scene)
+    if state is None or not scene.curved_reflections.auto_refresh:
+        return
+    try:
+        reflectors, meshes = classify_updates(scene, state, depsgraph.updates)
+        state.dirty_reflectors |= reflectors
+        state.dirty_meshes |= meshes
+        if not (reflectors or meshes):
+            return
+        if bpy.app.background:
+            process(scene, depsgraph, wait=True)
+        else:
+            _ensure_timer()
+    except Exception as error:  # noqa: BLE001
+        state.report('ERROR', f"Live update failed: {type(error).__name__}: {error}")
+
+
+def on_setting_changed(context, reflectors: bool = False, meshes: bool = False) -> None:
+    """Update callback of the reflector settings (``properties.py``).
+
+    Setting a property does not reliably reach ``depsgraph_update_post``: in the bpy
+    module, after a modifier was added, ticking Reflector from Python produced no
+    update at all, and at other times the update came at a later evaluation. So the
+    baked scene is told here too; with a window both land in the same timer tick.
+    ``reflectors``: the set of reflectors changed (re-bake); ``meshes``: a reflector's
+    appearance changed (new renderer only).
+    """
+    scene = getattr(context, "scene", None)
+    state = None if scene is None else state_of(scene)
+    if state is None or not scene.curved_reflections.auto_refresh:
+        return
+    state.dirty_reflectors |= reflectors
+    state.dirty_meshes |= meshes
+    if bpy.app.background:
+        process(scene, context.evaluated_depsgraph_get(), wait=True)
+    else:
+        _ensure_timer()
+
+
+@persistent
+def on_load_pre(*_args) -> None:
+    """Loading a file drops every live state (no state leaks between files)."""
+    clear_all()
+
+
+@persistent
+def on_load_post(*_args) -> None:
+    """Re-attach the handlers after a file load (they are persistent; this only repairs)."""
+    _attach_app_handlers()
+
+
+_APP_HANDLERS = (
+    ("depsgraph_update_post", on_depsgraph_update),
+    ("load_pre", on_load_pre),
+    ("load_post", on_load_post),
+)
+
+
+def _same_function(a, b) -> bool:
+    """Also true for a handler of an earlier import of this module (an add-on reload)."""
+    return a is b or (getattr(a, "__qualname__", None) == b.__qualname__
+                      and getattr(a, "__module__", None) == b.__module__)
+
+
+def _attach_app_handlers() -> None:
+    for name, function in _APP_HANDLERS:
+        handlers = getattr(bpy.app.handlers, name)
+        if not any(_same_function(h, function) for h in handlers):
+            handlers.append(function)
+
+
+def register() -> None:
+    global _draw_handle
+    _attach_app_handlers()
+    if _draw_handle is None:
+        _draw_handle = bpy.types.SpaceView3D.draw_handler_add(_draw_viewport, (), 'WINDOW', 'POST_VIEW')
+
+
+def unregister() -> None:
+    """Remove the draw handler, the app handlers and the timer; drop all state."""
+    global _draw_handle, _executor
+    if _draw_handle is not None:
+        bpy.types.SpaceView3D.draw_handler_remove(_draw_handle, 'WINDOW')
+        _draw_handle = None
+    for name, function in _APP_HANDLERS:
+        handlers = getattr(bpy.app.handlers, name)
+        for handler in [h for h in handlers if _same_function(h, function)]:
+            handlers.remove(handler)
+    if bpy.app.timers.is_registered(_tick):
+        bpy.app.timers.unregister(_tick)
+    clear_all()
+    if _executor is not None:
+        _executor.shutdown(wait=False, cancel_futures=True)
+        _executor = None

@@ -1,0 +1,386 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Cost of drawing reflections (issue #4): the reflected pass against a plain draw of the
+same diffuse meshes, measured in one run.
+
+    .venv/bin/python tests/benchmarks/bench_draw.py                       # docs/benchmarks/draw.md
+    .venv/bin/python tests/benchmarks/bench_draw.py --quick --out /tmp/draw.md
+
+A demo scene (``operators/demo_scenes.py``) is built with bpy and captured; its diffuse
+meshes are split uniformly (every triangle into four, conforming) until the reflected
+geometry the renderer draws (after its own pre-subdivision, SBC paper V-B) is nearest
+``--vertices`` vertices. The scene camera's sample-based camera is built once (SBC IV),
+then, into one ``GPUOffScreen`` of the view's size, alternately:
+
+- **reflected**: ``ReflectionRenderer.draw`` (what the viewport's draw handler calls):
+  pre-pass of the scene, per sheet the projection of every vertex and the reflected
+  triangles, and the composite over the mirrors (SBC V);
+- **plain**: the same triangles (the renderer's reflected-mesh vertices and triangles)
+  with a uniform-colour shader and the depth test, once.
+
+Every timed call ends with a one-pixel read-back, so the GPU has finished before the
+clock stops; the figures are medians of ``--repeats`` alternating calls after warm-up.
+On this project's machines the GPU is Mesa llvmpipe (the CPU), so absolute times are CPU
+times: the ratio, measured in one run, is the figure to compare. A profile splits the
+reflected pass: pre-pass only (a camera with no sheet: clears, pre-pass), all passes
+without the composite (``draw_passes``), the composite alone, and inside ``draw_passes``
+the renderer's per-history steps (:data:`PROFILED_STEPS`, each ended by a read-back).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import importlib.util
+import math
+import os
+import platform
+import shlex
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+DEFAULT_OUT = REPO_ROOT / "docs" / "benchmarks" / "draw.md"
+#: Target of the reflected pass over the plain draw (issue #4).
+TARGET_RATIO = 1.5
+
+
+def import_package():
+    """The repository as ``curved_reflections`` (isolated Blender user folder), registered."""
+    spec = importlib.util.spec_from_file_location("_package_link", REPO_ROOT / "scripts" / "package_link.py")
+    link = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(link)
+    return link.import_registered(REPO_ROOT, prefix="curved_reflections_bench_")
+
+
+def split_uniformly(vertices: np.ndarray, triangles: np.ndarray, colors: np.ndarray):
+    """Every triangle into four at its edges' midpoints, shared edges split once (no cracks)."""
+    edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
+    unique, inverse = np.unique(edges, axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    n = len(vertices)
+    new_vertices = np.concatenate([vertices, 0.5 * (vertices[unique[:, 0]] + vertices[unique[:, 1]])])
+    new_colors = np.concatenate([colors, 0.5 * (colors[unique[:, 0]] + colors[unique[:, 1]])]).astype(colors.dtype)
+    t = len(triangles)
+    m01, m12, m20 = (n + inverse[k * t:(k + 1) * t] for k in range(3))
+    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+    new_triangles = np.concatenate([
+        np.stack([a, m01, m20], axis=1), np.stack([m01, b, m12], axis=1),
+        np.stack([m20, m12, c], axis=1), np.stack([m01, m12, m20], axis=1),
+    ])
+    return new_vertices, new_triangles, new_colors
+
+
+def scaled_meshes(meshes, levels: int):
+    from curved_reflections.addon.scene import DiffuseMesh
+
+    result = []
+    for mesh in meshes:
+        v, t, c = mesh.vertices, np.asarray(mesh.triangles), mesh.colors
+        for _ in range(levels):
+            v, t, c = split_uniformly(v, t, c)
+        result.append(DiffuseMesh(mesh.name, v, t, c, emissive=mesh.emissive))
+    return result
+
+
+def _timed(function, framebuffer) -> float:
+    start = time.perf_counter()
+    function()
+    framebuffer.read_color(0, 0, 1, 1, 4, 0, 'FLOAT')  # waits for the GPU to finish
+    return time.perf_counter() - start
+
+
+def _plain_shader():
+    import gpu
+
+    info = gpu.types.GPUShaderCreateInfo()
+    info.push_constant('MAT4', "view_projection")
+    info.push_constant('VEC4', "uniform_color")
+    info.vertex_in(0, 'VEC3', "position")
+    info.fragment_out(0, 'VEC4', "color_out")
+    info.vertex_source("void main() { gl_Position = view_projection * vec4(position, 1.0); }")
+    info.fragment_source("void main() { color_out = uniform_color; }")
+    return gpu.shader.create_from_info(info)
+
+
+def measure(kind: str, width: int, height: int, target_vertices: int, repeats: int, warmup: int) -> dict:
+    import bpy
+    import gpu
+    from mathutils import Matrix
+
+    from curved_reflections.addon.sbc import build_sample_based_camera
+    from curved_reflections.addon.scene import scene_bounds
+    from curved_reflections.gpu_shaders.projection import SBCTextures
+    from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer, prepare_geometry
+    from curved_reflections.operators import demo_scenes
+    from curved_reflections.operators.capture import capture_scene, view_from_camera
+    from curved_reflections.operators.gpu_init import ensure_gpu
+    from curved_reflections.operators.render_image import BOUNDS_MARGIN, reflector_appearance, world_color
+
+    ensure_gpu()
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    scene = demo_scenes.build(kind, bpy.context.scene, width, height)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    captured = capture_scene(depsgraph)
+    view = view_from_camera(scene.camera, scene, depsgraph)
+
+    # Levels of uniform splitting whose drawn vertex count is nearest the target (log scale).
+    counts = {}
+    for levels in range(0, 6):
+        geometry = prepare_geometry(captured.reflectors, scaled_meshes(captured.meshes, levels))
+        counts[levels] = len(geometry.vertices)
+        if counts[levels] >= target_vertices:
+            break
+    levels = min(counts, key=lambda k: abs(math.log(counts[k] / target_vertices)))
+    meshes = scaled_meshes(captured.meshes, levels)
+
+    lo, hi = scene_bounds(captured.reflectors, meshes)
+    bounds = scene_bounds(captured.reflectors, meshes, BOUNDS_MARGIN * float(np.linalg.norm(hi - lo)))
+    settings = scene.curved_reflections
+    sbc = build_sample_based_camera(captured.reflectors, view, bounds, max_order=settings.max_order,
+                                    downsample=settings.downsample, accuracy_px=settings.accuracy_px)
+    colors, reflectivity = reflector_appearance(captured.reflectors, scene)
+    renderer = ReflectionRenderer(captured.reflectors, meshes, colors, reflectivity)
+    textures = SBCTextures(sbc)
+    no_sheet = SBCTextures(build_sample_based_camera(
+        captured.reflectors, _looking_away(view), bounds, downsample=settings.downsample))
+    assert no_sheet.n_groups == 0, "the view looking away still sees a reflector"
+    world = world_color(scene)
+    g = renderer.geometry
+
+    plain_shader = _plain_shader()
+    buffer = gpu.types.GPUVertBuf(_position_format(), len(g.vertices))
+    buffer.attr_fill("position", np.ascontiguousarray(g.vertices.astype(np.float32)))
+    plain_batch = gpu.types.GPUBatch(type='TRIS', buf=buffer,
+                                     elem=gpu.types.GPUIndexBuf(type='TRIS', seq=g.triangles.astype(np.int32)))
+    view_projection = Matrix((np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix)).tolist())
+
+    def plain():
+        gpu.state.depth_test_set('LESS_EQUAL')
+        gpu.state.depth_mask_set(True)
+        plain_shader.bind()
+        plain_shader.uniform_float("view_projection", view_projection)
+        plain_shader.uniform_float("uniform_color", (0.8, 0.3, 0.2, 1.0))
+        plain_batch.draw(plain_shader)
+        gpu.state.depth_test_set('NONE')
+        gpu.state.depth_mask_set(False)
+
+    calls = {
+        "reflected": lambda: renderer.draw(view, textures, world, reflectors_only=True),
+        "plain": plain,
+        "prepass only": lambda: renderer.draw_passes(view, no_sheet),
+        "passes": lambda: renderer.draw_passes(view, textures),
+        "composite": lambda: renderer.composite(renderer.targets(view.width, view.height), world, True,
+                                                textures.packed.downsample),
+    }
+    times = {name: [] for name in calls}
+    offscreen = gpu.types.GPUOffScreen(view.width, view.height, format='RGBA16F')
+    try:
+        with offscreen.bind():
+            framebuffer = gpu.state.active_framebuffer_get()
+            framebuffer.clear(color=(0.0, 0.0, 0.0, 1.0), depth=1.0)
+            for repeat in range(warmup + repeats):
+                for name, call in calls.items():
+                    framebuffer.clear(depth=1.0)
+                    seconds = _timed(call, framebuffer)
+                    if repeat >= warmup:
+                        times[name].append(seconds)
+    finally:
+        offscreen.free()
+    ms = {name: 1000.0 * statistics.median(values) for name, values in times.items()}
+    ms.update(_profile_steps(renderer, view, textures, repeats))
+    return {
+        "scene": kind, "width": view.width, "height": view.height, "levels": levels,
+        "captured_vertices": int(sum(len(m.vertices) for m in captured.meshes)),
+        "vertices": int(len(g.vertices)), "triangles": int(len(g.triangles)),
+        "sheets": int(len(sbc.groups)), "histories": int(len(set(map(tuple, sbc.groups)))),
+        "downsample": int(settings.downsample), "repeats": repeats,
+        "ms": ms, "ratio": ms["reflected"] / ms["plain"],
+    }
+
+
+#: The renderer's per-history steps, timed apart in the profile when it has them (private
+#: methods: a profile only; a step the renderer no longer has is left out of the table).
+PROFILED_STEPS = {"_draw_history": "projection + full triangles", "_draw_mixed": "mixed triangles"}
+
+
+def _profile_steps(renderer, view, textures, repeats: int) -> dict:
+    """Milliseconds per ``draw_passes`` call spent in each of :data:`PROFILED_STEPS`,
+    exclusive of the profiled steps it calls (each step ends with a one-pixel
+    read-back, so its GPU work is in its time)."""
+    import gpu
+
+    spent = {label: 0.0 for name, label in PROFILED_STEPS.items() if hasattr(renderer, name)}
+    nested = []  # per running step: seconds of the profiled steps it called
+
+    def timed(function, label):
+        def wrapper(*args, **kwargs):
+            nested.append(0.0)
+            start = time.perf_counter()
+            result = function(*args, **kwargs)
+            with args[0].reflection.bind():  # the targets' reflection framebuffer
+                args[0].reflection.read_color(0, 0, 1, 1, 4, 0, 'FLOAT')
+            seconds = time.perf_counter() - start
+            spent[label] += seconds - nested.pop()
+            if nested:
+                nested[-1] += seconds
+            return result
+        return wrapper
+
+    for name, label in PROFILED_STEPS.items():
+        if hasattr(renderer, name):
+            setattr(renderer, name, timed(getattr(renderer, name), label))
+    try:
+        offscreen = gpu.types.GPUOffScreen(view.width, view.height, format='RGBA16F')
+        with offscreen.bind():
+            renderer.draw_passes(view, textures)  # warm-up
+            for label in spent:
+                spent[label] = 0.0
+            for _ in range(repeats):
+                renderer.draw_passes(view, textures)
+        offscreen.free()
+    finally:
+        for name in PROFILED_STEPS:
+            renderer.__dict__.pop(name, None)
+    return {label: 1000.0 * total / repeats for label, total in spent.items()}
+
+
+def _position_format():
+    import gpu
+
+    vertex_format = gpu.types.GPUVertFormat()
+    vertex_format.attr_add(id="position", comp_type='F32', len=3, fetch_mode='FLOAT')
+    return vertex_format
+
+
+def _looking_away(view):
+    """The same view turned half round about its vertical axis (sees no reflector in the demo scenes)."""
+    from curved_reflections.addon.view import View
+
+    turn = np.diag([-1.0, 1.0, -1.0, 1.0])
+    return View(turn @ np.asarray(view.view_matrix), view.projection_matrix, view.width, view.height, name="away")
+
+
+def _machine() -> str:
+    import bpy
+
+    cpu = platform.processor() or "unknown CPU"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    try:
+        import gpu
+
+        device = f"{gpu.platform.renderer_get()} ({gpu.platform.version_get()})"
+    except Exception:  # noqa: BLE001 - only a label
+        device = "unknown GPU"
+    return f"{cpu}, {os.cpu_count()} cores; GPU: {device}; Blender {bpy.app.version_string}, Python {platform.python_version()}"
+
+
+def report(results: list, command: str, machine: str) -> str:
+    lines = [
+        "# Drawing cost: reflected pass against a plain draw",
+        "",
+        f"Generated {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC by `{command}` "
+        f"(`tests/benchmarks/bench_draw.py`).",
+        "",
+        f"- Machine: {machine}.",
+        "- Reflected: `ReflectionRenderer.draw` (pre-pass, per sheet vertex projection and reflected "
+        "triangles, composite over the mirrors). Plain: the same triangles once with a uniform colour "
+        "and the depth test. Each call ends with a one-pixel read-back (GPU finished); medians of "
+        "alternating calls after warm-up, in one run.",
+        "- On llvmpipe the GPU is the CPU: compare the ratio, not the milliseconds.",
+        "",
+        "| scene | view | drawn vertices (captured) | triangles | sheets | reflected ms | plain ms | ratio |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in results:
+        lines.append(
+            f"| {r['scene']} | {r['width']}x{r['height']}, d={r['downsample']} | {r['vertices']:,} "
+            f"({r['captured_vertices']:,}) | {r['triangles']:,} | {r['sheets']} | {r['ms']['reflected']:.1f} "
+            f"| {r['ms']['plain']:.1f} | **{r['ratio']:.1f}x** |")
+    lines += [
+        "",
+        "## Where the reflected pass spends its time",
+        "",
+        "| scene | pre-pass only (no sheet) | all passes, no composite | composite | reflections (passes - pre-pass) | per sheet | "
+        + " | ".join(PROFILED_STEPS.values()) + " |",
+        "|---|---|---|---|---|---|" + "---|" * len(PROFILED_STEPS),
+    ]
+    for r in results:
+        ms = r["ms"]
+        reflections = ms["passes"] - ms["prepass only"]
+        lines.append(
+            f"| {r['scene']} | {ms['prepass only']:.1f} | {ms['passes']:.1f} | {ms['composite']:.1f} | "
+            f"{reflections:.1f} | {reflections / max(1, r['sheets']):.1f} | "
+            + " | ".join(f"{ms[label]:.1f}" if label in ms else "-" for label in PROFILED_STEPS.values()) + " |")
+    lines += ["", "## What the numbers show", "", summary(results), ""]
+    return "\n".join(lines)
+
+
+def summary(results: list) -> str:
+    parts = []
+    for r in results:
+        ms = r["ms"]
+        reflections = ms["passes"] - ms["prepass only"]
+        steps = {label: ms[label] for label in PROFILED_STEPS.values() if label in ms}
+        shares = {"pre-pass": ms["prepass only"], "composite": ms["composite"]}
+        if steps:
+            shares.update(steps)
+        else:
+            shares["projection and reflected triangles"] = reflections
+        top = max(shares, key=shares.get)
+        verdict = "meets" if r["ratio"] <= TARGET_RATIO else "misses"
+        parts.append(
+            f"{r['scene']}: the reflected pass takes {r['ratio']:.1f}x the plain draw ({ms['reflected']:.1f} ms "
+            f"against {ms['plain']:.1f} ms for {r['vertices']:,} vertices), which {verdict} the "
+            f"{TARGET_RATIO}x target; the largest part is the {top} ({shares[top]:.1f} ms of "
+            f"{sum(shares.values()):.1f} ms, {r['sheets']} sheet(s): each sheet projects every vertex and "
+            f"draws every triangle once more).")
+    return " ".join(parts)
+
+
+def parse_args(argv):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="markdown file to write")
+    parser.add_argument("--scenes", nargs="+", default=["sbc_fig3", "teapot", "two_spheres", "vase"], help="demo scenes")
+    parser.add_argument("--width", type=int, default=640)
+    parser.add_argument("--height", type=int, default=480)
+    parser.add_argument("--vertices", type=int, default=100_000, help="drawn diffuse vertices to aim at")
+    parser.add_argument("--repeats", type=int, default=9)
+    parser.add_argument("--warmup", type=int, default=2)
+    parser.add_argument("--quick", action="store_true", help="small: one scene, 160x120, 10k vertices, 3 repeats")
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.scenes, args.width, args.height, args.vertices, args.repeats, args.warmup = (
+            ["sbc_fig3"], 160, 120, 10_000, 3, 1)
+    return args
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    args = parse_args(argv)
+    import_package()
+    results = []
+    for kind in args.scenes:
+        result = measure(kind, args.width, args.height, args.vertices, args.repeats, args.warmup)
+        print(f"{kind}: reflected {result['ms']['reflected']:.1f} ms, plain {result['ms']['plain']:.1f} ms, "
+              f"ratio {result['ratio']:.2f} ({result['vertices']:,} vertices, {result['sheets']} sheets)",
+              flush=True)
+        results.append(result)
+    command = " ".join([".venv/bin/python", "tests/benchmarks/bench_draw.py"] + [shlex.quote(a) for a in argv])
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(report(results, command, _machine()), encoding="utf-8")
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,36 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Smoke test of the drawing benchmark: its smallest configuration (``--quick``) runs end to end.
+
+Run by ``make bench`` (``make test`` ignores tests/benchmarks). The script runs in a child
+process, as from the command line, so its Blender state stays out of this one. Only the
+shape of the output is checked: the figures themselves are what the full run reports.
+"""
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+SCRIPT = Path(__file__).resolve().parent / "bench_draw.py"
+
+
+def test_quick_benchmark_writes_the_table(tmp_path):
+    environment = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "blender_user"))
+    out = tmp_path / "draw.md"
+    run = subprocess.run([sys.executable, str(SCRIPT), "--quick", "--out", str(out)],
+                         capture_output=True, text=True, timeout=600, env=environment)
+    assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
+
+    report = out.read_text()
+    for heading in ("# Drawing cost: reflected pass against a plain draw", "## Where the reflected pass spends",
+                    "## What the numbers show"):
+        assert heading in report
+    assert "bench_draw.py --quick --out" in report
+    row = re.search(r"\| sbc_fig3 \| 160x120, d=2 \| ([\d,]+) \([\d,]+\) \| ([\d,]+) \| (\d+) \| ([\d.]+) \| ([\d.]+) "
+                    r"\| \*\*([\d.]+)x\*\* \|", report)
+    assert row, report
+    vertices, triangles, sheets = (int(row.group(k).replace(",", "")) for k in (1, 2, 3))
+    reflected, plain, ratio = (float(row.group(k)) for k in (4, 5, 6))
+    assert vertices >= 5_000 and triangles > vertices and sheets >= 1
+    assert reflected > 0 and plain > 0 and abs(ratio - reflected / plain) < 0.1 + 0.05 * ratio

@@ -1,0 +1,263 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Live reflections (operators/live.py, operators/bake.py), driven headlessly.
+
+Background mode has no 3D view, so the draw code runs as the POST_VIEW handler would:
+into a bound ``GPUOffScreen`` with the explicit view of the scene camera. The scene is
+sbc_fig3 (mirror ball, columns, a cube almost touching the ball): the cube's flat
+colour on the mirror is its reflection. ``depsgraph_update_post`` does fire in the bpy
+module in background mode (after ``view_layer.update()``), so the auto-refresh tests
+go through the real handler; timers never run there, so the debounced view rebuild is
+driven by calling the timer's body (``live.process``) with explicit times.
+"""
+
+import bpy
+import numpy as np
+import pytest
+
+from curved_reflections.addon.view import look_at_view
+from curved_reflections.operators import demo_scenes, live
+from curved_reflections.operators.capture import view_from_camera
+
+#: Clear colour of the offscreen: in no demo palette, so untouched pixels are known.
+SENTINEL = (0.5, 0.25, 0.125, 1.0)
+WIDTH, HEIGHT = 128, 96
+
+
+@pytest.fixture
+def fig3(empty_scene, registered, gpu_ready):
+    return demo_scenes.build("sbc_fig3", bpy.context.scene, WIDTH, HEIGHT)
+
+
+def _camera_view(scene):
+    return view_from_camera(scene.camera, scene, bpy.context.evaluated_depsgraph_get())
+
+
+def _draw(scene, view, key=live.CAMERA_KEY):
+    """(drawn, image): what the draw handler draws over a SENTINEL-cleared framebuffer."""
+    import gpu
+
+    offscreen = gpu.types.GPUOffScreen(view.width, view.height, format='RGBA32F')
+    try:
+        with offscreen.bind():
+            framebuffer = gpu.state.active_framebuffer_get()
+            framebuffer.clear(color=SENTINEL)
+            drawn = live.draw_safely(scene, key, view)
+            pixels = framebuffer.read_color(0, 0, view.width, view.height, 4, 0, 'FLOAT')
+    finally:
+        offscreen.free()
+    pixels.dimensions = view.width * view.height * 4
+    return drawn, np.array(pixels, dtype=np.float32).reshape(view.height, view.width, 4)
+
+
+def _pixels_of(image, name, scene):
+    colour = np.array(demo_scenes.palette(scene)[name])
+    return np.argwhere(np.abs(image[..., :3] - colour).max(axis=2) < 0.02)
+
+
+def _touched(image):
+    return np.abs(image - SENTINEL).max(axis=2) > 1e-4
+
+
+def test_bake_fills_stats_and_draws_the_cubes_reflection_on_the_mirror(fig3, capfd):
+    assert bpy.ops.curved_reflections.bake() == {'FINISHED'}
+    assert "Info: Baked reflections:" in capfd.readouterr().out
+    state = live.state_of(fig3)
+    assert list(state.cameras) == [live.CAMERA_KEY]
+    assert state.stats["rays"] > 100 and state.stats["leaves"] > 10
+    assert state.stats["build_ms"] > 0 and state.stats["memory_mb"] > 0
+    assert (state.level, state.status) == ('INFO', "Reflections up to date")
+
+    drawn, image = _draw(fig3, _camera_view(fig3))
+    assert drawn and state.stats["draw_ms"] > 0
+    touched = _touched(image)
+    # Only the mirror ball is drawn over (reflectors only): a disc of ~1800 of 12288 px.
+    assert 1000 < touched.sum() < 3000
+    cube = _pixels_of(image, "Cube", fig3)
+    assert len(cube) >= 15
+    assert touched[cube[:, 0], cube[:, 1]].all()
+    # The reflection is of the scene: the floor and several columns show as well.
+    assert len(_pixels_of(image, "FloorA", fig3)) > 100
+    assert sum(len(_pixels_of(image, f"Column{k}", fig3)) > 0 for k in range(1, 8)) >= 3
+
+
+def test_refresh_rebuilds_and_clear_stops_drawing(fig3, capfd):
+    assert bpy.ops.curved_reflections.refresh() == {'CANCELLED'}
+    assert "Warning: Nothing to refresh: Bake first" in capfd.readouterr().out
+    bpy.ops.curved_reflections.bake()
+    state = live.state_of(fig3)
+    assert bpy.ops.curved_reflections.refresh() == {'FINISHED'}
+    assert "Info: Refreshed reflections:" in capfd.readouterr().out
+    assert (state.counts["bakes"], state.counts["builds"]) == (2, 2)
+    assert _draw(fig3, _camera_view(fig3))[0]
+
+    assert bpy.ops.curved_reflections.clear() == {'FINISHED'}
+    assert live.state_of(fig3) is None
+    drawn, image = _draw(fig3, _camera_view(fig3))
+    assert not drawn and not _touched(image).any()
+
+
+def test_moving_a_diffuse_object_moves_its_reflection_without_rebaking(fig3):
+    bpy.ops.curved_reflections.bake()
+    state = live.state_of(fig3)
+    view = _camera_view(fig3)
+    before = _pixels_of(_draw(fig3, view)[1], "Cube", fig3).mean(axis=0)
+    camera = state.cameras[live.CAMERA_KEY]
+
+    bpy.data.objects["Cube"].location.x -= 0.25  # along the ball, toward the left
+    bpy.context.view_layer.update()  # depsgraph_update_post fires in background mode
+    assert state.counts == {"bakes": 1, "remeshes": 1, "builds": 1, "draws": 1}
+    assert state.cameras[live.CAMERA_KEY] is camera  # projection is per draw: same camera
+    after = _pixels_of(_draw(fig3, view)[1], "Cube", fig3).mean(axis=0)
+    # A mirror ball reflects a move to the left as a (smaller) move to the left.
+    assert after[1] < before[1] - 1.0
+
+
+def test_editing_a_reflector_rebakes(fig3):
+    bpy.ops.curved_reflections.bake()
+    state = live.state_of(fig3)
+    mirror = bpy.data.objects["MirrorSphere"]
+    mirror.location.x += 0.2
+    bpy.context.view_layer.update()
+    assert (state.counts["bakes"], state.counts["builds"]) == (2, 2)
+    assert state.captured.reflectors[0].vertices[:, 0].max() == pytest.approx(1.2, abs=1e-3)
+
+    # Geometry (a modifier) and marking another reflector re-bake too.
+    mirror.modifiers.new("Wave", 'CAST').factor = 0.3
+    bpy.context.view_layer.update()
+    assert state.counts["bakes"] == 3
+    bpy.data.objects["Column1"].curved_reflections.is_reflector = True  # seen by its update callback
+    assert state.counts["bakes"] >= 4
+    assert sorted(r.name for r in state.captured.reflectors) == ["Column1", "MirrorSphere"]
+    assert _draw(fig3, _camera_view(fig3))[0]
+
+    # Without Auto Refresh edits wait for Refresh.
+    fig3.curved_reflections.auto_refresh = False
+    bakes = state.counts["bakes"]
+    mirror.location.x -= 0.2
+    bpy.context.view_layer.update()
+    assert state.counts["bakes"] == bakes
+
+
+def test_a_view_change_is_debounced_built_on_the_worker_and_the_old_camera_draws_meanwhile(fig3):
+    bpy.ops.curved_reflections.bake()
+    state = live.state_of(fig3)
+    old = state.cameras[live.CAMERA_KEY]
+    moved = look_at_view((0.8, -6.4, 2.4), (0.0, 0.0, 0.9), fov_y_deg=30.0, width=WIDTH, height=HEIGHT)
+
+    drawn, image = _draw(fig3, moved)
+    assert drawn  # the previous camera, until the new one is ready
+    view, asked = state.requests[live.CAMERA_KEY]
+    assert view is moved and not state.jobs
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    assert live.process(fig3, depsgraph, now=asked + 0.5 * live.DEBOUNCE_SECONDS)  # too early: waits
+    assert not state.jobs
+    assert live.process(fig3, depsgraph, now=asked + live.DEBOUNCE_SECONDS + 1e-3)  # now on the worker
+    future = state.jobs[live.CAMERA_KEY][0]
+    future.result(timeout=60)
+    assert not live.process(fig3, depsgraph)  # collected: nothing pending
+    new = state.cameras[live.CAMERA_KEY]
+    assert new is not old and new.view is moved and state.counts["builds"] == 2
+    assert _draw(fig3, moved)[0]
+    assert live.CAMERA_KEY not in state.requests  # the same view asks for nothing
+
+
+def test_a_draw_error_becomes_the_status_line(fig3, monkeypatch):
+    bpy.ops.curved_reflections.bake()
+    state = live.state_of(fig3)
+
+    def fail(*_args, **_kwargs):
+        raise ValueError("broken shader")
+
+    monkeypatch.setattr(state.renderer, "draw", fail)
+    view = _camera_view(fig3)
+    assert not live.draw_safely(fig3, live.CAMERA_KEY, view)
+    assert state.level == 'ERROR' and state.status.startswith("Drawing stopped: ValueError: broken shader")
+    assert not live.draw_safely(fig3, live.CAMERA_KEY, view)  # stopped, not retried every redraw
+    monkeypatch.undo()
+    bpy.ops.curved_reflections.refresh()
+    assert state.drawing and live.draw_safely(fig3, live.CAMERA_KEY, view)
+
+
+def test_unregister_leaves_no_handler_timer_or_state(empty_scene, gpu_ready):
+    import curved_reflections
+
+    curved_reflections.register()
+    scene = demo_scenes.build("sbc_fig3", bpy.context.scene, 64, 48)
+    live.bake(scene, bpy.context.evaluated_depsgraph_get())  # on the worker: the timer polls it
+    assert bpy.app.timers.is_registered(live._tick)
+    assert live.on_depsgraph_update in bpy.app.handlers.depsgraph_update_post
+    curved_reflections.unregister()
+    for name in ("depsgraph_update_post", "load_pre", "load_post"):
+        assert not [h for h in getattr(bpy.app.handlers, name) if "curved_reflections" in h.__module__]
+    assert not bpy.app.timers.is_registered(live._tick)
+    assert live._draw_handle is None and live._executor is None and not live._states
+
+
+def test_loading_a_file_drops_the_live_state_and_keeps_the_handlers(fig3, tmp_path):
+    bpy.ops.curved_reflections.bake()
+    path = tmp_path / "fig3.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    assert not live._states
+    assert live.on_depsgraph_update in bpy.app.handlers.depsgraph_update_post
+    assert bpy.ops.curved_reflections.bake() == {'FINISHED'}
+    assert _draw(bpy.context.scene, _camera_view(bpy.context.scene))[0]
+
+
+# --- bad states: a clear message, never a traceback -----------------------------------
+
+
+def _bake_error(capfd) -> str:
+    with pytest.raises(RuntimeError) as error:
+        bpy.ops.curved_reflections.bake()
+    captured = capfd.readouterr()
+    assert "Traceback" not in captured.out + captured.err
+    return str(error.value)
+
+
+def test_no_reflector_marked(fig3, capfd):
+    bpy.data.objects["MirrorSphere"].curved_reflections.is_reflector = False
+    assert _bake_error(capfd).startswith("Error: 'Scene': has no visible object marked as a reflector")
+    state = live.state_of(fig3)
+    assert state.level == 'ERROR' and "no visible object marked as a reflector" in state.status
+    assert not _draw(fig3, _camera_view(fig3))[0]
+
+
+def test_reflector_out_of_view(fig3, capfd):
+    fig3.camera.rotation_euler.z += np.pi  # look away from the ball
+    bpy.context.view_layer.update()
+    assert bpy.ops.curved_reflections.bake() == {'FINISHED'}
+    out = capfd.readouterr().out
+    assert "Warning: 'MirrorSphere': out of view, no reflection to draw" in out
+    assert live.state_of(fig3).level == 'WARNING'
+
+
+def test_camera_inside_a_reflector(fig3, capfd):
+    fig3.camera.location = (0.0, 0.1, 1.0)  # inside the ball (centre (0, 0, 1), radius 1)
+    bpy.context.view_layer.update()
+    assert _bake_error(capfd).startswith("Error: 'MirrorSphere': the view is inside this reflector")
+    assert "the view is inside this reflector" in live.state_of(fig3).status
+
+
+def test_camera_moving_inside_a_reflector_after_baking_reports_in_the_status(fig3):
+    bpy.ops.curved_reflections.bake()
+    state = live.state_of(fig3)
+    inside = look_at_view((0.0, 0.1, 1.0), (0.0, 1.0, 1.0), width=WIDTH, height=HEIGHT)
+    live.draw_safely(fig3, live.CAMERA_KEY, inside)
+    live.process(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
+    assert state.level == 'ERROR' and state.status.startswith("'MirrorSphere': the view is inside this reflector")
+    # Nothing drawn for that view, and not retried on every redraw; the old view draws again.
+    assert not live.draw_safely(fig3, live.CAMERA_KEY, inside)
+    assert not state.requests and not state.jobs
+    live.draw_safely(fig3, live.CAMERA_KEY, _camera_view(fig3))
+    live.process(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
+    assert live.draw_safely(fig3, live.CAMERA_KEY, _camera_view(fig3))
+
+
+def test_reflector_whose_modifiers_leave_no_faces(fig3, capfd):
+    mirror = bpy.data.objects["MirrorSphere"]
+    mirror.vertex_groups.new(name="nothing")
+    mask = mirror.modifiers.new("Mask", 'MASK')
+    mask.vertex_group = "nothing"  # an empty group: the Mask modifier removes every face
+    bpy.context.view_layer.update()
+    assert _bake_error(capfd).startswith("Error: 'MirrorSphere': has no faces once its modifiers are applied")
