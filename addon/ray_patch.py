@@ -34,6 +34,8 @@ from .segments import segment_max, segment_mean, segment_min, segment_sum, solve
 NEWTON_ITERATIONS = 8
 #: Iterations run on every point before only the unconverged ones go on.
 FIRST_ITERATIONS = 4
+#: Of those, the first ones run in float32 (far from the root, where float64 buys nothing).
+FLOAT32_ITERATIONS = 2
 #: Newton stops when no chart coordinate moves more than this (charts span [-1, 1]).
 STEP_TOLERANCE = 1e-7
 #: Fractions of the tail-to-head segment where the fit error is measured.
@@ -154,16 +156,29 @@ def invert_patches(patches: RayPatches, leaf: np.ndarray, points: np.ndarray):
 def _newton(patches: RayPatches, leaf: np.ndarray, points: np.ndarray):
     # Structure of arrays: every coefficient component is one contiguous 1-D array, so
     # each step is a few dozen fused 1-D operations (no cross/einsum over tiny axes).
+    # Tails are taken relative to each patch's constant term, so the float32 steps see
+    # small numbers (as the GLSL twin does).
     c = np.concatenate([patches.tail[leaf], patches.direction[leaf]], axis=2)  # (q, term, component)
+    origin = c[:, 0, :3].copy()
+    c[:, 0, :3] = 0.0
     k = [[np.ascontiguousarray(c[:, term, d]) for d in range(6)] for term in range(6)]
-    p = [np.ascontiguousarray(points[:, d]) for d in range(3)]
+    relative = points - origin
+    p = [np.ascontiguousarray(relative[:, d]) for d in range(3)]
     start = 0.5 if patches.bilinear else 0.0
     u = np.full(len(points), start)
     v = np.full(len(points), start)
     ray = _ray(k, u, v)
     s = _dot([p[d] - ray[d] for d in range(3)], ray[3:]) / np.maximum(np.sqrt(_dot(ray[3:], ray[3:])), 1e-300)
-    # Most points converge in a few steps: after those, only the rest go on iterating.
-    u, v, s, moving = _newton_steps(k, p, u, v, s, FIRST_ITERATIONS)
+    # The first steps, far from the root, run in float32 (twice the numbers per vector
+    # instruction); float64 steps then polish to full precision, so the answer is the
+    # float64 root. Most points converge in a few steps: after FIRST_ITERATIONS in all,
+    # only the rest go on iterating.
+    if FLOAT32_ITERATIONS:
+        k32 = [[x.astype(np.float32) for x in term] for term in k]
+        u32, v32, s32, _ = _newton_steps(k32, [x.astype(np.float32) for x in p], u.astype(np.float32),
+                                         v.astype(np.float32), s.astype(np.float32), FLOAT32_ITERATIONS, check=False)
+        u, v, s = u32.astype(np.float64), v32.astype(np.float64), s32.astype(np.float64)
+    u, v, s, moving = _newton_steps(k, p, u, v, s, FIRST_ITERATIONS - FLOAT32_ITERATIONS)
     rest = np.flatnonzero(moving)
     if len(rest):
         sub_k = [[term[d][rest] for d in range(6)] for term in k]
@@ -180,9 +195,11 @@ def _ray(k, u, v):
     return [k[0][d] + u * (k[1][d] + u * k[3][d] + v * k[4][d]) + v * (k[2][d] + v * k[5][d]) for d in range(6)]
 
 
-def _newton_steps(k, p, u, v, s, iterations: int):
-    """Newton on t(u, v) + s r(u, v) = p; returns u, v, s and which points still move."""
+def _newton_steps(k, p, u, v, s, iterations: int, check: bool = True):
+    """Newton on t(u, v) + s r(u, v) = p; returns u, v, s and which points still move
+    (with ``check=False`` every iteration runs and all points count as moving)."""
     moving = np.ones(len(u), dtype=bool)
+    tiny = np.finfo(u.dtype).tiny
     for _ in range(iterations):
         ray = _ray(k, u, v)
         du = [k[1][d] + 2 * u * k[3][d] + v * k[4][d] for d in range(6)]
@@ -193,11 +210,13 @@ def _newton_steps(k, p, u, v, s, iterations: int):
         f = [ray[d] + s * r[d] - p[d] for d in range(3)]
         bc, ca, ab = _cross(b, r), _cross(r, a), _cross(a, b)
         det = _dot(a, bc)
-        det = np.where(np.abs(det) > 1e-300, det, 1e-300)
+        det = np.where(np.abs(det) > tiny, det, tiny)
         step_u, step_v = _dot(f, bc) / det, _dot(f, ca) / det
         u = np.clip(u - step_u, -4.0, 4.0)
         v = np.clip(v - step_v, -4.0, 4.0)
         s = s - _dot(f, ab) / det
+        if not check:
+            continue
         moving = np.abs(step_u) + np.abs(step_v) >= STEP_TOLERANCE
         if not moving.any():
             break

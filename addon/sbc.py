@@ -19,6 +19,7 @@ paper's pinhole cameras, kept as the baseline.
 
 from __future__ import annotations
 
+import functools
 import os
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -26,11 +27,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .bsp import CAMERA_LEAF, MAX_DUPLICATION, RAY_LIST_LEAF, BSPTree, RaysCrossError, build_bsp
+from .bsp import (CAMERA_LEAF, CONE_SIZE, MAX_DUPLICATION, RAY_LIST_LEAF, BSPTree, RaysCrossError, build_bsp,
+                  in_cones)
 from .errors import SceneInputError
 from .pinhole import PinholeLeaves
 from .ray_patch import RayPatchLeaves, invert_patches
-from .raymap import RayMap, trace_ray_map
+from .raymap import RayMap, box_exit_distance, trace_ray_map
 from .raytrace import ReflectorSet
 from .view import View
 
@@ -41,9 +43,13 @@ CELL_TOLERANCE = 1e-6
 MISS_CELLS = 1.0
 #: Threads that project parts of the points at once, and the fewest points per thread.
 PROJECT_THREADS = 4
-THREAD_MIN_POINTS = 20000
+THREAD_MIN_POINTS = 16384
+#: Points projected together: small enough that each step's temporaries stay in the cache.
+PROJECT_BLOCK = 16384
 #: Groups of at most this many rays are never split into sheets.
 MIN_SHEET_RAYS = 64
+#: Sub-rays per side traced in each *mixed* cell (see MixedCells).
+SUBCELL_SAMPLES = 8
 #: Ray-list cells tried per point, nearest central ray first.
 CANDIDATE_CELLS = 3
 
@@ -60,6 +66,28 @@ class Projection:
     ray_distance: np.ndarray  # (G, P) distance from the last reflector point along the ray
 
 
+@dataclass(frozen=True)
+class MixedCells:
+    """Sub-cell occlusion of one group's *mixed* cells.
+
+    In a cell whose four corner rays end partly on another reflector (blocked) and
+    partly where they leave the scene box, the occluder's silhouette crosses the cell
+    and the bilinear head is meaningless: it would accept points behind the occluder
+    and refuse points beside it. There, SUBCELL_SAMPLES^2 in-between rays (the same
+    bilinear interpolation of the corner rays that projection uses) are traced at build
+    time; a point projected into the cell is limited by the head of the sub-ray nearest
+    its fractional cell (no limit where that sub-ray leaves the box). A table, not a
+    trace, so the GLSL twin reads the same answer from a texture.
+    """
+
+    index: np.ndarray  # (rows, columns) int: row in ``heads`` of the cell (i, j) = [j, i], -1 if not mixed
+    heads: np.ndarray  # (n_mixed, M, M) float: head distance of sub-ray [b, a] at ((a + .5)/M, (b + .5)/M), inf unblocked
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.index.nbytes + self.heads.nbytes)
+
+
 @dataclass
 class SampleBasedCamera:
     """One view's sample-based camera: a ray map and one BSP tree per reflection group."""
@@ -70,6 +98,10 @@ class SampleBasedCamera:
     model_name: str
     histories: list  # one reflection history per tree (a history repeats once per sheet)
     stats: dict = field(default_factory=dict)
+    #: (trees, CONE_SIZE) per tree, a cone around where its rays can project (bsp.ray_cones), or None.
+    cones: np.ndarray | None = None
+    #: Per tree, its group's MixedCells (shared by the sheets of a group), or None where not traced.
+    mixed: list | None = None
 
     @property
     def groups(self) -> list:
@@ -92,20 +124,30 @@ class SampleBasedCamera:
         # numpy releases the GIL inside its array operations, so parts of the points
         # project in parallel on threads; each part writes its own rows of the result.
         workers = min(PROJECT_THREADS, os.cpu_count() or 1, max(1, len(finite) // THREAD_MIN_POINTS))
-        parts = np.array_split(finite, workers)
+        parts = np.array_split(finite, max(1, -(-len(finite) // PROJECT_BLOCK)))
         if workers == 1:
-            self._project_points(points, parts[0], result)
+            for part in parts:
+                self._project_points(points, part, result)
         else:
             with ThreadPoolExecutor(workers) as pool:
                 list(pool.map(lambda part: self._project_points(points, part, result), parts))
         return result
 
     def _project_points(self, points, index, result: Projection):
+        points = points[index]
         for g, (tree, grid) in enumerate(zip(self.trees, self.grids)):
-            self._project_group(g, tree, grid, points[index], index, result)
+            # Only points in the sheet's bounding cone descend its tree (bsp.ray_cones).
+            chosen = (np.arange(len(points)) if self.cones is None
+                      else np.flatnonzero(in_cones(np.broadcast_to(self.cones[g], (len(points), CONE_SIZE)), points)))
+            if len(chosen):
+                self._project_group(g, tree, grid, points[chosen], index[chosen], result)
 
     def _project_group(self, g, tree: BSPTree, grid, points, point_index, result: Projection):
         leaf = tree.leaf[descend_tree(tree, points)]
+        if tree.leaf_cones is not None:
+            # Points outside their leaf's bounding cone cannot project there (bsp.ray_cones).
+            near = np.flatnonzero(in_cones(tree.leaf_cones[leaf], points))
+            leaf, points, point_index = leaf[near], points[near], point_index[near]
         kind = tree.leaf_kind[leaf]
         row = tree.leaf_row[leaf]
         cells = np.full((len(points), 2), np.nan)
@@ -119,39 +161,51 @@ class SampleBasedCamera:
         if len(on_list) and tree.cells is not None:
             cells[on_list], accepted[on_list] = _project_ray_lists(tree, row[on_list], points[on_list])
 
-        sample = _interpolate_rays(self.ray_map, grid, cells, accepted)
-        offset = points - sample["tail"]
-        s = np.einsum("pd,pd->p", offset, sample["direction"])
-        tolerance = 1e-6 * (1.0 + sample["head_distance"])
-        # The point must lie on the ray map's own ray at that cell, within one cell's
-        # spacing: this checks every leaf's answer against the traced rays themselves.
-        miss = np.linalg.norm(offset - s[:, None] * sample["direction"], axis=1)
-        on_ray = miss <= MISS_CELLS * _cell_spacing(sample, s) + tolerance
-        # Only a head on another reflector limits the segment: where a ray merely leaves
-        # the scene box, every scene point along it is in front of its end.
-        before_head = ~sample["blocked"] | (s <= sample["head_distance"] + tolerance)
-        ok = sample["complete"] & on_ray & (s >= -tolerance) & before_head
-        hits = np.flatnonzero(ok)
+        found = np.flatnonzero(accepted & np.isfinite(cells).all(axis=1))
+        points, cells, kind, target = points[found], cells[found], kind[found], point_index[found]
+        mixed = None if self.mixed is None else self.mixed[g]
+        hits, s, first_depth = _check_on_rays(self.ray_map, self._ray_table, grid, cells, points, mixed)
         pixels = self.ray_map.cell_pixels(cells[hits])
         origins, directions = self.ray_map.view.pixel_rays(pixels)
-        target = point_index[hits]
-        result.reflector_points[g, target] = origins + sample["first_depth"][hits, None] * directions
+        target = target[hits]
+        result.reflector_points[g, target] = origins + first_depth[:, None] * directions
         result.pixels[g, target] = pixels
         result.valid[g, target] = True
         result.leaf_kind[g, target] = kind[hits]
-        result.ray_distance[g, target] = s[hits]
+        result.ray_distance[g, target] = s
+
+    @functools.cached_property
+    def _ray_table(self) -> np.ndarray:
+        """(R, 8) rows tail, direction, head distance, first-hit depth: one gather per corner."""
+        m = self.ray_map
+        return np.concatenate([m.tail, m.direction, m.head_distance[:, None], m.first_depth[:, None]], axis=1)
 
 
 def descend_tree(tree: BSPTree, points: np.ndarray) -> np.ndarray:
-    """Node index of the leaf each point falls in (whole arrays, one step per tree level)."""
+    """Node index of the leaf each point falls in (whole arrays, one step per tree level).
+
+    Only the points still in inner nodes go on to the next level, and each step is a
+    few 1-D operations on the point coordinates (no gathers of (n, 3) rows).
+    """
     node = np.zeros(len(points), dtype=np.int64)
+    if tree.leaf[0] >= 0:
+        return node
+    x, y, z = (np.ascontiguousarray(points[:, d]) for d in range(3))
+    normal = tree.plane_normal
+    nx, ny, nz = (np.ascontiguousarray(normal[:, d]) for d in range(3))
+    active = np.arange(len(points))
+    current = node
     for _ in range(tree.depth + 1):
-        inner = np.flatnonzero(tree.leaf[node] < 0)
-        if len(inner) == 0:
+        side = (x * nx[current] + y * ny[current] + z * nz[current]) >= tree.plane_offset[current]
+        current = np.where(side, tree.left[current], tree.right[current])
+        done = tree.leaf[current] >= 0
+        if done.all():
+            node[active] = current
             break
-        n = node[inner]
-        side = np.einsum("pd,pd->p", points[inner], tree.plane_normal[n]) >= tree.plane_offset[n]
-        node[inner] = np.where(side, tree.left[n], tree.right[n])
+        finished = np.flatnonzero(done)
+        node[active[finished]] = current[finished]
+        going = np.flatnonzero(~done)
+        active, current, x, y, z = active[going], current[going], x[going], y[going], z[going]
     return node
 
 
@@ -186,9 +240,11 @@ def _closest_cells(cells, pair_point, pair_cell, points, keep: int = CANDIDATE_C
     """
     centre_tail, centre_direction, size, spread = cells.centre_rays
     offset = points[pair_point] - centre_tail[pair_cell]
-    along = np.maximum(np.einsum("ij,ij->i", offset, centre_direction[pair_cell]), 0.0)
-    miss = np.linalg.norm(np.cross(offset, centre_direction[pair_cell]), axis=1)
-    near = miss <= 2.0 * (size[pair_cell] + along * spread[pair_cell])
+    along = np.einsum("ij,ij->i", offset, centre_direction[pair_cell])
+    # Squared distance from the central line (unit direction): |o|^2 - (o . d)^2.
+    miss = np.maximum(np.einsum("ij,ij->i", offset, offset) - along * along, 0.0)
+    reach = 2.0 * (size[pair_cell] + np.maximum(along, 0.0) * spread[pair_cell])
+    near = miss <= reach * reach
     pair_point, pair_cell, miss = pair_point[near], pair_cell[near], miss[near]
     order = np.lexsort((miss, pair_point))
     sorted_point = pair_point[order]
@@ -198,39 +254,63 @@ def _closest_cells(cells, pair_point, pair_cell, points, keep: int = CANDIDATE_C
     return pair_point[chosen], pair_cell[chosen]
 
 
-def _interpolate_rays(ray_map: RayMap, grid: np.ndarray, cells: np.ndarray, accepted: np.ndarray) -> dict:
-    """Bilinear interpolation of the ray map's rays at fractional cells of one group."""
-    base = np.floor(np.nan_to_num(cells, nan=-10.0)).astype(np.int64)
-    frac = np.nan_to_num(cells - base)
+def _check_on_rays(ray_map: RayMap, table: np.ndarray, grid: np.ndarray, cells: np.ndarray, points: np.ndarray,
+                   mixed_cells: MixedCells | None = None):
+    """Which leaf answers the ray map's own rays confirm: indices into ``cells``, their ray
+    distances s and interpolated first-hit depths.
+
+    The four rays around the fractional cell must exist in the group; their bilinear
+    interpolation (tail, direction, head) must pass within one cell spacing of the point
+    (MISS_CELLS; this checks every leaf's answer against the traced rays themselves), with
+    the point in front of the tail and, where a corner ray ends on another reflector,
+    before the interpolated head. Where a ray merely leaves the scene box, every scene
+    point along it is in front of its end. In a mixed cell (``mixed_cells``), the head is that
+    of the nearest traced sub-ray instead.
+    """
+    base = np.floor(cells).astype(np.int64)
     rows, columns = grid.shape
     i0, j0 = base[:, 0], base[:, 1]
-    inside = accepted & (i0 >= 0) & (j0 >= 0) & (i0 + 1 < columns) & (j0 + 1 < rows)
-    i0c, j0c = np.clip(i0, 0, columns - 2), np.clip(j0, 0, rows - 2)
-    corners = np.stack([grid[j0c, i0c], grid[j0c, i0c + 1], grid[j0c + 1, i0c], grid[j0c + 1, i0c + 1]], axis=1)
-    complete = inside & np.all(corners >= 0, axis=1)
-    corners = np.maximum(corners, 0)
-    fu, fv = frac[:, 0], frac[:, 1]
-    weights = np.stack([(1 - fu) * (1 - fv), fu * (1 - fv), (1 - fu) * fv, fu * fv], axis=1)
-    direction = np.einsum("pk,pkd->pd", weights, ray_map.direction[corners])
-    direction /= np.maximum(np.linalg.norm(direction, axis=1), 1e-300)[:, None]
-    return {
-        "complete": complete,
-        "corner_tails": ray_map.tail[corners],
-        "corner_directions": ray_map.direction[corners],
-        "tail": np.einsum("pk,pkd->pd", weights, ray_map.tail[corners]),
-        "direction": direction,
-        "head_distance": np.einsum("pk,pk->p", weights, ray_map.head_distance[corners]),
-        "blocked": ray_map.blocked[corners].any(axis=1),
-        "first_depth": np.einsum("pk,pk->p", weights, ray_map.first_depth[corners]),
-    }
+    keep = np.flatnonzero((i0 >= 0) & (j0 >= 0) & (i0 + 1 < columns) & (j0 + 1 < rows))
+    flat = grid.reshape(-1)
+    first = j0[keep] * columns + i0[keep]
+    corners = [flat[first], flat[first + 1], flat[first + columns], flat[first + columns + 1]]
+    complete = np.flatnonzero((corners[0] >= 0) & (corners[1] >= 0) & (corners[2] >= 0) & (corners[3] >= 0))
+    keep = keep[complete]
+    corners = [c[complete] for c in corners]
+    frac = cells[keep] - base[keep]
+    fu, fv = frac[:, 0:1], frac[:, 1:2]
+    rays = [table[c] for c in corners]
+    mixed = ((1 - fu) * (1 - fv)) * rays[0] + (fu * (1 - fv)) * rays[1] + ((1 - fu) * fv) * rays[2] + (fu * fv) * rays[3]
+    direction = mixed[:, 3:6] / np.maximum(_norm(mixed[:, 3:6]), 1e-300)[:, None]
+    head_distance = mixed[:, 6]
+    blocked = ray_map.blocked
+    blocked = blocked[corners[0]] | blocked[corners[1]] | blocked[corners[2]] | blocked[corners[3]]
+    if mixed_cells is not None and len(mixed_cells.heads):
+        row = mixed_cells.index.reshape(-1)[first[complete]]
+        in_mixed = np.flatnonzero(row >= 0)
+        if len(in_mixed):
+            m = mixed_cells.heads.shape[1]
+            a = np.minimum((frac[in_mixed, 0] * m).astype(np.int64), m - 1)
+            b = np.minimum((frac[in_mixed, 1] * m).astype(np.int64), m - 1)
+            head = mixed_cells.heads[row[in_mixed], b, a]
+            blocked[in_mixed] = np.isfinite(head)
+            head_distance = head_distance.copy()
+            head_distance[in_mixed] = np.where(np.isfinite(head), head, head_distance[in_mixed])
+    offset = points[keep] - mixed[:, 0:3]
+    s = np.einsum("pd,pd->p", offset, direction)
+    tolerance = 1e-6 * (1.0 + head_distance)
+    miss = _norm(offset - s[:, None] * direction)
+    # Spacing of neighbouring rays at distance s (the larger axis of the cell).
+    along_u = _norm(rays[1][:, 0:3] - rays[0][:, 0:3] + s[:, None] * (rays[1][:, 3:6] - rays[0][:, 3:6]))
+    along_v = _norm(rays[2][:, 0:3] - rays[0][:, 0:3] + s[:, None] * (rays[2][:, 3:6] - rays[0][:, 3:6]))
+    ok = ((miss <= MISS_CELLS * np.maximum(along_u, along_v) + tolerance) & (s >= -tolerance)
+          & (~blocked | (s <= head_distance + tolerance)))
+    hits = np.flatnonzero(ok)
+    return keep[hits], s[hits], mixed[hits, 7]
 
 
-def _cell_spacing(sample: dict, s: np.ndarray) -> np.ndarray:
-    """Distance between neighbouring rays of the cell at ray distance ``s`` (the larger axis)."""
-    ends = sample["corner_tails"] + s[:, None, None] * sample["corner_directions"]
-    along_u = np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1)
-    along_v = np.linalg.norm(ends[:, 2] - ends[:, 0], axis=1)
-    return np.maximum(along_u, along_v)
+def _norm(vectors: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.einsum("pd,pd->p", vectors, vectors))
 
 
 def _build_sheets(ray_map: RayMap, rays: np.ndarray, grid: np.ndarray, model, accuracy_px: float) -> list:
@@ -245,8 +325,8 @@ def _build_sheets(ray_map: RayMap, rays: np.ndarray, grid: np.ndarray, model, ac
     several images (or, right at a seam, one image twice).
     """
     try:
-        return [build_bsp(ray_map, rays, grid, model, accuracy_px,
-                          max_duplication=None if len(rays) <= MIN_SHEET_RAYS else MAX_DUPLICATION)]
+        return [(build_bsp(ray_map, rays, grid, model, accuracy_px,
+                           max_duplication=None if len(rays) <= MIN_SHEET_RAYS else MAX_DUPLICATION), rays)]
     except RaysCrossError:
         cells = ray_map.cell[rays]
         axis = int(np.argmax(cells.max(axis=0) - cells.min(axis=0)))
@@ -255,7 +335,7 @@ def _build_sheets(ray_map: RayMap, rays: np.ndarray, grid: np.ndarray, model, ac
         # corner rays, two on each side) belong to the upper sheet: no line of holes.
         low, high = cells[:, axis] <= seam, cells[:, axis] >= seam
         if low.all() or high.all():
-            return [build_bsp(ray_map, rays, grid, model, accuracy_px, max_duplication=None)]
+            return [(build_bsp(ray_map, rays, grid, model, accuracy_px, max_duplication=None), rays)]
         return (_build_sheets(ray_map, rays[low], grid, model, accuracy_px)
                 + _build_sheets(ray_map, rays[high], grid, model, accuracy_px))
 
@@ -267,18 +347,20 @@ def build_from_ray_map(ray_map: RayMap, accuracy_px: float = 1.0, leaf_model: st
     if not accuracy_px > 0:
         raise ValueError(f"accuracy_px must be positive, got {accuracy_px}")
     start = time.perf_counter()
-    trees, grids, histories = [], [], []
+    trees, grids, histories, cones = [], [], [], []
     for g, history in enumerate(ray_map.histories):
         grid = ray_map.group_grid(g)
         model, rays = LEAF_MODELS[leaf_model], np.flatnonzero(ray_map.group == g)
         sheets = (_build_sheets(ray_map, rays, grid, model, accuracy_px) if model.splits_into_sheets
-                  else [build_bsp(ray_map, rays, grid, model, accuracy_px, max_duplication=None)])
-        for tree in sheets:
+                  else [(build_bsp(ray_map, rays, grid, model, accuracy_px, max_duplication=None), rays)])
+        for tree, sheet_rays in sheets:
             trees.append(tree)
             grids.append(grid)
             histories.append(history)
+            cones.append(tree.cone)
     seconds = time.perf_counter() - start
-    sbc = SampleBasedCamera(ray_map, trees, grids, leaf_model, histories)
+    sbc = SampleBasedCamera(ray_map, trees, grids, leaf_model, histories,
+                            cones=np.array(cones).reshape(-1, CONE_SIZE))
     sbc.stats = _stats(ray_map, trees, grids, seconds)
     return sbc
 
@@ -300,8 +382,52 @@ def build_sample_based_camera(reflectors, view: View, bounds, max_order: int = 1
     ray_map = trace_ray_map(reflector_set, view, bounds, int(downsample), int(max_order))
     trace_seconds = time.perf_counter() - start
     sbc = build_from_ray_map(ray_map, accuracy_px, leaf_model)
-    sbc.stats["trace_seconds"] = trace_seconds
+    start = time.perf_counter()
+    sbc.mixed = trace_mixed_cells(reflector_set, ray_map, bounds, sbc.grids)
+    sbc.stats["trace_seconds"] = trace_seconds + time.perf_counter() - start
+    sbc.stats["n_mixed_cells"] = int(sum(len(m.heads) for m in {id(m): m for m in sbc.mixed}.values()))
+    sbc.stats["nbytes"] += int(sum(m.nbytes for m in {id(m): m for m in sbc.mixed}.values()))
     return sbc
+
+
+def trace_mixed_cells(reflector_set: ReflectorSet, ray_map: RayMap, bounds, grids: list) -> list:
+    """MixedCells of every tree's group (one object per distinct grid, shared by its sheets)."""
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
+    lo, hi = np.minimum(lo, reflector_set.vertices.min(axis=0)), np.maximum(hi, reflector_set.vertices.max(axis=0))
+    traced = {}
+    for grid in grids:
+        if id(grid) not in traced:
+            traced[id(grid)] = _mixed_cells(reflector_set, ray_map, grid, lo, hi)
+    return [traced[id(grid)] for grid in grids]
+
+
+def _mixed_cells(reflector_set: ReflectorSet, ray_map: RayMap, grid: np.ndarray, lo, hi) -> MixedCells:
+    rows, columns = grid.shape
+    corners = np.stack([grid[:-1, :-1], grid[:-1, 1:], grid[1:, :-1], grid[1:, 1:]], axis=-1)  # (rows-1, cols-1, 4)
+    complete = np.all(corners >= 0, axis=-1)
+    blocked = ray_map.blocked[np.maximum(corners, 0)]
+    j, i = np.nonzero(complete & blocked.any(axis=-1) & ~blocked.all(axis=-1))
+    index = np.full((rows, columns), -1, dtype=np.int64)
+    m = SUBCELL_SAMPLES
+    if len(j) == 0:
+        return MixedCells(index, np.zeros((0, m, m)))
+    index[j, i] = np.arange(len(j))
+    cell_corners = corners[j, i]  # (n, 4)
+    fraction = (np.arange(m) + 0.5) / m
+    fb, fa = np.meshgrid(fraction, fraction, indexing="ij")  # [b, a]
+    fa, fb = fa.reshape(-1), fb.reshape(-1)
+    weights = np.stack([(1 - fa) * (1 - fb), fa * (1 - fb), (1 - fa) * fb, fa * fb], axis=1)  # (m*m, 4)
+    tails = np.einsum("sk,nkd->nsd", weights, ray_map.tail[cell_corners]).reshape(-1, 3)
+    directions = np.einsum("sk,nkd->nsd", weights, ray_map.direction[cell_corners]).reshape(-1, 3)
+    directions /= np.maximum(np.linalg.norm(directions, axis=1), 1e-300)[:, None]
+    # Each sub-ray starts on the chord between the corner tails: the nearest corner's
+    # triangle (and its one-ring) is its source, as for the traced rays.
+    nearest = np.argmax(weights, axis=1)
+    sources = ray_map.triangle[cell_corners[:, nearest]].reshape(-1)
+    box = box_exit_distance(tails, directions, lo, hi)
+    hits = reflector_set.intersect(tails, directions, box, sources)
+    heads = np.where(hits.hit, hits.t, np.inf).reshape(len(j), m, m)
+    return MixedCells(index, heads)
 
 
 def check_view_outside_reflectors(reflector_set: ReflectorSet, view: View) -> None:

@@ -82,6 +82,7 @@ def defines() -> dict:
         "SBC_CAMERA_LEAF": str(CAMERA_LEAF),
         "SBC_NEWTON_ITERATIONS": str(ray_patch.NEWTON_ITERATIONS),
         "SBC_CANDIDATE_CELLS": str(sbc_module.CANDIDATE_CELLS),
+        "SBC_SUBCELL_SAMPLES": str(sbc_module.SUBCELL_SAMPLES),
         "SBC_MISS_CELLS": _float(sbc_module.MISS_CELLS),
         "SBC_STEP_TOLERANCE": _float(STEP_TOLERANCE),
         "SBC_RESIDUAL_TOLERANCE": _float(RESIDUAL_TOLERANCE),

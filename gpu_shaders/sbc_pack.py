@@ -32,7 +32,11 @@ Textures (names as the GLSL samplers, ``sbc_`` + name):
     14: (cell-centre tail xyz, 0), relative to the origin (bilinear cells only)
     15: (cell-centre unit direction xyz, 0) (bilinear cells only)
 ``scalars`` 1 float per entry, 4 per texel: each group's ray-list CSR offsets
-            ``cell_start`` and its ray grid (rows x columns, row-major, ray index or -1).
+            ``cell_start``, its ray grid (rows x columns, row-major, ray index or -1),
+            right after it its mixed-cell grid (same layout: the scalar index of the
+            cell's sub-ray heads, or -1 where the cell is not mixed; addon.sbc.MixedCells),
+            then those heads, SUBCELL_SAMPLES^2 per mixed cell, row-major [b][a], the head
+            distance of the sub-ray, or -1 where it leaves the scene box (unblocked).
 ``rays``    2 texels per ray of the ray map: (tail xyz, head distance, negative where
             the head is where the ray leaves the scene box rather than on a reflector),
             (unit direction xyz, first-hit depth).
@@ -151,7 +155,7 @@ def pack_sample_based_camera(sbc) -> PackedSBC:
     cell_base = n_cameras  # cell patches follow all camera patches
     n_scalars = n_cells = 0
     n_nodes = n_leaves = n_camera_rows = 0
-    for tree, grid in zip(sbc.trees, sbc.grids):
+    for g, (tree, grid) in enumerate(zip(sbc.trees, sbc.grids)):
         n_raylists = len(tree.cell_start) - 1
         header = np.zeros((GROUP_TEXELS, 4))
         header[0] = (n_nodes, n_leaves, n_camera_rows, cell_base + n_cells)
@@ -178,6 +182,18 @@ def pack_sample_based_camera(sbc) -> PackedSBC:
         scalars.append(_exact("cell_start", tree.cell_start))
         scalars.append(_exact("grid", grid.reshape(-1)))
         n_scalars += n_raylists + 1 + grid.size
+        mixed = None if getattr(sbc, "mixed", None) is None else sbc.mixed[g]
+        heads_start = n_scalars + grid.size
+        mixed_grid = np.full(grid.size, -1, dtype=np.int64)
+        heads = np.zeros(0)
+        if mixed is not None and len(mixed.heads):
+            per_cell = mixed.heads[0].size
+            index = mixed.index.reshape(-1)
+            mixed_grid = np.where(index >= 0, heads_start + index * per_cell, -1)
+            heads = np.where(np.isfinite(mixed.heads), mixed.heads, -1.0).reshape(-1)
+        scalars.append(_exact("mixed grid", mixed_grid).astype(np.float32))
+        scalars.append(heads.astype(np.float32))
+        n_scalars += grid.size + len(heads)
         n_nodes += len(tree.leaf)
         n_leaves += len(tree.leaf_kind)
 
@@ -240,7 +256,9 @@ def unpack_sample_based_camera(packed: PackedSBC) -> tuple[list, dict]:
         n_cameras = int(row[kind == CAMERA_LEAF].max() + 1) if np.any(kind == CAMERA_LEAF) else 0
         n_cells = int(offsets[-1])
         patches = packed.patches.reshape(-1, PATCH_TEXELS, 4)
-        grid = packed.scalars[grid_start:grid_start + packed.rows * packed.columns].astype(np.int64)
+        size = packed.rows * packed.columns
+        grid = packed.scalars[grid_start:grid_start + size].astype(np.int64)
+        mixed_grid = packed.scalars[grid_start + size:grid_start + 2 * size].astype(np.int64)
         out.append({
             "plane_normal": node[:, 0, :3], "plane_offset": node[:, 0, 3],
             "left": node[:, 1, 0].astype(np.int64), "right": node[:, 1, 1].astype(np.int64),
@@ -250,6 +268,7 @@ def unpack_sample_based_camera(packed: PackedSBC) -> tuple[list, dict]:
             "cameras": _unpack_patches(patches[camera_start:camera_start + n_cameras].reshape(-1, 4)),
             "cells": _unpack_patches(patches[cell_start:cell_start + n_cells].reshape(-1, 4)),
             "grid": grid.reshape(packed.rows, packed.columns),
+            "mixed_grid": mixed_grid.reshape(packed.rows, packed.columns),
         })
     return out, {"tail": rays[:, 0, :3], "head_distance": np.abs(rays[:, 0, 3]), "blocked": rays[:, 0, 3] > 0,
                  "direction": rays[:, 1, :3], "first_depth": rays[:, 1, 3]}

@@ -271,6 +271,16 @@ bool sbc_project(vec3 p, int group, out vec2 pixel, out float first_depth, out f
     direction += weight[k] * direction_first.xyz;
     depth_first += weight[k] * direction_first.w;
   }
+  /* A mixed cell (corner rays ending partly on a reflector, partly at the box): the
+   * head of the nearest traced sub-ray decides (sbc.MixedCells). */
+  int mixed = int(sbc_scalar(grid + columns * rows));
+  if (mixed >= 0) {
+    int a = min(int(frac.x * float(SBC_SUBCELL_SAMPLES)), SBC_SUBCELL_SAMPLES - 1);
+    int b = min(int(frac.y * float(SBC_SUBCELL_SAMPLES)), SBC_SUBCELL_SAMPLES - 1);
+    float sub_head = sbc_scalar(mixed + b * SBC_SUBCELL_SAMPLES + a);
+    blocked = sub_head >= 0.0;
+    head = blocked ? sub_head : head;
+  }
   direction /= max(length(direction), 1e-30);
   float s = dot(to_point, direction);
   float tolerance = SBC_DISTANCE_TOLERANCE * (1.0 + head);

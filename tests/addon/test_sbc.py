@@ -201,6 +201,7 @@ def test_projection_on_threads_equals_projection_on_one(ellipsoid_case, monkeypa
 
     (sbc, single, _), points = ellipsoid_case  # projected with the default settings
     monkeypatch.setattr(sbc_module, "THREAD_MIN_POINTS", 1000)
+    monkeypatch.setattr(sbc_module, "PROJECT_BLOCK", 2500)  # several blocks for the threads to share
     monkeypatch.setattr(sbc_module, "PROJECT_THREADS", 4)
     threaded = sbc.project(points)
     monkeypatch.setattr(sbc_module, "PROJECT_THREADS", 1)
@@ -209,3 +210,109 @@ def test_projection_on_threads_equals_projection_on_one(ellipsoid_case, monkeypa
         np.testing.assert_array_equal(result.valid, one.valid)
         np.testing.assert_array_equal(result.leaf_kind, one.leaf_kind)
         np.testing.assert_array_equal(result.pixels, one.pixels)
+
+
+def _occluding_spheres():
+    """Sphere B hides part of sphere A's reflected rays (and the other way round)."""
+    reflectors = [icosphere([0, -1.0, 1], 0.9, 4, name="A"), icosphere([0.0, 1.0, 1.0], 0.9, 4, name="B")]
+    view = look_at_view([5.0, 0.0, 1.8], [0, 0, 1], width=320, height=240, fov_y_deg=45)
+    return reflectors, view
+
+
+def test_occlusion_in_mixed_cells_follows_the_true_in_between_rays():
+    """Cells whose corner rays end partly on the other sphere, partly at the box: points on
+    rays in between are projected where the true in-between ray reaches them unoccluded.
+
+    Truth: the bilinear in-between ray at (fu, fv), traced; only points whose answer is
+    the same for the in-between rays 0.15 cell around (fu, fv) are scored, since a leaf
+    may place a point that far off (accuracy 1 px = half a cell at d = 2).
+    """
+    from curved_reflections.addon.raymap import box_exit_distance
+
+    reflectors, view = _occluding_spheres()
+    sbc = build_sample_based_camera(reflectors, view, BOUNDS, downsample=2)
+    ray_map, reflector_set = sbc.ray_map, ReflectorSet(reflectors)
+    assert sbc.stats["n_mixed_cells"] > 20
+    lo = np.minimum(BOUNDS[0], reflector_set.vertices.min(0))
+    hi = np.maximum(BOUNDS[1], reflector_set.vertices.max(0))
+    rng = np.random.default_rng(9)
+    agree = {"sub-cell": [], "corner heads": []}
+    for group in (0, 1):
+        row = sbc.histories.index((group,))
+        j, i = np.nonzero(sbc.mixed[row].index >= 0)
+        pick = rng.integers(0, len(j), 2000)
+        grid = ray_map.group_grid(group)
+        corners = np.stack([grid[j[pick], i[pick]], grid[j[pick], i[pick] + 1], grid[j[pick] + 1, i[pick]],
+                            grid[j[pick] + 1, i[pick] + 1]], axis=1)
+
+        def in_between(fu, fv):
+            weights = np.stack([(1 - fu) * (1 - fv), fu * (1 - fv), (1 - fu) * fv, fu * fv], axis=1)
+            directions = np.einsum("pk,pkd->pd", weights, ray_map.direction[corners])
+            return np.einsum("pk,pkd->pd", weights, ray_map.tail[corners]), directions / np.linalg.norm(
+                directions, axis=1)[:, None]
+
+        fu, fv = rng.uniform(0.05, 0.95, (2, len(pick)))
+        tails, directions = in_between(fu, fv)
+        s = rng.uniform(0.05, 1.0, len(pick)) * box_exit_distance(tails, directions, lo, hi)
+        points = tails + s[:, None] * directions
+        answers = []
+        for du, dv in ((0, 0), (0.15, 0), (-0.15, 0), (0, 0.15), (0, -0.15)):
+            near_tails, near_directions = in_between(np.clip(fu + du, 0, 1), np.clip(fv + dv, 0, 1))
+            along = np.einsum("pd,pd->p", points - near_tails, near_directions)
+            # Convex spheres cannot hide their own reflections: only the other sphere occludes
+            # (this also ignores grazing hits on the chord between the corner tails).
+            nearest = np.argmax(np.stack([(1 - fu) * (1 - fv), fu * (1 - fv), (1 - fu) * fv, fu * fv], axis=1), axis=1)
+            sources = ray_map.triangle[corners[np.arange(len(pick)), nearest]]
+            hits = reflector_set.intersect(near_tails, near_directions, along, sources)
+            answers.append(~(hits.hit & (hits.reflector != group)))
+        answers = np.array(answers)
+        clear = answers.all(axis=0) | ~answers.any(axis=0)
+        seen = answers[0][clear]
+        assert clear.sum() > 1000 and 0.2 < seen.mean() < 0.8  # both answers are exercised
+        for rule in agree:
+            kept = sbc.mixed
+            if rule == "corner heads":
+                sbc.mixed = None
+            valid = sbc.project(points[clear]).valid[row]
+            agree[rule].append(valid == seen)
+            sbc.mixed = kept
+    sub_cell, corner_heads = (np.concatenate(agree[rule]).mean() for rule in agree)
+    print(f"agreement with the traced in-between rays: sub-cell {sub_cell:.4f}, corner heads {corner_heads:.4f}")
+    assert sub_cell >= 0.96, (sub_cell, corner_heads)
+    assert sub_cell > corner_heads + 0.1, (sub_cell, corner_heads)
+
+
+def test_bounding_cones_skip_work_but_change_no_answer():
+    """Sheets and leaves skip points outside their rays' bounding cones (bsp.ray_cones): on
+    a many-sheet vase most (point, sheet) pairs are skipped, and every answer, also for
+    points outside the scene box, is the one projection without cones gives."""
+    from curved_reflections.addon.bsp import in_cones
+
+    vase = shapes.vase(segments=64, rings=48)
+    reflectors = [Reflector("Vase", vase.vertices, vase.triangles, vase.normals)]
+    view = look_at_view([5.0, -2.0, 1.6], [0, 0, 1], width=320, height=240, fov_y_deg=35)
+    bounds = (np.array([-3.0, -3.0, -0.5]), np.array([3.0, 3.0, 3.5]))
+    rng = np.random.default_rng(12)
+    near = vase.vertices[rng.integers(0, len(vase.vertices), 3000)] + rng.normal(scale=0.3, size=(3000, 3))
+    points = np.concatenate([rng.uniform(bounds[0], bounds[1], (3000, 3)), near,
+                             rng.uniform(bounds[0] - 6.0, bounds[1] + 6.0, (1000, 3))])
+    sbc = build_sample_based_camera(reflectors, view, bounds, downsample=2)
+    assert sbc.stats["n_sheets"] > 4
+    culled = sbc.project(points)
+    inside = np.array([in_cones(np.broadcast_to(cone, (len(points), cone.size)), points) for cone in sbc.cones])
+    assert inside.mean() < 0.8
+    assert inside[culled.valid].all()  # every projected image lies in its sheet's cone
+    cones, leaf_cones = sbc.cones, [tree.leaf_cones for tree in sbc.trees]
+    sbc.cones = None
+    for tree in sbc.trees:
+        object.__setattr__(tree, "leaf_cones", None)
+    try:
+        plain = sbc.project(points)
+    finally:
+        sbc.cones = cones
+        for tree, cone in zip(sbc.trees, leaf_cones):
+            object.__setattr__(tree, "leaf_cones", cone)
+    assert plain.valid.sum() > 2000
+    np.testing.assert_array_equal(culled.valid, plain.valid)
+    np.testing.assert_array_equal(culled.leaf_kind, plain.leaf_kind)
+    np.testing.assert_array_equal(culled.pixels, plain.pixels)

@@ -459,6 +459,15 @@ def project_timed(sbc, points, repeats: int, repeat_limit: float, budget: float)
     return merged, done, done / elapsed, 1
 
 
+def throughput_points(scene: BenchScene, count: int) -> np.ndarray:
+    """``count`` points: the scene's (shuffled) points repeated, each copy jittered by
+    1e-3 of the scene box's diagonal (seeded)."""
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in scene.bounds)
+    rng = _rng(scene.name + "/throughput")
+    points = scene.points[np.arange(count) % len(scene.points)]
+    return points + rng.normal(scale=1e-3 * np.linalg.norm(hi - lo), size=points.shape)
+
+
 def run_cell(scene: BenchScene, downsample: int, accuracy: float, model: str, args, send) -> None:
     """Build, time, project and measure one configuration (in a child process)."""
     from curved_reflections.addon.sbc import build_from_ray_map, build_sample_based_camera
@@ -471,6 +480,12 @@ def run_cell(scene: BenchScene, downsample: int, accuracy: float, model: str, ar
         builds.append(build_from_ray_map(sbc.ray_map, accuracy, model).stats["build_seconds"])
     projection, n, rate, projection_runs = project_timed(sbc, scene.points, args.repeats, args.repeat_limit,
                                                          args.projection_budget)
+    rate_points = n
+    if args.rate_points > len(scene.points):
+        # Throughput on a larger set (so that projection's threads are used): the scene's
+        # points repeated with a small jitter, i.e. the same distribution.
+        _, rate_points, rate, projection_runs = project_timed(
+            sbc, throughput_points(scene, args.rate_points), args.repeats, args.repeat_limit, args.projection_budget)
     stats = sbc.stats
     result = {
         "n_rays": stats["n_rays"], "n_leaves": stats["n_leaves"], "leaves_per_ray":
@@ -481,6 +496,7 @@ def run_cell(scene: BenchScene, downsample: int, accuracy: float, model: str, ar
         "build_seconds": float(np.median(builds)), "build_runs": len(builds), "build_all": builds,
         "trace_seconds": stats["trace_seconds"], "nbytes": stats["nbytes"],
         "points_measured": int(n), "points_per_second": rate, "projection_runs": projection_runs,
+        "rate_points": int(rate_points),
     }
     result.update(measure(sbc, projection, scene, n))
     send(("done", result))
@@ -568,7 +584,8 @@ COLUMNS = (
     ("false %", lambda c: _f(c["false_rate"], 2, 100)),
     (f"false % >= {SURFACE_LAYER:g} off mirrors", lambda c: _f(c["false_rate_off_surface"], 2, 100)),
     ("camera share %", lambda c: _f(c["camera_share"], 1, 100)),
-    ("k pts/s (runs)", lambda c: f"{c['points_per_second'] / 1e3:.0f} ({c['projection_runs']})"),
+    ("k pts/s (runs, points)", lambda c: f"{c['points_per_second'] / 1e3:.0f} ({c['projection_runs']}, "
+                                         f"{c.get('rate_points', c['points_measured'])})"),
     ("points", lambda c: str(c["points_measured"])),
 )
 
@@ -744,10 +761,13 @@ def report(results: dict) -> str:
         "(exact point-to-triangle distance). Camera share: projected images answered by camera (not ray-list) "
         "leaves. Build s: "
         f"BSP build only, median of up to {s['repeats']} runs (one run when the first took > "
-        f"{s['repeat_limit']:g} s); trace s: the ray map. Projection: points/s of one `project` call on all "
-        f"points, median of up to {s['repeats']} calls; where all points would take over "
-        f"{s['projection_budget']:g} s, a shuffled prefix is projected in chunks until that budget is spent "
-        "and all figures of that row use that prefix (column *points*). MB: `stats[\"nbytes\"]`.",
+        f"{s['repeat_limit']:g} s); trace s: the ray map (with the mixed cells' sub-rays). Projection: "
+        f"points/s of one `project` call on {s.get('rate_points', 0)} points (the scene's points repeated, "
+        "jittered by 1e-3 of the box diagonal, so that projection's threads are used), median of up to "
+        f"{s['repeats']} calls; where a call would take over {s['projection_budget']:g} s, a prefix is "
+        "projected in chunks until that budget is spent (the count is in the column). Accuracy figures use "
+        "the scene's points, likewise a prefix where they would take over the budget (column *points*). "
+        "MB: `stats[\"nbytes\"]`.",
         "## Scenes",
         scenes_table(results["scenes"]),
         f"## Headline: d = {s['downsample']}, accuracy 1 px",
@@ -827,6 +847,9 @@ def parse_args(argv=None):
     parser.add_argument("--sweep-downsamples", nargs="*", type=int, default=[1, 2, 4])
     parser.add_argument("--sweep-accuracies", nargs="*", type=float, default=[0.5, 1.0, 2.0])
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--rate-points", type=int, default=200000,
+                        help="points per projection-throughput call (the scene's points repeated, jittered)")
+    parser.add_argument("--models", nargs="+", choices=MODELS, default=list(MODELS))
     parser.add_argument("--repeat-limit", type=float, default=6.0,
                         help="a build or projection taking longer than this is timed once")
     parser.add_argument("--projection-budget", type=float, default=30.0)
@@ -840,7 +863,7 @@ def parse_args(argv=None):
     if args.quick:
         args.scenes, args.points, args.downsample = ["sbc_fig3", "superellipsoid"], 1500, 4
         args.sweep_scenes, args.sweep_downsamples, args.sweep_accuracies = ["superellipsoid"], [4, 8], [1.0, 2.0]
-        args.repeats = 1
+        args.repeats, args.rate_points = 1, 20000
     unknown = set(args.sweep_scenes) - set(args.scenes)
     if unknown:
         parser.error(f"sweep scenes must be among --scenes: {sorted(unknown)}")
@@ -868,13 +891,13 @@ def main(argv=None) -> int:
         _log(f"{name}: {len(scene.points)} points, {len(scene.exact.point)} visible exact solutions "
              f"in {scene.exact_seconds:.1f} s")
         headline = {}
-        for model in MODELS:
+        for model in args.models:
             headline[model] = measure_cell(scene, args.downsample, 1.0, model, args)
             results["headline"].append(headline[model])
         if name in args.sweep_scenes:
             for d in args.sweep_downsamples:
                 for accuracy in args.sweep_accuracies:
-                    for model in MODELS:
+                    for model in args.models:
                         if d == args.downsample and accuracy == 1.0:
                             results["sweep"].append(headline[model])
                         else:

@@ -103,19 +103,27 @@ def test_gpu_projection_matches_numpy(gpu_ready, case):
 
 def test_packing_round_trip(case):
     """Unpacked texels give back every array the projection reads (integers exactly)."""
-    _, sbc, _ = case
+    name, sbc, _ = case
     packed = sbc_pack.pack_sample_based_camera(sbc)
     groups, rays = sbc_pack.unpack_sample_based_camera(packed)
+    # The ball hides part of the vase's reflected rays: mixed cells get sub-ray heads.
+    assert (sbc.stats["n_mixed_cells"] > 10) == (name == "vase_and_ball")
     assert len(groups) == len(sbc.trees) == packed.n_groups
     assert (packed.columns, packed.rows, packed.downsample) == (sbc.ray_map.columns, sbc.ray_map.rows, 2)
 
     def close(actual, expected, scale=1.0):
         np.testing.assert_allclose(actual, expected, rtol=1e-6, atol=1e-6 * scale)
 
-    for unpacked, tree, grid in zip(groups, sbc.trees, sbc.grids):
+    for unpacked, tree, grid, mixed in zip(groups, sbc.trees, sbc.grids, sbc.mixed):
         for name in ("left", "right", "leaf", "leaf_kind", "leaf_row", "leaf_rays", "cell_start"):
             np.testing.assert_array_equal(unpacked[name], getattr(tree, name), err_msg=name)
         np.testing.assert_array_equal(unpacked["grid"], grid)
+        np.testing.assert_array_equal(unpacked["mixed_grid"] >= 0, mixed.index >= 0)
+        j, i = np.nonzero(mixed.index >= 0)
+        samples = mixed.heads[0].size if len(mixed.heads) else 0
+        heads = packed.scalars[unpacked["mixed_grid"][j, i][:, None] + np.arange(samples)].astype(np.float64)
+        expected = mixed.heads[mixed.index[j, i]].reshape(len(j), samples)
+        close(heads, np.where(np.isfinite(expected), expected, -1.0), 10.0)
         assert unpacked["depth"] == tree.depth
         close(unpacked["plane_normal"], tree.plane_normal)
         close(unpacked["plane_offset"], tree.plane_offset, 10.0)
