@@ -15,33 +15,41 @@ Three passes, all into float targets of the view's size:
    Holzschuch 2006, section 3.3.6. The weight is the reflectivity, times Schlick's
    Fresnel term where the reflector asks for it (SBC V-D).
 2. **Reflections**, per reflection history and its sheets (``SampleBasedCamera.groups``:
-   one history per sheet, a history repeating when its rays cross in space), in three
-   kinds of draw:
+   one history per sheet, a history repeating when its rays cross in space). Made
+   **once per camera** (:meth:`ReflectionRenderer.projection`, cached; a mesh change
+   means a new renderer) and drawn every frame:
 
-   a. *vertex projection*: every vertex of the (pre-subdivided, SBC V-B,
-      :mod:`.subdivision`) diffuse meshes is projected once per sheet with
-      ``sbc_project`` (``glsl/sbc_projection.glsl``); pixel, depth and validity, and
-      the eye vector and reflected distance, land in texel ``gl_VertexID`` of the
-      sheet's layer of two float targets;
-   b. *triangles*, per sheet: the meshes are drawn un-indexed, every vertex carrying
-      its triangle's three corner indices; it reads the three projections and
-      collapses the triangle unless every corner projects. Projecting per vertex first,
-      instead of three corners per drawn vertex, costs one projection per mesh vertex
-      and makes the decision identical for the triangle's three vertices. Across the
-      seam between two sheets of one history a corner may take its projection from the
-      neighbouring sheet, within a few ray-map cells (``glsl/reflection_mesh_vert.glsl``),
-      so seams do not open cracks. The depth is SBC V-A's offset (k - 1 + z / D) g:
-      within a sheet the point nearer the mirror along the reflected ray wins (case 2),
-      lower orders before higher ones (case 3), one depth buffer for all sheets. The
-      fragment stage keeps only pixels whose pre-pass id is the sheet's first reflector
-      (history[0] + 1): reflections stay inside the visible footprint of their
-      reflector, and real objects in front of a mirror stay in front;
-   c. *mixed triangles* (SBC V-B: one or two corners project): read back from the
-      vertex projections, they are drawn instanced as a barycentric sub-grid whose every
-      sub-vertex is projected on its own (``glsl/reflection_mixed_vert.glsl``);
-      sub-triangles with a corner that does not project are discarded, so the
-      reflection ends within about a sub-triangle (about 1 px, :data:`MIXED_SUB_PX`) of
-      where projection ends instead of at the last whole triangle.
+   a. *vertex projection* (GPU): every vertex of the (pre-subdivided, SBC V-B,
+      :mod:`.subdivision`) diffuse meshes is projected per sheet with ``sbc_project``
+      (``glsl/sbc_projection.glsl``, ``glsl/reflection_project_vert.glsl``): pixel,
+      depth and validity, eye vector and reflected distance land in texel
+      ``gl_VertexID`` of the sheet's layer of two float targets, read back. Only the
+      vertex chunks (runs of :data:`CHUNK_VERTICES` Morton-sorted vertices) that meet
+      the sheet's bounds are projected (:mod:`..addon.sheet_bounds`); the others could
+      not project there.
+   b. *triangles* (CPU, from the read-back), per sheet: those with a corner projected in
+      the sheet and every corner projected, in it or, across the seam between two sheets
+      of one history, in another sheet within a few ray-map cells of the triangle's own
+      corner (:data:`STITCH_CELLS`; so seams do not open cracks, and a corner is not
+      joined to its second image across the mirror). The depth is SBC V-A's offset
+      (k - 1 + z / D) g: within a sheet the point nearer the mirror along the reflected
+      ray wins (case 2), lower orders before higher ones (case 3), one depth buffer.
+   c. *mixed triangles* (SBC V-B: one or two corners project, none stitched): each is
+      cut into a barycentric sub-grid whose sub-vertices are projected on their own (a
+      second GPU projection pass); sub-triangles with a sub-vertex that does not project
+      are dropped, so the reflection ends within about a sub-triangle (about 1 px,
+      :data:`MIXED_SUB_PX`) of where projection ends instead of at the last whole
+      triangle. Inside, a block of :data:`MIXED_COARSE_FACTOR` ^ 2 sub-triangles that
+      all project is kept as one triangle over its projected corners.
+   d. *per frame* (``glsl/reflection_mesh_vert.glsl``): all of it is one vertex buffer
+      whose vertices hold their **first reflector point in world space**, their depth,
+      eye vector, distance and mesh data; one draw places each vertex where the current
+      view sees its reflector point (in the camera's own view, exactly its projected
+      pixel). The fragment stage keeps only pixels whose pre-pass id is the vertex's
+      first reflector (history[0] + 1): reflections stay inside the visible footprint of
+      their reflector, and real objects in front of a mirror stay in front. From a moved
+      view (a new camera still building) the reflection thus stays on the mirror in
+      world space, nearly right, instead of lagging as pixels of the old view.
 
    Shading (SBC V-C, ``glsl/reflection_shading.glsl``): a reflected vertex keeps its
    mesh's colour, normal and UVs (times the mesh's image texture, if any); emission
@@ -64,16 +72,23 @@ read-back of the image, for a viewport) fills the band from the nearest reflecte
 instead. Optionally (``trace_edges``) every pixel next to a drawn reflection that got
 none is traced too.
 
+Drawn from a view other than the camera's, the cached reflection is exact only at the
+reflector points: a reflected triangle is interpolated affinely between them (as in the
+camera's view), the reflection does not slide over the mirror as a new camera would
+make it (until that camera lands), and a triangle with a reflector point behind the
+view is dropped.
+
 Not done: creases of a reflector (a lid's rim) can leave a line of pixels without (or
 with a wrong) reflection, where the engine's rays straddle the crease; for reflections
 of order k > 1 the eye vector of lighting runs to the first reflector point, not the
 last.
 
-:class:`ReflectionRenderer` holds one scene's geometry (subdivided once) and its GPU
-batches; :meth:`ReflectionRenderer.draw` draws any view with any sample-based camera of
-it and composites into the framebuffer that is bound, so a viewport draw handler can
-call it with the region's matrices (``operators.capture.view_from_region``);
-:meth:`ReflectionRenderer.render` draws offscreen and reads the image back.
+:class:`ReflectionRenderer` holds one scene's geometry (subdivided once), its GPU
+batches and the projections of the last cameras drawn; :meth:`ReflectionRenderer.draw`
+draws any view with any sample-based camera of it and composites into the framebuffer
+that is bound, so a viewport draw handler can call it with the region's matrices
+(``operators.capture.view_from_region``); :meth:`ReflectionRenderer.render` draws
+offscreen and reads the image back.
 
 Shaders are built on first use and cached, never at import or register time. Push
 constants stay far below 128 bytes (:data:`PUSH_CONSTANT_BYTES`); the cameras travel in
@@ -90,7 +105,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..addon import band_trace, subdivision
+from ..addon import band_trace, sheet_bounds, subdivision
 from . import projection
 
 _GLSL = Path(__file__).resolve().parent / "glsl"
@@ -102,12 +117,7 @@ PUSH_CONSTANT_BYTES = {
     # mat4 inverse_view_projection; vec2 view_size; int group, order, layer_offset; ivec2 target_size;
     # float inverse_diameter, order_range
     "project": 64 + 8 + 4 + 4 + 4 + 8 + 4 + 4,
-    # ivec2 projected_size; vec2 view_size; int first_reflector_id, own_layer, n_layers, layer_size;
-    # float stitch_px; int use_image
-    "mesh": 8 + 8 + 4 + 4 + 4 + 4 + 4 + 4,
-    # mat4 inverse_view_projection; vec2 view_size; int first_reflector_id, order; float inverse_diameter,
-    # order_range; int use_image, instance_offset
-    "mixed": 64 + 8 + 4 + 4 + 4 + 4 + 4 + 4,
+    "reflected": 64 + 8 + 4 + 4,  # mat4 view_projection; vec2 view_size; int use_camera_pixel, use_image
     "composite": 16 + 4 + 4 + 8,  # vec4 world_color; int reflectors_only, fill_radius; ivec2 origin
 }
 #: A mixed triangle (SBC V-B) is drawn as a triangular grid of n sub-triangles along each
@@ -116,6 +126,9 @@ PUSH_CONSTANT_BYTES = {
 #: (the paper's baseline).
 MIXED_SUBDIVISIONS = 32
 MIXED_SUB_PX = 1.0
+#: Inside a mixed triangle, a block of MIXED_COARSE_FACTOR^2 sub-triangles that all
+#: project is drawn as one (sub-grids of at least twice this many steps).
+MIXED_COARSE_FACTOR = 4
 #: Float targets hold vertex indices exactly below 2^24.
 MAX_VERTICES = 1 << 24
 #: Texels of the vertex projection target (16 bytes each): the sheets of one history
@@ -203,76 +216,34 @@ def _build_project():
     return gpu.shader.create_from_info(info)
 
 
-def _reflected_interface(name: str, subdivided: bool):
+@functools.cache
+def _build_reflected():
     import gpu
 
-    interface = gpu.types.GPUStageInterfaceInfo(name)
+    interface = gpu.types.GPUStageInterfaceInfo("curved_reflections_reflected_interface")
     interface.smooth('VEC4', "color_interp")
     interface.smooth('VEC3', "normal_interp")
     interface.smooth('VEC3', "eye_interp")
     interface.smooth('VEC2', "uv_interp")
     interface.smooth('FLOAT', "distance_interp")
     interface.flat('FLOAT', "lit_interp")
-    if subdivided:
-        interface.no_perspective('FLOAT', "valid_interp")
-    return interface
-
-
-@functools.cache
-def _build_mesh():
-    import gpu
-
+    interface.flat('FLOAT', "reflector_interp")
     info = gpu.types.GPUShaderCreateInfo()
-    info.push_constant('IVEC2', "projected_size")
+    info.push_constant('MAT4', "view_projection")
     info.push_constant('VEC2', "view_size")
-    info.push_constant('INT', "first_reflector_id")
-    info.push_constant('INT', "own_layer")
-    info.push_constant('INT', "n_layers")
-    info.push_constant('INT', "layer_size")
-    info.push_constant('FLOAT', "stitch_px")
+    info.push_constant('INT', "use_camera_pixel")
     info.push_constant('INT', "use_image")
-    info.sampler(0, 'FLOAT_2D', "projected_vertices")
-    info.sampler(1, 'FLOAT_2D', "prepass_labels")
-    info.sampler(2, 'FLOAT_2D', "projected_eyes")
-    info.sampler(3, 'FLOAT_2D', "image")
-    info.vertex_in(0, 'IVEC3', "corners")
-    info.vertex_in(1, 'INT', "corner")
-    info.vertex_in(2, 'VEC4', "color")
-    info.vertex_in(3, 'VEC4', "normal_lit")
-    info.vertex_in(4, 'VEC2', "uv")
-    info.vertex_out(_reflected_interface("curved_reflections_mesh_interface", False))
+    info.sampler(0, 'FLOAT_2D', "prepass_labels")
+    info.sampler(1, 'FLOAT_2D', "image")
+    info.vertex_in(0, 'VEC4', "world_depth")
+    info.vertex_in(1, 'VEC4', "pixel_reflector")
+    info.vertex_in(2, 'VEC4', "eye_distance")
+    info.vertex_in(3, 'VEC4', "color")
+    info.vertex_in(4, 'VEC4', "normal_lit")
+    info.vertex_in(5, 'VEC2', "uv")
+    info.vertex_out(interface)
     info.fragment_out(0, 'VEC4', "color_out")
     info.vertex_source(_source("reflection_mesh_vert.glsl"))
-    info.fragment_source(_shading_source() + _source("reflection_mesh_frag.glsl"))
-    return gpu.shader.create_from_info(info)
-
-
-@functools.cache
-def _build_mixed():
-    import gpu
-
-    info = gpu.types.GPUShaderCreateInfo()
-    info.define("SUBDIVIDED")
-    info.push_constant('MAT4', "inverse_view_projection")
-    info.push_constant('VEC2', "view_size")
-    info.push_constant('INT', "first_reflector_id")
-    info.push_constant('INT', "order")
-    info.push_constant('FLOAT', "inverse_diameter")
-    info.push_constant('FLOAT', "order_range")
-    info.push_constant('INT', "use_image")
-    info.push_constant('INT', "instance_offset")
-    projection.declare_samplers(info)
-    n = len(projection.SAMPLERS)
-    info.sampler(n, 'FLOAT_2D', "prepass_labels")
-    info.sampler(n + 1, 'FLOAT_2D', "image")
-    info.sampler(n + 2, 'FLOAT_2D', "mixed_instances")
-    info.sampler(n + 3, 'FLOAT_2D', "vertex_positions")
-    info.sampler(n + 4, 'FLOAT_2D', "vertex_colors")
-    info.sampler(n + 5, 'FLOAT_2D', "vertex_normals")
-    info.vertex_in(0, 'VEC2', "barycentric")
-    info.vertex_out(_reflected_interface("curved_reflections_mixed_interface", True))
-    info.fragment_out(0, 'VEC4', "color_out")
-    info.vertex_source(projection.library_source() + _shading_source() + _source("reflection_mixed_vert.glsl"))
     info.fragment_source(_shading_source() + _source("reflection_mesh_frag.glsl"))
     return gpu.shader.create_from_info(info)
 
@@ -297,7 +268,7 @@ def _build_composite():
     return gpu.shader.create_from_info(info)
 
 
-_BUILDERS = {"prepass": _build_prepass, "project": _build_project, "mesh": _build_mesh, "mixed": _build_mixed,
+_BUILDERS = {"prepass": _build_prepass, "project": _build_project, "reflected": _build_reflected,
              "composite": _build_composite}
 
 
@@ -427,12 +398,18 @@ def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=Non
     if offset >= MAX_VERTICES:
         raise ValueError(f"{offset} reflected vertices: float targets index below 2^24 only")
     packed = np.concatenate(packed) if packed else np.zeros((0, 10), np.float32)
+    vertices = np.concatenate(vertices) if vertices else np.zeros((0, 3))
+    mesh_triangles = np.concatenate(mesh_triangles) if mesh_triangles else np.zeros((0, 3), np.int64)
+    # Vertices along a Morton curve: runs of them are compact chunks for per-sheet culling.
+    order = sheet_bounds.morton_order(vertices)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    vertices, packed, mesh_triangles = vertices[order], packed[order], rank[mesh_triangles]
     vertex_normals = packed[:, 4:7]
     length = np.linalg.norm(vertex_normals, axis=1, keepdims=True)
     vertex_normals = np.divide(vertex_normals, length, out=np.zeros_like(vertex_normals), where=length > 0)
     mesh_triangles, ranges = _sorted_by_image(
-        np.concatenate(mesh_triangles) if mesh_triangles else np.zeros((0, 3), np.int64),
-        np.concatenate(mesh_image) if mesh_image else np.zeros(0, int))
+        mesh_triangles, np.concatenate(mesh_image) if mesh_image else np.zeros(0, int))
     geometry = DrawGeometry(
         shift=shift,
         prepass_positions=np.concatenate(positions) if positions else np.zeros((0, 3), np.float32),
@@ -441,7 +418,7 @@ def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=Non
         prepass_normals=np.concatenate(normals) if normals else np.zeros((0, 4), np.float32),
         prepass_uvs=np.concatenate(uvs) if uvs else np.zeros((0, 2), np.float32),
         prepass_triangles=prepass_triangles,
-        vertices=np.concatenate(vertices) if vertices else np.zeros((0, 3)),
+        vertices=vertices,
         colors=np.ascontiguousarray(packed[:, :4]),
         triangles=mesh_triangles,
         diameter=float(max(np.linalg.norm(hi - lo), 1e-9)),
@@ -467,11 +444,10 @@ def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=Non
 class FrameTargets:
     """Float textures and framebuffers of one frame size (reusable from frame to frame)."""
 
-    def __init__(self, width: int, height: int, n_vertices: int, layers: int = 1):
+    def __init__(self, width: int, height: int):
         import gpu
 
-        self.width, self.height, self.n_vertices = int(width), int(height), int(n_vertices)
-        self.layers = max(1, int(layers))
+        self.width, self.height = int(width), int(height)
         size = (self.width, self.height)
         self.prepass_colors = gpu.types.GPUTexture(size, format='RGBA32F')
         self.prepass_labels = gpu.types.GPUTexture(size, format='RGBA32F')
@@ -482,20 +458,13 @@ class FrameTargets:
         self.reflection_depth = gpu.types.GPUTexture(size, format='DEPTH_COMPONENT32F')
         self.reflection = gpu.types.GPUFrameBuffer(depth_slot=self.reflection_depth,
                                                    color_slots=(self.reflection_colors,))
-        texels = self.layers * self.n_vertices
-        columns = max(1, min(texels, projection.sbc_pack.TEXTURE_WIDTH))
-        self.projected_size = (columns, max(1, -(-texels // columns)))
-        self.projected = gpu.types.GPUTexture(self.projected_size, format='RGBA32F')
-        self.projected_eyes = gpu.types.GPUTexture(self.projected_size, format='RGBA32F')
-        self.projected_framebuffer = gpu.types.GPUFrameBuffer(color_slots=(self.projected, self.projected_eyes))
         zero = np.zeros(4, np.float32)
         self.no_trace = gpu.types.GPUTexture((1, 1), format='RGBA32F', data=gpu.types.Buffer('FLOAT', 4, zero))
         self.traced = None  # RGBA32F of the traced band of the last frame, or None
         self._output = None
 
-    def fits(self, width: int, height: int, n_vertices: int, layers: int = 1) -> bool:
-        return ((self.width, self.height, self.n_vertices) == (int(width), int(height), int(n_vertices))
-                and self.layers >= layers)
+    def fits(self, width: int, height: int) -> bool:
+        return (self.width, self.height) == (int(width), int(height))
 
     @property
     def output(self):
@@ -589,28 +558,121 @@ def _sheet_chunks(histories: list, capacity: int) -> list:
     return [sheets[k:k + capacity] for sheets in by_history.values() for k in range(0, len(sheets), capacity)]
 
 
+def _points_batch(positions: np.ndarray):
+    """A POINTS batch of (N, 3) float32 positions (the projection pass's input)."""
+    import gpu
+
+    return gpu.types.GPUBatch(type='POINTS', buf=_vertex_buffer({"position": (positions, 'F32', 'FLOAT')}))
+
+
+def _runs(values: np.ndarray) -> list:
+    """(value, first, count) of each run of equal consecutive ``values``."""
+    values = np.asarray(values)
+    if len(values) == 0:
+        return []
+    starts = np.flatnonzero(np.r_[True, values[1:] != values[:-1]])
+    counts = np.diff(np.r_[starts, len(values)])
+    return [(int(values[k]), int(k), int(n)) for k, n in zip(starts, counts)]
+
+
+#: Vertices per chunk of the per-sheet culling: runs of the Morton-sorted vertices
+#: (:func:`sheet_bounds.morton_order`), each with its AABB.
+CHUNK_VERTICES = 512
+#: Cameras whose projections a renderer keeps (a viewport region each, as operators/live.py's MAX_VIEWS).
+CACHED_PROJECTIONS = 8
+
+
+def _same_view(a, b) -> bool:
+    """Whether two views are exactly the same (size and matrices)."""
+    return a is b or ((a.width, a.height) == (b.width, b.height)
+                      and np.array_equal(np.asarray(a.view_matrix), np.asarray(b.view_matrix))
+                      and np.array_equal(np.asarray(a.projection_matrix), np.asarray(b.projection_matrix)))
+
+
+@dataclass
+class CachedProjection:
+    """The reflected triangles of one sample-based camera over the renderer's meshes.
+
+    Made once per camera (or per mesh change: a new renderer) by
+    :meth:`ReflectionRenderer.projection`, drawn every frame. Every vertex of a drawn
+    reflected triangle holds its first reflector point in world space, its depth (order
+    and distance along the reflected ray, SBC V-A), its camera-view pixel, its eye vector
+    and reflected distance (SBC V-C, V-D) and its mesh's colour, normal and UVs.
+    """
+
+    textures: object  # the projection.SBCTextures it was made from (identity = the cache key)
+    camera_view: object  # the view the camera was built for
+    batch: object  # GPUBatch of the triangles (un-indexed), or None when nothing is reflected
+    runs: tuple  # (image index or -1, first vertex, vertex count), in drawing order
+    triangles: int
+    mixed_triangles: int
+    stats: dict = field(default_factory=dict)
+    camera: object = None  # the SampleBasedCamera, when :meth:`ReflectionRenderer.render` was given it
+
+
+@functools.cache
+def _coarse_cover(n: int, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """For the n x n and m x m barycentric sub-grids (m divides n): the m-grid sub-triangle
+    holding each n-grid sub-triangle (n^2,), and the m-grid sub-triangles as n-grid vertex
+    indices (m^2, 3): a coarse sub-triangle's corners are points of the fine grid."""
+    fine_points, fine_triangles = subdivision.barycentric_grid(n)
+    coarse_points, coarse_triangles = subdivision.barycentric_grid(m)
+
+    def grid_ij(points, size):
+        i = np.rint(points[:, 1] * size).astype(np.int64)
+        return i, size - np.rint(points[:, 0] * size).astype(np.int64) - i
+
+    def cell_key(i, j, triangles, scale):
+        ci, cj = i[triangles].mean(axis=1) / scale, j[triangles].mean(axis=1) / scale
+        a, b = np.floor(ci).astype(np.int64), np.floor(cj).astype(np.int64)
+        return ((a * m + b) * 2 + ((ci - a) + (cj - b) > 1.0)).astype(np.int64)
+
+    fi, fj = grid_ij(fine_points, n)
+    ci, cj = grid_ij(coarse_points, m)
+    lookup = np.full(2 * m * m, -1, np.int64)
+    lookup[cell_key(ci, cj, coarse_triangles, 1)] = np.arange(len(coarse_triangles))
+    coarse_of_fine = lookup[cell_key(fi, fj, fine_triangles, n // m)]
+    index = np.full((n + 1, n + 1), -1, np.int64)
+    index[fi, fj] = np.arange(len(fi))
+    factor = n // m
+    coarse_in_fine = index[ci[coarse_triangles] * factor, cj[coarse_triangles] * factor]
+    return coarse_of_fine, coarse_in_fine
+
+
 class ReflectionRenderer:
     """One scene's reflected geometry and GPU batches; draws it for any view and camera.
 
-    Build it once per scene change (subdivision runs here, once per mesh); call
-    :meth:`draw` or :meth:`render` per frame with that frame's view and its
-    sample-based camera in textures (``projection.SBCTextures``).
+    Build it once per scene change (subdivision runs here, once per mesh). The projection
+    of the meshes with a sample-based camera is made once per camera
+    (:meth:`projection`, cached until another camera's textures are drawn) and
+    :meth:`draw` or :meth:`render` draws any view with it. ``cull``: project in each
+    sheet only the vertex chunks that meet the sheet's k-DOP (:mod:`..addon.sheet_bounds`;
+    needs the camera itself, not only its textures).
     """
 
     def __init__(self, reflectors, meshes, reflector_colors=None, reflectivity=None,
                  edge_fraction: float | None = subdivision.EDGE_FRACTION, *, fresnel_f0=None,
-                 attenuation_distance=None, mixed_subdivisions: int = MIXED_SUBDIVISIONS):
+                 attenuation_distance=None, mixed_subdivisions: int = MIXED_SUBDIVISIONS, cull: bool = True):
         self.geometry = prepare_geometry(reflectors, meshes, reflector_colors, reflectivity, edge_fraction,
                                          fresnel_f0, attenuation_distance)
         self.mixed_subdivisions = int(mixed_subdivisions)
+        self.cull = bool(cull)
         self.stats = dict(self.geometry.stats)
+        self.counts = {"projections": 0, "frames": 0}
         self._reflectors, self._meshes = list(reflectors), list(meshes)
         self._batches = None
         self._targets = None
         self._tracer = None
+        self._projection = None  # the last one drawn
+        self._cache: dict = {}  # id(textures) -> CachedProjection, least recently drawn first
+        g = self.geometry
+        self._triangle_image = np.full(len(g.triangles), -1, np.int64)
+        for image, first, count in g.ranges:
+            self._triangle_image[first:first + count] = image
+        self._chunk_boxes = sheet_bounds.chunk_boxes(g.vertices, CHUNK_VERTICES) if len(g.vertices) else None
 
     def _make_batches(self) -> dict:
-        """Vertex buffers, the vertex data textures of the mixed-triangle pass and the images."""
+        """Vertex buffers of the pre-pass and of the projection's points, and the images."""
         import gpu
 
         g = self.geometry
@@ -626,22 +688,7 @@ class ReflectionRenderer:
                     type='TRIS', seq=g.prepass_triangles[first:first + count])))
                 for image, first, count in g.prepass_ranges]
         if len(g.triangles):
-            points = _vertex_buffer({"position": (g.vertices.astype(np.float32), 'F32', 'FLOAT')})
-            batches["points"] = gpu.types.GPUBatch(type='POINTS', buf=points)
-            corners = np.repeat(g.triangles.astype(np.int32), 3, axis=0)
-            flat = g.triangles.reshape(-1)
-            buffer = _vertex_buffer({
-                "corners": (corners, 'I32', 'INT'),
-                "corner": (np.tile(np.arange(3, dtype=np.int32), len(g.triangles)), 'I32', 'INT'),
-                "color": (g.colors[flat], 'F32', 'FLOAT'),
-                "normal_lit": (np.c_[g.normals, g.lit][flat].astype(np.float32), 'F32', 'FLOAT'),
-                "uv": (g.uvs[flat], 'F32', 'FLOAT'),
-            })
-            batches["mesh"] = gpu.types.GPUBatch(type='TRIS', buf=buffer)
-            # Mixed triangles (SBC V-B): the vertex data as textures, one texel per vertex.
-            batches["vertex_positions"] = _data_texture(np.c_[g.vertices, g.uvs[:, 0]])
-            batches["vertex_colors"] = _data_texture(np.c_[g.colors[:, :3], g.lit])
-            batches["vertex_normals"] = _data_texture(np.c_[g.normals, g.uvs[:, 1]])
+            batches["points"] = _points_batch(g.vertices.astype(np.float32))
         batches["images"] = [_data_texture(image, image.shape[1]) for image in g.images]
         batches["no_image"] = _data_texture(np.ones((1, 4)))
         screen = _vertex_buffer({"position": (np.array([[-1, -1], [3, -1], [-1, 3]], np.float32), 'F32', 'FLOAT')})
@@ -651,29 +698,33 @@ class ReflectionRenderer:
     def _image(self, index: int):
         return self._batches["images"][index] if index >= 0 else self._batches["no_image"]
 
-    def targets(self, width: int, height: int, layers: int = 1) -> FrameTargets:
-        """The frame targets for this size (and at least ``layers`` projection layers),
-        reused while they fit."""
-        n_vertices = len(self.geometry.vertices)
-        if self._targets is None or not self._targets.fits(width, height, n_vertices, layers):
-            self._targets = FrameTargets(width, height, n_vertices, layers)
+    def targets(self, width: int, height: int) -> FrameTargets:
+        """The frame targets for this size, reused while they fit."""
+        if self._targets is None or not self._targets.fits(width, height):
+            self._targets = FrameTargets(width, height)
         return self._targets
 
+    def invalidate(self) -> None:
+        """Forget the cached projections: the next draw projects again."""
+        self._projection = None
+        self._cache.clear()
+
     def draw(self, view, textures, world_color=(0.0, 0.0, 0.0, 1.0), reflectors_only: bool = False,
-             fill_radius: int | None = None) -> FrameTargets:
+             fill_radius: int | None = None, camera=None) -> FrameTargets:
         """Pre-pass and reflections of ``view`` into the frame targets
         (:meth:`draw_passes`), then the composite into the framebuffer bound by the
         caller (:meth:`composite`). What a viewport draw handler calls, with the
         region's view (``operators.capture.view_from_region``); nothing is read back.
 
-        ``textures`` is the view's sample-based camera as ``projection.SBCTextures``;
-        ``world_color`` the linear RGB(A) that reflected rays leaving the scene show;
-        ``fill_radius`` the composite's cheap fill of the band along a footprint's edge
-        (``None``: the camera's down-sampling), where :meth:`render` traces instead.
+        ``textures`` is a sample-based camera as ``projection.SBCTextures``, ``camera``
+        the camera itself (optional; see :meth:`draw_passes`); ``world_color`` the
+        linear RGB(A) that reflected rays leaving the scene show; ``fill_radius`` the
+        composite's cheap fill of the band along a footprint's edge (``None``: the
+        camera's down-sampling), where :meth:`render` traces instead.
         """
         import gpu
 
-        targets = self.draw_passes(view, textures)
+        targets = self.draw_passes(view, textures, camera)
         if fill_radius is None:
             fill_radius = textures.packed.downsample
         x, y, width, height = gpu.state.viewport_get()
@@ -682,23 +733,30 @@ class ReflectionRenderer:
         self.composite(targets, world_color, reflectors_only, fill_radius, origin)
         return targets
 
-    def draw_passes(self, view, textures) -> FrameTargets:
-        """The pre-pass and every sheet's reflection into the frame targets of ``view``'s size."""
+    def draw_passes(self, view, textures, camera=None) -> FrameTargets:
+        """The pre-pass and the reflected triangles of ``view`` into its frame targets.
+
+        The reflected triangles come from :meth:`projection` of ``textures``: made now
+        when these textures are not the cached ones, else reused. The projection is made
+        in the camera's own view: ``camera.ray_map.view`` when the camera is given, else
+        ``view`` (which must then be the camera's view). A ``view`` other than the
+        camera's (the viewport moved, a new camera is being built) draws the cached
+        first reflector points where ``view`` sees them.
+        """
         import gpu
         from mathutils import Matrix
 
         if self._batches is None:
             self._batches = self._make_batches()
         batches, g = self._batches, self.geometry
-        histories = list(textures.groups)
-        chunks = _sheet_chunks(histories, max(1, MAX_PROJECTED_TEXELS // max(1, len(g.vertices))))
-        targets = self.targets(view.width, view.height, max((len(c) for c in chunks), default=1))
+        camera_view = camera.ray_map.view if camera is not None else view
+        cached = self.projection(textures, camera_view, camera)
+        targets = self.targets(view.width, view.height)
         width, height = targets.width, targets.height
-        stitch_px = STITCH_CELLS * textures.packed.downsample
         translate = np.eye(4)
         translate[:3, 3] = g.shift
-        view_projection = np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix) @ translate
-        order_range = 1.0 / (max((len(h) for h in histories), default=1) + 1)
+        view_projection = Matrix((np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix)
+                                  @ translate).tolist())
         with _saved_state():
             gpu.state.blend_set('NONE')
             gpu.state.face_culling_set('NONE')  # mirrors are two-sided; reflections flip winding
@@ -710,7 +768,7 @@ class ReflectionRenderer:
                     gpu.state.depth_mask_set(True)
                     shader = _shader("prepass")
                     shader.bind()
-                    shader.uniform_float("view_projection", Matrix(view_projection.tolist()))
+                    shader.uniform_float("view_projection", view_projection)
                     shader.uniform_float("camera", _camera(view, g.shift))
                     for image, batch in batches["prepass"]:
                         shader.uniform_int("use_image", int(image >= 0))
@@ -719,17 +777,39 @@ class ReflectionRenderer:
             with targets.reflection.bind():
                 gpu.state.viewport_set(0, 0, width, height)
                 targets.reflection.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
-            self.stats["mixed_triangles"] = 0
-            if "mesh" in batches:
-                world_to_clip = np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix)
-                inverse = Matrix(np.linalg.inv(world_to_clip).tolist())
-                mixed = 0
-                for sheets in chunks:
-                    mixed += self._draw_history(targets, textures, sheets, histories[sheets[0]], order_range,
-                                                stitch_px, inverse)
-                self.stats["mixed_triangles"] = mixed
+                if cached.batch is not None:
+                    gpu.state.depth_test_set('LESS')
+                    gpu.state.depth_mask_set(True)
+                    shader = _shader("reflected")
+                    shader.bind()
+                    shader.uniform_float("view_projection", view_projection)
+                    shader.uniform_float("view_size", (float(width), float(height)))
+                    shader.uniform_int("use_camera_pixel", int(_same_view(view, cached.camera_view)))
+                    shader.uniform_sampler("prepass_labels", targets.prepass_labels)
+                    for image, first, count in cached.runs:
+                        shader.uniform_int("use_image", int(image >= 0))
+                        shader.uniform_sampler("image", self._image(image))
+                        cached.batch.draw_range(shader, elem_start=first, elem_count=count)
+        self.stats["mixed_triangles"] = cached.mixed_triangles
+        self.counts["frames"] += 1
         targets.traced = None
         return targets
+
+    def projection(self, textures, camera_view, camera=None) -> CachedProjection:
+        """The reflected triangles of ``textures``'s camera, built in ``camera_view``:
+        the cached ones when they were made from these textures (the last
+        :data:`CACHED_PROJECTIONS` cameras drawn are kept: one per viewport region),
+        else made now."""
+        key = id(textures)
+        cached = self._cache.pop(key, None)
+        if cached is None or cached.textures is not textures:
+            while len(self._cache) >= CACHED_PROJECTIONS:
+                self._cache.pop(next(iter(self._cache)))
+            cached = self._project(textures, camera_view, camera)
+            self.stats.update(cached.stats)
+        self._cache[key] = cached  # most recently used last
+        self._projection = cached
+        return cached
 
     def composite(self, targets: FrameTargets, world_color=(0.0, 0.0, 0.0, 1.0), reflectors_only: bool = False,
                   fill_radius: int = 0, origin=None) -> None:
@@ -788,156 +868,314 @@ class ReflectionRenderer:
         targets.traced = gpu.types.GPUTexture((targets.width, targets.height), format='RGBA32F', data=data)
         return int(len(pixels))
 
-    def _draw_history(self, targets: FrameTargets, textures, sheets: list, history, order_range: float,
-                      stitch_px: float, inverse_view_projection) -> int:
-        """Project every vertex in each of ``sheets`` (sheets of one history) into its own
-        layer, then draw each sheet's triangles, stitched across the seams between them,
-        and its mixed triangles subdivided (:meth:`_draw_mixed`). Returns how many mixed
-        triangles were drawn."""
+    def _vertex_runs(self, kdops, sheet: int) -> list:
+        """(first, count) runs of vertices to project in ``sheet``: all of them without
+        culling, else the chunks meeting the sheet's k-DOP, neighbouring chunks merged."""
+        n = len(self.geometry.vertices)
+        if kdops is None:
+            return [(0, n)]
+        lo, hi = self._chunk_boxes
+        kdop, cone = kdops[0][sheet], None if kdops[1] is None else kdops[1][sheet]
+        meeting = sheet_bounds.chunks_meeting(lo, hi, kdop)
+        if cone is not None:
+            meeting &= sheet_bounds.chunks_in_cone(lo, hi, cone)
+        chosen = np.flatnonzero(meeting)
+        if len(chosen) == 0:
+            return []
+        breaks = np.flatnonzero(np.diff(chosen) > 1)
+        starts = chosen[np.r_[0, breaks + 1]]
+        ends = chosen[np.r_[breaks, len(chosen) - 1]] + 1
+        return [(int(a) * CHUNK_VERTICES, int(min(b * CHUNK_VERTICES, n) - a * CHUNK_VERTICES))
+                for a, b in zip(starts, ends)]
+
+    def _project(self, textures, camera_view, camera) -> CachedProjection:
+        """Project the meshes with the camera of ``textures`` (SBC V-A) and decide, from
+        the read-back, which reflected triangles are drawn (V-B): per sheet, those with
+        every corner projected in it or, across a seam, in another sheet of its history
+        within :data:`STITCH_CELLS` cells; mixed triangles (one or two corners projected,
+        none stitched) as sub-grids of about :data:`MIXED_SUB_PX` whose sub-vertices are
+        projected on their own, keeping the sub-triangles whose three sub-vertices project.
+        """
+        import gpu
+        from mathutils import Matrix
+
+        start = time.perf_counter()
+        self.counts["projections"] += 1
+        if self._batches is None:
+            self._batches = self._make_batches()
+        g = self.geometry
+        histories = list(textures.groups)
+        n_vertices = len(g.vertices)
+        if n_vertices == 0 or not histories or "points" not in self._batches:
+            return CachedProjection(textures, camera_view, None, (), 0, 0, {
+                "projection_seconds": 0.0, "projected_vertices": 0, "unculled_vertices": 0, "mixed_sub_triangles": 0})
+        world_to_clip = np.asarray(camera_view.projection_matrix) @ np.asarray(camera_view.view_matrix)
+        setup = {"inverse_view_projection": Matrix(np.linalg.inv(world_to_clip).tolist()),
+                 "view_size": (float(camera_view.width), float(camera_view.height)),
+                 "order_range": 1.0 / (max(len(h) for h in histories) + 1)}
+        stitch_px = STITCH_CELLS * textures.packed.downsample
+        kdops = ((sheet_bounds.sheet_kdops(camera, g.diameter), getattr(camera, "cones", None))
+                 if (self.cull and camera is not None) else None)
+        pieces, mixed_blocks, projected = [], [], 0
+        for sheets in _sheet_chunks(histories, max(1, MAX_PROJECTED_TEXELS // n_vertices)):
+            history = histories[sheets[0]]
+            draws = []
+            for layer, sheet in enumerate(sheets):
+                for first, count in self._vertex_runs(kdops, sheet):
+                    draws.append((sheet, len(history), layer * n_vertices, first, count))
+                    projected += count
+            points, eyes = self._project_pass(textures, self._batches["points"], draws, len(sheets) * n_vertices,
+                                              setup)
+            points = points.reshape(len(sheets), n_vertices, 4)
+            eyes = eyes.reshape(len(sheets), n_vertices, 4)
+            pieces += self._full_triangles(points, eyes, history, stitch_px)
+            if self.mixed_subdivisions > 0:
+                blocks = self._mixed_instances(points, sheets, len(history))
+                pieces += [("mixed", len(mixed_blocks) + k) for k in range(len(blocks))]
+                mixed_blocks += blocks
+        mixed_pieces = self._mixed_triangles(textures, mixed_blocks, setup)
+        n_mixed = sum(len(b[2]) for b in mixed_blocks)
+        stats = {"projected_vertices": projected, "unculled_vertices": len(histories) * n_vertices,
+                 "mixed_sub_triangles": sum(len(p[1]["world_depth"]) for p in mixed_pieces) // 3}
+        pieces = [mixed_pieces[p[1]] if p[0] == "mixed" else p for p in pieces]
+        pieces = [p for p in pieces if len(p[1]["world_depth"])]
+        if not pieces:
+            stats["projection_seconds"] = time.perf_counter() - start
+            return CachedProjection(textures, camera_view, None, (), 0, n_mixed, stats)
+        runs, first = [], 0
+        for image, arrays in pieces:
+            count = len(arrays["world_depth"])
+            if runs and runs[-1][0] == image:
+                runs[-1] = (image, runs[-1][1], runs[-1][2] + count)
+            else:
+                runs.append((image, first, count))
+            first += count
+        names = ("world_depth", "pixel_reflector", "eye_distance", "color", "normal_lit", "uv")
+        buffer = _vertex_buffer({name: (np.concatenate([p[1][name] for p in pieces]).astype(np.float32), 'F32',
+                                        'FLOAT') for name in names})
+        batch = gpu.types.GPUBatch(type='TRIS', buf=buffer)
+        stats["projection_seconds"] = time.perf_counter() - start
+        return CachedProjection(textures, camera_view, batch, tuple(runs), first // 3, n_mixed, stats)
+
+    def _project_pass(self, textures, batch, draws: list, n_texels: int, setup: dict):
+        """Project the points of ``batch`` with ``textures``: per (group, order, texel
+        offset, first, count) of ``draws`` the points first .. first + count - 1 into
+        texels offset + index. Returns the two targets read back, (n_texels, 4) each:
+        (pixel, depth, valid) and (eye vector, reflected distance)
+        (``glsl/reflection_project_vert.glsl``); texels of points not drawn are 0 (invalid)."""
         import gpu
 
-        batches = self._batches
-        columns, rows = targets.projected_size
-        n_vertices = len(self.geometry.vertices)
-        view_size = (float(targets.width), float(targets.height))
-        with targets.projected_framebuffer.bind():
+        columns = max(1, min(n_texels, projection.sbc_pack.TEXTURE_WIDTH))
+        rows = max(1, -(-n_texels // columns))
+        points = gpu.types.GPUTexture((columns, rows), format='RGBA32F')
+        eyes = gpu.types.GPUTexture((columns, rows), format='RGBA32F')
+        framebuffer = gpu.types.GPUFrameBuffer(color_slots=(points, eyes))
+        with _saved_state(), framebuffer.bind():
+            gpu.state.blend_set('NONE')
             gpu.state.viewport_set(0, 0, columns, rows)
-            targets.projected_framebuffer.clear(color=(0.0, 0.0, 0.0, 0.0))
+            framebuffer.clear(color=(0.0, 0.0, 0.0, 0.0))
             gpu.state.depth_test_set('NONE')
             gpu.state.program_point_size_set(True)
             try:
                 shader = _shader("project")
                 shader.bind()
-                shader.uniform_float("inverse_view_projection", inverse_view_projection)
-                shader.uniform_float("view_size", view_size)
-                shader.uniform_int("order", len(history))
+                shader.uniform_float("inverse_view_projection", setup["inverse_view_projection"])
+                shader.uniform_float("view_size", setup["view_size"])
                 shader.uniform_int("target_size", (columns, rows))
                 shader.uniform_float("inverse_diameter", 1.0 / self.geometry.diameter)
-                shader.uniform_float("order_range", order_range)
+                shader.uniform_float("order_range", setup["order_range"])
                 textures.bind(shader)
-                for layer, group in enumerate(sheets):
-                    shader.uniform_int("group", group)
-                    shader.uniform_int("layer_offset", layer * n_vertices)
-                    batches["points"].draw(shader)
+                for group, order, offset, first, count in draws:
+                    shader.uniform_int("group", int(group))
+                    shader.uniform_int("order", int(order))
+                    shader.uniform_int("layer_offset", int(offset))
+                    batch.draw_range(shader, elem_start=int(first), elem_count=int(count))
             finally:
                 gpu.state.program_point_size_set(False)
-        with targets.reflection.bind():
-            gpu.state.viewport_set(0, 0, targets.width, targets.height)
-            gpu.state.depth_test_set('LESS')
-            gpu.state.depth_mask_set(True)
-            shader = _shader("mesh")
-            shader.bind()
-            shader.uniform_int("projected_size", (columns, rows))
-            shader.uniform_float("view_size", view_size)
-            shader.uniform_int("first_reflector_id", int(history[0]) + 1)
-            shader.uniform_int("n_layers", len(sheets))
-            shader.uniform_int("layer_size", n_vertices)
-            shader.uniform_float("stitch_px", float(stitch_px))
-            shader.uniform_sampler("projected_vertices", targets.projected)
-            shader.uniform_sampler("projected_eyes", targets.projected_eyes)
-            shader.uniform_sampler("prepass_labels", targets.prepass_labels)
-            for layer in range(len(sheets)):
-                shader.uniform_int("own_layer", layer)
-                for image, first, count in self.geometry.ranges:
-                    shader.uniform_int("use_image", int(image >= 0))
-                    shader.uniform_sampler("image", self._image(image))
-                    batches["mesh"].draw_range(shader, elem_start=3 * first, elem_count=3 * count)
-        if self.mixed_subdivisions <= 0:
-            return 0
-        return self._draw_mixed(targets, textures, sheets, history, order_range, inverse_view_projection)
+        return (_read_texture(points, columns, rows).reshape(-1, 4)[:n_texels],
+                _read_texture(eyes, columns, rows).reshape(-1, 4)[:n_texels])
 
-    def _draw_mixed(self, targets: FrameTargets, textures, sheets: list, history, order_range: float,
-                    inverse_view_projection) -> int:
-        """Mixed triangles of ``sheets`` (SBC V-B), each as a sub-grid whose vertices are
-        projected on their own (``glsl/reflection_mixed_vert.glsl``).
+    def _vertex_arrays(self, positions, points, eyes, reflector: float, color, normal_lit, uv) -> dict:
+        """Per-vertex arrays of drawn reflected triangles (``glsl/reflection_mesh_vert.glsl``)."""
+        n = len(points)
+        world = np.asarray(positions, np.float64) + eyes[:, :3] - self.geometry.shift
+        return {"world_depth": np.c_[world, points[:, 2]],
+                "pixel_reflector": np.c_[points[:, :2], np.full(n, reflector), np.zeros(n)],
+                "eye_distance": eyes, "color": color, "normal_lit": normal_lit, "uv": uv}
 
-        Which triangles are mixed is read back from the vertex projections: one or two
-        corners project in the sheet and not every corner projects in some sheet of the
-        history (those the triangle pass stitches). The read-back is the projection
-        target's texels of these sheets, 16 bytes per vertex and sheet.
-        """
-        import gpu
+    def _full_triangles(self, points, eyes, history, stitch_px: float) -> list:
+        """(image, per-vertex arrays) pieces of the triangles drawn whole, per sheet (layer)
+        of one history, in triangle order: those with a corner projected in the sheet and
+        every other corner in it or, stitched, in another sheet of the history: the one
+        nearest in the image to the triangle's first corner projected here, within
+        ``stitch_px`` (a point can have two images in two sheets; a corner must not be
+        joined to its other image across the mirror)."""
+        g = self.geometry
+        n_layers = len(points)
+        valid = points[..., 3] > 0.5
+        reflector = float(history[0]) + 1.0
+        limit = np.float32(stitch_px) ** 2
+        pieces = []
+        for layer in range(n_layers):
+            own = valid[layer][g.triangles]
+            candidates = np.flatnonzero(own.any(axis=1))
+            if len(candidates) == 0:
+                continue
+            corners, own = g.triangles[candidates], own[candidates]
+            layer_of = np.full(corners.shape, layer)
+            ok = own.copy()
+            partial = ~own.all(axis=1)
+            if partial.any() and n_layers > 1:
+                anchor = points[layer, corners[np.arange(len(corners)), own.argmax(axis=1)], :2]
+                for k in range(3):
+                    need = partial & ~own[:, k]
+                    if not need.any():
+                        continue
+                    index = corners[need, k]
+                    offset = points[:, index, :2] - anchor[need][None]
+                    distance2 = (offset * offset).sum(axis=2)
+                    near = valid[:, index] & (distance2 <= limit)
+                    near[layer] = False
+                    distance2 = np.where(near, distance2, np.inf)[::-1]  # ties: the last layer, as the GPU did
+                    layer_of[need, k] = n_layers - 1 - distance2.argmin(axis=0)
+                    ok[need, k] = np.isfinite(distance2.min(axis=0))
+            drawn = ok.all(axis=1)
+            if not drawn.any():
+                continue
+            vertex, layers = corners[drawn].reshape(-1), layer_of[drawn].reshape(-1)
+            arrays = self._vertex_arrays(g.vertices[vertex].astype(np.float32), points[layers, vertex],
+                                         eyes[layers, vertex], reflector, g.colors[vertex],
+                                         np.c_[g.normals[vertex], g.lit[vertex]], g.uvs[vertex])
+            image = np.repeat(self._triangle_image[candidates[drawn]], 3)
+            for value, first, count in _runs(image):
+                pieces.append((value, {k: v[first:first + count] for k, v in arrays.items()}))
+        return pieces
 
-        g, batches = self.geometry, self._batches
-        n_vertices = len(g.vertices)
-        projected = _read_texture(targets.projected, *targets.projected_size).reshape(-1, 4)
-        projected = projected[:len(sheets) * n_vertices].reshape(len(sheets), n_vertices, 4)
-        valid = projected[..., 3] > 0.5
+    def _mixed_instances(self, points, sheets: list, order: int) -> list:
+        """Mixed triangles of ``sheets`` (SBC V-B) as (image, n, corners, group, order)
+        blocks, n the sub-grid (a power of two up to ``mixed_subdivisions``, so that
+        sub-triangles span about :data:`MIXED_SUB_PX`): one or two corners project in the
+        sheet and not every corner projects in some sheet of the history (those are
+        stitched)."""
+        g = self.geometry
+        valid = points[..., 3] > 0.5
         somewhere = valid.any(axis=0)[g.triangles].all(axis=1)
-        # Pixels per world unit in each sheet, the largest over the edges of fully projected
-        # triangles (conservative: the median let magnified parts of a sheet go coarse); a
-        # mixed triangle's size in pixels is estimated from its longest edge.
-        edge = np.linalg.norm(g.vertices[g.triangles[:, 1]] - g.vertices[g.triangles[:, 0]], axis=1)
+        # A mixed triangle's size in pixels is estimated from its longest edge.
         longest = np.max([np.linalg.norm(g.vertices[g.triangles[:, k]] - g.vertices[g.triangles[:, (k + 1) % 3]],
                                          axis=1) for k in range(3)], axis=0)
-        instances, runs = [], []
+        # Pixels per world unit at each vertex: the largest over the edges of the fully
+        # projected triangles around it (local, so that a magnified part of a sheet, near a
+        # silhouette, does not refine every mixed triangle of the sheet); a mixed triangle
+        # without such a neighbour takes the sheet's largest.
+        scales = []
+        for layer in range(len(sheets)):
+            own = valid[layer][g.triangles]
+            full = np.flatnonzero(own.all(axis=1))
+            vertex_scale = np.zeros(len(g.vertices))
+            largest = 0.0
+            for k in range(3):
+                a, b = g.triangles[full, k], g.triangles[full, (k + 1) % 3]
+                length = np.linalg.norm(g.vertices[b] - g.vertices[a], axis=1)
+                ratio = np.linalg.norm(points[layer, b, :2] - points[layer, a, :2], axis=1) / np.where(
+                    length > 0, length, np.inf)
+                np.maximum.at(vertex_scale, a, ratio)
+                np.maximum.at(vertex_scale, b, ratio)
+                largest = max(largest, float(ratio.max(initial=0.0)))
+            scales.append((vertex_scale, largest if len(full) else np.inf))
+        blocks = []
         for image, first, count in g.ranges:
             triangles = g.triangles[first:first + count]
             by_level: dict = {}
             for layer, group in enumerate(sheets):
                 own = valid[layer][triangles]
-                full = own.all(axis=1) & (edge[first:first + count] > 0)
-                pixels = projected[layer][triangles[full], :2]
-                scale = (np.max(np.linalg.norm(pixels[:, 1] - pixels[:, 0], axis=1) / edge[first:first + count][full])
-                         if full.any() else np.inf)
                 chosen = np.flatnonzero(own.any(axis=1) & ~own.all(axis=1) & ~somewhere[first:first + count])
                 if len(chosen) == 0:
                     continue
+                vertex_scale, largest = scales[layer]
+                scale = vertex_scale[triangles[chosen]].max(axis=1)
+                scale = np.where(scale > 0, scale, largest)
                 size_px = scale * longest[first:first + count][chosen]
                 wanted = np.clip(np.nan_to_num(size_px / MIXED_SUB_PX, posinf=1e9), 1, self.mixed_subdivisions)
                 level = np.minimum(np.ceil(np.log2(wanted)).astype(np.int64),
                                    int(np.log2(max(1, self.mixed_subdivisions))))
-                corners = triangles[chosen]
-                anchor = projected[layer][corners[np.arange(len(chosen)), own[chosen].argmax(axis=1)], :2]
-                texels = np.zeros((len(chosen), 2, 4), np.float32)
-                texels[:, 0, :3] = corners
-                texels[:, 0, 3] = group
-                texels[:, 1, :2] = anchor
                 for value in np.unique(level):
-                    by_level.setdefault(int(value), []).append(texels[level == value])
+                    by_level.setdefault(int(value), []).append((triangles[chosen[level == value]],
+                                                                np.full(int((level == value).sum()), group)))
             for value, parts in by_level.items():
-                start = sum(len(i) for i in instances) // 2
-                block = np.concatenate(parts)
-                instances.append(block.reshape(-1, 4))
-                runs.append((image, 1 << value, start, len(block)))
-        if not instances:
-            return 0
-        instance_texture = _data_texture(np.concatenate(instances), 2 * 2048)
-        with targets.reflection.bind():
-            gpu.state.viewport_set(0, 0, targets.width, targets.height)
-            gpu.state.depth_test_set('LESS')
-            gpu.state.depth_mask_set(True)
-            shader = _shader("mixed")
-            shader.bind()
-            shader.uniform_float("inverse_view_projection", inverse_view_projection)
-            shader.uniform_float("view_size", (float(targets.width), float(targets.height)))
-            shader.uniform_int("first_reflector_id", int(history[0]) + 1)
-            shader.uniform_int("order", len(history))
-            shader.uniform_float("inverse_diameter", 1.0 / g.diameter)
-            shader.uniform_float("order_range", order_range)
-            textures.bind(shader)
-            shader.uniform_sampler("prepass_labels", targets.prepass_labels)
-            shader.uniform_sampler("mixed_instances", instance_texture)
-            for name in ("vertex_positions", "vertex_colors", "vertex_normals"):
-                shader.uniform_sampler(name, batches[name])
-            for image, n, first, count in runs:
-                shader.uniform_int("use_image", int(image >= 0))
-                shader.uniform_sampler("image", self._image(image))
-                shader.uniform_int("instance_offset", first)
-                self._sub_grid(n).draw_instanced(shader, instance_start=0, instance_count=count)
-        return sum(run[3] for run in runs)
+                blocks.append((image, 1 << value, np.concatenate([p[0] for p in parts]),
+                               np.concatenate([p[1] for p in parts]), order))
+        return blocks
 
-    def _sub_grid(self, n: int):
-        """The batch of an n x n barycentric sub-grid (:func:`subdivision.barycentric_grid`)."""
-        import gpu
-
-        key = f"sub_grid_{n}"
-        if key not in self._batches:
+    def _mixed_triangles(self, textures, blocks: list, setup: dict) -> list:
+        """(image, per-vertex arrays) of each block of :meth:`_mixed_instances`: every
+        sub-vertex (barycentric mix of the corners' data, :func:`subdivision.barycentric_grid`)
+        projected with its sheet; sub-triangles with a sub-vertex that does not project
+        are left out, so the reflection ends within about a sub-triangle of where
+        projection ends instead of at the last whole triangle."""
+        g = self.geometry
+        if not blocks:
+            return []
+        vertices32 = g.vertices.astype(np.float32)
+        grids, positions, groups, orders = [], [], [], []
+        for image, n, corners, group, order in blocks:
             grid, sub_triangles = subdivision.barycentric_grid(n)
-            self._batches[key] = gpu.types.GPUBatch(
-                type='TRIS', buf=_vertex_buffer({"barycentric": (grid.astype(np.float32), 'F32', 'FLOAT')}),
-                elem=gpu.types.GPUIndexBuf(type='TRIS', seq=sub_triangles.astype(np.int32)))
-        return self._batches[key]
+            w = grid.astype(np.float32)
+            w = np.c_[w, np.float32(1.0) - w[:, 0] - w[:, 1]]  # (G, 3)
+            grids.append((w, sub_triangles))
+            positions.append(np.einsum("gk,mkc->mgc", w, vertices32[corners]).reshape(-1, 3))
+            groups.append(np.repeat(group, len(w)))
+            orders.append(np.full(len(w) * len(corners), order))
+        positions, groups, orders = np.concatenate(positions), np.concatenate(groups), np.concatenate(orders)
+        by_group = np.argsort(groups, kind="stable")
+        points = np.zeros((len(positions), 4), np.float32)
+        eyes = np.zeros((len(positions), 4), np.float32)
+        for first in range(0, len(positions), MAX_PROJECTED_TEXELS):
+            part = by_group[first:first + MAX_PROJECTED_TEXELS]
+            draws = [(int(groups[part[a]]), int(orders[part[a]]), 0, int(a), int(c))
+                     for _, a, c in _runs(groups[part])]
+            projected, projected_eyes = self._project_pass(textures, _points_batch(positions[part]), draws,
+                                                           len(part), setup)
+            points[part], eyes[part] = projected, projected_eyes
+        pieces, offset = [], 0
+        for (image, n, corners, group, order), (w, sub_triangles) in zip(blocks, grids):
+            m, size = len(corners), len(w)
+            block = slice(offset, offset + m * size)
+            offset += m * size
+            valid = (points[block, 3] > 0.5).reshape(m, size)
+            kept = valid[:, sub_triangles].all(axis=2)  # (m, sub-triangles)
+            triangles_of = np.broadcast_to(sub_triangles, (m,) + sub_triangles.shape)
+            if n >= MIXED_COARSE_FACTOR * 2:
+                # Where a whole coarse sub-triangle (MIXED_COARSE_FACTOR^2 fine ones) projects,
+                # it is drawn instead: the edge keeps the fine grid, the inside is interpolated
+                # between projected points MIXED_COARSE_FACTOR sub-triangles apart.
+                coarse_of_fine, coarse_in_fine = _coarse_cover(n, n // MIXED_COARSE_FACTOR)
+                whole = np.ones((m, len(coarse_in_fine)), bool)
+                np.logical_and.at(whole, (slice(None), coarse_of_fine), kept)
+                kept = np.concatenate([kept & ~whole[:, coarse_of_fine], whole], axis=1)
+                triangles_of = np.concatenate(
+                    [triangles_of, np.broadcast_to(coarse_in_fine, (m,) + coarse_in_fine.shape)], axis=1)
+            instance, sub = np.nonzero(kept)
+            if len(instance) == 0:
+                pieces.append((image, {"world_depth": np.zeros((0, 4))}))
+                continue
+            local = triangles_of[instance, sub].reshape(-1)  # sub-vertex in the grid
+            owner = np.repeat(instance, 3)
+            rows = owner * size + local
+            c = corners[owner]
+            weights = w[local]  # (k, 3)
+
+            def mix(values):
+                return np.einsum("kc,kcd->kd", weights, values[c].astype(np.float32))
+
+            color = np.c_[mix(g.colors[:, :3]), np.ones(len(rows), np.float32)]
+            lit = g.lit[c[:, 0]]
+            normal_lit = np.c_[mix(g.normals), lit]
+            reflector = np.asarray([float(h[0]) + 1.0 for h in textures.groups])[group[owner]]
+            arrays = self._vertex_arrays(positions[block][rows], points[block][rows], eyes[block][rows], 0.0,
+                                         color, normal_lit, mix(g.uvs))
+            arrays["pixel_reflector"][:, 2] = reflector
+            pieces.append((image, arrays))
+        return pieces
 
     def render(self, view, sbc_or_textures, world_color=(0.0, 0.0, 0.0, 1.0), trace: bool = True,
                fill_radius: int | None = None, trace_edges: bool = False) -> np.ndarray:
@@ -954,12 +1192,18 @@ class ReflectionRenderer:
         different histories are traced too (:func:`band_trace.history_boundary`).
         """
         start = time.perf_counter()
-        textures = sbc_or_textures
+        textures, camera = sbc_or_textures, None
         if not isinstance(textures, projection.SBCTextures):
-            textures = projection.SBCTextures(sbc_or_textures)
+            camera = sbc_or_textures
+            cached = self._projection
+            # The same camera again (a second render of it) keeps its projection.
+            textures = cached.textures if cached is not None and cached.camera is camera else (
+                projection.SBCTextures(camera))
         uploaded = time.perf_counter()
         downsample = textures.packed.downsample
-        targets = self.draw_passes(view, textures)
+        targets = self.draw_passes(view, textures, camera)
+        if camera is not None:
+            self._projection.camera = camera
         drawn = time.perf_counter()
         traced = 0
         if trace and textures.n_groups:

@@ -7,18 +7,28 @@ projection runs per draw on the GPU):
 
 - **capture** (main thread, needs ``bpy``): the evaluated scene as reflectors and
   diffuse meshes (:mod:`.capture`), and a :class:`ReflectionRenderer` holding the
-  meshes' GPU batches. Moving or editing a *diffuse* object re-captures and re-uploads
-  only this: projection happens per draw, so the cameras stay valid (unless the object
-  leaves the camera's scene box, which ends its reflected rays: then they are rebuilt).
+  meshes' GPU batches, with the reflectors' colour, reflectivity, Fresnel and fade
+  distance (:func:`.render_image.reflector_properties`, SBC V-D). Moving or editing a
+  *diffuse* object re-captures and re-uploads only this, and re-projects once: the
+  cameras stay valid (unless the object leaves the camera's scene box, which ends its
+  reflected rays: then they are rebuilt).
 - **camera** per view (worker thread, bpy-free): the ray map and BSP trees of
   ``build_sample_based_camera``. A view change asks for a new one, debounced
   (:data:`DEBOUNCE_SECONDS` after the last change); while it builds, the previous
   camera keeps drawing. Editing a *reflector* (geometry, transform, marking or
   unmarking one) re-bakes: capture again and rebuild every view's camera.
+- **projection** (main thread, GPU, once per camera and per mesh change): the meshes'
+  vertices projected with the camera, kept by the renderer as reflected triangles
+  whose vertices sit at their *first reflector points in world space*
+  (``ReflectionRenderer.projection``). Made on the first draw after a camera landed
+  or the meshes changed, not on every redraw.
 - **draw** (``SpaceView3D`` POST_VIEW handler, every redraw): the reflections of the
   region's view over the reflectors (``reflectors_only``), with the last camera built
-  for that region. Exceptions never escape a redraw: they stop drawing for the scene
-  and become its status line in the panel.
+  for that region: the cached reflected triangles placed by the current view's
+  matrices, so while a new camera builds after the view moved, the reflection stays on
+  the mirror (the old camera's reflector points in world space), nearly right, instead
+  of lagging as an image of the old view. Exceptions never escape a redraw: they stop
+  drawing for the scene and become its status line in the panel.
 
 Background mode (``blender -b``, ``import bpy``) has neither 3D views nor a running
 timer loop, so everything also works with explicit views (:class:`~..addon.view.View`
@@ -45,7 +55,7 @@ from ..addon.sbc import build_sample_based_camera
 from ..addon.scene import scene_bounds
 from ..addon.view import View
 from .capture import capture_scene, view_from_camera, view_from_region
-from .render_image import BOUNDS_MARGIN, reflector_appearance, world_color
+from .render_image import BOUNDS_MARGIN, reflector_properties, world_color
 
 #: Seconds after the last view change before its camera is rebuilt.
 DEBOUNCE_SECONDS = 0.15
@@ -97,7 +107,8 @@ class LiveScene:
     status: str = ""
     level: str = 'INFO'  # 'INFO', 'WARNING' or 'ERROR'
     stats: dict = field(default_factory=dict)
-    counts: dict = field(default_factory=lambda: {"bakes": 0, "remeshes": 0, "builds": 0, "draws": 0})
+    counts: dict = field(default_factory=lambda: {"bakes": 0, "remeshes": 0, "builds": 0, "draws": 0,
+                                                  "projections": 0})
 
     def report(self, level: str, message: str) -> None:
         self.level, self.status = level, message
@@ -129,8 +140,10 @@ def _capture(state: LiveScene, scene, depsgraph, reflectors: bool) -> None:
 
     captured = capture_scene(depsgraph)
     lo, hi = scene_bounds(captured.reflectors, captured.meshes)
-    colors, reflectivity = reflector_appearance(captured.reflectors, scene)
-    state.renderer = ReflectionRenderer(captured.reflectors, captured.meshes, colors, reflectivity)
+    # A new renderer has no projection: the next draw projects with the view's camera
+    # once (SBC V-A), and later draws reuse it until a camera lands or the meshes change.
+    state.renderer = ReflectionRenderer(captured.reflectors, captured.meshes,
+                                        **reflector_properties(captured.reflectors, scene))
     state.captured = captured
     state.world = world_color(scene)
     state.bounds = (lo, hi)
@@ -353,8 +366,11 @@ def draw(scene, key, view: View) -> bool:
     framebuffer (viewport = the view's rectangle), with the camera built for ``key``.
 
     A view that differs from the camera's asks for a new camera (with Auto Refresh);
-    meanwhile the old one draws when the view size is unchanged. Returns whether
-    anything was drawn. Raises what drawing raises (the callers catch it).
+    meanwhile the old one draws: its reflected triangles are cached in world space
+    (``ReflectionRenderer.projection``), so any view, of any size, places them. The
+    projection runs on the first draw with a camera (one landed, or the renderer is new
+    after a mesh change) and is reused by later draws. Returns whether anything was
+    drawn. Raises what drawing raises (the callers catch it).
     """
     from ..gpu_shaders.projection import SBCTextures
 
@@ -369,12 +385,16 @@ def draw(scene, key, view: View) -> bool:
     if (camera is None or not current or not _same_view(camera.view, view)) and key not in state.jobs:
         if scene.curved_reflections.auto_refresh or camera is None:
             request_view(state, key, view)
-    if camera is None or (camera.view.width, camera.view.height) != (view.width, view.height):
+    if camera is None:
         return False
     if camera.textures is None:
         camera.textures = SBCTextures(camera.sbc)
     start = time.perf_counter()
-    state.renderer.draw(view, camera.textures, state.world, reflectors_only=True)
+    projections = state.renderer.counts["projections"]
+    state.renderer.draw(view, camera.textures, state.world, reflectors_only=True, camera=camera.sbc)
+    if state.renderer.counts["projections"] != projections:
+        state.counts["projections"] += 1
+        state.stats["projection_ms"] = 1000.0 * state.renderer.stats.get("projection_seconds", 0.0)
     camera.last_drawn = time.monotonic()
     state.stats["draw_ms"] = 1000.0 * (time.perf_counter() - start)
     state.counts["draws"] += 1

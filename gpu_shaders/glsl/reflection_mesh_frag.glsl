@@ -1,8 +1,8 @@
 /* SPDX-License-Identifier: GPL-3.0-or-later */
-/* Reflected-mesh pass, fragment stage (also of the mixed-triangle pass).
+/* Reflected-mesh pass, fragment stage (reflection_mesh_vert.glsl).
  *
- * A reflection is kept only on pixels where the pre-pass saw this sheet's first
- * reflector (id = history[0] + 1): that confines it to the visible footprint of the
+ * A reflection is kept only on pixels where the pre-pass saw its sheet's first
+ * reflector (id = history[0] + 1, per vertex in `reflector_interp`): that confines it to the visible footprint of the
  * reflector, and real objects in front of the mirror stay in front, their pre-pass id
  * being 0 (Roger & Holzschuch 2006, section 3.3.6, with an id texture for the stencil).
  * Hidden-surface removal between reflected points is the depth test on the depth
@@ -15,13 +15,8 @@
 
 void main()
 {
-#ifdef SUBDIVIDED
-  if (valid_interp < 0.9999) {
-    discard; /* a sub-triangle with a corner that does not project */
-  }
-#endif
   float id = texelFetch(prepass_labels, ivec2(gl_FragCoord.xy), 0).x;
-  if (abs(id - float(first_reflector_id)) > 0.5) {
+  if (abs(id - reflector_interp) > 0.5) {
     discard;
   }
   vec4 albedo = color_interp;

@@ -299,3 +299,87 @@ def test_draw_into_a_bound_offscreen_as_a_draw_handler_would(gpu_ready):
     on_mirror = np.any(np.abs(expected[..., :3] - world[:3]) > 1e-6, axis=2)  # the reflections
     np.testing.assert_allclose(images[1][on_mirror], expected[on_mirror], atol=1e-6)
     np.testing.assert_allclose(images[1][0, 0], (0.25, 0.5, 0.75, 1.0), atol=1e-6)  # untouched
+
+
+# --- the cached projection ----------------------------------------------------------
+
+
+def _red_pixels(targets):
+    """Pixels (x, y) of the reflection target that show the red square."""
+    from curved_reflections.gpu_shaders.reflection_draw import _read_texture
+
+    colors = _read_texture(targets.reflection_colors, targets.width, targets.height)
+    red = (colors[..., 3] > 0.5) & (colors[..., 0] > 0.5) & (colors[..., 1] < 0.1) & (colors[..., 2] < 0.1)
+    return np.argwhere(red)[:, ::-1]
+
+
+def test_redraws_reuse_the_projection_and_a_moved_view_places_the_world_reflector_points(gpu_ready):
+    """The projection runs once per camera: redraws, from the camera's view or another,
+    run no projection pass. From a moved view, with the old camera, the reflection is
+    drawn where the moved view sees the *first reflector points* (world space) of the
+    reflected geometry: the red square's centre reflects at the moved view's pixel of
+    its reflector point, not at its pixel in the old view."""
+    from curved_reflections.gpu_shaders.projection import SBCTextures
+    from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
+
+    mirror = icosphere((0.0, 0.0, 0.0), 1.0, 4, name="Mirror")
+    square = _square("Near", 2.5, 1.0, (1.0, 0.0, 0.0))
+    view = look_at_view((0.0, -6.0, 0.3), (0.0, 0.0, 0.0), fov_y_deg=25.0, width=96, height=96)
+    moved = look_at_view((0.9, -6.0, 0.6), (0.1, 0.0, 0.0), fov_y_deg=25.0, width=96, height=96)
+    sbc = build_sample_based_camera([mirror], view, scene_bounds([mirror], [square], margin=1.0), downsample=2)
+    renderer = ReflectionRenderer([mirror], [square])
+    textures = SBCTextures(sbc)
+    first = _red_pixels(renderer.draw_passes(view, textures, sbc))
+    _red_pixels(renderer.draw_passes(view, textures, sbc))
+    assert renderer.counts == {"projections": 1, "frames": 2}
+    shown = _red_pixels(renderer.draw_passes(moved, textures, sbc))
+    assert renderer.counts == {"projections": 1, "frames": 3}  # the old camera, no new projection
+
+    reflector_point = sbc.project(np.array([[2.5, 0.0, 0.0]])).reflector_points[0]
+    expected = moved.to_pixels(reflector_point)[0][0]
+    old = view.to_pixels(reflector_point)[0][0]
+    assert np.linalg.norm(expected - old) > 5.0  # the view moved enough to tell them apart
+    assert len(first) > 10 and len(shown) > 10
+    np.testing.assert_allclose(first.mean(axis=0) + 0.5, old, atol=1.5)
+    np.testing.assert_allclose(shown.mean(axis=0) + 0.5, expected, atol=1.5)
+
+    # A new camera's textures project once more; the old one is still cached.
+    other = SBCTextures(sbc)
+    renderer.draw_passes(view, other, sbc)
+    renderer.draw_passes(view, textures, sbc)
+    assert renderer.counts["projections"] == 2
+
+
+def test_per_sheet_culling_leaves_the_image_identical(gpu_ready):
+    """The teapot at 320 x 240 splits its reflection into 42 sheets; projecting in each
+    sheet only the vertex chunks that meet its bounds (addon/sheet_bounds.py) skips
+    vertices (about 3 %: the floor is seen by most sheets) and changes no pixel."""
+    import bpy
+
+    import curved_reflections
+    from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
+    from curved_reflections.operators import demo_scenes
+    from curved_reflections.operators.capture import capture_scene, view_from_camera
+    from curved_reflections.operators.render_image import BOUNDS_MARGIN
+
+    curved_reflections.register()
+    try:
+        bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+        scene = demo_scenes.build("teapot", bpy.context.scene, 320, 240)
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        captured = capture_scene(depsgraph)
+        view = view_from_camera(scene.camera, scene, depsgraph)
+    finally:
+        curved_reflections.unregister()
+    lo, hi = scene_bounds(captured.reflectors, captured.meshes)
+    bounds = scene_bounds(captured.reflectors, captured.meshes, BOUNDS_MARGIN * float(np.linalg.norm(hi - lo)))
+    sbc = build_sample_based_camera(captured.reflectors, view, bounds, downsample=2)
+    assert len(sbc.groups) > 4
+    images, projected = [], []
+    for cull in (True, False):
+        renderer = ReflectionRenderer(captured.reflectors, captured.meshes, cull=cull)
+        images.append(renderer.render(view, sbc, trace=False))
+        projected.append(renderer.stats["projected_vertices"])
+    np.testing.assert_array_equal(images[0], images[1])
+    assert projected[1] == len(sbc.groups) * len(renderer.geometry.vertices)
+    assert projected[0] < projected[1]

@@ -105,11 +105,33 @@ def test_moving_a_diffuse_object_moves_its_reflection_without_rebaking(fig3):
 
     bpy.data.objects["Cube"].location.x -= 0.25  # along the ball, toward the left
     bpy.context.view_layer.update()  # depsgraph_update_post fires in background mode
-    assert state.counts == {"bakes": 1, "remeshes": 1, "builds": 1, "draws": 1}
-    assert state.cameras[live.CAMERA_KEY] is camera  # projection is per draw: same camera
+    assert state.counts == {"bakes": 1, "remeshes": 1, "builds": 1, "draws": 1, "projections": 1}
+    assert state.cameras[live.CAMERA_KEY] is camera  # a mesh change re-projects: same camera
     after = _pixels_of(_draw(fig3, view)[1], "Cube", fig3).mean(axis=0)
+    assert state.counts["projections"] == 2  # once, on the first draw after the change
     # A mirror ball reflects a move to the left as a (smaller) move to the left.
     assert after[1] < before[1] - 1.0
+
+
+def test_redraws_without_changes_run_no_projection(fig3):
+    """The projection is cached by the renderer (reflected triangles at their world
+    reflector points): redraws of the same camera, from its view or a moved one, only
+    draw; the renderer is built with the reflectors' Fresnel and fade settings."""
+    mirror = bpy.data.objects["MirrorSphere"].curved_reflections
+    mirror.use_fresnel, mirror.fresnel_f0, mirror.attenuation_distance = True, 0.2, 3.0
+    bpy.ops.curved_reflections.bake()
+    state = live.state_of(fig3)
+    view = _camera_view(fig3)
+    for _ in range(3):
+        assert _draw(fig3, view)[0]
+    moved = look_at_view((0.8, -6.4, 2.4), (0.0, 0.0, 0.9), fov_y_deg=30.0, width=WIDTH, height=HEIGHT)
+    assert _draw(fig3, moved)[0]
+    assert (state.counts["draws"], state.counts["projections"]) == (4, 1)
+    assert state.renderer.counts == {"projections": 1, "frames": 4}
+    assert state.stats["projection_ms"] > 0
+    labels = state.renderer.geometry.prepass_labels
+    on_mirror = labels[:, 0] == 1.0
+    np.testing.assert_allclose(labels[on_mirror][:, 2:], [[0.2, 3.0]] * int(on_mirror.sum()), atol=1e-6)
 
 
 def test_editing_a_reflector_rebakes(fig3):
@@ -146,6 +168,7 @@ def test_a_view_change_is_debounced_built_on_the_worker_and_the_old_camera_draws
 
     drawn, image = _draw(fig3, moved)
     assert drawn  # the previous camera, until the new one is ready
+    assert state.counts["projections"] == 1
     view, asked = state.requests[live.CAMERA_KEY]
     assert view is moved and not state.jobs
     depsgraph = bpy.context.evaluated_depsgraph_get()
@@ -158,6 +181,7 @@ def test_a_view_change_is_debounced_built_on_the_worker_and_the_old_camera_draws
     new = state.cameras[live.CAMERA_KEY]
     assert new is not old and new.view is moved and state.counts["builds"] == 2
     assert _draw(fig3, moved)[0]
+    assert state.counts["projections"] == 2  # the new camera projects once
     assert live.CAMERA_KEY not in state.requests  # the same view asks for nothing
 
 
