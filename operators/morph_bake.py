@@ -1,0 +1,234 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Bake and clear morphing grids (SBC paper VI), and the morphing status for the panel.
+
+``curved_reflections.bake_morphing`` bakes the grid of every visible reflector whose
+mode is Morphing (``addon/bake.py``: worker processes, one node each). Invoked from the
+UI it is modal: the bake runs on a thread that drives the worker processes, the window
+manager's progress bar and the panel's status line follow it, and Esc cancels between
+nodes (the previous cache stays as it was). ``execute`` (scripts, background mode)
+bakes synchronously. ``curved_reflections.clear_morphing`` removes the baked grids.
+
+:func:`load_morphing` is what drawing code calls per reflector: it returns the baked
+grid, or None with the reason recorded for :func:`morph_status` (runtime mode is then
+used), so a missing, stale or corrupt cache never stops drawing.
+"""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+
+import bpy
+import numpy as np
+
+from ..addon import bake, bake_cache
+from ..addon.errors import SceneInputError
+from ..addon.morphing import MorphSettings
+from .capture import capture_scene
+
+#: Per scene name: {"running": bool, "done": int, "total": int, "reflector": str, "message": str}
+_STATE: dict = {}
+#: Per reflector name: the last load or bake outcome, shown by the panel.
+_REFLECTOR_STATUS: dict = {}
+
+
+def cache_directory() -> Path:
+    """Where baked grids live: the extension's user folder (``extension_path_user``)."""
+    package = __package__.rpartition(".")[0]
+    try:
+        path = bpy.utils.extension_path_user(package, path="morphing", create=True)
+    except ValueError:  # not installed as an extension (tests, scripts importing the repository)
+        path = bpy.utils.user_resource('CONFIG', path="curved_reflections_morphing", create=True)
+    return Path(path)
+
+
+#: Cube-face resolution of the baked cameras (MorphSettings' default); tests lower it.
+FACE_RESOLUTION = MorphSettings.face_resolution
+
+
+def morph_settings(scene) -> MorphSettings:
+    """The grid settings of ``scene.curved_reflections`` (grid nodes and margin)."""
+    settings = scene.curved_reflections
+    return MorphSettings(grid=tuple(settings.morph_grid), margin=float(settings.morph_margin),
+                         face_resolution=FACE_RESOLUTION)
+
+
+def morph_status(scene) -> str:
+    """One line for the panel: a bake in progress, else the last outcome of bake, clear or load."""
+    state = _STATE.get(scene.name)
+    if state and state["running"]:
+        return f"Baking {state['reflector']}: {state['done']}/{state['total']} nodes (Esc cancels)"
+    lines = [f"{name}: {text}" for name, text in sorted(_REFLECTOR_STATUS.items())]
+    if state and state.get("message"):
+        lines.insert(0, state["message"])
+    return "; ".join(lines) if lines else "No morphing grid baked in this session"
+
+
+def morphing_reflectors(context):
+    """(captured reflector, object matrix) of every visible reflector in Morphing mode."""
+    depsgraph = context.evaluated_depsgraph_get()
+    captured = capture_scene(depsgraph)
+    chosen = []
+    for reflector in captured.reflectors:
+        obj = context.scene.objects.get(reflector.name)
+        if obj is None or obj.curved_reflections.mode != 'MORPHING':
+            continue
+        chosen.append((reflector, np.array(obj.matrix_world, dtype=np.float64)))
+    return chosen
+
+
+def load_morphing(reflector, matrix, scene, reflector_index: int = 0):
+    """The baked grid for this reflector as it is now, or None (runtime mode) with the reason recorded."""
+    try:
+        grid = bake.load_for(reflector, matrix, morph_settings(scene), cache_directory(), reflector_index)
+    except SceneInputError as error:
+        _REFLECTOR_STATUS[reflector.name] = f"{error.problem}"
+        return None
+    _REFLECTOR_STATUS[reflector.name] = "morphing (baked grid loaded)"
+    return grid
+
+
+def note_runtime_fallback(error) -> None:
+    """Record a ViewOutsideGrid (the view left the grid) for the status line: runtime mode is drawn."""
+    _REFLECTOR_STATUS[error.reflector_name] = f"runtime mode: {error.reason}"
+
+
+class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
+    """Bake the morphing grids of the reflectors in Morphing mode (Esc cancels)"""
+
+    bl_idname = "curved_reflections.bake_morphing"
+    bl_label = "Bake Morphing Grid"
+    bl_options = {'REGISTER'}
+
+    processes: bpy.props.IntProperty(name="Processes", description="Worker processes (0: every core)",
+                                     default=0, min=0, max=256)
+
+    _thread = None
+    _timer = None
+
+    @classmethod
+    def poll(cls, context):
+        if context.scene is None:
+            return False
+        state = _STATE.get(context.scene.name)
+        return not (state and state["running"])
+
+    def _jobs(self, context):
+        try:
+            jobs = morphing_reflectors(context)
+        except SceneInputError as error:
+            self.report({'ERROR'}, str(error))
+            return None
+        if not jobs:
+            self.report({'ERROR'}, "No visible reflector is in Morphing mode (set Mode in the Reflections tab)")
+            return None
+        return jobs
+
+    def _run(self, scene_name, jobs, settings, directory, cancel):
+        """Bake each reflector in turn (on the bake thread, or inline from execute)."""
+        state = _STATE[scene_name]
+        outcome = []
+        try:
+            for reflector, matrix in jobs:
+                state.update(reflector=reflector.name, done=0, total=int(np.prod(settings.grid)))
+
+                def progress(done, total, state=state):
+                    state.update(done=done, total=total)
+
+                result = bake.bake_grid(reflector, matrix, settings, directory,
+                                        processes=self.processes or None, progress=progress, cancel=cancel)
+                if result.cancelled:
+                    _REFLECTOR_STATUS[reflector.name] = "bake cancelled; the previous cache (if any) is kept"
+                    outcome.append(f"{reflector.name}: cancelled")
+                    break
+                _REFLECTOR_STATUS[reflector.name] = (f"baked {result.n_nodes} nodes in {result.seconds:.1f} s "
+                                                     f"({result.nbytes / 2**20:.1f} MB)")
+                outcome.append(f"{reflector.name}: baked in {result.seconds:.1f} s")
+        except (SceneInputError, OSError) as error:
+            outcome.append(f"bake failed: {error}")
+        except Exception as error:  # the bake thread's boundary: report, never leave "running" behind
+            outcome.append(f"bake failed: {type(error).__name__}: {error}")
+        finally:
+            state.update(running=False, message="; ".join(outcome))
+        return outcome
+
+    def _start(self, context):
+        jobs = self._jobs(context)
+        if jobs is None:
+            return None
+        try:
+            settings = morph_settings(context.scene)
+        except SceneInputError as error:
+            self.report({'ERROR'}, str(error))
+            return None
+        _STATE[context.scene.name] = {"running": True, "done": 0, "total": 0, "reflector": jobs[0][0].name,
+                                      "message": ""}
+        return jobs, settings, cache_directory()
+
+    def execute(self, context):
+        started = self._start(context)
+        if started is None:
+            return {'CANCELLED'}
+        outcome = self._run(context.scene.name, *started, threading.Event())
+        failed = any("failed" in line for line in outcome)
+        self.report({'ERROR'} if failed else {'INFO'}, "; ".join(outcome))
+        return {'CANCELLED'} if failed else {'FINISHED'}
+
+    def invoke(self, context, event):
+        started = self._start(context)
+        if started is None:
+            return {'CANCELLED'}
+        self._cancel = threading.Event()
+        self._scene_name = context.scene.name
+        self._thread = threading.Thread(target=self._run, args=(self._scene_name, *started, self._cancel),
+                                        daemon=True)
+        self._thread.start()
+        wm = context.window_manager
+        wm.progress_begin(0, 100)
+        self._timer = wm.event_timer_add(0.2, window=context.window)
+        wm.modal_handler_add(self)
+        return {'RUNNING_MODAL'}
+
+    def modal(self, context, event):
+        if event.type == 'ESC':
+            self._cancel.set()
+        if event.type != 'TIMER':
+            return {'PASS_THROUGH'} if event.type != 'ESC' else {'RUNNING_MODAL'}
+        state = _STATE[self._scene_name]
+        context.window_manager.progress_update(int(100 * state["done"] / max(state["total"], 1)))
+        for area in context.screen.areas if context.screen else ():
+            area.tag_redraw()
+        if self._thread.is_alive():
+            return {'RUNNING_MODAL'}
+        context.window_manager.event_timer_remove(self._timer)
+        context.window_manager.progress_end()
+        message = state.get("message", "")
+        cancelled = "cancelled" in message
+        self.report({'WARNING'} if cancelled or "failed" in message else {'INFO'}, message or "Bake finished")
+        return {'CANCELLED'} if cancelled or "failed" in message else {'FINISHED'}
+
+
+class CURVED_REFLECTIONS_OT_clear_morphing(bpy.types.Operator):
+    """Remove the baked morphing grids of this file's reflectors (runtime mode until baked again)"""
+
+    bl_idname = "curved_reflections.clear_morphing"
+    bl_label = "Clear Morphing Grid"
+    bl_options = {'REGISTER'}
+
+    def execute(self, context):
+        state = _STATE.get(context.scene.name)
+        if state and state["running"]:
+            self.report({'ERROR'}, "A bake is running: cancel it first (Esc)")
+            return {'CANCELLED'}
+        names = [obj.name for obj in context.scene.objects if obj.curved_reflections.is_reflector]
+        removed = sum(bake_cache.clear_cache(cache_directory(), name) for name in names)
+        for name in names:
+            _REFLECTOR_STATUS[name] = "no morphing cache (cleared); runtime mode"
+        self.report({'INFO'}, f"Removed {removed} baked grid(s)")
+        return {'FINISHED'}
+
+
+classes = (
+    CURVED_REFLECTIONS_OT_bake_morphing,
+    CURVED_REFLECTIONS_OT_clear_morphing,
+)

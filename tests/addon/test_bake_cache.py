@@ -1,0 +1,191 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Baking morphing grids in worker processes, and their .npz cache (SBC paper VI)."""
+
+import os
+import threading
+
+import numpy as np
+import pytest
+
+from curved_reflections.addon import bake, bake_cache, look_at_view
+from curved_reflections.addon import morphing as M
+from curved_reflections.addon.sbc import build_sample_based_camera
+from curved_reflections.addon.sbc_arrays import sbc_from_arrays, sbc_to_arrays
+from curved_reflections.addon.sphere import icosphere
+
+SETTINGS = M.MorphSettings(grid=(3, 3, 2), margin=0.8, face_resolution=32)
+CENTRE = np.array([0.0, 0.0, 1.0])
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    return icosphere(CENTRE, 1.0, 3, "Mirror Ball")
+
+
+@pytest.fixture(scope="module")
+def baked(sphere, tmp_path_factory):
+    """One 3x3x2 bake on two worker processes, and its folder."""
+    folder = tmp_path_factory.mktemp("morphing")
+    steps = []
+    result = bake.bake_grid(sphere, np.eye(4), SETTINGS, folder, processes=2,
+                            progress=lambda done, total: steps.append((done, total)))
+    return folder, result, steps
+
+
+def _points(n=400, seed=0):
+    points = np.random.default_rng(seed).uniform([-2.5, -2.5, -1.0], [2.5, 2.5, 3.0], (n, 3))
+    return points[np.linalg.norm(points - CENTRE, axis=1) > 1.05]
+
+
+def test_sbc_arrays_round_trip_projects_identically(sphere):
+    view = look_at_view([0.5, -3.0, 1.8], CENTRE, width=96, height=72)
+    sbc = build_sample_based_camera([sphere], view, ([-3, -3, -2], [3, 3, 4]), downsample=2)
+    arrays = sbc_to_arrays(sbc, "x_")
+    assert all(isinstance(v, np.ndarray) and v.dtype != object for v in arrays.values())
+    again = sbc_from_arrays(arrays, "x_")
+    points = _points()
+    a, b = sbc.project(points), again.project(points)
+    assert a.valid.sum() > 50
+    assert np.array_equal(a.valid, b.valid) and np.array_equal(np.nan_to_num(a.pixels), np.nan_to_num(b.pixels))
+    assert again.stats["n_leaves"] == sbc.stats["n_leaves"]
+
+
+def test_bake_writes_every_node_and_reports_progress(baked):
+    folder, result, steps = baked
+    assert not result.cancelled and result.n_built == result.n_nodes == 18
+    assert steps == [(k, 18) for k in range(1, 19)]
+    assert result.processes == 2 and result.peak_rss_mb > 0 and result.nbytes > 0
+    files = sorted(p.name for p in result.directory.iterdir())
+    assert "grid.npz" in files and len([f for f in files if f.startswith("node_")]) == 18
+    assert not [p for p in folder.iterdir() if ".partial-" in p.name]
+
+
+def test_loaded_grid_projects_and_is_pickle_free(sphere, baked):
+    folder, result, _ = baked
+    grid = bake.load_for(sphere, np.eye(4), SETTINGS, folder)
+    view = look_at_view([1.5, -2.0, 2.5], CENTRE, width=160, height=120)
+    projection = grid.project(_points(), view)
+    assert projection.valid.sum() > 50
+    for path in result.directory.iterdir():
+        with np.load(path, allow_pickle=False) as data:  # raises on any object array
+            assert all(data[k].dtype != object for k in data.files)
+
+
+def test_processes_give_the_same_grid_as_one_process(sphere, baked, tmp_path, monkeypatch):
+    folder, parallel, _ = baked
+    serial = bake.bake_grid(sphere, np.eye(4), SETTINGS, tmp_path, processes=1)
+    assert serial.key == parallel.key
+    for node in range(18):
+        with np.load(bake_cache.node_file(parallel.directory, node)) as a, \
+                np.load(bake_cache.node_file(serial.directory, node)) as b:
+            assert set(a.files) == set(b.files)
+            for k in a.files:
+                if k != "seconds" and "stats" not in k:  # timings differ
+                    assert np.array_equal(a[k], b[k]), (node, k)
+
+
+def test_nodes_are_built_in_worker_processes(sphere, tmp_path, monkeypatch):
+    pids = tmp_path / "pids"
+    pids.mkdir()
+    original = bake.build_node
+
+    def recording(*args):
+        (pids / str(os.getpid())).touch()
+        return original(*args)
+
+    monkeypatch.setattr(bake, "build_node", recording)  # inherited by the forked workers
+    settings = M.MorphSettings(grid=(2, 2, 2), margin=0.8, face_resolution=16)
+    bake.bake_grid(sphere, np.eye(4), settings, tmp_path / "cache", processes=2)
+    workers = {int(p.name) for p in pids.iterdir()}
+    assert workers and os.getpid() not in workers
+
+
+def test_stale_missing_and_corrupt_caches_give_clear_errors(sphere, baked, tmp_path):
+    folder, result, _ = baked
+    with pytest.raises(bake_cache.CacheError, match="no morphing cache yet") as missing:
+        bake.load_for(sphere, np.eye(4), SETTINGS, tmp_path)
+    assert missing.value.reason == "missing"
+    moved = icosphere(CENTRE, 1.1, 3, "Mirror Ball")  # other geometry, same name
+    with pytest.raises(bake_cache.CacheError, match="other geometry or settings") as stale:
+        bake.load_for(moved, np.eye(4), SETTINGS, folder)
+    assert stale.value.reason == "stale"
+    other = M.MorphSettings(grid=(3, 3, 3), margin=0.8, face_resolution=32)
+    with pytest.raises(bake_cache.CacheError, match="other geometry or settings"):
+        bake.load_for(sphere, np.eye(4), other, folder)
+    # A rigid motion keeps the cache: the grid lives in the reflector's frame.
+    matrix = np.eye(4)
+    matrix[:3, :3] = [[0, -1, 0], [1, 0, 0], [0, 0, 1]]
+    matrix[:3, 3] = [2.0, 1.0, 0.0]
+    world = M.Reflector(sphere.name, M.from_frame(matrix, sphere.vertices), sphere.triangles,
+                        sphere.normals @ matrix[:3, :3].T)
+    assert bake.load_for(world, matrix, SETTINGS, folder).grid.shape == (3, 3, 2)
+    assert bake_cache.cache_state(folder, sphere, result.key) == "ready"
+    assert bake_cache.cache_state(folder, moved, result.key) == "stale"
+    assert bake_cache.cache_state(tmp_path, sphere, result.key) == "missing"
+
+
+def test_corrupt_files_raise_cache_errors_not_tracebacks(sphere, baked, tmp_path):
+    import shutil
+
+    folder, result, _ = baked
+    copy = tmp_path / "copy"
+    shutil.copytree(folder, copy)
+    directory = bake_cache.grid_directory(copy, sphere.name, result.key)
+    node = int(np.flatnonzero(bake.load_for(sphere, np.eye(4), SETTINGS, copy).node_status == M.NODE_OK)[0])
+    bake_cache.node_file(directory, node).write_bytes(b"not a zip file")
+    grid = bake.load_for(sphere, np.eye(4), SETTINGS, copy)
+    with pytest.raises(bake_cache.CacheError, match=f"node_{node:05d}.npz is unreadable") as error:
+        grid.nodes[node]
+    assert error.value.reason == "corrupt"
+    # An object array needs pickle: refused, reported as corrupt.
+    manifest = dict(np.load(directory / "grid.npz"))
+    manifest["key"] = np.array([{"evil": 1}], dtype=object)
+    np.savez(directory / "grid.npz", **manifest)
+    with pytest.raises(bake_cache.CacheError, match="grid.npz is unreadable"):
+        bake.load_for(sphere, np.eye(4), SETTINGS, copy)
+    (directory / "grid.npz").write_bytes(b"\x00" * 10)
+    with pytest.raises(bake_cache.CacheError, match="unreadable"):
+        bake.load_for(sphere, np.eye(4), SETTINGS, copy)
+
+
+def test_cancel_half_way_keeps_the_previous_cache(sphere, baked, tmp_path):
+    import shutil
+
+    folder, result, _ = baked
+    copy = tmp_path / "copy"
+    shutil.copytree(folder, copy)
+    old_folder = bake_cache.grid_directory(copy, sphere.name, result.key)
+    before = sorted((p.name, p.stat().st_size) for p in old_folder.iterdir())
+    cancel = threading.Event()
+    seen = []
+
+    def progress(done, total):
+        seen.append(done)
+        if done >= total // 2:
+            cancel.set()
+
+    # Other settings: a finished bake would replace (and remove) the old grid.
+    other = M.MorphSettings(grid=(3, 3, 3), margin=0.8, face_resolution=32)
+    outcome = bake.bake_grid(sphere, np.eye(4), other, copy, processes=2, progress=progress, cancel=cancel)
+    assert outcome.cancelled and outcome.directory is None and outcome.n_built < outcome.n_nodes
+    assert max(seen) < 27
+    after = sorted((p.name, p.stat().st_size) for p in old_folder.iterdir())
+    assert after == before
+    assert [p.name for p in copy.iterdir()] == [old_folder.name]
+    assert bake.load_for(sphere, np.eye(4), SETTINGS, copy).grid.shape == (3, 3, 2)
+    with pytest.raises(bake_cache.CacheError) as error:
+        bake.load_for(sphere, np.eye(4), other, copy)
+    assert error.value.reason == "stale"
+
+
+def test_clear_removes_only_that_reflectors_grids(sphere, baked, tmp_path):
+    import shutil
+
+    folder, _, _ = baked
+    copy = tmp_path / "copy"
+    shutil.copytree(folder, copy)
+    (copy / "Other-0123456789abcdef").mkdir()
+    assert bake_cache.clear_cache(copy, sphere.name) == 1
+    assert [p.name for p in copy.iterdir()] == ["Other-0123456789abcdef"]
+    with pytest.raises(bake_cache.CacheError, match="no morphing cache yet"):
+        bake.load_for(sphere, np.eye(4), SETTINGS, copy)
