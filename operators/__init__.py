@@ -7,7 +7,7 @@ they are registered in module order and unregistered in reverse.
 
 import bpy
 
-from . import bake, demo_scenes, live, panel, properties, reflectors, render_image
+from . import bake, demo_scenes, live, morph_bake, panel, properties, reflectors, render_image
 
 _modules = (
     properties,
@@ -15,6 +15,7 @@ _modules = (
     demo_scenes,
     render_image,
     bake,
+    morph_bake,
     panel,
 )
 

@@ -9,7 +9,7 @@ that do not apply are greyed, not hidden, so the layout does not jump.
 
 import bpy
 
-from . import live
+from . import live, morph_bake
 from .capture import SURFACE_TYPES
 
 _STATUS_ICONS = {'INFO': 'INFO', 'WARNING': 'ERROR', 'ERROR': 'CANCEL'}
@@ -58,6 +58,14 @@ def _live_section(layout, scene) -> None:
         layout.label(text=state.status, icon=_STATUS_ICONS.get(state.level, 'INFO'))
 
 
+def _morphing_section(layout, scene) -> None:
+    row = layout.row(align=True)
+    row.operator("curved_reflections.bake_morphing", icon='LIGHTPROBE_VOLUME')
+    row.operator("curved_reflections.clear_morphing", icon='TRASH')
+    layout.label(text=morph_bake.morph_status(scene), icon='INFO')
+    layout.label(text="The live view still draws Runtime cameras for every reflector", icon='ERROR')
+
+
 class VIEW3D_PT_curved_reflections(bpy.types.Panel):
     """Curved mirror reflections: which objects are mirrors, the method settings and live drawing"""
 
@@ -97,7 +105,7 @@ class VIEW3D_PT_curved_reflections(bpy.types.Panel):
         morph.prop(scene_settings, "morph_grid")
         morph.prop(scene_settings, "morph_margin")
         if morphing:
-            column.label(text="Live view draws Runtime cameras for every reflector", icon='INFO')
+            _morphing_section(layout.box(), scene)
 
         _live_section(layout.box(), scene)
 

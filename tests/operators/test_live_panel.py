@@ -82,3 +82,14 @@ def test_panel_shows_settings_buttons_stats_and_status(empty_scene, registered, 
     assert ("No reflector marked", 'INFO') in labels
     assert any(text.startswith("'Scene': has no visible object marked as a reflector") and icon == 'CANCEL'
                for text, icon in labels)
+
+
+def test_panel_shows_the_morphing_box_when_a_reflector_is_in_morphing_mode(empty_scene, registered):
+    scene = demo_scenes.build("sbc_fig3", bpy.context.scene, 64, 48)
+    mirror = bpy.data.objects["MirrorSphere"]
+    assert "curved_reflections.bake_morphing" not in _draw(scene, mirror)["operators"]
+    mirror.curved_reflections.mode = 'MORPHING'
+    log = _draw(scene, mirror)
+    assert {"curved_reflections.bake_morphing", "curved_reflections.clear_morphing"} <= set(log["operators"])
+    assert not {"morph_grid", "morph_margin"} & set(log["greyed"])
+    assert ("No morphing grid baked in this session", 'INFO') in log["labels"]
