@@ -11,7 +11,8 @@ the point, and the first reflector point is the point on the desired view ray of
 A projection is accepted where the four rays around (u, v) exist in the group (the
 point reflects inside the reflector's footprint, not across its silhouette) and the
 point lies on their interpolated ray: in front of the mirror, and before the next
-reflector where one of the four rays meets one.
+reflector where one of the four rays meets one. Where the ray field folds over (a
+caustic crosses the cell: FoldCells), the answer is solved again on traced sub-rays.
 
 ``leaf_model="ray_patch"`` (default) uses our ray-field patches; ``"pinhole"`` the
 paper's pinhole cameras, kept as the baseline.
@@ -31,9 +32,9 @@ from .bsp import (CAMERA_LEAF, CONE_SIZE, MAX_DUPLICATION, RAY_LIST_LEAF, BSPTre
                   in_cones)
 from .errors import SceneInputError
 from .pinhole import PinholeLeaves
-from .ray_patch import RayPatchLeaves, invert_patches
+from .ray_patch import RayPatches, RayPatchLeaves, invert_patches
 from .raymap import RayMap, box_exit_distance, trace_ray_map
-from .raytrace import ReflectorSet
+from .raytrace import ReflectorSet, reflect, reflection_valid
 from .view import View
 
 LEAF_MODELS = {"ray_patch": RayPatchLeaves(), "pinhole": PinholeLeaves()}
@@ -52,6 +53,12 @@ MIN_SHEET_RAYS = 64
 SUBCELL_SAMPLES = 8
 #: Ray-list cells tried per point, nearest central ray first.
 CANDIDATE_CELLS = 3
+#: Sub-cells per side traced in each *fold* cell (see FoldCells).
+FOLD_SAMPLES = 8
+#: Fold sub-cells tried per point, nearest central ray first.
+FOLD_CANDIDATES = 16
+#: Corner triangles of a cell (corners 00, 10, 01, 11) whose orientation decides a fold.
+FOLD_TRIANGLES = ((0, 1, 2), (1, 3, 0), (3, 2, 1), (2, 0, 3))
 
 
 @dataclass(frozen=True)
@@ -88,6 +95,31 @@ class MixedCells:
         return int(self.index.nbytes + self.heads.nbytes)
 
 
+@dataclass(frozen=True)
+class FoldCells:
+    """True in-between rays of one group's *fold* cells.
+
+    Near a caustic the reflected rays cross: along some cells the four corner rays fold
+    over between the tail and the head (one of the cell's corner triangles changes
+    orientation), so the bilinear ray patch sweeps space that no true ray reaches and
+    answers points with false images, or puts true ones pixels off. In those cells
+    (SBC paper section IV-C, ray-list leaves interpolate the unit frustum: here a finer
+    one) (FOLD_SAMPLES + 1)^2 view rays through the cell are traced and reflected at
+    build time, and an answer that falls in a fold cell is solved again on the
+    FOLD_SAMPLES^2 bilinear sub-cells of those rays, as ray-list cells are: no
+    sub-cell holds the point, no image. Sub-cell patches are charted in sub-cell units:
+    ``patches.lo`` is FOLD_SAMPLES times the ray-map cell of the sub-cell's corner.
+    """
+
+    index: np.ndarray  # (rows, columns) int: fold number of cell (i, j) = [j, i], -1 if not a fold cell
+    patches: RayPatches  # bilinear, FOLD_SAMPLES^2 rows per fold cell, row-major [b][a]
+    valid: np.ndarray  # (n_fold * FOLD_SAMPLES^2,) bool: the sub-cell's four rays hit the group's reflector
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.index.nbytes + self.patches.nbytes + self.valid.nbytes)
+
+
 @dataclass
 class SampleBasedCamera:
     """One view's sample-based camera: a ray map and one BSP tree per reflection group."""
@@ -102,6 +134,8 @@ class SampleBasedCamera:
     cones: np.ndarray | None = None
     #: Per tree, its group's MixedCells (shared by the sheets of a group), or None where not traced.
     mixed: list | None = None
+    #: Per tree, its group's FoldCells (shared by the sheets of a group), or None where not traced.
+    folds: list | None = None
 
     @property
     def groups(self) -> list:
@@ -160,6 +194,8 @@ class SampleBasedCamera:
         on_list = np.flatnonzero(kind == RAY_LIST_LEAF)
         if len(on_list) and tree.cells is not None:
             cells[on_list], accepted[on_list] = _project_ray_lists(tree, row[on_list], points[on_list])
+        if self.folds is not None and len(self.folds[g].valid):
+            accepted = _refine_in_folds(self.folds[g], cells, accepted, points)
 
         found = np.flatnonzero(accepted & np.isfinite(cells).all(axis=1))
         points, cells, kind, target = points[found], cells[found], kind[found], point_index[found]
@@ -229,6 +265,47 @@ def _project_ray_lists(tree: BSPTree, row, points):
     result[pair_point[first]] = cells[first]
     found[pair_point[first]] = True
     return result, found
+
+
+def _refine_in_folds(folds: FoldCells, cells, accepted, points):
+    """Solve answers that fall in fold cells again on the cell's traced sub-rays (FoldCells).
+
+    ``cells`` is updated in place; returns ``accepted`` without the answers no sub-cell holds.
+    """
+    rows, columns = folds.index.shape
+    base = np.floor(np.where(accepted[:, None], cells, -1.0)).astype(np.int64)
+    inside = np.flatnonzero(accepted & (base[:, 0] >= 0) & (base[:, 1] >= 0) & (base[:, 0] < columns)
+                            & (base[:, 1] < rows))
+    fold = folds.index[base[inside, 1], base[inside, 0]]
+    inside, fold = inside[fold >= 0], fold[fold >= 0]
+    if len(inside) == 0:
+        return accepted
+    per_cell = FOLD_SAMPLES * FOLD_SAMPLES
+    pair_point = np.repeat(np.arange(len(inside)), per_cell)
+    pair_cell = (fold[:, None] * per_cell + np.arange(per_cell)).reshape(-1)
+    usable = folds.valid[pair_cell]
+    pair_point, pair_cell = _closest_cells(folds.patches, pair_point[usable], pair_cell[usable], points[inside],
+                                           FOLD_CANDIDATES)
+    sub_cells, distance, residual = invert_patches(folds.patches, pair_cell, points[inside][pair_point])
+    local = sub_cells - folds.patches.lo[pair_cell]
+    scale = 1 + np.linalg.norm(points[inside][pair_point], axis=1)
+    hit = (np.all((local >= -CELL_TOLERANCE) & (local <= 1 + CELL_TOLERANCE), axis=1)
+           & (residual < 1e-6 * scale) & (distance >= 0))
+    # A sub-cell whose own rays are folded over at the point's depth sweeps space no ray reaches.
+    held = np.flatnonzero(hit)
+    t, d = folds.patches.tail[pair_cell[held]], folds.patches.direction[pair_cell[held]]
+    corner_tails = np.stack([t[:, 0], t[:, 0] + t[:, 1], t[:, 0] + t[:, 2], t[:, 0] + t[:, 1] + t[:, 2] + t[:, 4]], 1)
+    corner_directions = np.stack([d[:, 0], d[:, 0] + d[:, 1], d[:, 0] + d[:, 2], d[:, 0] + d[:, 1] + d[:, 2] + d[:, 4]], 1)
+    hit[held] = ~rays_fold_at(corner_tails, corner_directions, distance[held])
+    first = np.flatnonzero(hit)[::-1]  # the first match per point (nearest centre ray) is written last
+    found = np.zeros(len(inside), dtype=bool)
+    refined = np.full((len(inside), 2), np.nan)
+    refined[pair_point[first]] = sub_cells[first] / FOLD_SAMPLES
+    found[pair_point[first]] = True
+    cells[inside] = refined
+    accepted = accepted.copy()
+    accepted[inside] = found
+    return accepted
 
 
 def _closest_cells(cells, pair_point, pair_cell, points, keep: int = CANDIDATE_CELLS):
@@ -387,7 +464,125 @@ def build_sample_based_camera(reflectors, view: View, bounds, max_order: int = 1
     sbc.stats["trace_seconds"] = trace_seconds + time.perf_counter() - start
     sbc.stats["n_mixed_cells"] = int(sum(len(m.heads) for m in {id(m): m for m in sbc.mixed}.values()))
     sbc.stats["nbytes"] += int(sum(m.nbytes for m in {id(m): m for m in sbc.mixed}.values()))
+    start = time.perf_counter()
+    sbc.folds = trace_fold_cells(reflector_set, ray_map, sbc.grids)
+    sbc.stats["fold_seconds"] = time.perf_counter() - start
+    sbc.stats["trace_seconds"] += sbc.stats["fold_seconds"]
+    distinct = {id(f): f for f in sbc.folds}.values()
+    sbc.stats["n_fold_cells"] = int(sum(len(f.valid) for f in distinct)) // (FOLD_SAMPLES * FOLD_SAMPLES)
+    sbc.stats["nbytes"] += int(sum(f.nbytes for f in distinct))
     return sbc
+
+
+def trace_fold_cells(reflector_set: ReflectorSet, ray_map: RayMap, grids: list) -> list:
+    """FoldCells of every tree's group (one object per distinct grid, shared by its sheets)."""
+    traced = {}
+    for grid in grids:
+        if id(grid) not in traced:
+            traced[id(grid)] = _fold_cells(reflector_set, ray_map, grid)
+    return [traced[id(grid)] for grid in grids]
+
+
+def fold_cell_mask(ray_map: RayMap, corners: np.ndarray) -> np.ndarray:
+    """(n,) bool: cells (four corner rays 00, 10, 01, 11 each) whose rays fold over
+    somewhere between their tails and their longest head (rays_fold)."""
+    return rays_fold(ray_map.tail[corners], ray_map.direction[corners], ray_map.head_distance[corners].max(axis=1))
+
+
+def _orientations(tail: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    """(n, 4, 3) coefficients q0, q1, q2 of each corner triangle's orientation
+    q0 + q1 s + q2 s^2 (cross product of its edges at depth s, along the mean direction)."""
+    mean = direction.mean(axis=1)
+    out = np.empty((len(tail), len(FOLD_TRIANGLES), 3))
+    for k, (a, b, c) in enumerate(FOLD_TRIANGLES):
+        e1t, e1d = tail[:, b] - tail[:, a], direction[:, b] - direction[:, a]
+        e2t, e2d = tail[:, c] - tail[:, a], direction[:, c] - direction[:, a]
+        out[:, k, 0] = np.einsum("nd,nd->n", np.cross(e1t, e2t), mean)
+        out[:, k, 1] = np.einsum("nd,nd->n", np.cross(e1t, e2d) + np.cross(e1d, e2t), mean)
+        out[:, k, 2] = np.einsum("nd,nd->n", np.cross(e1d, e2d), mean)
+    return out
+
+
+def _mixed(q: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """(n, m) bool: at depth[:, m], do the four corner triangles disagree in orientation
+    (one turns one way, another the other; a quad collapsed to a point is not folded)?"""
+    value = q[:, :, None, 0] + depth[:, None] * (q[:, :, None, 1] + depth[:, None] * q[:, :, None, 2])
+    return np.any(value > 0, axis=1) & np.any(value < 0, axis=1)
+
+
+def rays_fold_at(tail: np.ndarray, direction: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """(n,) bool: at its depth, is each cell's quad of rays (n, 4, 3) folded over (its
+    corner triangles disagree in orientation, so the bilinear patch is not one-to-one)?"""
+    return _mixed(_orientations(tail, direction), depth[:, None])[:, 0]
+
+
+def rays_fold(tail: np.ndarray, direction: np.ndarray, reach: np.ndarray) -> np.ndarray:
+    """(n,) bool: is each cell's quad of rays (n, 4, 3; corners 00, 10, 01, 11) folded over
+    at some depth in [0, reach]?
+
+    Each corner triangle's orientation is a quadratic in the depth; the triangles can
+    only start or stop disagreeing at a root of one of them, so the test is exact at
+    the ends, the roots in [0, reach] and the midpoints between them. A quad that turns
+    over as a whole (past a focus, all four triangles flip) stays one-to-one: no fold.
+    """
+    q = _orientations(tail, direction)
+    a, b, c = q[..., 2], q[..., 1], q[..., 0]
+    root = np.sqrt(np.maximum(b * b - 4 * a * c, 0.0))
+    linear = np.abs(a) <= 1e-12 * (np.abs(b) + np.abs(c)) + 1e-300
+    with np.errstate(divide="ignore", invalid="ignore"):
+        roots = np.concatenate([np.where(linear, -c / b, (-b - root) / (2 * a)),
+                                np.where(linear, np.nan, (-b + root) / (2 * a))], axis=1)
+    roots = np.where(np.isfinite(roots), np.clip(roots, 0.0, reach[:, None]), 0.0)
+    depths = np.sort(np.concatenate([np.zeros((len(q), 1)), reach[:, None], roots], axis=1), axis=1)
+    depths = np.concatenate([depths, 0.5 * (depths[:, 1:] + depths[:, :-1])], axis=1)
+    return _mixed(q, depths).any(axis=1)
+
+
+def _fold_cells(reflector_set: ReflectorSet, ray_map: RayMap, grid: np.ndarray) -> FoldCells:
+    rows, columns = grid.shape
+    m = FOLD_SAMPLES
+    index = np.full((rows, columns), -1, dtype=np.int64)
+    corners = np.stack([grid[:-1, :-1], grid[:-1, 1:], grid[1:, :-1], grid[1:, 1:]], axis=-1)  # (rows-1, cols-1, 4)
+    j, i = np.nonzero(np.all(corners >= 0, axis=-1))
+    members = grid[grid >= 0]
+    history = ray_map.histories[int(ray_map.group[members[0]])] if len(members) else ()
+    if len(j) and len(history) == 1:  # first-order groups: sub-rays are view rays reflected once
+        fold = fold_cell_mask(ray_map, corners[j, i])
+        j, i = j[fold], i[fold]
+    else:
+        j = i = np.zeros(0, dtype=np.int64)
+    empty = RayPatches(np.zeros((0, 3)), np.zeros((0, 2, 3)), np.zeros(0), np.zeros((0, 6, 3)),
+                       np.zeros((0, 6, 3)), np.zeros((0, 6, 2)), np.zeros((0, 2)), np.zeros((0, 2)), True)
+    if len(j) == 0:
+        return FoldCells(index, empty, np.zeros(0, dtype=bool))
+    index[j, i] = np.arange(len(j))
+    lattice = np.arange(m + 1)
+    lb, la = np.meshgrid(lattice, lattice, indexing="ij")  # [b, a]
+    sub = np.stack([i[:, None] * m + la.reshape(-1), j[:, None] * m + lb.reshape(-1)], axis=-1)  # (n, (m+1)^2, 2)
+    origins, incoming = ray_map.view.pixel_rays(ray_map.cell_pixels(sub.reshape(-1, 2) / m))
+    hits = reflector_set.intersect(origins, incoming)
+    ok = (hits.reflector == history[0]) & reflection_valid(incoming, hits.normal, hits.face_normal)
+    tails = origins + np.where(ok, hits.t, 0.0)[:, None] * incoming
+    directions = reflect(incoming, hits.normal)
+    n = len(j)
+    tails, directions, ok = (x.reshape(n, m + 1, m + 1, -1) for x in (tails, directions, ok[:, None]))
+
+    def corner(x, db, da):
+        return x[:, db:db + m, da:da + m].reshape(n * m * m, -1)
+
+    t = [corner(tails, 0, 0), corner(tails, 0, 1), corner(tails, 1, 0), corner(tails, 1, 1)]
+    d = [corner(directions, 0, 0), corner(directions, 0, 1), corner(directions, 1, 0), corner(directions, 1, 1)]
+    valid = (corner(ok, 0, 0) & corner(ok, 0, 1) & corner(ok, 1, 0) & corner(ok, 1, 1))[:, 0]
+
+    def bilinear(c):  # coefficients 1, u, v, u^2, uv, v^2 of the bilinear patch through corners 00, 10, 01, 11
+        zero = np.zeros_like(c[0])
+        return np.stack([c[0], c[1] - c[0], c[2] - c[0], zero, c[3] - c[2] - c[1] + c[0], zero], axis=1)
+
+    count = n * m * m
+    lo = corner(sub.reshape(n, m + 1, m + 1, 2), 0, 0).astype(np.float64)
+    patches = RayPatches(np.zeros((count, 3)), np.zeros((count, 2, 3)), np.ones(count), bilinear(t), bilinear(d),
+                         np.zeros((count, 6, 2)), lo, lo + 1.0, True)
+    return FoldCells(index, patches, valid)
 
 
 def trace_mixed_cells(reflector_set: ReflectorSet, ray_map: RayMap, bounds, grids: list) -> list:

@@ -24,8 +24,11 @@ Textures (names as the GLSL samplers, ``sbc_`` + name):
 ``leaves``  1 texel per leaf: (kind, row, rays in leaf, 0); row local to the group
             (camera-leaf patch or ray-list leaf).
 ``patches`` 16 texels per ray patch; the camera-leaf patches of all groups, then the
-            bilinear ray-list cell patches of all groups (offsets in ``groups``):
-    0: (chart origin xyz, 1 if bilinear else 0)
+            bilinear ray-list cell patches of all groups (offsets in ``groups``), then
+            the bilinear sub-cell patches of every group's fold cells (addon.sbc.FoldCells,
+            FOLD_SAMPLES^2 per fold cell, row-major [b][a], lo/hi in sub-cell units):
+    0: (chart origin xyz, 1 if bilinear else 0; -1 for a fold sub-cell whose rays do not
+       all hit the group's reflector)
     1..6: (tail coefficient k xyz, cell coefficient k x), k = 1, u, v, u^2, uv, v^2
     7..12: (direction coefficient k xyz, cell coefficient k y)
     13: (lo.x, lo.y, hi.x, hi.y) the member cells' bounds
@@ -35,7 +38,8 @@ Textures (names as the GLSL samplers, ``sbc_`` + name):
             ``cell_start``, its ray grid (rows x columns, row-major, ray index or -1),
             right after it its mixed-cell grid (same layout: the scalar index of the
             cell's sub-ray heads, or -1 where the cell is not mixed; addon.sbc.MixedCells),
-            then those heads, SUBCELL_SAMPLES^2 per mixed cell, row-major [b][a], the head
+            its fold-cell grid (same layout: the patch index of the fold cell's first
+            sub-cell, or -1 where the cell is not a fold cell), then the mixed-cell heads, SUBCELL_SAMPLES^2 per mixed cell, row-major [b][a], the head
             distance of the sub-ray, or -1 where it leaves the scene box (unblocked).
 ``rays``    2 texels per ray of the ray map: (tail xyz, head distance, negative where
             the head is where the ray leaves the scene box rather than on a reflector),
@@ -62,6 +66,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..addon.bsp import CAMERA_LEAF
+from ..addon.sbc import FOLD_SAMPLES
 
 #: Texels per row of every packed texture; index i lives at (i % W, i // W).
 TEXTURE_WIDTH = 4096
@@ -116,7 +121,7 @@ def _exact(name: str, values) -> np.ndarray:
     return values.astype(np.float32)
 
 
-def _pack_patches(patches, bilinear: bool) -> np.ndarray:
+def _pack_patches(patches, bilinear: bool, valid=None) -> np.ndarray:
     """(n * PATCH_TEXELS, 4) float32 texels of ray patches, tails relative to their origin."""
     n = len(patches.lo)
     tail = patches.tail.astype(np.float64).copy()
@@ -134,6 +139,8 @@ def _pack_patches(patches, bilinear: bool) -> np.ndarray:
     out[:, 7:13, 3] = patches.cell[:, :, 1]
     out[:, 13, :2] = patches.lo
     out[:, 13, 2:] = patches.hi
+    if valid is not None:
+        out[:, 0, 3] = np.where(valid, 1.0, -1.0)
     if bilinear:
         centre_tail, centre_direction, _, _ = patches.centre_rays  # as sbc._closest_cells uses them
         out[:, 14, :3] = centre_tail - origin.astype(np.float64)
@@ -150,9 +157,13 @@ def pack_sample_based_camera(sbc) -> PackedSBC:
     if sbc.model_name != "ray_patch":
         raise ValueError(f"GPU projection supports the 'ray_patch' leaf model only, not {sbc.model_name!r}")
     ray_map = sbc.ray_map
-    groups, nodes, leaves, camera_patches, cell_patches, scalars = [], [], [], [], [], []
+    groups, nodes, leaves, camera_patches, cell_patches, fold_patches, scalars = [], [], [], [], [], [], []
     n_cameras = sum(0 if t.cameras is None else len(t.cameras.lo) for t in sbc.trees)
     cell_base = n_cameras  # cell patches follow all camera patches
+    fold_base = cell_base + sum(0 if t.cells is None else len(t.cells.lo) for t in sbc.trees)
+    folds = getattr(sbc, "folds", None)
+    fold_offsets = {}  # patch index of each distinct FoldCells' first sub-cell (shared by sheets)
+    n_fold_patches = 0
     n_scalars = n_cells = 0
     n_nodes = n_leaves = n_camera_rows = 0
     for g, (tree, grid) in enumerate(zip(sbc.trees, sbc.grids)):
@@ -183,7 +194,7 @@ def pack_sample_based_camera(sbc) -> PackedSBC:
         scalars.append(_exact("grid", grid.reshape(-1)))
         n_scalars += n_raylists + 1 + grid.size
         mixed = None if getattr(sbc, "mixed", None) is None else sbc.mixed[g]
-        heads_start = n_scalars + grid.size
+        heads_start = n_scalars + 2 * grid.size  # after the mixed-cell and fold-cell grids
         mixed_grid = np.full(grid.size, -1, dtype=np.int64)
         heads = np.zeros(0)
         if mixed is not None and len(mixed.heads):
@@ -192,8 +203,18 @@ def pack_sample_based_camera(sbc) -> PackedSBC:
             mixed_grid = np.where(index >= 0, heads_start + index * per_cell, -1)
             heads = np.where(np.isfinite(mixed.heads), mixed.heads, -1.0).reshape(-1)
         scalars.append(_exact("mixed grid", mixed_grid).astype(np.float32))
+        fold = None if folds is None else folds[g]
+        fold_grid = np.full(grid.size, -1, dtype=np.int64)
+        if fold is not None and len(fold.valid):
+            if id(fold) not in fold_offsets:
+                fold_offsets[id(fold)] = fold_base + n_fold_patches
+                fold_patches.append(_pack_patches(fold.patches, bilinear=True, valid=fold.valid))
+                n_fold_patches += len(fold.valid)
+            index = fold.index.reshape(-1)
+            fold_grid = np.where(index >= 0, fold_offsets[id(fold)] + index * FOLD_SAMPLES ** 2, -1)
+        scalars.append(_exact("fold grid", fold_grid).astype(np.float32))
         scalars.append(heads.astype(np.float32))
-        n_scalars += grid.size + len(heads)
+        n_scalars += 2 * grid.size + len(heads)
         n_nodes += len(tree.leaf)
         n_leaves += len(tree.leaf_kind)
 
@@ -210,11 +231,11 @@ def pack_sample_based_camera(sbc) -> PackedSBC:
     rays[:, 0, :3], rays[:, 0, 3] = ray_map.tail, np.where(ray_map.blocked, 1.0, -1.0) * ray_map.head_distance
     rays[:, 1, :3], rays[:, 1, 3] = ray_map.direction, ray_map.first_depth
     _exact("ray count", [ray_map.n_rays])
-    _exact("patch count", [n_cameras + n_cells])
+    _exact("patch count", [n_cameras + n_cells + n_fold_patches])
+    all_patches = camera_patches + cell_patches + fold_patches
     return PackedSBC(
         groups=group_texels, nodes=node_texels, leaves=_exact("leaves", stack(leaves)),
-        patches=np.concatenate(camera_patches + cell_patches) if (camera_patches or cell_patches)
-        else np.zeros((0, 4), np.float32),
+        patches=np.concatenate(all_patches) if all_patches else np.zeros((0, 4), np.float32),
         scalars=np.concatenate(scalars) if scalars else np.zeros(0, np.float32),
         rays=rays.reshape(-1, 4).astype(np.float32), n_groups=len(sbc.trees),
         columns=int(ray_map.columns), rows=int(ray_map.rows), downsample=int(ray_map.downsample),
@@ -229,7 +250,7 @@ def _unpack_patches(texels: np.ndarray) -> dict:
     return {
         "origin": origin, "bilinear": patch[:, 0, 3] > 0.5, "tail": tail, "direction": patch[:, 7:13, :3],
         "cell": np.stack([patch[:, 1:7, 3], patch[:, 7:13, 3]], axis=2), "lo": patch[:, 13, :2],
-        "hi": patch[:, 13, 2:], "centre_tail": patch[:, 14, :3] + origin, "centre_direction": patch[:, 15, :3],
+        "hi": patch[:, 13, 2:], "valid": patch[:, 0, 3] > -0.5, "centre_tail": patch[:, 14, :3] + origin, "centre_direction": patch[:, 15, :3],
     }
 
 
@@ -259,6 +280,7 @@ def unpack_sample_based_camera(packed: PackedSBC) -> tuple[list, dict]:
         size = packed.rows * packed.columns
         grid = packed.scalars[grid_start:grid_start + size].astype(np.int64)
         mixed_grid = packed.scalars[grid_start + size:grid_start + 2 * size].astype(np.int64)
+        fold_grid = packed.scalars[grid_start + 2 * size:grid_start + 3 * size].astype(np.int64)
         out.append({
             "plane_normal": node[:, 0, :3], "plane_offset": node[:, 0, 3],
             "left": node[:, 1, 0].astype(np.int64), "right": node[:, 1, 1].astype(np.int64),
@@ -269,6 +291,7 @@ def unpack_sample_based_camera(packed: PackedSBC) -> tuple[list, dict]:
             "cells": _unpack_patches(patches[cell_start:cell_start + n_cells].reshape(-1, 4)),
             "grid": grid.reshape(packed.rows, packed.columns),
             "mixed_grid": mixed_grid.reshape(packed.rows, packed.columns),
+            "fold_grid": fold_grid.reshape(packed.rows, packed.columns),
         })
     return out, {"tail": rays[:, 0, :3], "head_distance": np.abs(rays[:, 0, 3]), "blocked": rays[:, 0, 3] > 0,
                  "direction": rays[:, 1, :3], "first_depth": rays[:, 1, 3]}

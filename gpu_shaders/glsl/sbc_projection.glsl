@@ -117,28 +117,53 @@ bool sbc_project_camera(int patch_index, vec3 p, out vec2 cell)
          all(lessThanEqual(cell, bounds.zw + SBC_CELL_MARGIN));
 }
 
-/* Ray-list leaf (sbc._project_ray_lists): Newton on the SBC_CANDIDATE_CELLS cells whose
- * centre ray passes closest to p (sbc._closest_cells; ties keep the cell order), nearest
- * first; the first cell holding the point (bilinear coordinates in [0, 1] +- tolerance,
- * converged, in front of the tails) wins. */
-bool sbc_project_ray_list(int first_patch, int first_cell, int stop_cell, vec3 p, out vec2 cell)
+/* Are the four rays (corners 00, 10, 01, 11) folded over at depth s (sbc.rays_fold_at):
+ * do the cell's corner triangles (edges' cross product along the mean direction)
+ * disagree in orientation there? */
+bool sbc_rays_fold_at(vec3 tail[4], vec3 direction[4], float s)
 {
-  float best_miss[SBC_CANDIDATE_CELLS];
-  int best_cell[SBC_CANDIDATE_CELLS];
-  for (int k = 0; k < SBC_CANDIDATE_CELLS; k++) {
+  vec3 mean = 0.25 * (direction[0] + direction[1] + direction[2] + direction[3]);
+  ivec3 triangles[4] = ivec3[4](ivec3(0, 1, 2), ivec3(1, 3, 0), ivec3(3, 2, 1), ivec3(2, 0, 3));
+  bool positive = false, negative = false;
+  for (int k = 0; k < 4; k++) {
+    ivec3 t = triangles[k];
+    vec3 a = tail[t.x] + s * direction[t.x];
+    float value = dot(cross(tail[t.y] + s * direction[t.y] - a, tail[t.z] + s * direction[t.z] - a), mean);
+    positive = positive || value > 0.0;
+    negative = negative || value < 0.0;
+  }
+  return positive && negative;
+}
+
+/* Ray-list leaf (sbc._project_ray_lists), and fold cells' sub-cells (sbc._refine_in_folds,
+ * `fold` true): Newton on the `keep` cells whose centre ray passes closest to p
+ * (sbc._closest_cells; ties keep the cell order), nearest first; the first cell holding
+ * the point (bilinear coordinates in [0, 1] +- tolerance, converged, in front of the
+ * tails; for a fold sub-cell also usable, texel 0 w >= 0, and its rays not folded
+ * over at the point's depth) wins. `cell` is lo + the bilinear coordinates. */
+bool sbc_project_ray_list(int first_patch, int first_cell, int stop_cell, vec3 p, int keep, bool fold,
+                          out vec2 cell)
+{
+  float best_miss[SBC_MAX_CANDIDATES];
+  int best_cell[SBC_MAX_CANDIDATES];
+  for (int k = 0; k < SBC_MAX_CANDIDATES; k++) {
     best_miss[k] = 3.0e38;
     best_cell[k] = -1;
   }
   for (int c = first_cell; c < stop_cell; c++) {
     int base = (first_patch + c) * SBC_PATCH_TEXELS;
-    vec3 q = p - SBC_FETCH(sbc_patches, base).xyz;
+    vec4 origin_texel = SBC_FETCH(sbc_patches, base);
+    if (origin_texel.w < 0.0) {
+      continue;  /* a fold sub-cell whose rays leave the group */
+    }
+    vec3 q = p - origin_texel.xyz;
     vec3 centre_tail = SBC_FETCH(sbc_patches, base + 14).xyz;
     vec3 centre_direction = SBC_FETCH(sbc_patches, base + 15).xyz;
     float miss = length(cross(q - centre_tail, centre_direction));
     /* Insertion into the sorted short list; strict < keeps earlier cells first on ties. */
-    for (int k = 0; k < SBC_CANDIDATE_CELLS; k++) {
+    for (int k = 0; k < keep; k++) {
       if (miss < best_miss[k] || best_cell[k] < 0) {
-        for (int m = SBC_CANDIDATE_CELLS - 1; m > k; m--) {
+        for (int m = keep - 1; m > k; m--) {
           best_miss[m] = best_miss[m - 1];
           best_cell[m] = best_cell[m - 1];
         }
@@ -148,7 +173,7 @@ bool sbc_project_ray_list(int first_patch, int first_cell, int stop_cell, vec3 p
       }
     }
   }
-  for (int k = 0; k < SBC_CANDIDATE_CELLS; k++) {
+  for (int k = 0; k < keep; k++) {
     if (best_cell[k] < 0) {
       break;
     }
@@ -162,6 +187,17 @@ bool sbc_project_ray_list(int first_patch, int first_cell, int stop_cell, vec3 p
         all(lessThanEqual(uv, vec2(1.0 + SBC_CELL_TOLERANCE))) &&
         sbc_converged(residual, p, q, s) && s >= 0.0)
     {
+      if (fold) {
+        vec3 t0 = SBC_FETCH(sbc_patches, base + 1).xyz, t1 = SBC_FETCH(sbc_patches, base + 2).xyz;
+        vec3 t2 = SBC_FETCH(sbc_patches, base + 3).xyz, t4 = SBC_FETCH(sbc_patches, base + 5).xyz;
+        vec3 d0 = SBC_FETCH(sbc_patches, base + 7).xyz, d1 = SBC_FETCH(sbc_patches, base + 8).xyz;
+        vec3 d2 = SBC_FETCH(sbc_patches, base + 9).xyz, d4 = SBC_FETCH(sbc_patches, base + 11).xyz;
+        vec3 tails[4] = vec3[4](t0, t0 + t1, t0 + t2, t0 + t1 + t2 + t4);
+        vec3 directions[4] = vec3[4](d0, d0 + d1, d0 + d2, d0 + d1 + d2 + d4);
+        if (sbc_rays_fold_at(tails, directions, s)) {
+          continue;
+        }
+      }
       cell = SBC_FETCH(sbc_patches, base + 13).xy + uv;
       return true;
     }
@@ -222,16 +258,30 @@ bool sbc_project(vec3 p, int group, out vec2 pixel, out float first_depth, out f
   else {
     int starts = int(h1.x);
     accepted = sbc_project_ray_list(int(h0.w), int(sbc_scalar(starts + row)),
-                                    int(sbc_scalar(starts + row + 1)), p, cell);
+                                    int(sbc_scalar(starts + row + 1)), p, SBC_CANDIDATE_CELLS, false, cell);
   }
   if (!accepted) {
     return false;
   }
-
-  /* 3. The four rays around the cell exist in the group (sbc._interpolate_rays). */
   int columns = int(h2.x);
   int rows = int(h2.y);
+
+  /* An answer in a fold cell is solved again on its traced sub-rays (sbc._refine_in_folds). */
   vec2 base = floor(cell);
+  if (base.x >= 0.0 && base.y >= 0.0 && base.x < float(columns) && base.y < float(rows)) {
+    int fold = int(sbc_scalar(int(h1.y) + (2 * rows + int(base.y)) * columns + int(base.x)));
+    if (fold >= 0) {
+      vec2 sub_cell;
+      if (!sbc_project_ray_list(fold, 0, SBC_FOLD_SAMPLES * SBC_FOLD_SAMPLES, p, SBC_FOLD_CANDIDATES, true,
+                                sub_cell)) {
+        return false;
+      }
+      cell = sub_cell / float(SBC_FOLD_SAMPLES);
+    }
+  }
+
+  /* 3. The four rays around the cell exist in the group (sbc._interpolate_rays). */
+  base = floor(cell);
   vec2 frac = cell - base;
   int i0 = int(base.x);
   int j0 = int(base.y);

@@ -811,8 +811,9 @@ def _code_version(root: Path) -> dict:
     """The commit the engine was imported from, and the engine files that differ from it."""
     def git(*arguments):
         try:
+            # Only line ends are stripped: a porcelain line starts with a space (" M path").
             return subprocess.run(["git", "-C", str(root), *arguments], capture_output=True, text=True,
-                                  timeout=30).stdout.strip()
+                                  timeout=30).stdout.rstrip("\n")
         except (OSError, subprocess.SubprocessError):
             return ""
 

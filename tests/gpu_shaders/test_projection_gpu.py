@@ -20,6 +20,7 @@ import pytest
 
 from curved_reflections.addon import Reflector, build_sample_based_camera, look_at_view, scene_bounds
 from curved_reflections.addon.shapes import vase
+from curved_reflections.addon import sbc as sbc_module
 from curved_reflections.addon.sphere import icosphere
 from curved_reflections.gpu_shaders import sbc_pack
 
@@ -93,6 +94,17 @@ def test_gpu_projection_matches_numpy(gpu_ready, case):
     np.testing.assert_array_equal(gpu.leaf_kind[both], cpu.leaf_kind[both])
     assert set(np.unique(cpu.leaf_kind[both])) == {1, 2}  # both leaf kinds are exercised
 
+    # Answers in fold cells (the vase's concave inside) are solved again on traced sub-rays
+    # (sbc.FoldCells): the GPU does the same and agrees there too.
+    g, k = np.nonzero(cpu.valid)
+    cells = np.floor(cpu.pixels[g, k] / sbc.ray_map.downsample - 0.5).astype(np.int64)
+    in_fold = np.zeros(cpu.valid.shape, dtype=bool)
+    in_fold[g, k] = [sbc.folds[a].index[j, i] >= 0 for a, (i, j) in zip(g, cells)]
+    if name == "vase_and_ball":
+        assert sbc.stats["n_fold_cells"] > 100 and (in_fold & both).sum() > 100
+        assert (gpu.valid != cpu.valid)[in_fold].sum() <= max(2, DECISION_SHARE * in_fold.sum() * 10)
+        assert np.abs(gpu.pixels[in_fold & both] - cpu.pixels[in_fold & both]).max() <= PIXEL_TOLERANCE
+
     # The first reflector point is origin + first_depth * direction of the pixel's view ray.
     origins, directions = sbc.ray_map.view.pixel_rays(cpu.pixels[both])
     first_depth = np.einsum("ij,ij->i", cpu.reflector_points[both] - origins, directions)
@@ -114,7 +126,7 @@ def test_packing_round_trip(case):
     def close(actual, expected, scale=1.0):
         np.testing.assert_allclose(actual, expected, rtol=1e-6, atol=1e-6 * scale)
 
-    for unpacked, tree, grid, mixed in zip(groups, sbc.trees, sbc.grids, sbc.mixed):
+    for g, (unpacked, tree, grid, mixed) in enumerate(zip(groups, sbc.trees, sbc.grids, sbc.mixed)):
         for name in ("left", "right", "leaf", "leaf_kind", "leaf_row", "leaf_rays", "cell_start"):
             np.testing.assert_array_equal(unpacked[name], getattr(tree, name), err_msg=name)
         np.testing.assert_array_equal(unpacked["grid"], grid)
@@ -124,6 +136,17 @@ def test_packing_round_trip(case):
         heads = packed.scalars[unpacked["mixed_grid"][j, i][:, None] + np.arange(samples)].astype(np.float64)
         expected = mixed.heads[mixed.index[j, i]].reshape(len(j), samples)
         close(heads, np.where(np.isfinite(expected), expected, -1.0), 10.0)
+        # Fold cells: the grid points at each cell's first sub-cell patch, in [b][a] order.
+        fold = sbc.folds[g]
+        np.testing.assert_array_equal(unpacked["fold_grid"] >= 0, fold.index >= 0)
+        j, i = np.nonzero(fold.index >= 0)
+        per_cell = sbc_module.FOLD_SAMPLES ** 2
+        rows = (unpacked["fold_grid"][j, i][:, None] + np.arange(per_cell)).reshape(-1)
+        sub = sbc_pack._unpack_patches(packed.patches.reshape(-1, sbc_pack.PATCH_TEXELS, 4)[rows].reshape(-1, 4))
+        expected_rows = (fold.index[j, i][:, None] * per_cell + np.arange(per_cell)).reshape(-1)
+        np.testing.assert_array_equal(sub["valid"], fold.valid[expected_rows])
+        for field in ("tail", "direction", "lo", "hi"):
+            close(sub[field], getattr(fold.patches, field)[expected_rows], 200.0)
         assert unpacked["depth"] == tree.depth
         close(unpacked["plane_normal"], tree.plane_normal)
         close(unpacked["plane_offset"], tree.plane_offset, 10.0)
@@ -154,10 +177,13 @@ def test_tails_are_stored_relative_to_their_origin(case):
     packed = sbc_pack.pack_sample_based_camera(sbc)
     patches = packed.patches.reshape(-1, sbc_pack.PATCH_TEXELS, 4)
     extent = np.ptp(sbc.ray_map.tail, axis=0).max()
-    # Camera patches (all trees), then ray-list cells: a camera patch's constant tail term
-    # lies within its chart's extent of its origin; a cell's origin is its first corner's tail.
+    # Camera patches (all trees), then ray-list cells, then fold sub-cells (once per group): a
+    # camera patch's constant tail term lies within its chart's extent of its origin; a cell's
+    # or sub-cell's origin is its first corner's tail.
+    folds = {id(f): f for f in sbc.folds}.values()
     bound = np.concatenate([t.cameras.scale for t in sbc.trees if t.cameras is not None]
-                           + [np.full(len(t.cells.lo), 1e-6 * extent) for t in sbc.trees if t.cells is not None])
+                           + [np.full(len(t.cells.lo), 1e-6 * extent) for t in sbc.trees if t.cells is not None]
+                           + [np.full(len(f.valid), 1e-6 * extent) for f in folds])
     assert np.all(np.linalg.norm(patches[:, 1, :3], axis=1) <= 2 * bound)
     assert np.abs(patches[:, 0, :3]).max() > 0.1 * extent  # origins themselves are not small
 
