@@ -36,10 +36,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import importlib.util
 import math
-import os
-import platform
 import shlex
 import statistics
 import sys
@@ -48,18 +45,13 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import bench_sbc  # noqa: E402  (same folder: package import, machine facts)
+
 REPO_ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_OUT = REPO_ROOT / "docs" / "benchmarks" / "draw.md"
 #: Target of the reflected pass over the plain draw (issue #4).
 TARGET_RATIO = 1.5
-
-
-def import_package():
-    """The repository as ``curved_reflections`` (isolated Blender user folder), registered."""
-    spec = importlib.util.spec_from_file_location("_package_link", REPO_ROOT / "scripts" / "package_link.py")
-    link = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(link)
-    return link.import_registered(REPO_ROOT, prefix="curved_reflections_bench_")
 
 
 def split_uniformly(vertices: np.ndarray, triangles: np.ndarray, colors: np.ndarray):
@@ -290,24 +282,16 @@ def _looking_away(view):
 
 
 def _machine() -> str:
-    import bpy
-
-    cpu = platform.processor() or "unknown CPU"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
+    """bench_sbc's machine facts, with the GPU the drawing ran on."""
+    facts = bench_sbc._machine()
     try:
         import gpu
 
         device = f"{gpu.platform.renderer_get()} ({gpu.platform.version_get()})"
     except Exception:  # noqa: BLE001 - only a label
         device = "unknown GPU"
-    return f"{cpu}, {os.cpu_count()} cores; GPU: {device}; Blender {bpy.app.version_string}, Python {platform.python_version()}"
-
+    return (f"{facts['cpu']}, {facts['cores']} cores; GPU: {device}; Blender {facts['bpy']}, "
+            f"Python {facts['python']}")
 
 def report(results: list, command: str, machine: str, note: str = "") -> str:
     lines = [
@@ -436,7 +420,7 @@ def parse_args(argv):
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     args = parse_args(argv)
-    import_package()
+    bench_sbc.import_package()
     results = []
     for kind in args.scenes:
         result = measure(kind, args.width, args.height, args.vertices, args.repeats, args.warmup,

@@ -285,22 +285,6 @@ def _targets(results: dict) -> list:
     return lines
 
 
-def _code_version() -> dict:
-    """The commit, and the engine files that differ from it (``git status --porcelain``)."""
-    import subprocess
-
-    def git(*arguments):
-        try:
-            return subprocess.run(["git", "-C", str(bench_sbc.REPO_ROOT), *arguments], capture_output=True,
-                                  text=True, timeout=30).stdout
-        except (OSError, subprocess.SubprocessError):
-            return ""
-
-    changed = git("status", "--porcelain", "--", "addon", "operators", "gpu_shaders", "__init__.py")
-    return {"commit": git("rev-parse", "HEAD").strip() or "unknown",
-            "uncommitted": [line[3:] for line in changed.splitlines() if len(line) > 3]}
-
-
 def parse_args(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=bench_sbc.REPO_ROOT / "docs" / "benchmarks")
@@ -328,7 +312,7 @@ def main(argv=None) -> int:
         "command": " ".join([".venv/bin/python", "tests/benchmarks/bench_higher_order.py"]
                             + [shlex.quote(a) for a in argv]),
         "started": datetime.datetime.now().isoformat(timespec="seconds"),
-        "machine": bench_sbc._machine(), "code": _code_version(),
+        "machine": bench_sbc._machine(), "code": bench_sbc._code_version(bench_sbc.REPO_ROOT),
     }
     bench_sbc._log("two_spheres: scene, points and exact second-order paths")
     scene = prepare(args.points)
