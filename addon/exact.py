@@ -151,19 +151,32 @@ def _may_reflect(view, points, centres, radii, cone_axis, cone_cos) -> np.ndarra
     """Conservative test: some x within ``radii`` of ``centres`` may reflect the point."""
     to_eye = view.directions_to_eye(centres)
     if view.is_perspective:
-        eye_distance = lengths(view.eye - centres)
-        eye_turn = np.arcsin(np.clip(radii / np.maximum(eye_distance, 1e-300), 0.0, 1.0))
-        eye_turn = np.where(eye_distance > radii, eye_turn, np.pi)
+        eye_turn = turn_toward(radii, lengths(view.eye - centres))
     else:
         eye_turn = np.zeros(len(centres))
     to_point = points - centres
     point_distance = lengths(to_point)
     to_point /= np.maximum(point_distance, 1e-300)[:, None]
-    point_turn = np.where(point_distance > radii,
-                          np.arcsin(np.clip(radii / np.maximum(point_distance, 1e-300), 0.0, 1.0)), np.pi)
-    half = to_eye + to_point
+    return half_vector_may_meet_cone(to_eye, eye_turn, to_point, turn_toward(radii, point_distance),
+                                     cone_axis, cone_cos)
+
+
+def turn_toward(radius, distance):
+    """Largest angle the direction toward a sphere of ``radius`` at ``distance`` can turn
+    (pi when the sphere holds the viewer)."""
+    return np.where(distance > radius, np.arcsin(np.clip(radius / np.maximum(distance, 1e-300), 0.0, 1.0)), np.pi)
+
+
+def half_vector_may_meet_cone(to_a, turn_a, to_b, turn_b, cone_axis, cone_cos) -> np.ndarray:
+    """Conservative: a normal in the cone (axis, cos of half-angle) may bisect some unit
+    directions within ``turn_a`` of ``to_a`` and ``turn_b`` of ``to_b``.
+
+    The half vector of directions turned by at most a and b lies within
+    asin((2 sin(a/2) + 2 sin(b/2)) / |to_a + to_b|) of their sum.
+    """
+    half = to_a + to_b
     half_length = lengths(half)
-    chord = 2 * np.sin(eye_turn / 2) + 2 * np.sin(point_turn / 2)
+    chord = 2 * np.sin(turn_a / 2) + 2 * np.sin(turn_b / 2)
     bounded = chord < half_length
     half_turn = np.arcsin(np.clip(chord / np.maximum(half_length, 1e-300), 0.0, 1.0))
     spread = np.arccos(np.clip(cone_cos, -1.0, 1.0)) + half_turn + CONE_SLACK

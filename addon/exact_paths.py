@@ -45,8 +45,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .bvh import descend
-from .exact import _first_hit_of_view_ray, _foot
-from .raytrace import ReflectorSet
+from .exact import (CONE_SLACK, INSIDE_TOLERANCE, _first_hit_of_view_ray, _foot, half_vector_may_meet_cone,
+                    turn_toward)
+from .raytrace import ReflectorSet, reflect
 from .vectors import dot, lengths, normalized
 from .view import View
 
@@ -61,8 +62,6 @@ ABANDON_DISTANCE = 0.5
 ABANDON_AFTER = 5
 #: ... and a pair whose full (unlimited) Newton step aims this far outside, twice running.
 ABANDON_AIM = 0.5
-INSIDE_TOLERANCE = 1e-9
-CONE_SLACK = 1e-6
 #: Points per chunk of the per-point stage (bounds the (point, t2) arrays).
 POINT_CHUNK = 128
 
@@ -126,27 +125,6 @@ def _triangle_spheres(reflector_set: ReflectorSet) -> _Spheres:
     return _Spheres(0.5 * (lo + hi), 0.5 * lengths(hi - lo), axis, cos)
 
 
-def _turn(radius, distance):
-    """Largest angle the direction toward a sphere of ``radius`` at ``distance`` can turn."""
-    return np.where(distance > radius, np.arcsin(np.clip(radius / np.maximum(distance, 1e-300), 0.0, 1.0)), np.pi)
-
-
-def _may_reflect(to_a, turn_a, to_b, turn_b, cone_axis, cone_cos) -> np.ndarray:
-    """Conservative: a normal in the cone may bisect some directions within the turns of ``to_a``, ``to_b``.
-
-    The half vector of unit directions turned by at most a and b lies within
-    asin((2 sin(a/2) + 2 sin(b/2)) / |to_a + to_b|) of their sum (``exact._may_reflect``).
-    """
-    half = to_a + to_b
-    half_length = lengths(half)
-    chord = 2 * np.sin(turn_a / 2) + 2 * np.sin(turn_b / 2)
-    bounded = chord < half_length
-    half_turn = np.arcsin(np.clip(chord / np.maximum(half_length, 1e-300), 0.0, 1.0))
-    spread = np.arccos(np.clip(cone_cos, -1.0, 1.0)) + half_turn + CONE_SLACK
-    alignment = np.abs(dot(half, cone_axis)) / np.maximum(half_length, 1e-300)
-    return ~bounded | (spread >= np.pi / 2) | (alignment >= np.cos(np.minimum(spread, np.pi / 2)))
-
-
 def _first_leg_pairs(reflector_set: ReflectorSet, view: View, spheres: _Spheres):
     """(t1, t2) pairs where a point of t1 may reflect the eye toward a point of t2."""
     bvh = reflector_set.bvh
@@ -156,15 +134,16 @@ def _first_leg_pairs(reflector_set: ReflectorSet, view: View, spheres: _Spheres)
     to_eye = view.eye - spheres.centre
     eye_distance = lengths(to_eye)
     to_eye /= eye_distance[:, None]
-    eye_turn = _turn(spheres.radius, eye_distance)
+    eye_turn = turn_toward(spheres.radius, eye_distance)
     faces_eye = _seen_facets(reflector_set, view)
 
     def pair_test(t1, centre, radius):
         offset = centre - spheres.centre[t1]
         distance = lengths(offset)
         toward = offset / np.maximum(distance, 1e-300)[:, None]
-        return _may_reflect(to_eye[t1], eye_turn[t1], toward, _turn(spheres.radius[t1] + radius, distance),
-                            spheres.axis[t1], spheres.cos[t1])
+        return half_vector_may_meet_cone(to_eye[t1], eye_turn[t1], toward,
+                                         turn_toward(spheres.radius[t1] + radius, distance),
+                                         spheres.axis[t1], spheres.cos[t1])
 
     # The ray from x1 must leave the front of t1's facet (the eye's side of its plane).
     front = reflector_set.face_normals * np.sign(dot(view.eye - reflector_set.v0, reflector_set.face_normals))[:, None]
@@ -253,10 +232,6 @@ def _candidates(spheres, eye, first_leg, sources, points):
     return point[keep], t1[keep], t2[keep]
 
 
-def _reflected(directions, normals):
-    return directions - 2.0 * dot(directions, normals)[:, None] * normals
-
-
 def _leaving_cone(spheres, eye, t1):
     """Cone of the directions the eye's rays leave t1 in, after reflection.
 
@@ -266,8 +241,8 @@ def _leaving_cone(spheres, eye, t1):
     offset = spheres.centre[t1] - eye
     distance = lengths(offset)
     incoming = offset / distance[:, None]
-    width = 2 * np.arccos(np.clip(spheres.cos[t1], -1, 1)) + _turn(spheres.radius[t1], distance)
-    return _reflected(incoming, spheres.axis[t1]), width
+    width = 2 * np.arccos(np.clip(spheres.cos[t1], -1, 1)) + turn_toward(spheres.radius[t1], distance)
+    return reflect(incoming, spheres.axis[t1]), width
 
 
 def _arrival_cone(spheres, t2, points):
@@ -275,15 +250,15 @@ def _arrival_cone(spheres, t2, points):
     offset = points - spheres.centre[t2]
     distance = lengths(offset)
     to_point = offset / np.maximum(distance, 1e-300)[:, None]
-    width = 2 * np.arccos(np.clip(spheres.cos[t2], -1, 1)) + _turn(spheres.radius[t2], distance)
-    return _reflected(to_point, spheres.axis[t2]), width
+    width = 2 * np.arccos(np.clip(spheres.cos[t2], -1, 1)) + turn_toward(spheres.radius[t2], distance)
+    return reflect(to_point, spheres.axis[t2]), width
 
 
 def _toward(spheres, t2, centre, radius):
     """Cone of the directions from a sphere (centre, radius) toward t2."""
     offset = spheres.centre[t2] - centre
     distance = lengths(offset)
-    return offset / np.maximum(distance, 1e-300)[:, None], _turn(spheres.radius[t2] + radius, distance)
+    return offset / np.maximum(distance, 1e-300)[:, None], turn_toward(spheres.radius[t2] + radius, distance)
 
 
 def _cones_meet(axis_a, width_a, axis_b, width_b) -> np.ndarray:
