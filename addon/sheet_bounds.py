@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .bvh import morton_codes
 from .sbc import MISS_CELLS
 
 #: Slab directions of the k-DOPs: the axes, the face diagonals and the body diagonals (k = 26).
@@ -86,17 +87,11 @@ def sheet_kdops(sbc, diameter: float) -> np.ndarray:
 
 
 def morton_order(points: np.ndarray) -> np.ndarray:
-    """The permutation sorting ``points`` (N, 3) along a 30-bit Morton (Z-order) curve."""
+    """The permutation sorting ``points`` (N, 3) along the BVH's 30-bit Morton curve."""
     points = np.asarray(points, np.float64)
     if len(points) == 0:
         return np.zeros(0, np.int64)
-    lo, hi = points.min(axis=0), points.max(axis=0)
-    cells = np.clip(((points - lo) / np.maximum(hi - lo, 1e-300) * 1023.0).astype(np.int64), 0, 1023)
-    code = np.zeros(len(points), np.int64)
-    for bit in range(10):
-        for axis in range(3):
-            code |= ((cells[:, axis] >> bit) & 1) << (3 * bit + axis)
-    return np.argsort(code, kind="stable")
+    return np.argsort(morton_codes(points), kind="stable")
 
 
 def chunk_boxes(points: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
