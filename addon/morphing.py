@@ -45,7 +45,7 @@ import numpy as np
 
 from .bsp import CAMERA_LEAF
 from .errors import SceneInputError
-from .ray_patch import NEWTON_ITERATIONS, RayPatches, _newton_steps, _ray
+from .ray_patch import RayPatches, solve_charts
 from .raytrace import ReflectorSet
 from .sbc import SampleBasedCamera, build_sample_based_camera, check_view_outside_reflectors, descend_tree
 from .scene import Reflector
@@ -558,18 +558,8 @@ def _extended_tails(tree, points: np.ndarray) -> np.ndarray:
     on_camera = np.flatnonzero(tree.leaf_kind[leaf] == CAMERA_LEAF)
     if len(on_camera) == 0 or not isinstance(tree.cameras, RayPatches):
         return result
-    patches, row, p = tree.cameras, tree.leaf_row[leaf[on_camera]], points[on_camera]
-    c = np.concatenate([patches.tail[row], patches.direction[row]], axis=2)
-    k = [[np.ascontiguousarray(c[:, term, d]) for d in range(6)] for term in range(6)]
-    pc = [np.ascontiguousarray(p[:, d]) for d in range(3)]
-    u, v = np.zeros(len(p)), np.zeros(len(p))
-    ray = _ray(k, u, v)
-    direction = np.stack(ray[3:], axis=1)
-    s = np.einsum("pd,pd->p", p - np.stack(ray[:3], axis=1), direction) / np.linalg.norm(direction, axis=1)
-    u, v, s, _ = _newton_steps(k, pc, u, v, s, NEWTON_ITERATIONS)
-    ray = _ray(k, u, v)
-    tail = np.stack(ray[:3], axis=1)
-    miss = np.linalg.norm(tail + s[:, None] * np.stack(ray[3:], axis=1) - p, axis=1)
+    p = points[on_camera]
+    u, v, s, tail, miss = solve_charts(tree.cameras, tree.leaf_row[leaf[on_camera]], p)
     ok = ((miss < 1e-6 * (1 + np.linalg.norm(p, axis=1))) & (np.abs(u) <= EXTENDED_CHART)
           & (np.abs(v) <= EXTENDED_CHART) & (s >= 0))
     result[on_camera[ok]] = tail[ok]

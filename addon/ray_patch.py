@@ -154,6 +154,14 @@ def invert_patches(patches: RayPatches, leaf: np.ndarray, points: np.ndarray):
 
 
 def _newton(patches: RayPatches, leaf: np.ndarray, points: np.ndarray):
+    u, v, s, _, miss = solve_charts(patches, leaf, points)
+    return patches.cells_at(leaf, u, v), s, miss
+
+
+def solve_charts(patches: RayPatches, leaf: np.ndarray, points: np.ndarray):
+    """Newton on t(u, v) + s r(u, v) = p in each point's leaf patch: chart coordinates
+    (u, v), distance s along the ray, the ray's tail (P, 3) and how far the point lies
+    off the ray (P,). Coordinates are not limited to the leaf's chart."""
     # Structure of arrays: every coefficient component is one contiguous 1-D array, so
     # each step is a few dozen fused 1-D operations (no cross/einsum over tiny axes).
     # Tails are taken relative to each patch's constant term, so the float32 steps see
@@ -187,7 +195,7 @@ def _newton(patches: RayPatches, leaf: np.ndarray, points: np.ndarray):
         u[rest], v[rest], s[rest] = sub_u, sub_v, sub_s
     ray = _ray(k, u, v)
     miss = [ray[d] + s * ray[d + 3] - p[d] for d in range(3)]
-    return patches.cells_at(leaf, u, v), s, np.sqrt(_dot(miss, miss))
+    return u, v, s, np.stack(ray[:3], axis=1) + origin, np.sqrt(_dot(miss, miss))
 
 
 def _ray(k, u, v):
