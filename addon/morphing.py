@@ -72,6 +72,9 @@ DUPLICATE_PIXELS = 3.0
 DUPLICATE_FRACTION = 1e-3
 #: An image missing at some nodes is blended over the others if they weigh this much.
 PARTIAL_WEIGHT = 0.5
+#: Sets of static points whose node images a grid keeps (one per renderer or mesh set);
+#: the oldest is dropped first.
+STATIC_SETS = 4
 #: remedy codes of MorphProjection
 NOT_PROJECTED, ALL_NODES, EXTENDED_FRUSTUM, PARTIAL = 0, 1, 2, 3
 #: node status codes
@@ -353,6 +356,45 @@ def bake_reflector(reflector: Reflector, settings: MorphSettings) -> tuple[Refle
     return ReflectorSet([extended]), grid, (grid.lo - grid.spacing, grid.hi + grid.spacing)
 
 
+class NodesOnDemand(dict):
+    """Node cameras of a grid built on first use, instead of baked: a grid to try a
+    reflector with, and what tests and benchmarks measure morphing with (a view only
+    ever uses the four nodes of its tetrahedron). ``cpu_seconds`` sums the builds."""
+
+    def __init__(self, reflector_set: ReflectorSet, positions: np.ndarray, bounds, settings: MorphSettings):
+        super().__init__()
+        self.args = reflector_set, positions, bounds, settings
+        self.cpu_seconds = 0.0
+
+    def __missing__(self, node) -> NodeCamera:
+        reflector_set, positions, bounds, settings = self.args
+        self[node] = camera = build_node(reflector_set, positions[int(node)], bounds, settings)
+        self.cpu_seconds += camera.cpu_seconds
+        return camera
+
+
+class _StatusOnDemand:
+    """Node status of a :class:`NodesOnDemand` grid: known once the node is built."""
+
+    def __init__(self, nodes: NodesOnDemand):
+        self.nodes = nodes
+
+    def __getitem__(self, index) -> np.ndarray:
+        return np.array([self.nodes[int(n)].status for n in np.atleast_1d(index)], dtype=np.int8)
+
+
+def grid_on_demand(reflector: Reflector, settings: MorphSettings, reflector_index: int = 0,
+                   blend: str = "surface", nodes: NodesOnDemand | None = None) -> MorphingGrid:
+    """A MorphingGrid of ``reflector`` (in its rigid frame) whose nodes are built when a
+    view first needs them (:class:`NodesOnDemand`; pass ``nodes`` to share them between grids)."""
+    reflector_set, grid, bounds = bake_reflector(reflector, settings)
+    if nodes is None:
+        nodes = NodesOnDemand(reflector_set, grid.node_positions(), bounds, settings)
+    lo, hi = reflector.bounds
+    return MorphingGrid(reflector.name, reflector_index, grid, settings, _StatusOnDemand(nodes), nodes,
+                        float(np.max(hi - lo)), blend=blend)
+
+
 # --- projection -----------------------------------------------------------------------
 
 
@@ -394,6 +436,10 @@ class MorphingGrid:
     #: "surface" (default): the blend refined on a quadratic fitted to the four nodes'
     #: reflector points and normals; "linear": the paper's barycentric blend alone.
     blend: str = "surface"
+    #: How a node's cube-face SBC projects points: ``(sbc, points) -> (G, P, 3)`` first
+    #: reflector points, NaN where not projected. ``None``: ``sbc.project`` in numpy;
+    #: the viewport passes the GPU's (``gpu_shaders/morph_source.GPUFaceImages``).
+    face_images: object = field(default=None, repr=False, compare=False)
     _static: dict = field(default_factory=dict, repr=False)
 
     def __post_init__(self):
@@ -412,6 +458,13 @@ class MorphingGrid:
             raise ViewOutsideGrid(self.reflector_name, "the view's grid cell touches the inside of the mirror")
         return int(tet[0]), nodes, weights[0], frame
 
+    def check_view(self, view: View, matrix=np.eye(4)):
+        """:meth:`locate_view` of a desired view; raises ViewOutsideGrid where morphing
+        cannot draw it (outside the grid, a cell inside the mirror, an orthographic view)."""
+        if not view.is_perspective:
+            raise ViewOutsideGrid(self.reflector_name, "morphing needs a perspective view")
+        return self.locate_view(view.eye, matrix)
+
     def project(self, points_world, view: View, matrix=np.eye(4), static_key=None) -> MorphProjection:
         """Morph the projections of world points for the desired ``view``.
 
@@ -421,10 +474,10 @@ class MorphingGrid:
         the same tetrahedron and the frame does not move (SBC paper VI); only the blend is
         redone.
         """
-        if not view.is_perspective:
-            raise ViewOutsideGrid(self.reflector_name, "morphing needs a perspective view")
-        tet, nodes, weights, frame = self.locate_view(view.eye, matrix)
+        tet, nodes, weights, frame = self.check_view(view, matrix)
         points_world = np.asarray(points_world, dtype=np.float64)
+        if static_key is not None and static_key not in self._static and len(self._static) >= STATIC_SETS:
+            del self._static[next(iter(self._static))]  # the oldest set of static points
         cached = self._static.get(static_key) if static_key is not None else None
         if cached is not None and cached[0] == tet and np.array_equal(cached[1], frame) \
                 and cached[2] == len(points_world):
@@ -445,8 +498,7 @@ class MorphingGrid:
         for sbc in camera.faces:
             if sbc is None:
                 continue
-            result = sbc.project(points)
-            parts.append(np.where(result.valid[:, :, None], result.reflector_points, np.nan))
+            parts.append(project_face(sbc, points) if self.face_images is None else self.face_images(sbc, points))
         if not parts:
             return np.full((len(points), 0, 3), np.nan)
         images = np.concatenate(parts, axis=0).transpose(1, 0, 2)
@@ -549,6 +601,12 @@ class MorphingGrid:
             groups=[(self.reflector_index,)] * k_max, reflector_points=world.transpose(1, 0, 2), valid=valid.T,
             pixels=pixels.transpose(1, 0, 2), ray_distance=distance.T, remedy=remedy.T, tetrahedron=tet,
             nodes=np.asarray(nodes), weights=np.asarray(weights))
+
+
+def project_face(sbc: SampleBasedCamera, points: np.ndarray) -> np.ndarray:
+    """(G, P, 3) first reflector points of ``points`` in one face SBC, NaN where not projected."""
+    result = sbc.project(points)
+    return np.where(result.valid[:, :, None], result.reflector_points, np.nan)
 
 
 def _extended_tails(tree, points: np.ndarray) -> np.ndarray:

@@ -124,6 +124,10 @@ class SBCTextures:
     def n_groups(self) -> int:
         return self.packed.n_groups
 
+    @property
+    def downsample(self) -> int:
+        return self.packed.downsample
+
     def bind(self, shader) -> None:
         """Bind the textures to the library's samplers of a bound ``shader``."""
         for name, sampler in zip(sbc_pack.TEXTURE_NAMES, SAMPLERS):

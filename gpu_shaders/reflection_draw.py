@@ -589,6 +589,57 @@ def _same_view(a, b) -> bool:
                       and np.array_equal(np.asarray(a.projection_matrix), np.asarray(b.projection_matrix)))
 
 
+def _culling(source, camera, diameter: float):
+    """Per-sheet k-DOPs and bounding cones of ``source`` that cull vertex chunks
+    (:mod:`..addon.sheet_bounds`; a ``None`` entry culls nothing), or ``None``."""
+    if isinstance(source, SheetSources):
+        return source.culling(diameter)
+    if camera is None:
+        return None
+    return sheet_bounds.sheet_kdops(camera, diameter), getattr(camera, "cones", None)
+
+
+class SheetSources:
+    """Sheets of several projection sources drawn as one camera: a runtime camera's
+    textures with some of its sheets left out (reflectors drawn from a morphing grid
+    instead) and morphing grids (:class:`.morph_source.MorphSource`).
+
+    ``parts``: (source, indices of its sheets kept, the ``SampleBasedCamera`` of a
+    camera's textures or ``None``); ``view``: the view all of them project in. Sheets of
+    one reflection history must stay consecutive (a history is in one part only).
+    """
+
+    def __init__(self, parts, view):
+        self.parts = [(source, [int(k) for k in kept], camera) for source, kept, camera in parts if len(kept)]
+        self.view = view
+        self.groups = [source.groups[k] for source, kept, _ in self.parts for k in kept]
+        self.downsample = max((source.downsample for source, _, _ in self.parts), default=1)
+
+    def project(self, renderer, positions, batch, draws: list, n_texels: int, setup: dict, static: bool = False):
+        """Each part projects its own sheets' draws; texels not drawn are 0 in every part."""
+        points = np.zeros((n_texels, 4), np.float32)
+        eyes = np.zeros((n_texels, 4), np.float32)
+        offset = 0
+        for source, kept, _ in self.parts:
+            mine = [(kept[group - offset],) + tuple(rest) for group, *rest in draws
+                    if offset <= group < offset + len(kept)]
+            offset += len(kept)
+            if mine:
+                part_points, part_eyes = renderer._project_points(source, positions, batch, mine, n_texels, setup,
+                                                                  static)
+                points += part_points
+                eyes += part_eyes
+        return points, eyes
+
+    def culling(self, diameter: float):
+        kdops, cones = [], []
+        for source, kept, camera in self.parts:
+            own = _culling(source, camera, diameter)
+            kdops += [None if own is None else own[0][k] for k in kept]
+            cones += [None if own is None or own[1] is None else own[1][k] for k in kept]
+        return kdops, cones
+
+
 @dataclass
 class CachedProjection:
     """The reflected triangles of one sample-based camera over the renderer's meshes.
@@ -600,7 +651,7 @@ class CachedProjection:
     and reflected distance (SBC V-C, V-D) and its mesh's colour, normal and UVs.
     """
 
-    textures: object  # the projection.SBCTextures it was made from (identity = the cache key)
+    source: object  # the projection.SBCTextures or other source it was made from (identity = the cache key)
     camera_view: object  # the view the camera was built for
     batch: object  # GPUBatch of the triangles (un-indexed), or None when nothing is reflected
     runs: tuple  # (image index or -1, first vertex, vertex count), in drawing order
@@ -658,6 +709,8 @@ class ReflectionRenderer:
         self.mixed_subdivisions = int(mixed_subdivisions)
         self.cull = bool(cull)
         self.stats = dict(self.geometry.stats)
+        #: Names this renderer's vertices for sources that keep work for them (MorphSource).
+        self.vertices_token = object()
         self.counts = {"projections": 0, "frames": 0}
         self._reflectors, self._meshes = list(reflectors), list(meshes)
         self._batches = None
@@ -726,7 +779,7 @@ class ReflectionRenderer:
 
         targets = self.draw_passes(view, textures, camera)
         if fill_radius is None:
-            fill_radius = textures.packed.downsample
+            fill_radius = textures.downsample
         x, y, width, height = gpu.state.viewport_get()
         # A viewport of the view's size is drawn into where it is; otherwise from (0, 0).
         origin = (x, y) if (width, height) == (targets.width, targets.height) else None
@@ -749,7 +802,7 @@ class ReflectionRenderer:
         if self._batches is None:
             self._batches = self._make_batches()
         batches, g = self._batches, self.geometry
-        camera_view = camera.ray_map.view if camera is not None else view
+        camera_view = camera.ray_map.view if camera is not None else getattr(textures, "view", view)
         cached = self.projection(textures, camera_view, camera)
         targets = self.targets(view.width, view.height)
         width, height = targets.width, targets.height
@@ -802,7 +855,7 @@ class ReflectionRenderer:
         else made now."""
         key = id(textures)
         cached = self._cache.pop(key, None)
-        if cached is None or cached.textures is not textures:
+        if cached is None or cached.source is not textures:
             while len(self._cache) >= CACHED_PROJECTIONS:
                 self._cache.pop(next(iter(self._cache)))
             cached = self._project(textures, camera_view, camera)
@@ -875,6 +928,8 @@ class ReflectionRenderer:
         if kdops is None:
             return [(0, n)]
         lo, hi = self._chunk_boxes
+        if kdops is None or kdops[0][sheet] is None:
+            return [(0, n)]
         kdop, cone = kdops[0][sheet], None if kdops[1] is None else kdops[1][sheet]
         meeting = sheet_bounds.chunks_meeting(lo, hi, kdop)
         if cone is not None:
@@ -913,9 +968,9 @@ class ReflectionRenderer:
         setup = {"inverse_view_projection": Matrix(np.linalg.inv(world_to_clip).tolist()),
                  "view_size": (float(camera_view.width), float(camera_view.height)),
                  "order_range": 1.0 / (max(len(h) for h in histories) + 1)}
-        stitch_px = STITCH_CELLS * textures.packed.downsample
-        kdops = ((sheet_bounds.sheet_kdops(camera, g.diameter), getattr(camera, "cones", None))
-                 if (self.cull and camera is not None) else None)
+        setup["inverse_diameter"] = 1.0 / g.diameter
+        stitch_px = STITCH_CELLS * textures.downsample
+        kdops = _culling(textures, camera, g.diameter) if self.cull else None
         pieces, mixed_blocks, projected = [], [], 0
         for sheets in _sheet_chunks(histories, max(1, MAX_PROJECTED_TEXELS // n_vertices)):
             history = histories[sheets[0]]
@@ -924,8 +979,8 @@ class ReflectionRenderer:
                 for first, count in self._vertex_runs(kdops, sheet):
                     draws.append((sheet, len(history), layer * n_vertices, first, count))
                     projected += count
-            points, eyes = self._project_pass(textures, self._batches["points"], draws, len(sheets) * n_vertices,
-                                              setup)
+            points, eyes = self._project_points(textures, g.vertices, self._batches["points"], draws,
+                                                len(sheets) * n_vertices, setup, static=True)
             points = points.reshape(len(sheets), n_vertices, 4)
             eyes = eyes.reshape(len(sheets), n_vertices, 4)
             pieces += self._full_triangles(points, eyes, history, stitch_px)
@@ -994,6 +1049,19 @@ class ReflectionRenderer:
                 gpu.state.program_point_size_set(False)
         return (_read_texture(points, columns, rows).reshape(-1, 4)[:n_texels],
                 _read_texture(eyes, columns, rows).reshape(-1, 4)[:n_texels])
+
+    def _project_points(self, source, positions, batch, draws: list, n_texels: int, setup: dict,
+                        static: bool = False):
+        """The projection pass of ``draws`` (as :meth:`_project_pass`) with any source: a
+        camera's textures on the GPU, else the source's own ``project`` (morphing grids,
+        :class:`SheetSources`). ``positions`` are the points of ``batch`` (made from them
+        when ``None``); ``static``: they are this renderer's own vertices, which a source
+        may keep work for between views (morphing's node images, SBC paper VI)."""
+        if isinstance(source, projection.SBCTextures):
+            if batch is None:
+                batch = _points_batch(np.asarray(positions, np.float32))
+            return self._project_pass(source, batch, draws, n_texels, setup)
+        return source.project(self, positions, batch, draws, n_texels, setup, static)
 
     def _vertex_arrays(self, positions, points, eyes, reflector: float, color, normal_lit, uv) -> dict:
         """Per-vertex arrays of drawn reflected triangles (``glsl/reflection_mesh_vert.glsl``)."""
@@ -1133,8 +1201,8 @@ class ReflectionRenderer:
             part = by_group[first:first + MAX_PROJECTED_TEXELS]
             draws = [(int(groups[part[a]]), int(orders[part[a]]), 0, int(a), int(c))
                      for _, a, c in _runs(groups[part])]
-            projected, projected_eyes = self._project_pass(textures, _points_batch(positions[part]), draws,
-                                                           len(part), setup)
+            projected, projected_eyes = self._project_points(textures, positions[part], None, draws, len(part),
+                                                             setup)
             points[part], eyes[part] = projected, projected_eyes
         pieces, offset = [], 0
         for (image, n, corners, group, order), (w, sub_triangles) in zip(blocks, grids):
@@ -1181,8 +1249,9 @@ class ReflectionRenderer:
                fill_radius: int | None = None, trace_edges: bool = False) -> np.ndarray:
         """Draw ``view`` offscreen and read it back: (H, W, 4) float32 linear RGBA, rows bottom to top.
 
-        ``sbc_or_textures``: a ``SampleBasedCamera`` built for this view, or its
-        ``projection.SBCTextures``. With ``trace`` the band along each footprint's edge
+        ``sbc_or_textures``: a ``SampleBasedCamera`` built for this view, its
+        ``projection.SBCTextures``, or another projection source of this view
+        (:class:`SheetSources`, :class:`.morph_source.MorphSource`). With ``trace`` the band along each footprint's edge
         that the camera cannot reach (d pixels wide) is ray traced (:meth:`trace_band`);
         without, it gets the composite's fill (``fill_radius``, ``None``: d). With
         ``trace_edges`` also the reflector pixels within d of a drawn reflection that got
@@ -1193,20 +1262,20 @@ class ReflectionRenderer:
         """
         start = time.perf_counter()
         textures, camera = sbc_or_textures, None
-        if not isinstance(textures, projection.SBCTextures):
+        if hasattr(sbc_or_textures, "ray_map"):  # the camera itself, not its textures or another source
             camera = sbc_or_textures
             cached = self._projection
             # The same camera again (a second render of it) keeps its projection.
-            textures = cached.textures if cached is not None and cached.camera is camera else (
+            textures = cached.source if cached is not None and cached.camera is camera else (
                 projection.SBCTextures(camera))
         uploaded = time.perf_counter()
-        downsample = textures.packed.downsample
+        downsample = textures.downsample
         targets = self.draw_passes(view, textures, camera)
         if camera is not None:
             self._projection.camera = camera
         drawn = time.perf_counter()
         traced = 0
-        if trace and textures.n_groups:
+        if trace and textures.groups:
             max_order = max(len(h) for h in textures.groups)
             traced = self.trace_band(view, targets, max_order, world_color, downsample, trace_edges,
                                      getattr(sbc_or_textures, "ray_map", None))

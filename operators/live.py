@@ -22,6 +22,14 @@ projection runs per draw on the GPU):
   whose vertices sit at their *first reflector points in world space*
   (``ReflectionRenderer.projection``). Made on the first draw after a camera landed
   or the meshes changed, not on every redraw.
+- **morphing** (reflectors in Morphing mode with a baked grid, SBC paper VI): their
+  grids are loaded with the capture of the reflectors. A view inside a grid needs no
+  camera build for that reflector: its first-order reflections are blended from the
+  four nodes around the eye (``gpu_shaders/morph_source.py``, node projections on the
+  GPU) when the view's projection is made, and the runtime camera, when another
+  reflector or a higher order still needs one, leaves that reflector's first-order
+  sheets out. A view outside the grid (or orthographic) draws the reflector in runtime
+  mode, and the panel says so.
 - **draw** (``SpaceView3D`` POST_VIEW handler, every redraw): the reflections of the
   region's view over the reflectors (``reflectors_only``), with the last camera built
   for that region: the cached reflected triangles placed by the current view's
@@ -50,6 +58,7 @@ import numpy as np
 from bpy.app.handlers import persistent
 
 from ..addon.errors import SceneInputError
+from ..addon.morphing import ViewOutsideGrid
 from ..addon.raytrace import ReflectorSet
 from ..addon.sbc import build_sample_based_camera
 from ..addon.scene import scene_bounds
@@ -74,14 +83,17 @@ CAMERA_KEY = "scene camera"
 
 @dataclass
 class ViewCamera:
-    """The sample-based camera of one view, and its textures once uploaded (main thread)."""
+    """The sample-based camera of one view (``None`` when morphing grids draw every
+    reflector), the grids covering the view, and their projection source once made
+    (main thread)."""
 
     view: View
     sbc: object
     bounds: tuple
     settings: tuple
     generation: int
-    textures: object = None
+    morph: list = field(default_factory=list)  # (MorphingGrid, matrix) of the grids covering the view
+    source: object = None  # what the renderer projects with (made on the first draw: needs the GPU)
     last_drawn: float = 0.0
 
 
@@ -94,6 +106,7 @@ class LiveScene:
     renderer: object = None
     reflector_set: object = None
     reflector_names: frozenset = frozenset()
+    grids: list = field(default_factory=list)  # (MorphingGrid, matrix) of the baked reflectors in Morphing mode
     bounds: tuple | None = None
     world: tuple = (0.0, 0.0, 0.0, 1.0)
     cameras: dict = field(default_factory=dict)  # view key -> ViewCamera
@@ -151,10 +164,54 @@ def _capture(state: LiveScene, scene, depsgraph, reflectors: bool) -> None:
     if reflectors or state.reflector_set is None:
         state.reflector_set = ReflectorSet(list(captured.reflectors))
         state.reflector_names = _marked_reflectors(scene)
+        state.grids = _load_grids(scene, captured.reflectors)
         state.generation += 1
         state.counts["bakes"] += 1
     else:
         state.counts["remeshes"] += 1
+
+
+def _load_grids(scene, reflectors) -> list:
+    """(grid, object matrix) of each reflector in Morphing mode whose baked grid matches
+    it; the others are drawn in runtime mode (``load_morphing`` records why)."""
+    from ..gpu_shaders.morph_source import GPUFaceImages
+    from .morph_bake import load_morphing
+
+    faces = GPUFaceImages()
+    grids = []
+    for index, reflector in enumerate(reflectors):
+        obj = scene.objects.get(reflector.name)
+        if obj is None or obj.curved_reflections.mode != 'MORPHING':
+            continue
+        matrix = np.array(obj.matrix_world, dtype=np.float64)
+        grid = load_morphing(reflector, matrix, scene, index)
+        if grid is not None:
+            grid.face_images = faces
+            grids.append((grid, matrix))
+    return grids
+
+
+def _covering_grids(state: LiveScene, view: View) -> list:
+    """The grids whose reflector ``view`` can be drawn from in morphing mode; each
+    reflector's panel line says which mode draws it and why."""
+    from .morph_bake import note_morphing_active, note_runtime_fallback
+
+    covering = []
+    for grid, matrix in state.grids:
+        try:
+            grid.check_view(view, matrix)
+        except ViewOutsideGrid as error:
+            note_runtime_fallback(error)
+            continue
+        note_morphing_active(grid.reflector_name)
+        covering.append((grid, matrix))
+    return covering
+
+
+def _needs_camera(state: LiveScene, covering: list, settings: tuple) -> bool:
+    """Whether a sample-based camera must be built: a reflector not drawn from a grid,
+    or reflections of a higher order (grids give first-order ones only)."""
+    return len(covering) < len(state.reflector_set.reflectors) or settings[0] > 1
 
 
 def _marked_reflectors(scene) -> frozenset:
@@ -192,7 +249,11 @@ def _start(state: LiveScene, key, view: View, wait: bool) -> None:
     """Build ``view``'s camera: on the worker, or here and now with ``wait``."""
     state.requests.pop(key, None)
     bounds, settings, generation = _camera_bounds(state), state.settings, state.generation
-    if wait:
+    covering = _covering_grids(state, view)
+    if not _needs_camera(state, covering, settings):
+        future = Future()
+        future.set_result(None)
+    elif wait:
         future = Future()
         try:
             future.set_result(_build_camera(state.reflector_set, view, bounds, settings))
@@ -200,15 +261,15 @@ def _start(state: LiveScene, key, view: View, wait: bool) -> None:
             future.set_exception(error)
     else:
         future = _executor_get().submit(_build_camera, state.reflector_set, view, bounds, settings)
-    state.jobs[key] = (future, view, bounds, settings, generation)
-    if wait:
+    state.jobs[key] = (future, view, bounds, settings, generation, covering)
+    if future.done():
         _collect(state)
 
 
 def _collect(state: LiveScene) -> bool:
     """Store the cameras that finished; returns whether any did."""
     finished = False
-    for key, (future, view, bounds, settings, generation) in list(state.jobs.items()):
+    for key, (future, view, bounds, settings, generation, covering) in list(state.jobs.items()):
         if not future.done():
             continue
         del state.jobs[key]
@@ -226,21 +287,22 @@ def _collect(state: LiveScene) -> bool:
         if generation != state.generation:
             continue  # built for reflectors that have changed since
         state.failed.pop(key, None)
-        state.cameras[key] = ViewCamera(view, sbc, bounds, settings, generation, last_drawn=time.monotonic())
+        state.cameras[key] = ViewCamera(view, sbc, bounds, settings, generation, covering,
+                                        last_drawn=time.monotonic())
         state.counts["builds"] += 1
-        _update_stats(state, sbc)
-        _report_visibility(state, sbc)
+        _update_stats(state, sbc, covering)
+        _report_visibility(state, sbc, covering)
     while len(state.cameras) > MAX_VIEWS:
         oldest = min(state.cameras, key=lambda k: state.cameras[k].last_drawn)
         del state.cameras[oldest]
     return finished
 
 
-def _update_stats(state: LiveScene, sbc) -> None:
-    s = sbc.stats
+def _update_stats(state: LiveScene, sbc, covering: list) -> None:
+    s = {} if sbc is None else sbc.stats
     geometry = state.renderer.geometry
     mesh_bytes = geometry.vertices.nbytes + geometry.colors.nbytes + geometry.triangles.nbytes
-    camera_bytes = sum(c.sbc.stats.get("nbytes", 0) for c in state.cameras.values())
+    camera_bytes = sum(c.sbc.stats.get("nbytes", 0) for c in state.cameras.values() if c.sbc is not None)
     state.stats.update({
         "rays": int(s.get("n_rays", 0)),
         "leaves": int(s.get("n_leaves", 0)),
@@ -248,13 +310,16 @@ def _update_stats(state: LiveScene, sbc) -> None:
         "memory_mb": (camera_bytes + mesh_bytes) / 2.0 ** 20,
         "views": len(state.cameras),
         "reflected_triangles": int(len(geometry.triangles)),
+        "morphing": ", ".join(grid.reflector_name for grid, _ in covering),
     })
 
 
-def _report_visibility(state: LiveScene, sbc) -> None:
-    """Reflectors the view does not see: a warning when none is seen (nothing to draw)."""
+def _report_visibility(state: LiveScene, sbc, covering: list) -> None:
+    """Reflectors the view does not see: a warning when none is seen (nothing to draw).
+    A reflector drawn from its grid counts as seen (its grid decides per vertex)."""
     names = [r.name for r in state.captured.reflectors]
-    seen = {int(history[0]) for history in sbc.groups}
+    seen = {int(history[0]) for history in ([] if sbc is None else sbc.groups)}
+    seen |= {grid.reflector_index for grid, _ in covering}
     unseen = [name for k, name in enumerate(names) if k not in seen]
     quoted = ", ".join(repr(n) for n in unseen)
     if not seen:
@@ -387,11 +452,13 @@ def draw(scene, key, view: View) -> bool:
             request_view(state, key, view)
     if camera is None:
         return False
-    if camera.textures is None:
-        camera.textures = SBCTextures(camera.sbc)
+    if camera.source is None:
+        camera.source = _projection_source(camera)
     start = time.perf_counter()
     projections = state.renderer.counts["projections"]
-    state.renderer.draw(view, camera.textures, state.world, reflectors_only=True, camera=camera.sbc)
+    plain = isinstance(camera.source, SBCTextures)
+    state.renderer.draw(view, camera.source, state.world, reflectors_only=True,
+                        camera=camera.sbc if plain else None)
     if state.renderer.counts["projections"] != projections:
         state.counts["projections"] += 1
         state.stats["projection_ms"] = 1000.0 * state.renderer.stats.get("projection_seconds", 0.0)
@@ -399,6 +466,25 @@ def draw(scene, key, view: View) -> bool:
     state.stats["draw_ms"] = 1000.0 * (time.perf_counter() - start)
     state.counts["draws"] += 1
     return True
+
+
+def _projection_source(camera: ViewCamera):
+    """What the renderer projects ``camera``'s view with: the camera's textures, or its
+    sheets of the reflectors not drawn from a grid plus the grids (``SheetSources``)."""
+    from ..gpu_shaders.morph_source import MorphSource
+    from ..gpu_shaders.projection import SBCTextures
+    from ..gpu_shaders.reflection_draw import SheetSources
+
+    if not camera.morph:
+        return SBCTextures(camera.sbc)
+    morphed = {grid.reflector_index for grid, _ in camera.morph}
+    parts = []
+    if camera.sbc is not None:
+        kept = [k for k, history in enumerate(camera.sbc.groups) if not (len(history) == 1 and history[0] in morphed)]
+        parts.append((SBCTextures(camera.sbc), kept, camera.sbc))
+    source = MorphSource(camera.morph, camera.view)
+    parts.append((source, range(len(source.groups)), None))
+    return SheetSources(parts, camera.view)
 
 
 def _same_view(a: View, b: View) -> bool:

@@ -53,11 +53,14 @@ def morph_settings(scene) -> MorphSettings:
                          face_resolution=FACE_RESOLUTION)
 
 
-def morph_status(scene) -> str:
-    """One line for the panel: a bake in progress, else the last outcome of bake, clear or load."""
+def morph_status(scene, per_reflector: bool = True) -> str:
+    """One line: a bake in progress, else the last bake's outcome and (``per_reflector``)
+    the last outcome of bake, clear, load or draw of each reflector."""
     state = _STATE.get(scene.name)
     if state and state["running"]:
         return f"Baking {state['reflector']}: {state['done']}/{state['total']} nodes (Esc cancels)"
+    if not per_reflector:
+        return state.get("message", "") if state else ""
     lines = [f"{name}: {text}" for name, text in sorted(_REFLECTOR_STATUS.items())]
     if state and state.get("message"):
         lines.insert(0, state["message"])
@@ -91,6 +94,29 @@ def load_morphing(reflector, matrix, scene, reflector_index: int = 0):
 def note_runtime_fallback(error) -> None:
     """Record a ViewOutsideGrid (the view left the grid) for the status line: runtime mode is drawn."""
     _REFLECTOR_STATUS[error.reflector_name] = f"runtime mode: {error.reason}"
+
+
+def note_morphing_active(reflector_name: str) -> None:
+    """Record that the live view draws this reflector from its baked grid."""
+    _REFLECTOR_STATUS[reflector_name] = "morphing: the view is inside the baked grid"
+
+
+def reflector_modes(scene) -> list[tuple[str, str]]:
+    """(reflector, which mode draws it and why) for every reflector of ``scene`` in
+    Morphing mode: the last load, bake or draw outcome recorded for it."""
+    lines = []
+    for obj in scene.objects:
+        settings = obj.curved_reflections
+        if settings.is_reflector and settings.mode == 'MORPHING':
+            lines.append((obj.name, _REFLECTOR_STATUS.get(obj.name, "runtime mode: not baked or loaded yet")))
+    return lines
+
+
+def _refresh_live(context) -> None:
+    """Tell the live view that grids changed (it reloads them with the reflectors)."""
+    from . import live
+
+    live.on_setting_changed(context, reflectors=True)
 
 
 class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
@@ -172,6 +198,7 @@ class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
         outcome = self._run(context.scene.name, *started, threading.Event())
         failed = any("failed" in line for line in outcome)
         self.report({'ERROR'} if failed else {'INFO'}, "; ".join(outcome))
+        _refresh_live(context)
         return {'CANCELLED'} if failed else {'FINISHED'}
 
     def invoke(self, context, event):
@@ -204,6 +231,7 @@ class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
         context.window_manager.progress_end()
         message = state.get("message", "")
         cancelled = "cancelled" in message
+        _refresh_live(context)
         self.report({'WARNING'} if cancelled or "failed" in message else {'INFO'}, message or "Bake finished")
         return {'CANCELLED'} if cancelled or "failed" in message else {'FINISHED'}
 
@@ -225,6 +253,7 @@ class CURVED_REFLECTIONS_OT_clear_morphing(bpy.types.Operator):
         for name in names:
             _REFLECTOR_STATUS[name] = "no morphing cache (cleared); runtime mode"
         self.report({'INFO'}, f"Removed {removed} baked grid(s)")
+        _refresh_live(context)
         return {'FINISHED'}
 
 

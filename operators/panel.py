@@ -62,8 +62,11 @@ def _morphing_section(layout, scene) -> None:
     row = layout.row(align=True)
     row.operator("curved_reflections.bake_morphing", icon='LIGHTPROBE_VOLUME')
     row.operator("curved_reflections.clear_morphing", icon='TRASH')
-    layout.label(text=morph_bake.morph_status(scene), icon='INFO')
-    layout.label(text="The live view still draws Runtime cameras for every reflector", icon='ERROR')
+    bake_line = morph_bake.morph_status(scene, per_reflector=False)
+    if bake_line:
+        layout.label(text=bake_line, icon='INFO')
+    for name, mode in morph_bake.reflector_modes(scene):
+        layout.label(text=f"{name}: {mode}", icon='LIGHTPROBE_VOLUME' if mode.startswith("morphing") else 'INFO')
 
 
 class VIEW3D_PT_curved_reflections(bpy.types.Panel):

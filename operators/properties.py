@@ -59,6 +59,7 @@ class CurvedReflectionsObjectSettings(bpy.types.PropertyGroup):
                                      "as the view moves (SBC paper VI)"),
         ),
         default='RUNTIME',
+        update=_reflector_toggled,
     )
 
 

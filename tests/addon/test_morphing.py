@@ -15,33 +15,10 @@ SETTINGS = M.MorphSettings(grid=(3, 3, 2), margin=0.8, face_resolution=48)
 CENTRE = np.array([0.0, 0.0, 1.0])
 
 
-class LazyNodes(dict):
-    """Nodes built on first use (the tests touch only a few tetrahedra)."""
-
-    def __init__(self, reflector_set, positions, bounds, settings):
-        super().__init__()
-        self.args = reflector_set, positions, bounds, settings
-        self.built = 0
-
-    def __missing__(self, node):
-        reflector_set, positions, bounds, settings = self.args
-        self[node] = camera = M.build_node(reflector_set, positions[node], bounds, settings)
-        self.built += 1
-        return camera
-
-
 def morphing_grid(reflector, settings=SETTINGS, blend="surface", nodes=None):
-    reflector_set, grid, bounds = M.bake_reflector(reflector, settings)
-    positions = grid.node_positions()
-    nodes = LazyNodes(reflector_set, positions, bounds, settings) if nodes is None else nodes
-    status = np.array([M.NODE_INSIDE if _inside_sphere(p, reflector) else M.NODE_OK for p in positions], np.int8)
-    lo, hi = reflector.bounds
-    return M.MorphingGrid(reflector.name, 0, grid, settings, status, nodes, float(np.max(hi - lo)), blend=blend), nodes
-
-
-def _inside_sphere(p, reflector):
-    centre = reflector.vertices.mean(axis=0)
-    return np.linalg.norm(p - centre) < np.linalg.norm(reflector.vertices[0] - centre)
+    """A grid whose nodes are built on first use (the tests touch only a few tetrahedra)."""
+    grid = M.grid_on_demand(reflector, settings, blend=blend, nodes=nodes)
+    return grid, grid.nodes
 
 
 @pytest.fixture(scope="module")
@@ -110,7 +87,7 @@ def test_cube_faces_cover_every_direction_with_overlap():
 
 def test_view_at_a_node_reproduces_that_nodes_projection(sphere):
     grid, _ = morphing_grid(sphere, blend="linear")
-    node = int(np.flatnonzero(grid.node_status == M.NODE_OK)[0])
+    node = next(n for n in range(grid.grid.n_nodes) if grid.node_status[n][0] == M.NODE_OK)
     eye = grid.grid.node_positions()[node]
     view = look_at_view(eye, CENTRE, width=160, height=120)
     points = np.random.default_rng(2).uniform(grid.grid.lo, grid.grid.hi, (400, 3))

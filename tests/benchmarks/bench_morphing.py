@@ -71,22 +71,6 @@ def _log(text: str) -> None:
     print(f"[bench_morphing {time.strftime('%H:%M:%S')}] {text}", flush=True)
 
 
-class LazyNodes(dict):
-    """Node cameras built on first use."""
-
-    def __init__(self, morphing, reflector_set, positions, bounds, settings):
-        super().__init__()
-        self.args = morphing, reflector_set, positions, bounds, settings
-        self.cpu_seconds = 0.0
-
-    def __missing__(self, node):
-        morphing, reflector_set, positions, bounds, settings = self.args
-        camera = morphing.build_node(reflector_set, positions[node], bounds, settings)
-        self.cpu_seconds += camera.cpu_seconds
-        self[node] = camera
-        return camera
-
-
 def sphere_scene(n_points: int):
     """The sbc_fig3 demo: its mirror (world), the mirror's object matrix, box and a point sampler."""
     import bpy
@@ -124,22 +108,14 @@ def measure_grid(morphing, mirror, matrix, settings, views, view_points, exact, 
 
     frame = morphing.rigid_frame(matrix)
     local = morphing.reflector_in_frame(mirror, frame)
-    reflector_set, grid, bounds = morphing.bake_reflector(local, settings)
     reflector_set_world = ReflectorSet([mirror])
-    positions = grid.node_positions()
-    status = np.full(grid.n_nodes, -1, dtype=np.int8)
-    nodes = LazyNodes(morphing, reflector_set, positions, bounds, settings)
-
-    class Status:  # node status known only once a node is built
-        def __getitem__(self, index):
-            return np.array([nodes[int(n)].status for n in np.atleast_1d(index)], dtype=np.int8)
-
-    lo, hi = local.bounds
-    size = float(np.max(hi - lo))
+    nodes = None
+    grid = morphing.grid_for(local, settings)
     cell = {"grid": list(settings.grid), "spacing": [float(x) for x in grid.spacing], "blends": {}}
     fallbacks = 0
     for blend in ("linear", "surface"):
-        morph = morphing.MorphingGrid(mirror.name, 0, grid, settings, Status(), nodes, size, blend=blend)
+        morph = morphing.grid_on_demand(local, settings, blend=blend, nodes=nodes)
+        nodes = morph.nodes
         errors, covered, n_exact, projected, false, remedies, rates, static_rates = [], 0, 0, 0, 0, {}, [], []
         covered_facing, n_facing, false_on_mirror, off_image = 0, 0, 0, 0
         for view, points, found in zip(views, view_points, exact):

@@ -92,4 +92,4 @@ def test_panel_shows_the_morphing_box_when_a_reflector_is_in_morphing_mode(empty
     log = _draw(scene, mirror)
     assert {"curved_reflections.bake_morphing", "curved_reflections.clear_morphing"} <= set(log["operators"])
     assert not {"morph_grid", "morph_margin"} & set(log["greyed"])
-    assert ("No morphing grid baked in this session", 'INFO') in log["labels"]
+    assert ("MirrorSphere: runtime mode: not baked or loaded yet", 'INFO') in log["labels"]

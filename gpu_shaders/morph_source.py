@@ -1,0 +1,110 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Morphing grids as a projection source of the reflection renderer (SBC paper VI).
+
+In reflection-morphing mode (Popescu, Sacks, Mei 2006, section VI) a reflector's
+reflections come from the panoramic sample-based cameras baked at the nodes of a
+tetrahedral grid around it: the four nodes of the tetrahedron holding the eye project
+each vertex, and their first reflector points are blended (:mod:`..addon.morphing`).
+:class:`MorphSource` hands those blended points to
+:class:`.reflection_draw.ReflectionRenderer` in the layout of its GPU projection pass
+(``glsl/reflection_project_vert.glsl``), so the renderer draws morphed reflections
+exactly as it draws a runtime camera's: whole and mixed triangles, depth order, lit
+shading, Fresnel and fade. :class:`GPUFaceImages` runs the nodes' projections, the
+expensive part, on the GPU with the GLSL twin of ``SampleBasedCamera.project``; the
+matching of images across nodes and the blend stay in numpy (a few array operations
+per vertex). The renderer's own vertices are *static points*: their four node images
+are kept while the eye stays in one tetrahedron, and only the blend runs per view.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+
+import numpy as np
+
+from . import projection
+
+#: Images of one point in one reflector drawn at most (sheets per grid). A convex
+#: mirror has one; a concave one can show a point two or three times.
+MAX_IMAGES = 3
+#: Face cameras kept packed in GPU textures (a tetrahedron uses four nodes of six faces).
+PACKED_FACES = 48
+
+
+class MorphSource:
+    """First-order reflections of some reflectors from their baked grids, for one view.
+
+    ``grids``: (``MorphingGrid``, the reflector's object matrix) pairs, each grid's
+    ``reflector_index`` its index among the renderer's reflectors; ``view``: the
+    perspective view inside every grid (``MorphingGrid.locate_view``). Each grid gives
+    :data:`MAX_IMAGES` sheets of the history ``(reflector_index,)``; an image's sheet is
+    its rank in the blend (``MorphProjection``), so one sheet is one image of a point.
+    """
+
+    def __init__(self, grids, view, max_images: int = MAX_IMAGES):
+        self.grids = list(grids)
+        self.view = view
+        self.max_images = int(max_images)
+        self.groups = [(grid.reflector_index,) for grid, _ in self.grids for _ in range(self.max_images)]
+        self.downsample = 1  # a vertex's image is blended on its own, not read from a ray map
+        self.counts = {"projected": 0, "dropped_images": 0}
+
+    def project(self, renderer, positions, batch, draws: list, n_texels: int, setup: dict, static: bool = False):
+        """(n_texels, 4) (pixel, depth, valid) and (eye vector, reflected distance) per
+        drawn texel, as the renderer's GPU pass writes them; ``batch`` is not used."""
+        points = np.zeros((n_texels, 4), np.float32)
+        eyes = np.zeros((n_texels, 4), np.float32)
+        positions = np.asarray(positions, np.float64)
+        blended = {}
+        for group, order, offset, first, count in draws:
+            grid_index, image = divmod(int(group), self.max_images)
+            key = (grid_index, int(first), int(count))
+            if key not in blended:
+                grid, matrix = self.grids[grid_index]
+                static_key = (renderer.vertices_token, key[1:]) if static else None
+                blended[key] = result = grid.project(positions[first:first + count], self.view, matrix,
+                                                     static_key=static_key)
+                self.counts["projected"] += int(count)
+                self.counts["dropped_images"] += int(result.valid[self.max_images:].sum())
+            result = blended[key]
+            if image >= len(result.groups):
+                continue
+            valid = result.valid[image]
+            rows = np.flatnonzero(valid)
+            texels = offset + first + rows
+            distance = result.ray_distance[image, rows]
+            # As glsl/reflection_project_vert.glsl: the order's depth slot, nearer points in front.
+            depth = (order - 1 + np.clip(distance * setup["inverse_diameter"], 0.0, 1.0)) * setup["order_range"]
+            points[texels] = np.c_[result.pixels[image, rows], depth, np.ones(len(rows))]
+            eyes[texels] = np.c_[result.reflector_points[image, rows] - positions[first + rows], distance]
+        return points, eyes
+
+
+class GPUFaceImages:
+    """A node's cube-face cameras projecting on the GPU (``MorphingGrid.face_images``).
+
+    Each face SBC is packed into textures once (:class:`.projection.SBCTextures`, the
+    last :data:`PACKED_FACES` kept) and projects with :func:`.projection.project_points`;
+    the first reflector point is the face pixel's view ray at the projected depth, as
+    ``SampleBasedCamera.project`` gives it. Needs the GPU: call from the main thread.
+    """
+
+    def __init__(self, capacity: int = PACKED_FACES):
+        self.capacity = int(capacity)
+        self._packed: OrderedDict = OrderedDict()  # id(sbc) -> (sbc, textures)
+        self.packs = 0
+
+    def __call__(self, sbc, points) -> np.ndarray:
+        entry = self._packed.pop(id(sbc), None)
+        if entry is None or entry[0] is not sbc:
+            entry = (sbc, projection.SBCTextures(sbc))
+            self.packs += 1
+            while len(self._packed) >= self.capacity:
+                self._packed.popitem(last=False)
+        self._packed[id(sbc)] = entry
+        result = projection.project_points(entry[1], points)
+        images = np.full(result.pixels.shape[:2] + (3,), np.nan)
+        if result.valid.any():
+            origins, directions = sbc.ray_map.view.pixel_rays(result.pixels[result.valid])
+            images[result.valid] = origins + result.first_depth[result.valid][:, None] * directions
+        return images

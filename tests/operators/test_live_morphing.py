@@ -1,0 +1,84 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Reflectors in Morphing mode in the live view (operators/live.py, SBC paper VI).
+
+The sbc_fig3 scene, its mirror ball switched to Morphing. The grid comes from
+``morphing.grid_on_demand`` (nodes built when a view first needs them) in place of a
+baked cache, so the test builds four nodes instead of baking a grid; loading and
+staleness of real caches are tested in test_morph_bake.py. A view inside the grid
+draws the ball's reflections from the grid with no camera built; the same view in
+Runtime mode draws nearly the same image; a view outside the grid draws runtime
+mode, and the panel's line for the ball says which mode draws it and why.
+"""
+
+import bpy
+import numpy as np
+import pytest
+
+from curved_reflections.addon import morphing
+from curved_reflections.addon.view import look_at_view
+from curved_reflections.operators import demo_scenes, live, morph_bake
+
+from test_live import HEIGHT, WIDTH, _draw, _pixels_of, _touched
+
+SETTINGS = morphing.MorphSettings(grid=(7, 7, 5), margin=0.8, face_resolution=48)
+
+
+@pytest.fixture
+def fig3_morphing(empty_scene, registered, gpu_ready, monkeypatch):
+    scene = demo_scenes.build("sbc_fig3", bpy.context.scene, WIDTH, HEIGHT)
+
+    def grid_on_demand(reflector, matrix, scene, reflector_index=0):
+        local = morphing.reflector_in_frame(reflector, morphing.rigid_frame(matrix))
+        morph_bake._REFLECTOR_STATUS[reflector.name] = "morphing (baked grid loaded)"
+        return morphing.grid_on_demand(local, SETTINGS, reflector_index)
+
+    monkeypatch.setattr(morph_bake, "load_morphing", grid_on_demand)
+    morph_bake._REFLECTOR_STATUS.clear()
+    return scene
+
+
+def _views():
+    mirror = bpy.data.objects["MirrorSphere"]
+    centre = np.array(mirror.matrix_world.translation)
+    radius = 0.5 * max(mirror.dimensions)
+    near = look_at_view(centre + radius * np.array([0.4, -2.4, 0.8]), centre, fov_y_deg=45.0,
+                        width=WIDTH, height=HEIGHT, name="near")
+    far = look_at_view(centre + radius * np.array([0.4, -9.0, 2.0]), centre, fov_y_deg=20.0,
+                       width=WIDTH, height=HEIGHT, name="far")
+    return mirror, near, far
+
+
+def test_morphing_draws_inside_its_grid_and_runtime_outside(fig3_morphing):
+    scene = fig3_morphing
+    mirror, near, far = _views()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    state = live.bake(scene, depsgraph, views={"near": near}, wait=True)
+    assert state.cameras["near"].sbc is not None  # Runtime mode: a camera
+    runtime = _draw(scene, near, "near")[1]
+
+    mirror.curved_reflections.mode = 'MORPHING'  # its update callback re-bakes (auto refresh)
+    assert [grid.reflector_name for grid, _ in state.grids] == ["MirrorSphere"]
+    camera = state.cameras["near"]
+    assert camera.sbc is None and [grid.reflector_name for grid, _ in camera.morph] == ["MirrorSphere"]
+    drawn, morphed = _draw(scene, near, "near")
+    assert drawn and state.stats["morphing"] == "MirrorSphere"
+    assert morph_bake.reflector_modes(scene) == [("MirrorSphere", "morphing: the view is inside the baked grid")]
+    # The same mirror pixels are drawn, and they show what runtime mode shows there.
+    touched = _touched(morphed)
+    assert touched.sum() > 0.9 * _touched(runtime).sum() > 1000
+    same = np.abs(morphed[..., :3] - runtime[..., :3]).max(axis=2) < 0.02
+    assert same[touched].mean() > 0.9
+    assert len(_pixels_of(morphed, "FloorA", scene)) > 200
+
+    # A view outside the grid is drawn in runtime mode, and the panel says why.
+    live._start(state, "far", far, wait=True)
+    assert state.cameras["far"].sbc is not None and state.cameras["far"].morph == []
+    assert _draw(scene, far, "far")[0]
+    assert morph_bake.reflector_modes(scene) == [
+        ("MirrorSphere", "runtime mode: the view is outside the morphing grid")]
+
+    # Back to Runtime: a camera again, and the ball no longer listed as morphing.
+    mirror.curved_reflections.mode = 'RUNTIME'
+    assert state.grids == [] and state.cameras["near"].sbc is not None
+    assert morph_bake.reflector_modes(scene) == []
+    np.testing.assert_allclose(_draw(scene, near, "near")[1], runtime, atol=1e-6)
