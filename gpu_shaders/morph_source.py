@@ -29,6 +29,11 @@ from . import projection
 MAX_IMAGES = 3
 #: Face cameras kept packed in GPU textures (a tetrahedron uses four nodes of six faces).
 PACKED_FACES = 48
+#: Largest sub-grid of a mixed triangle (SBC V-B) drawn from a grid: every sub-vertex is
+#: morphed from scratch (node projections, matching, blend), tens of microseconds each in
+#: numpy, where the GPU projects a runtime camera's for almost nothing. 8 keeps the
+#: reflection's edge within an eighth of a triangle.
+MIXED_SUBDIVISIONS = 8
 
 
 class MorphSource:
@@ -47,6 +52,7 @@ class MorphSource:
         self.max_images = int(max_images)
         self.groups = [(grid.reflector_index,) for grid, _ in self.grids for _ in range(self.max_images)]
         self.downsample = 1  # a vertex's image is blended on its own, not read from a ray map
+        self.sheet_subdivisions = [MIXED_SUBDIVISIONS] * len(self.groups)
         self.counts = {"projected": 0, "dropped_images": 0}
 
     def project(self, renderer, positions, batch, draws: list, n_texels: int, setup: dict, static: bool = False):

@@ -589,6 +589,14 @@ def _same_view(a, b) -> bool:
                       and np.array_equal(np.asarray(a.projection_matrix), np.asarray(b.projection_matrix)))
 
 
+def _subdivision_caps(source, sheets: list):
+    """The largest mixed-triangle sub-grid each of ``sheets`` allows (``None``: the
+    renderer's): a source whose points cost much more to project than the GPU pass
+    (``MorphSource``) caps it."""
+    caps = getattr(source, "sheet_subdivisions", None)
+    return None if caps is None else [caps[sheet] for sheet in sheets]
+
+
 def _culling(source, camera, diameter: float):
     """Per-sheet k-DOPs and bounding cones of ``source`` that cull vertex chunks
     (:mod:`..addon.sheet_bounds`; a ``None`` entry culls nothing), or ``None``."""
@@ -614,6 +622,8 @@ class SheetSources:
         self.view = view
         self.groups = [source.groups[k] for source, kept, _ in self.parts for k in kept]
         self.downsample = max((source.downsample for source, _, _ in self.parts), default=1)
+        self.sheet_subdivisions = [cap for source, kept, _ in self.parts
+                                   for cap in (_subdivision_caps(source, kept) or [MIXED_SUBDIVISIONS] * len(kept))]
 
     def project(self, renderer, positions, batch, draws: list, n_texels: int, setup: dict, static: bool = False):
         """Each part projects its own sheets' draws; texels not drawn are 0 in every part."""
@@ -985,7 +995,7 @@ class ReflectionRenderer:
             eyes = eyes.reshape(len(sheets), n_vertices, 4)
             pieces += self._full_triangles(points, eyes, history, stitch_px)
             if self.mixed_subdivisions > 0:
-                blocks = self._mixed_instances(points, sheets, len(history))
+                blocks = self._mixed_instances(points, sheets, len(history), _subdivision_caps(textures, sheets))
                 pieces += [("mixed", len(mixed_blocks) + k) for k in range(len(blocks))]
                 mixed_blocks += blocks
         mixed_pieces = self._mixed_triangles(textures, mixed_blocks, setup)
@@ -1119,7 +1129,7 @@ class ReflectionRenderer:
                 pieces.append((value, {k: v[first:first + count] for k, v in arrays.items()}))
         return pieces
 
-    def _mixed_instances(self, points, sheets: list, order: int) -> list:
+    def _mixed_instances(self, points, sheets: list, order: int, caps=None) -> list:
         """Mixed triangles of ``sheets`` (SBC V-B) as (image, n, corners, group, order)
         blocks, n the sub-grid (a power of two up to ``mixed_subdivisions``, so that
         sub-triangles span about :data:`MIXED_SUB_PX`): one or two corners project in the
@@ -1163,9 +1173,9 @@ class ReflectionRenderer:
                 scale = vertex_scale[triangles[chosen]].max(axis=1)
                 scale = np.where(scale > 0, scale, largest)
                 size_px = scale * longest[first:first + count][chosen]
-                wanted = np.clip(np.nan_to_num(size_px / MIXED_SUB_PX, posinf=1e9), 1, self.mixed_subdivisions)
-                level = np.minimum(np.ceil(np.log2(wanted)).astype(np.int64),
-                                   int(np.log2(max(1, self.mixed_subdivisions))))
+                cap = self.mixed_subdivisions if caps is None else min(self.mixed_subdivisions, caps[layer])
+                wanted = np.clip(np.nan_to_num(size_px / MIXED_SUB_PX, posinf=1e9), 1, cap)
+                level = np.minimum(np.ceil(np.log2(wanted)).astype(np.int64), int(np.log2(max(1, cap))))
                 for value in np.unique(level):
                     by_level.setdefault(int(value), []).append((triangles[chosen[level == value]],
                                                                 np.full(int((level == value).sum()), group)))

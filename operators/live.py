@@ -629,8 +629,11 @@ def on_setting_changed(context, reflectors: bool = False, meshes: bool = False) 
 
 @persistent
 def on_load_pre(*_args) -> None:
-    """Loading a file drops every live state (no state leaks between files)."""
+    """Loading a file drops every live state and morphing status (no state leaks between files)."""
+    from .morph_bake import forget_statuses
+
     clear_all()
+    forget_statuses()
 
 
 @persistent
@@ -678,7 +681,10 @@ def unregister() -> None:
             handlers.remove(handler)
     if bpy.app.timers.is_registered(_tick):
         bpy.app.timers.unregister(_tick)
+    from .morph_bake import forget_statuses
+
     clear_all()
+    forget_statuses()
     if _executor is not None:
         _executor.shutdown(wait=False, cancel_futures=True)
         _executor = None

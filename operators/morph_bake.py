@@ -96,6 +96,11 @@ def note_runtime_fallback(error) -> None:
     _REFLECTOR_STATUS[error.reflector_name] = f"runtime mode: {error.reason}"
 
 
+def forget_statuses() -> None:
+    """Drop every reflector's status line (another file is being loaded)."""
+    _REFLECTOR_STATUS.clear()
+
+
 def note_morphing_active(reflector_name: str) -> None:
     """Record that the live view draws this reflector from its baked grid."""
     _REFLECTOR_STATUS[reflector_name] = "morphing: the view is inside the baked grid"
