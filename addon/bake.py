@@ -3,10 +3,12 @@
 
 SBC paper VI builds the grid's SBCs as a preprocess. Each node's panoramic camera is
 independent numpy work, which threads would serialise on the GIL between numpy calls,
-so nodes are built in worker *processes* (``multiprocessing``, ``fork`` context). The
-parent writes each finished node to the cache folder, reports progress after each, and
-checks the cancel flag between nodes: a cancelled (or failed) bake removes its partial
-folder, so the previous cache stays exactly as it was.
+so nodes are built in worker *processes* (``multiprocessing``, ``fork`` context). Each
+worker writes the node it built to the partial cache folder itself (compression happens
+on every core, and no camera is pickled to the parent); the parent reports progress
+after each node and checks the cancel flag between nodes: a cancelled (or failed) bake
+stops the workers and removes its partial folder, so the previous cache stays exactly
+as it was.
 
 Inside Blender the extension is the package ``bl_ext.<repo>.curved_reflections``. A
 forked worker inherits the parent's modules, so the worker function (this module's
@@ -64,10 +66,16 @@ def default_processes() -> int:
 
 
 def _bake_node(node: int):
-    """Worker: build one node and return its cache arrays (plain data crosses the pipe)."""
+    """Worker: build one node and write its cache file; only its status and sizes cross the pipe.
+
+    Writing in the worker keeps the parent idle: compressing every node's arrays in the
+    parent (and pickling them to it) took a core's worth of time away from the workers.
+    """
     work = _WORK
     camera = build_node(work["reflector_set"], work["positions"][node], work["bounds"], work["settings"])
-    return node, camera.status, (camera.seconds, camera.cpu_seconds), camera.nbytes, bake_cache.node_arrays(camera)
+    if camera.status == NODE_OK:
+        bake_cache.write_node(work["partial"], node, bake_cache.node_arrays(camera))
+    return node, camera.status, (camera.seconds, camera.cpu_seconds), camera.nbytes
 
 
 def _peak_rss_mb() -> float:
@@ -101,7 +109,7 @@ def bake_grid(reflector: Reflector, matrix, settings: MorphSettings, cache_dir, 
     status = np.zeros(total, dtype=np.int8)
     node_seconds, node_cpu = np.zeros(total), np.zeros(total)
     nbytes, done, cancelled = 0, 0, False
-    _WORK.update(reflector_set=reflector_set, positions=positions, bounds=bounds, settings=settings)
+    _WORK.update(reflector_set=reflector_set, positions=positions, bounds=bounds, settings=settings, partial=partial)
     try:
         if processes == 1:
             results = map(_bake_node, range(total))
@@ -110,11 +118,9 @@ def bake_grid(reflector: Reflector, matrix, settings: MorphSettings, cache_dir, 
             pool = multiprocessing.get_context("fork").Pool(processes)
             results = pool.imap_unordered(_bake_node, range(total), chunksize=1)
         try:
-            for node, node_status, seconds, size, arrays in results:
+            for node, node_status, seconds, size in results:
                 status[node], (node_seconds[node], node_cpu[node]) = node_status, seconds
                 nbytes += size
-                if node_status == NODE_OK:
-                    bake_cache.write_node(partial, node, arrays)
                 done += 1
                 if progress is not None:
                     progress(done, total)

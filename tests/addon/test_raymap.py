@@ -2,7 +2,8 @@
 import numpy as np
 
 from curved_reflections.addon import look_at_view
-from curved_reflections.addon.raymap import box_exit_distance, trace_ray_map
+from curved_reflections.addon import raymap
+from curved_reflections.addon.raymap import box_exit_distance, reflect_primary_hits, trace_ray_map
 from curved_reflections.addon.raytrace import ReflectorSet
 from curved_reflections.addon.sphere import icosphere
 
@@ -56,3 +57,31 @@ def test_box_exit_distance():
     d = box_exit_distance(np.array([[0.0, 0, 0], [0, 0, 0]]), np.array([[1.0, 0, 0], [0, 0.6, 0.8]]),
                           [-1, -2, -3], [2, 2, 2])
     np.testing.assert_allclose(d, [2.0, 2.5])
+
+
+def test_view_rays_missing_the_bounding_sphere_are_not_traced_and_change_nothing(monkeypatch):
+    """trace_ray_map traces only view rays whose line meets the reflectors' bounding sphere;
+    the ray map equals the one from tracing every ray, up to the second order."""
+    a, b = icosphere([0, -1.1, 1], 1.0, 3, name="A"), icosphere([0, 1.1, 1], 1.0, 3, name="B")
+    reflectors = ReflectorSet([a, b])
+    view = look_at_view([7, -3, 4], [0, 0, 1], width=160, height=120, fov_y_deg=60)
+    traced = []
+    intersect = reflectors.intersect
+
+    def counting(origins, directions, *args, **kwargs):
+        traced.append(len(origins))
+        return intersect(origins, directions, *args, **kwargs)
+
+    monkeypatch.setattr(reflectors, "intersect", counting)
+    culled = trace_ray_map(reflectors, view, BOUNDS, downsample=2, max_order=2)
+    monkeypatch.undo()
+    origins, directions = view.pixel_rays(view.pixel_grid(2))
+    hits = reflectors.intersect(origins, directions)
+    full = reflect_primary_hits(reflectors, view, BOUNDS, 2, 2, hits.hit, hits.triangle, hits.t, origins,
+                                directions, hits.normal, hits.face_normal)
+    assert traced[0] < 0.6 * len(origins) and 0 < hits.hit.sum() <= traced[0]
+    assert culled.histories == full.histories and culled.n_rays == full.n_rays > 200
+    for name in ("cell", "order", "group", "first_point", "first_depth", "tail", "direction", "head_distance",
+                 "triangle", "blocked"):
+        np.testing.assert_array_equal(getattr(culled, name), getattr(full, name), err_msg=name)
+    assert raymap.SPHERE_CULL_MARGIN > 0

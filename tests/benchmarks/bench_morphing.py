@@ -4,6 +4,8 @@ against the exact solver as a function of grid spacing, and the bake of a 9x9x5 
 
     .venv/bin/python tests/benchmarks/bench_morphing.py --out docs/benchmarks
     .venv/bin/python tests/benchmarks/bench_morphing.py --out /tmp/bench --quick    # ~1 minute
+    .venv/bin/python tests/benchmarks/bench_morphing.py --out /tmp/bench --bake-only    # the 9x9x5 bake alone
+    .venv/bin/python tests/benchmarks/bench_morphing.py --out /tmp/bench --grids 9,9,5    # one grid's error
 
 Scene: the ``sbc_fig3`` demo (mirror sphere of radius 1 on a tiled floor among columns),
 built with bpy and captured from the evaluated depsgraph, as ``bench_sbc.py`` does; its
@@ -37,6 +39,7 @@ import importlib.util
 import json
 import math
 import os
+import resource
 import shlex
 import subprocess
 import sys
@@ -185,8 +188,10 @@ def measure_grid(morphing, mirror, matrix, settings, views, view_points, exact, 
 def measure_bake(morphing, bake, mirror, matrix, settings, processes) -> dict:
     folder = Path(tempfile.mkdtemp(prefix="bench_morphing_"))
     load_before = os.getloadavg()
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
     try:
         result = bake.bake_grid(mirror, matrix, settings, folder, processes=processes)
+        own_after, children_after = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
         disk = sum(p.stat().st_size for p in result.directory.iterdir())
     finally:
         subprocess.run(["rm", "-rf", str(folder)], check=False)
@@ -195,8 +200,14 @@ def measure_bake(morphing, bake, mirror, matrix, settings, processes) -> dict:
             "seconds": result.seconds, "cpu_seconds": float(result.node_cpu_seconds.sum()),
             "node_cpu_p50": float(np.median(result.node_cpu_seconds[built])),
             "node_cpu_max": float(result.node_cpu_seconds.max()), "n_nodes": result.n_nodes,
+            # Whole processes: the workers' CPU includes writing the node files, the parent's the rest.
+            "worker_cpu_seconds": _cpu(children_after) - _cpu(children), "parent_cpu_seconds": _cpu(own_after) - _cpu(own),
             "peak_rss_mb": result.peak_rss_mb, "memory_mb": result.nbytes / 2**20, "disk_mb": disk / 2**20,
             "load_before": list(load_before), "load_after": list(os.getloadavg())}
+
+
+def _cpu(usage) -> float:
+    return usage.ru_utime + usage.ru_stime
 
 
 def _f(value, digits=2):
@@ -301,6 +312,8 @@ def parse_args(argv=None):
                         "(default: MorphSettings' default)")
     parser.add_argument("--bake-grid", default="9,9,5")
     parser.add_argument("--processes", type=int, default=2)
+    parser.add_argument("--bake-only", action="store_true", help="measure the bake alone (no error sweep, no "
+                        "exact solve); writes morphing_bake.json and leaves morphing.md as it is")
     parser.add_argument("--quick", action="store_true", help="smallest run: grids 3x3x2 and 5x5x3, 2 views, "
                         "1500 points, face 32 px, a 3x3x2 bake")
     args = parser.parse_args(argv)
@@ -326,6 +339,15 @@ def main(argv=None) -> int:
                                               accuracy_px=accuracy)
                     for g in args.grids + [args.bake_grid]}
     mirror, matrix, bounds, meshes = sphere_scene(args.points)
+    if args.bake_only:
+        bake_result = measure_bake(morphing, bake, mirror, matrix, settings_for[args.bake_grid], args.processes)
+        bake_result.update(command=" ".join([".venv/bin/python", "tests/benchmarks/bench_morphing.py"]
+                                            + [shlex.quote(a) for a in argv]), machine=B._machine(),
+                           code=B._code_version(REPO_ROOT), total_seconds=time.perf_counter() - started)
+        (args.out / "morphing_bake.json").write_text(json.dumps(B._jsonable(bake_result), indent=1) + "\n")
+        _log(f"bake {args.bake_grid}: {bake_result['seconds']:.1f} s wall, {bake_result['cpu_seconds']:.1f} s CPU, "
+             f"peak RSS {bake_result['peak_rss_mb']:.0f} MB; wrote {args.out / 'morphing_bake.json'}")
+        return 0
     rng = np.random.default_rng(SEED)
     default = morphing.MorphSettings()
     views = draw_views(morphing, mirror, matrix, default, args.views, args.min_eye_distance, rng)

@@ -39,3 +39,14 @@ def test_quick_benchmark_writes_tables_and_raw_results(tmp_path):
                     "## What the numbers show"):
         assert heading in report
     assert "bench_morphing.py --quick --out" in report
+
+
+def test_bake_only_writes_the_bake_figures_alone(tmp_path):
+    environment = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "blender_user"))
+    run = subprocess.run([sys.executable, str(SCRIPT), "--quick", "--bake-only", "--out", str(tmp_path / "out")],
+                         capture_output=True, text=True, timeout=900, env=environment)
+    assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
+    result = json.loads((tmp_path / "out" / "morphing_bake.json").read_text())
+    assert result["grid"] == [3, 3, 2] and result["n_nodes"] == 18 and result["seconds"] > 0
+    assert result["worker_cpu_seconds"] >= 0.5 * result["cpu_seconds"] > 0
+    assert not (tmp_path / "out" / "morphing.md").exists()
