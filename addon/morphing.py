@@ -330,8 +330,11 @@ def build_node(reflector_set: ReflectorSet, eye, bounds, settings: MorphSettings
         check_view_outside_reflectors(reflector_set, views[0])
     except SceneInputError:
         return NodeCamera(NODE_INSIDE, [None] * 6, time.perf_counter() - start, time.process_time() - cpu)
-    vlo, vhi = reflector_set.vertices.min(axis=0), reflector_set.vertices.max(axis=0)
-    centre, radius = 0.5 * (vlo + vhi), 0.5 * float(np.linalg.norm(vhi - vlo))
+    # The sphere around the box's centre through the farthest vertex: a face whose frustum
+    # misses it sees no triangle (the box's circumsphere let through faces with empty ray maps).
+    vertices = reflector_set.vertices
+    centre = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0))
+    radius = float(np.sqrt(np.max(np.einsum("vd,vd->v", vertices - centre, vertices - centre))))
     faces = []
     for view in views:
         if not _face_sees_sphere(view, centre, radius):
@@ -604,8 +607,11 @@ class MorphingGrid:
 
 
 def project_face(sbc: SampleBasedCamera, points: np.ndarray) -> np.ndarray:
-    """(G, P, 3) first reflector points of ``points`` in one face SBC, NaN where not projected."""
-    result = sbc.project(points)
+    """(G, P, 3) first reflector points of ``points`` in one face SBC, NaN where not projected.
+
+    Interpolated answers only (``polish=False``): a baked face camera does not keep the
+    scene (``sbc_arrays.TRANSIENT``), and the blend is measured on what the cache gives."""
+    result = sbc.project(points, polish=False)
     return np.where(result.valid[:, :, None], result.reflector_points, np.nan)
 
 
@@ -690,6 +696,26 @@ def refine_on_local_surface(images, present, eyes, points, eye, weights):
     to_point = _unit(points[:, None] - images)
     normals = _unit(to_eye + to_point)
     normal = _unit(np.einsum("qn,qnd->qd", weights, normals))
+    nz = np.einsum("qnd,qd->qn", normals, normal)
+    usable = present & (nz > 0.2)
+    x, ok, fitted_normal = origin.copy(), np.zeros(q, bool), normal.copy()
+    # Only rows with enough usable nodes are fitted (a point's empty image slots and
+    # images seen by too few nodes are most rows of a drawn mesh's projection).
+    rows = np.flatnonzero(usable.sum(axis=1) >= MIN_SURFACE_NODES)
+    if len(rows):
+        x[rows], ok[rows], fitted_normal[rows] = _fit_and_reflect(
+            images[rows], present[rows], usable[rows], normals[rows], normal[rows], nz[rows], origin[rows],
+            points[rows], eye)
+    # Where the fit is not used, the weighted normal of the nodes' images stands for the
+    # mirror's normal at the linear blend.
+    return x, ok, np.where(ok[:, None], fitted_normal, normal), normal
+
+
+def _fit_and_reflect(images, present, usable, normals, normal, nz, origin, points, eye):
+    """:func:`refine_on_local_surface` for rows that have enough usable nodes: the
+    height-field fit and Newton on it; returns (x, ok, fitted normal). Newton runs on the
+    rows not yet converged only."""
+    q = len(images)
     helper = np.where(np.abs(normal[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
     t1 = _unit(np.cross(normal, helper))
     t2 = np.cross(normal, t1)
@@ -697,11 +723,9 @@ def refine_on_local_surface(images, present, eyes, points, eye, weights):
     a, b, h = (np.einsum("qnd,qd->qn", offset, axis) for axis in (t1, t2, normal))
     spread = np.maximum(np.sqrt(np.max(np.where(present, a * a + b * b, 0.0), axis=1)), 1e-12)
     a, b, h = a / spread[:, None], b / spread[:, None], h / spread[:, None]
-    nz = np.einsum("qnd,qd->qn", normals, normal)
     with np.errstate(divide="ignore", invalid="ignore"):
         slope_a = -np.einsum("qnd,qd->qn", normals, t1) / nz
         slope_b = -np.einsum("qnd,qd->qn", normals, t2) / nz
-    usable = present & (nz > 0.2)
     zero, one = np.zeros_like(a), np.ones_like(a)
     rows = np.concatenate([
         np.stack([one, a, b, 0.5 * a * a, a * b, 0.5 * b * b], axis=2),
@@ -713,38 +737,43 @@ def refine_on_local_surface(images, present, eyes, points, eye, weights):
     normal_matrix = np.einsum("qri,qrj->qij", rows, rows) + 1e-10 * np.eye(6)
     coefficients = np.linalg.solve(normal_matrix, np.einsum("qri,qr->qi", rows, rhs)[..., None])[..., 0]
 
-    def surface(u, v):
-        c = coefficients
+    def surface(k, u, v):
+        c = coefficients[k]
         height = c[:, 0] + c[:, 1] * u + c[:, 2] * v + 0.5 * c[:, 3] * u * u + c[:, 4] * u * v + 0.5 * c[:, 5] * v * v
         du = c[:, 1] + c[:, 3] * u + c[:, 4] * v
         dv = c[:, 2] + c[:, 4] * u + c[:, 5] * v
-        x = origin + spread[:, None] * (u[:, None] * t1 + v[:, None] * t2 + height[:, None] * normal)
-        return x, t1 + du[:, None] * normal, t2 + dv[:, None] * normal
+        x = origin[k] + spread[k, None] * (u[:, None] * t1[k] + v[:, None] * t2[k] + height[:, None] * normal[k])
+        return x, t1[k] + du[:, None] * normal[k], t2[k] + dv[:, None] * normal[k]
 
-    def residual(u, v):
-        x, ta, tb = surface(u, v)
-        bisector = _unit(eye[None] - x) + _unit(points - x)
+    def residual(k, u, v):
+        x, ta, tb = surface(k, u, v)
+        bisector = _unit(eye[None] - x) + _unit(points[k] - x)
         return np.stack([np.einsum("qd,qd->q", bisector, ta), np.einsum("qd,qd->q", bisector, tb)], axis=1)
 
     u, v = np.zeros(q), np.zeros(q)
+    active = np.arange(q)
     step = 1e-6
     for _ in range(SURFACE_ITERATIONS):
-        f = residual(u, v)
-        ju = (residual(u + step, v) - f) / step
-        jv = (residual(u, v + step) - f) / step
+        ua, va = u[active], v[active]
+        f = residual(active, ua, va)
+        ju = (residual(active, ua + step, va) - f) / step
+        jv = (residual(active, ua, va + step) - f) / step
         det = ju[:, 0] * jv[:, 1] - jv[:, 0] * ju[:, 1]
         det = np.where(np.abs(det) > 1e-300, det, 1e-300)
         du = (f[:, 0] * jv[:, 1] - jv[:, 0] * f[:, 1]) / det
         dv = (ju[:, 0] * f[:, 1] - f[:, 0] * ju[:, 1]) / det
-        u, v = np.clip(u - du, -4.0, 4.0), np.clip(v - dv, -4.0, 4.0)
-    x, ta, tb = surface(u, v)
+        u[active], v[active] = np.clip(ua - du, -4.0, 4.0), np.clip(va - dv, -4.0, 4.0)
+        # A step below 1e-13 (in units of the images' spread) changes nothing further.
+        active = active[~((np.abs(du) < 1e-13) & (np.abs(dv) < 1e-13))]
+        if len(active) == 0:
+            break
+    every = np.arange(q)
+    x, ta, tb = surface(every, u, v)
     fitted_normal = _unit(np.cross(ta, tb))
     fitted_normal *= np.where(np.einsum("qd,qd->q", fitted_normal, normal) < 0, -1.0, 1.0)[:, None]
-    ok = ((usable.sum(axis=1) >= MIN_SURFACE_NODES) & (np.abs(residual(u, v)).max(axis=1) < 1e-8)
-          & (u * u + v * v <= SURFACE_REACH ** 2) & np.isfinite(x).all(axis=1))
-    # Where the fit is not used, the weighted normal of the nodes' images stands for the
-    # mirror's normal at the linear blend.
-    return x, ok, np.where(ok[:, None], fitted_normal, normal), normal
+    ok = ((np.abs(residual(every, u, v)).max(axis=1) < 1e-8) & (u * u + v * v <= SURFACE_REACH ** 2)
+          & np.isfinite(x).all(axis=1))
+    return x, ok, fitted_normal
 
 
 def _unit(v):

@@ -35,6 +35,7 @@ from .pinhole import PinholeLeaves
 from .ray_patch import RayPatches, RayPatchLeaves, invert_patches
 from .raymap import RayMap, box_exit_distance, trace_ray_map
 from .raytrace import ReflectorSet, reflect, reflection_valid
+from .true_rays import polish_on_true_rays
 from .view import View
 
 LEAF_MODELS = {"ray_patch": RayPatchLeaves(), "pinhole": PinholeLeaves()}
@@ -136,12 +137,19 @@ class SampleBasedCamera:
     mixed: list | None = None
     #: Per tree, its group's FoldCells (shared by the sheets of a group), or None where not traced.
     folds: list | None = None
+    #: The reflectors, where first-order answers of ray-list leaves and fold cells are
+    #: polished on the true reflected rays (true_rays.py); None: answers as interpolated.
+    true_rays: ReflectorSet | None = None
 
     @property
     def groups(self) -> list:
         return list(self.histories)
 
-    def project(self, points) -> Projection:
+    def project(self, points, polish: bool = True) -> Projection:
+        """Project world points (P, 3) in every group. With ``polish`` (and ``true_rays``
+        set), first-order answers of ray-list leaves and fold cells are polished on the
+        true reflected rays (``true_rays.polish_on_true_rays``); without, every answer is
+        the interpolated one (what the GLSL twin computes)."""
         points = np.asarray(points, dtype=np.float64)
         if points.ndim != 2 or points.shape[1] != 3:
             raise ValueError(f"points must be a (P, 3) array, got shape {points.shape}")
@@ -159,24 +167,25 @@ class SampleBasedCamera:
         # project in parallel on threads; each part writes its own rows of the result.
         workers = min(PROJECT_THREADS, os.cpu_count() or 1, max(1, len(finite) // THREAD_MIN_POINTS))
         parts = np.array_split(finite, max(1, -(-len(finite) // PROJECT_BLOCK)))
+        polish = bool(polish) and self.true_rays is not None
         if workers == 1:
             for part in parts:
-                self._project_points(points, part, result)
+                self._project_points(points, part, result, polish)
         else:
             with ThreadPoolExecutor(workers) as pool:
-                list(pool.map(lambda part: self._project_points(points, part, result), parts))
+                list(pool.map(lambda part: self._project_points(points, part, result, polish), parts))
         return result
 
-    def _project_points(self, points, index, result: Projection):
+    def _project_points(self, points, index, result: Projection, polish: bool):
         points = points[index]
         for g, (tree, grid) in enumerate(zip(self.trees, self.grids)):
             # Only points in the sheet's bounding cone descend its tree (bsp.ray_cones).
             chosen = (np.arange(len(points)) if self.cones is None
                       else np.flatnonzero(in_cones(np.broadcast_to(self.cones[g], (len(points), CONE_SIZE)), points)))
             if len(chosen):
-                self._project_group(g, tree, grid, points[chosen], index[chosen], result)
+                self._project_group(g, tree, grid, points[chosen], index[chosen], result, polish)
 
-    def _project_group(self, g, tree: BSPTree, grid, points, point_index, result: Projection):
+    def _project_group(self, g, tree: BSPTree, grid, points, point_index, result: Projection, polish: bool):
         leaf = tree.leaf[descend_tree(tree, points)]
         if tree.leaf_cones is not None:
             # Points outside their leaf's bounding cone cannot project there (bsp.ray_cones).
@@ -200,15 +209,54 @@ class SampleBasedCamera:
         found = np.flatnonzero(accepted & np.isfinite(cells).all(axis=1))
         points, cells, kind, target = points[found], cells[found], kind[found], point_index[found]
         mixed = None if self.mixed is None else self.mixed[g]
-        hits, s, first_depth = _check_on_rays(self.ray_map, self._ray_table, grid, cells, points, mixed)
+        hits, s, first_depth, spacing = _check_on_rays(self.ray_map, self._ray_table, grid, cells, points, mixed)
         pixels = self.ray_map.cell_pixels(cells[hits])
         origins, directions = self.ray_map.view.pixel_rays(pixels)
-        target = target[hits]
-        result.reflector_points[g, target] = origins + first_depth[:, None] * directions
+        target, kind = target[hits], kind[hits]
+        reflector_points = origins + first_depth[:, None] * directions
+        if polish:
+            keep = self._polish(g, pixels, reflector_points, s, points[hits], kind, cells[hits], spacing)
+            pixels, reflector_points, s, target, kind = (
+                pixels[keep], reflector_points[keep], s[keep], target[keep], kind[keep])
+        result.reflector_points[g, target] = reflector_points
         result.pixels[g, target] = pixels
         result.valid[g, target] = True
-        result.leaf_kind[g, target] = kind[hits]
+        result.leaf_kind[g, target] = kind
         result.ray_distance[g, target] = s
+
+    def _polish(self, g, pixels, reflector_points, s, points, kind, cells, spacing) -> np.ndarray:
+        """Polish group ``g``'s risky answers in place (first order: those of ray-list leaves
+        and fold cells) on the true reflected rays (true_rays.py); returns which answers
+        stand. ``spacing``: the ray spacing at each point (world units per cell)."""
+        keep = np.ones(len(pixels), dtype=bool)
+        if self.true_rays is None or len(self.histories[g]) != 1:
+            return keep
+        risky = np.flatnonzero((kind == RAY_LIST_LEAF) | _in_fold_cells(self.folds, g, cells))
+        if len(risky):
+            pixels[risky], reflector_points[risky], s[risky], ok = polish_on_true_rays(
+                self.true_rays, self.ray_map.view, self.histories[g][0], pixels[risky], points[risky],
+                self.ray_map.downsample, spacing[risky] / self.ray_map.downsample)
+            keep[risky[~ok]] = False
+        return keep
+
+    def polish_answers(self, g: int, pixels, points, kind):
+        """What ``project`` does after its interpolated answers, for answers of group ``g``
+        found elsewhere (the GLSL twin, ``gpu_shaders/reflection_draw.py``): desired-view
+        ``pixels`` (P, 2) of ``points`` (P, 3) with their leaf ``kind`` (P,). Returns
+        (pixels, first reflector points, ray distances, ok) of the answers polished on
+        the true rays (the others as given, reflector points and distances NaN there)."""
+        pixels = np.array(pixels, dtype=np.float64)
+        points = np.asarray(points, dtype=np.float64)
+        kind = np.asarray(kind)
+        reflector_points = np.full((len(pixels), 3), np.nan)
+        s = np.full(len(pixels), np.nan)
+        cells = pixels / self.ray_map.downsample - 0.5
+        spacing = np.zeros(len(pixels))  # unconfirmed by the ray map (float32 answers at an edge): iterate
+        mixed = None if self.mixed is None else self.mixed[g]
+        hits, _, _, confirmed = _check_on_rays(self.ray_map, self._ray_table, self.grids[g], cells, points, mixed)
+        spacing[hits] = confirmed
+        ok = self._polish(g, pixels, reflector_points, s, points, kind, cells, spacing)
+        return pixels, reflector_points, s, ok
 
     @functools.cached_property
     def _ray_table(self) -> np.ndarray:
@@ -265,6 +313,17 @@ def _project_ray_lists(tree: BSPTree, row, points):
     result[pair_point[first]] = cells[first]
     found[pair_point[first]] = True
     return result, found
+
+
+def _in_fold_cells(folds: list | None, g: int, cells: np.ndarray) -> np.ndarray:
+    """(P,) whether each ray-map position (cell coordinates) lies in one of group ``g``'s fold cells."""
+    if folds is None or not len(folds[g].valid):
+        return np.zeros(len(cells), dtype=bool)
+    index = folds[g].index
+    base = np.floor(cells).astype(np.int64)
+    column = np.clip(base[:, 0], 0, index.shape[1] - 1)
+    row = np.clip(base[:, 1], 0, index.shape[0] - 1)
+    return index[row, column] >= 0
 
 
 def _refine_in_folds(folds: FoldCells, cells, accepted, points):
@@ -334,7 +393,8 @@ def _closest_cells(cells, pair_point, pair_cell, points, keep: int = CANDIDATE_C
 def _check_on_rays(ray_map: RayMap, table: np.ndarray, grid: np.ndarray, cells: np.ndarray, points: np.ndarray,
                    mixed_cells: MixedCells | None = None):
     """Which leaf answers the ray map's own rays confirm: indices into ``cells``, their ray
-    distances s and interpolated first-hit depths.
+    distances s, interpolated first-hit depths, and the spacing of the cell's rays at s
+    (the smaller of its two axes, world units per cell).
 
     The four rays around the fractional cell must exist in the group; their bilinear
     interpolation (tail, direction, head) must pass within one cell spacing of the point
@@ -383,7 +443,7 @@ def _check_on_rays(ray_map: RayMap, table: np.ndarray, grid: np.ndarray, cells: 
     ok = ((miss <= MISS_CELLS * np.maximum(along_u, along_v) + tolerance) & (s >= -tolerance)
           & (~blocked | (s <= head_distance + tolerance)))
     hits = np.flatnonzero(ok)
-    return keep[hits], s[hits], mixed[hits, 7]
+    return keep[hits], s[hits], mixed[hits, 7], np.minimum(along_u, along_v)[hits]
 
 
 def _norm(vectors: np.ndarray) -> np.ndarray:
@@ -471,6 +531,7 @@ def build_sample_based_camera(reflectors, view: View, bounds, max_order: int = 1
     distinct = {id(f): f for f in sbc.folds}.values()
     sbc.stats["n_fold_cells"] = int(sum(len(f.valid) for f in distinct)) // (FOLD_SAMPLES * FOLD_SAMPLES)
     sbc.stats["nbytes"] += int(sum(f.nbytes for f in distinct))
+    sbc.true_rays = reflector_set
     return sbc
 
 

@@ -28,6 +28,9 @@ CLASSES = {cls.__name__: cls for cls in (SampleBasedCamera, RayMap, View, BSPTre
                                          MixedCells, FoldCells)}
 #: Fields recomputed on load rather than stored.
 DERIVED = {"SampleBasedCamera": ("grids",)}
+#: Fields not stored: references to the scene a camera was built in (the reflectors that
+#: polish answers on the true rays); a loaded camera has their default (None).
+TRANSIENT = {"SampleBasedCamera": ("true_rays",)}
 
 
 def _put(out: dict, key: str, value) -> None:
@@ -39,7 +42,7 @@ def _put(out: dict, key: str, value) -> None:
             raise TypeError(f"cannot store a {name}")
         out[key + "#class"] = np.array(name)
         for f in dataclasses.fields(value):
-            if f.name not in DERIVED.get(name, ()):
+            if f.name not in DERIVED.get(name, ()) + TRANSIENT.get(name, ()):
                 _put(out, f"{key}.{f.name}", getattr(value, f.name))
     elif isinstance(value, np.ndarray):
         if value.dtype == object:
@@ -79,7 +82,7 @@ def _get(data, key: str):
             raise ValueError(f"unknown class {name!r}")
         cls = CLASSES[name]
         values = {f.name: _get(data, f"{key}.{f.name}") for f in dataclasses.fields(cls)
-                  if f.name not in DERIVED.get(name, ()) and f.init}
+                  if f.name not in DERIVED.get(name, ()) + TRANSIENT.get(name, ()) and f.init}
         if name == "SampleBasedCamera":
             ray_map = values["ray_map"]
             values["grids"] = [ray_map.group_grid(ray_map.histories.index(h)) for h in values["histories"]]

@@ -23,6 +23,7 @@ from collections import OrderedDict
 import numpy as np
 
 from . import projection
+from .reflection_draw import reflected_depth
 
 #: Images of one point in one reflector drawn at most (sheets per grid). A convex
 #: mirror has one; a concave one can show a point two or three times.
@@ -79,9 +80,8 @@ class MorphSource:
             rows = np.flatnonzero(valid)
             texels = offset + first + rows
             distance = result.ray_distance[image, rows]
-            # As glsl/reflection_project_vert.glsl: the order's depth slot, nearer points in front.
-            depth = (order - 1 + np.clip(distance * setup["inverse_diameter"], 0.0, 1.0)) * setup["order_range"]
-            points[texels] = np.c_[result.pixels[image, rows], depth, np.ones(len(rows))]
+            points[texels] = np.c_[result.pixels[image, rows], reflected_depth(order, distance, setup),
+                                   np.ones(len(rows))]
             eyes[texels] = np.c_[result.reflector_points[image, rows] - positions[first + rows], distance]
         return points, eyes
 

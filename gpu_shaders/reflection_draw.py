@@ -589,6 +589,35 @@ def _same_view(a, b) -> bool:
                       and np.array_equal(np.asarray(a.projection_matrix), np.asarray(b.projection_matrix)))
 
 
+def reflected_depth(order: int, distance: np.ndarray, setup: dict) -> np.ndarray:
+    """The depth that orders reflections, as ``glsl/reflection_project_vert.glsl`` writes it:
+    (k - 1 + z / D) g (SBC paper V-A), z the distance along the reflected ray."""
+    return (order - 1 + np.clip(distance * setup["inverse_diameter"], 0.0, 1.0)) * setup["order_range"]
+
+
+def _polish_readback(camera, positions, draws: list, points: np.ndarray, eyes: np.ndarray, setup: dict) -> None:
+    """Polish, in place, the GPU pass's first-order answers of ray-list leaves and fold
+    cells on the true reflected rays, as the camera's numpy projection does
+    (``SampleBasedCamera.polish_answers``; the GLSL twin interpolates only): new pixel,
+    depth, eye vector and distance where polished, not projected where polishing fails."""
+    for group, order, offset, first, count in draws:
+        if len(camera.histories[group]) != 1:
+            continue
+        answered = np.flatnonzero(points[offset + first:offset + first + count, 3] > 0.5)
+        if len(answered) == 0:
+            continue
+        texels = offset + first + answered
+        position = np.asarray(positions[first + answered], dtype=np.float64)
+        pixels, reflector_points, distance, ok = camera.polish_answers(
+            group, points[texels, :2], position, np.rint(points[texels, 3]).astype(np.int8))
+        points[texels[~ok]] = 0.0
+        eyes[texels[~ok]] = 0.0
+        polished = np.flatnonzero(ok & np.isfinite(distance))
+        moved = texels[polished]
+        points[moved, :3] = np.c_[pixels[polished], reflected_depth(order, distance[polished], setup)]
+        eyes[moved] = np.c_[reflector_points[polished] - position[polished], distance[polished]]
+
+
 def _subdivision_caps(source, sheets: list):
     """The largest mixed-triangle sub-grid each of ``sheets`` allows (``None``: the
     renderer's): a source whose points cost much more to project than the GPU pass
@@ -630,13 +659,13 @@ class SheetSources:
         points = np.zeros((n_texels, 4), np.float32)
         eyes = np.zeros((n_texels, 4), np.float32)
         offset = 0
-        for source, kept, _ in self.parts:
+        for source, kept, camera in self.parts:
             mine = [(kept[group - offset],) + tuple(rest) for group, *rest in draws
                     if offset <= group < offset + len(kept)]
             offset += len(kept)
             if mine:
                 part_points, part_eyes = renderer._project_points(source, positions, batch, mine, n_texels, setup,
-                                                                  static)
+                                                                  static, camera)
                 points += part_points
                 eyes += part_eyes
         return points, eyes
@@ -990,7 +1019,7 @@ class ReflectionRenderer:
                     draws.append((sheet, len(history), layer * n_vertices, first, count))
                     projected += count
             points, eyes = self._project_points(textures, g.vertices, self._batches["points"], draws,
-                                                len(sheets) * n_vertices, setup, static=True)
+                                                len(sheets) * n_vertices, setup, static=True, camera=camera)
             points = points.reshape(len(sheets), n_vertices, 4)
             eyes = eyes.reshape(len(sheets), n_vertices, 4)
             pieces += self._full_triangles(points, eyes, history, stitch_px)
@@ -998,7 +1027,7 @@ class ReflectionRenderer:
                 blocks = self._mixed_instances(points, sheets, len(history), _subdivision_caps(textures, sheets))
                 pieces += [("mixed", len(mixed_blocks) + k) for k in range(len(blocks))]
                 mixed_blocks += blocks
-        mixed_pieces = self._mixed_triangles(textures, mixed_blocks, setup)
+        mixed_pieces = self._mixed_triangles(textures, mixed_blocks, setup, camera)
         n_mixed = sum(len(b[2]) for b in mixed_blocks)
         stats = {"projected_vertices": projected, "unculled_vertices": len(histories) * n_vertices,
                  "mixed_sub_triangles": sum(len(p[1]["world_depth"]) for p in mixed_pieces) // 3}
@@ -1061,16 +1090,21 @@ class ReflectionRenderer:
                 _read_texture(eyes, columns, rows).reshape(-1, 4)[:n_texels])
 
     def _project_points(self, source, positions, batch, draws: list, n_texels: int, setup: dict,
-                        static: bool = False):
+                        static: bool = False, camera=None):
         """The projection pass of ``draws`` (as :meth:`_project_pass`) with any source: a
         camera's textures on the GPU, else the source's own ``project`` (morphing grids,
         :class:`SheetSources`). ``positions`` are the points of ``batch`` (made from them
         when ``None``); ``static``: they are this renderer's own vertices, which a source
-        may keep work for between views (morphing's node images, SBC paper VI)."""
+        may keep work for between views (morphing's node images, SBC paper VI). With the
+        ``camera`` of the textures, risky answers are polished on the true rays as its
+        numpy projection polishes them (:func:`_polish_readback`)."""
         if isinstance(source, projection.SBCTextures):
             if batch is None:
                 batch = _points_batch(np.asarray(positions, np.float32))
-            return self._project_pass(source, batch, draws, n_texels, setup)
+            points, eyes = self._project_pass(source, batch, draws, n_texels, setup)
+            if getattr(camera, "true_rays", None) is not None:
+                _polish_readback(camera, positions, draws, points, eyes, setup)
+            return points, eyes
         return source.project(self, positions, batch, draws, n_texels, setup, static)
 
     def _vertex_arrays(self, positions, points, eyes, reflector: float, color, normal_lit, uv) -> dict:
@@ -1184,7 +1218,7 @@ class ReflectionRenderer:
                                np.concatenate([p[1] for p in parts]), order))
         return blocks
 
-    def _mixed_triangles(self, textures, blocks: list, setup: dict) -> list:
+    def _mixed_triangles(self, textures, blocks: list, setup: dict, camera=None) -> list:
         """(image, per-vertex arrays) of each block of :meth:`_mixed_instances`: every
         sub-vertex (barycentric mix of the corners' data, :func:`subdivision.barycentric_grid`)
         projected with its sheet; sub-triangles with a sub-vertex that does not project
@@ -1212,7 +1246,7 @@ class ReflectionRenderer:
             draws = [(int(groups[part[a]]), int(orders[part[a]]), 0, int(a), int(c))
                      for _, a, c in _runs(groups[part])]
             projected, projected_eyes = self._project_points(textures, positions[part], None, draws, len(part),
-                                                             setup)
+                                                             setup, camera=camera)
             points[part], eyes[part] = projected, projected_eyes
         pieces, offset = [], 0
         for (image, n, corners, group, order), (w, sub_triangles) in zip(blocks, grids):

@@ -8,12 +8,14 @@
  * targets (layer_offset = layer * vertex count), so that triangles can be stitched
  * across the seams between sheets (reflection_mesh_vert.glsl).
  *
- * Target 0 = (pixel.x, pixel.y, depth, valid): the desired-view pixel of the reflection,
+ * Target 0 = (pixel.x, pixel.y, depth, leaf kind): the desired-view pixel of the reflection,
  * and the depth that orders reflections (SBC V-A visibility cases 2 and 3): the offset
  * (k - 1 + z / D) g along the desired view ray, with k the reflection order, z the
  * distance from the last reflector point along the reflected ray (the point nearer the
  * mirror wins within a sheet), D an upper bound of z (the scene's diameter) and
- * g = 1 / (k_max + 1) the depth range per order (lower orders in front).
+ * g = 1 / (k_max + 1) the depth range per order (lower orders in front); the leaf kind is
+ * 0 where the vertex does not project, 1 (camera leaf) or 2 (ray-list leaf) where it does:
+ * the CPU polishes ray-list answers on the true rays (SampleBasedCamera.polish_answers).
  * Target 1 = (e, z): e the eye vector of lighting (SBC V-C), from the vertex to its
  * first reflector point (exact for first-order reflections; for higher orders the first
  * point stands in for the last), and z again, for distance attenuation (SBC V-D). */
@@ -26,7 +28,7 @@ void main()
   bool valid = sbc_project(position, group, pixel, first_depth, ray_distance, leaf_kind);
   float z = clamp(ray_distance * inverse_diameter, 0.0, 1.0);
   float depth = (float(order - 1) + z) * order_range;
-  projected = valid ? vec4(pixel, depth, 1.0) : vec4(0.0);
+  projected = valid ? vec4(pixel, depth, float(leaf_kind)) : vec4(0.0);
   vec3 eye = view_ray_point(inverse_view_projection, view_size, pixel, first_depth) - position;
   projected_eye = valid ? vec4(eye, ray_distance) : vec4(0.0);
   int index = layer_offset + gl_VertexID;

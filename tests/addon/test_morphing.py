@@ -85,6 +85,30 @@ def test_cube_faces_cover_every_direction_with_overlap():
     assert inner.all()
 
 
+def test_faces_left_out_see_no_triangle_and_the_others_are_built(sphere):
+    """build_node builds the faces whose frustum meets the sphere around the mirror's box
+    centre through its farthest vertex; every other face (the box's circumsphere let some
+    through) traces an empty ray map."""
+    from curved_reflections.addon.raymap import trace_ray_map
+
+    settings = M.MorphSettings(grid=(3, 3, 2), margin=0.8, face_resolution=24)
+    reflector_set, grid, bounds = M.bake_reflector(sphere, settings)
+    lo, hi = bounds
+    reach = float(np.linalg.norm(hi - lo))
+    built, skipped = 0, 0
+    for eye in grid.node_positions():
+        node = M.build_node(reflector_set, eye, bounds, settings)
+        views = M.cube_face_views(eye, settings, near=reach * 1e-4, far=2.0 * reach + 1.0)
+        for view, face in zip(views, node.faces):
+            if face is None:
+                skipped += 1
+                assert trace_ray_map(reflector_set, view, bounds, settings.downsample).n_rays == 0
+            else:
+                built += 1
+                assert face.ray_map.n_rays > 0
+    assert built > 0 and skipped > 0
+
+
 def test_view_at_a_node_reproduces_that_nodes_projection(sphere):
     grid, _ = morphing_grid(sphere, blend="linear")
     node = next(n for n in range(grid.grid.n_nodes) if grid.node_status[n][0] == M.NODE_OK)

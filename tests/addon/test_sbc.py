@@ -209,7 +209,9 @@ def test_projection_on_threads_equals_projection_on_one(ellipsoid_case, monkeypa
     for result in (threaded, single):
         np.testing.assert_array_equal(result.valid, one.valid)
         np.testing.assert_array_equal(result.leaf_kind, one.leaf_kind)
-        np.testing.assert_array_equal(result.pixels, one.pixels)
+        # Answers polished on the true rays trace them in batches of another make-up:
+        # the BVH's float sums may differ in the last bits.
+        np.testing.assert_allclose(result.pixels, one.pixels, rtol=0, atol=1e-9)
 
 
 def _occluding_spheres():
@@ -370,3 +372,41 @@ def test_a_concave_mirror_has_fold_cells_and_stays_accurate():
     coarse = sbc.project(points)
     sbc.folds = folds
     assert projection.valid.sum() >= 0.95 * coarse.valid.sum()
+
+
+def test_staged_error_probes_build_the_same_trees_for_fewer_samples(ellipsoid_case, monkeypatch):
+    """BuildBSP's accuracy test measures strided probes of a level's rays first
+    (bsp._within_accuracy): the trees equal those of measuring every error sample of every
+    well-posed node, and fewer samples are measured."""
+    from curved_reflections.addon import bsp
+    from curved_reflections.addon.sbc import build_from_ray_map
+    from curved_reflections.addon.segments import segment_max
+
+    sbc = ellipsoid_case[0][0]
+    measured = {"rows": 0, "every": 0}
+    sample_within = bsp._sample_within
+
+    def counting(ray_map, model, params, member_ray, member_node, accuracy_px):
+        measured["rows"] += len(member_ray)
+        return sample_within(ray_map, model, params, member_ray, member_node, accuracy_px)
+
+    def every_sample(ray_map, model, params, member_ray, member_node, accuracy_px, candidates):
+        measured["every"] += int(candidates[member_node].sum())
+        owner, points = model.error_samples(ray_map, member_ray)
+        cells, inside = model.project(params, member_node[owner], points, ray_map)
+        error = np.linalg.norm(cells - ray_map.cell[member_ray[owner]], axis=1) * ray_map.downsample
+        error = np.where(inside & np.isfinite(error), error, np.inf)
+        return (segment_max(error, member_node[owner], len(candidates)) <= accuracy_px) & candidates
+
+    monkeypatch.setattr(bsp, "_sample_within", counting)
+    staged = build_from_ray_map(sbc.ray_map, accuracy_px=1.0)
+    monkeypatch.setattr(bsp, "_within_accuracy", every_sample)
+    reference = build_from_ray_map(sbc.ray_map, accuracy_px=1.0)
+    assert len(staged.trees) == len(reference.trees) >= 1
+    for a, b in zip(staged.trees, reference.trees):
+        for name in ("plane_normal", "plane_offset", "left", "right", "leaf", "leaf_kind", "leaf_row", "leaf_rays",
+                     "cell_start", "leaf_cones", "cone"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+        np.testing.assert_array_equal(a.cameras.tail, b.cameras.tail)
+    assert staged.stats["n_camera_leaves"] > 10
+    assert 0 < measured["rows"] < 0.7 * measured["every"]

@@ -6,21 +6,12 @@ process, as from the command line, so its Blender state stays out of this one. O
 shape of the output is checked: the figures themselves are what the full run reports.
 """
 
-import os
 import re
-import subprocess
-import sys
-from pathlib import Path
-
-SCRIPT = Path(__file__).resolve().parent / "bench_draw.py"
 
 
-def test_quick_benchmark_writes_the_table(tmp_path):
-    environment = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "blender_user"))
+def test_quick_benchmark_writes_the_table(run_quick, tmp_path):
     out = tmp_path / "draw.md"
-    run = subprocess.run([sys.executable, str(SCRIPT), "--quick", "--out", str(out)],
-                         capture_output=True, text=True, timeout=600, env=environment)
-    assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
+    run_quick("bench_draw.py", out, timeout=600)
 
     report = out.read_text()
     for heading in ("# Drawing cost: reflected pass against a plain draw", "## Where the reflected pass spends",

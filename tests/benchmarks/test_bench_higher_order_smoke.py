@@ -7,19 +7,10 @@ figures themselves are what the full run reports.
 """
 
 import json
-import os
-import subprocess
-import sys
-from pathlib import Path
-
-SCRIPT = Path(__file__).resolve().parent / "bench_higher_order.py"
 
 
-def test_quick_benchmark_writes_tables_and_raw_results(tmp_path):
-    environment = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "blender_user"))
-    run = subprocess.run([sys.executable, str(SCRIPT), "--quick", "--out", str(tmp_path / "out")],
-                         capture_output=True, text=True, timeout=900, env=environment)
-    assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
+def test_quick_benchmark_writes_tables_and_raw_results(run_quick, tmp_path):
+    run_quick("bench_higher_order.py", tmp_path / "out")
 
     results = json.loads((tmp_path / "out" / "higher_order.json").read_text())
     assert results["scene"]["exact_visible"] > 100

@@ -1,0 +1,112 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""First-order images polished on the true reflected rays of the reflector mesh.
+
+A sample-based camera answers from rays traced at ray-map resolution and interpolated in
+between (SBC paper, Popescu, Sacks, Mei 2006, sections III-IV). Where the reflected ray
+field is smooth the interpolation is within a fraction of a pixel; near a caustic, where
+neighbouring rays cross, the interpolated field passes through points that no true ray
+reaches there, and a ray-list leaf (IV-C) or a fold cell answers with an image pixels
+away from the true one, or with one that does not exist. Measured on the teapot demo
+(d = 2, accuracy 1 px): 95 % of the images more than 1 px off came from ray-list
+leaves, and they lay 2-25 px from true images.
+
+Such answers are polished as Roger and Holzschuch (2006, section 3.2) find reflections:
+by iterating on the true geometry. The answer's desired-view pixel q starts Gauss-Newton
+on the exact first-order reflection law: trace the view ray through q to the reflector
+(first hit x, interpolated normal n), reflect it (r), and drive the part of p - x
+perpendicular to r to zero; the 3x2 Jacobian comes from two more traced rays a quarter
+pixel away. An image is kept where the iteration converges to a ray that meets the
+group's reflector, reflects off its front and reaches p ahead of the mirror, within
+:data:`MAX_SHIFT_CELLS` ray-map cells of where it started; it then carries the exact
+first reflector point x and distance s. A point whose answer does not converge has no
+image in that group (as a point that no ray reaches has none).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .raytrace import ReflectorSet, reflect, reflection_valid
+from .view import View
+
+#: Gauss-Newton iterations at most (each traces three rays per unconverged image).
+ITERATIONS = 6
+#: Finite-difference step of the Jacobian, desired-view pixels.
+STEP_PX = 0.25
+#: A step shorter than this (pixels) ends an image's iteration: converged.
+CONVERGED_PX = 0.01
+#: A converged image's ray passes within this many pixels (at the point) of the point.
+RESIDUAL_PX = 0.05
+#: Longest step of one iteration (pixels): far from the root the linear model is poor.
+MAX_STEP_PX = 4.0
+#: A polished image may end at most this many ray-map cells from where it started.
+MAX_SHIFT_CELLS = 12.0
+
+
+def _true_residual(reflector_set: ReflectorSet, view: View, reflector: int, pixels, points):
+    """Per pixel: (P, 3) offset of the point from the true reflected ray (perpendicular
+    part), the first reflector point, the distance along the reflected ray, and whether
+    the ray is a valid first-order reflection off ``reflector`` reaching the point."""
+    origins, directions = view.pixel_rays(pixels)
+    hits = reflector_set.intersect(origins, directions)
+    normal = np.where(hits.hit[:, None], hits.normal, 0.0)
+    reflected = reflect(directions, normal)
+    offset = points - hits.position
+    distance = np.einsum("ij,ij->i", offset, reflected)
+    residual = offset - distance[:, None] * reflected
+    valid = (hits.hit & (hits.reflector == reflector)
+             & reflection_valid(directions, normal, np.where(hits.hit[:, None], hits.face_normal, 0.0))
+             & (distance > 0))
+    return np.nan_to_num(residual), hits.position, distance, valid
+
+
+def polish_on_true_rays(reflector_set: ReflectorSet, view: View, reflector: int, pixels: np.ndarray,
+                        points: np.ndarray, cell_px: float, spacing_px: np.ndarray | None = None):
+    """Polish first-order images of ``points`` in ``reflector`` starting at ``pixels``.
+
+    Returns (pixels (P, 2), first reflector points (P, 3), distances along the reflected
+    ray (P,), ok (P,)); rows not ok are left as given. ``cell_px`` is the ray map's cell
+    size in pixels (its down-sampling), the unit of :data:`MAX_SHIFT_CELLS`.
+    ``spacing_px`` (P,), where known, is how far apart (world units) the traced rays of
+    neighbouring pixels pass at the point: an answer whose true ray already passes
+    within :data:`RESIDUAL_PX` of such spacings is kept after one traced ray, with no
+    Jacobian (most answers, away from caustics).
+    """
+    pixels = np.asarray(pixels, dtype=np.float64)
+    points = np.asarray(points, dtype=np.float64)
+    n = len(pixels)
+    polished = pixels.copy()
+    f, position, distance, valid = _true_residual(reflector_set, view, reflector, pixels, points)
+    converged = np.zeros(n, dtype=bool)
+    if spacing_px is not None:
+        converged = valid & (np.linalg.norm(f, axis=1) < RESIDUAL_PX * np.asarray(spacing_px))
+    active = np.flatnonzero(~converged)
+    for _ in range(ITERATIONS):
+        if len(active) == 0:
+            break
+        q, p = polished[active], points[active]
+        f, _, _, reflects = _true_residual(reflector_set, view, reflector, q, p)
+        fu = _true_residual(reflector_set, view, reflector, q + (STEP_PX, 0.0), p)[0]
+        fv = _true_residual(reflector_set, view, reflector, q + (0.0, STEP_PX), p)[0]
+        ju, jv = (fu - f) / STEP_PX, (fv - f) / STEP_PX
+        # Normal equations of the 3x2 least-squares step.
+        a, b, c = np.einsum("ij,ij->i", ju, ju), np.einsum("ij,ij->i", ju, jv), np.einsum("ij,ij->i", jv, jv)
+        gu, gv = np.einsum("ij,ij->i", ju, f), np.einsum("ij,ij->i", jv, f)
+        det = a * c - b * b
+        usable = reflects & (np.abs(det) > 1e-300)
+        det = np.where(usable, det, 1.0)
+        step = np.stack([(c * gu - b * gv) / det, (a * gv - b * gu) / det], axis=1)
+        length = np.linalg.norm(step, axis=1)
+        step *= np.minimum(1.0, MAX_STEP_PX / np.maximum(length, 1e-300))[:, None]
+        polished[active] = q - np.where(usable[:, None], step, 0.0)
+        # Converged on a root, not on the closest approach of rays that miss the point.
+        done = usable & (length < CONVERGED_PX) & (np.linalg.norm(f, axis=1) < RESIDUAL_PX * np.sqrt(np.minimum(a, c)))
+        converged[active[done]] = True
+        active = active[usable & ~done]
+    moved = np.flatnonzero(np.any(polished != pixels, axis=1))
+    _, position[moved], distance[moved], valid[moved] = _true_residual(reflector_set, view, reflector,
+                                                                       polished[moved], points[moved])
+    inside = ((polished >= 0).all(axis=1) & (polished[:, 0] <= view.width) & (polished[:, 1] <= view.height))
+    near = np.linalg.norm(polished - pixels, axis=1) <= MAX_SHIFT_CELLS * cell_px
+    ok = converged & valid & inside & near
+    return np.where(ok[:, None], polished, pixels), position, distance, ok

@@ -1,0 +1,58 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Images polished on the true reflected rays (addon/true_rays.py).
+
+A mirror sphere and points around it: started a few pixels off, the polish lands on
+the exact solver's image (addon/exact.py) and gives its first reflector point and ray
+distance; a point no reflected ray reaches (inside the mirror) gets no image.
+"""
+
+import numpy as np
+
+from curved_reflections.addon import look_at_view
+from curved_reflections.addon.exact import solve_reflections
+from curved_reflections.addon.raytrace import ReflectorSet
+from curved_reflections.addon.sphere import icosphere
+from curved_reflections.addon.true_rays import polish_on_true_rays
+
+
+def _scene():
+    reflector_set = ReflectorSet([icosphere((0.0, 0.0, 0.0), 1.0, 5)])
+    view = look_at_view((0.5, -4.0, 1.2), (0.0, 0.0, 0.0), width=320, height=240)
+    rng = np.random.default_rng(5)
+    directions = rng.normal(size=(300, 3))
+    points = 1.6 * directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    exact = solve_reflections(reflector_set, view, points)
+    to_eye = view.eye - exact.position
+    facing = np.einsum("ij,ij->i", exact.normal, to_eye) / np.linalg.norm(to_eye, axis=1)
+    # Away from the grazing rim, where a pixel's step moves the reflected ray by the most
+    # and a start 3 px off may miss the sphere.
+    return reflector_set, view, points, exact.select(exact.seen_by_eye & exact.in_view & (facing > 0.3))
+
+
+def test_polish_from_pixels_away_lands_on_the_exact_image():
+    reflector_set, view, points, exact = _scene()
+    assert len(exact.point) > 50
+    start = exact.pixel + np.random.default_rng(6).uniform(-3.0, 3.0, exact.pixel.shape)
+    pixels, positions, distances, ok = polish_on_true_rays(reflector_set, view, 0, start, points[exact.point], 2.0)
+    assert ok.all()
+    error = np.linalg.norm(pixels[ok] - exact.pixel[ok], axis=1)
+    assert error.max() < 0.01, error.max()
+    # The first reflector point and the distance are those of the exact reflection path.
+    assert np.abs(positions[ok] - exact.position[ok]).max() < 1e-3
+    np.testing.assert_allclose(distances[ok], np.linalg.norm(points[exact.point[ok]] - exact.position[ok], axis=1),
+                               rtol=1e-3)
+
+
+def test_answers_already_on_the_true_ray_take_one_traced_ray():
+    reflector_set, view, points, exact = _scene()
+    spacing = np.full(len(exact.point), 1e-2)  # world units between neighbouring pixels' rays
+    pixels, _, _, ok = polish_on_true_rays(reflector_set, view, 0, exact.pixel, points[exact.point], 2.0, spacing)
+    assert ok.all()
+    np.testing.assert_array_equal(pixels, exact.pixel)  # kept as given: within RESIDUAL_PX already
+
+
+def test_a_point_no_reflected_ray_reaches_has_no_image():
+    reflector_set, view, _, exact = _scene()
+    inside = np.zeros((len(exact.point), 3))  # the sphere's centre: behind every mirror point
+    _, _, _, ok = polish_on_true_rays(reflector_set, view, 0, exact.pixel, inside, 2.0)
+    assert not ok.any()
