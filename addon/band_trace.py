@@ -191,3 +191,32 @@ def band_pixels(labels: np.ndarray, drawn: np.ndarray, radius: int, edges_of_dra
         near_edge |= boundary
     rows, columns = np.nonzero((ids > 0) & ~drawn & near_edge)
     return np.stack([columns, rows], axis=1)
+
+
+def unreliable_cells(ray_map, trees, mixed=None, folds=None) -> np.ndarray:
+    """(rows, columns) bool: ray-map cells (by their lower-left corner ray) where the
+    sample-based camera itself knows its projection is unreliable: cells of ray-list
+    leaves (no plane split the rays, SBC section IV-C), fold cells (the rays cross: a
+    caustic, ``sbc.FoldCells``) and mixed cells (an occluder's silhouette crosses the
+    cell, ``sbc.MixedCells``). Reflections there may be missing although the mirror
+    shows an object (thin, strongly curved parts: a teapot's spout)."""
+    out = np.zeros((ray_map.rows, ray_map.columns), dtype=bool)
+    for tree in trees:
+        if tree.cells is not None and len(tree.cells.lo):
+            corner = np.rint(tree.cells.lo).astype(np.int64)
+            out[corner[:, 1], corner[:, 0]] = True
+    for cells in list(mixed or []) + list(folds or []):
+        if cells is not None:
+            out |= cells.index >= 0
+    return out
+
+
+def cell_pixels_mask(cells: np.ndarray, downsample: int, width: int, height: int) -> np.ndarray:
+    """(H, W) bool: pixels whose centre lies in a marked ray-map cell square (the four
+    rays around the centre, lower-left corner marked), as :func:`history_boundary` reads them."""
+    rows, columns = cells.shape
+
+    def lower(n_pixels, n_cells):
+        return np.clip(np.floor((np.arange(n_pixels) + 0.5) / downsample - 0.5).astype(np.int64), 0, n_cells - 1)
+
+    return cells[np.ix_(lower(height, rows), lower(width, columns))]

@@ -934,13 +934,16 @@ class ReflectionRenderer:
             self._batches["screen"].draw(shader)
 
     def trace_band(self, view, targets: FrameTargets, max_order: int, world_color, radius: int,
-                   edges_of_drawn: bool = False, ray_map=None) -> int:
+                   edges_of_drawn: bool = False, ray_map=None, camera=None) -> int:
         """Trace the reflector pixels along each footprint's edge that got no reflection
         (:mod:`.band_trace`): reads the pre-pass ids and the reflection coverage back,
         traces those pixels on the CPU and uploads their colours for the composite. With
         the camera's ``ray_map``, also those between ray-map cells of different histories
         (:func:`band_trace.history_boundary`: the edge of a second-order reflection inside
-        a footprint). Returns how many pixels were traced."""
+        a footprint). With the ``camera`` itself, also the pixels without a drawn
+        reflection in cells where its projection is unreliable
+        (:func:`band_trace.unreliable_cells`: ray-list leaves, fold and mixed cells).
+        Returns how many pixels were traced."""
         import gpu
 
         if self._tracer is None:
@@ -949,6 +952,12 @@ class ReflectionRenderer:
         drawn = _read_texture(targets.reflection_colors, targets.width, targets.height)[..., 3] > 0.5
         boundary = None if ray_map is None else band_trace.history_boundary(
             ray_map, targets.width, targets.height, max_order)
+        if camera is not None:
+            # Cells where the camera knows it may not project (ray lists, folds, mixed).
+            unreliable = band_trace.cell_pixels_mask(
+                band_trace.unreliable_cells(camera.ray_map, camera.trees, camera.mixed, camera.folds),
+                camera.ray_map.downsample, targets.width, targets.height)
+            boundary = unreliable if boundary is None else boundary | unreliable
         pixels = band_trace.band_pixels(labels, drawn, radius, edges_of_drawn, boundary)
         traced = np.zeros((targets.height, targets.width, 4), np.float32)
         if len(pixels):
@@ -964,11 +973,9 @@ class ReflectionRenderer:
         """(first, count) runs of vertices to project in ``sheet``: all of them without
         culling, else the chunks meeting the sheet's k-DOP, neighbouring chunks merged."""
         n = len(self.geometry.vertices)
-        if kdops is None:
+        if kdops is None or kdops[0][sheet] is None:  # no culling, or a sheet without bounds (SheetSources)
             return [(0, n)]
         lo, hi = self._chunk_boxes
-        if kdops is None or kdops[0][sheet] is None:
-            return [(0, n)]
         kdop, cone = kdops[0][sheet], None if kdops[1] is None else kdops[1][sheet]
         meeting = sheet_bounds.chunks_meeting(lo, hi, kdop)
         if cone is not None:
@@ -1322,7 +1329,7 @@ class ReflectionRenderer:
         if trace and textures.groups:
             max_order = max(len(h) for h in textures.groups)
             traced = self.trace_band(view, targets, max_order, world_color, downsample, trace_edges,
-                                     getattr(sbc_or_textures, "ray_map", None))
+                                     getattr(sbc_or_textures, "ray_map", None), camera)
             fill_radius = 0
         elif fill_radius is None:
             fill_radius = downsample

@@ -383,3 +383,31 @@ def test_per_sheet_culling_leaves_the_image_identical(gpu_ready):
     np.testing.assert_array_equal(images[0], images[1])
     assert projected[1] == len(sbc.groups) * len(renderer.geometry.vertices)
     assert projected[0] < projected[1]
+
+
+def test_unreliable_cells_mark_ray_list_fold_and_mixed_cells_and_their_pixels():
+    """A pixel without a drawn reflection inside a ray-list, fold or mixed cell is traced
+    (band_trace.unreliable_cells); one in a camera-leaf cell far from any edge is not."""
+    from types import SimpleNamespace
+
+    ray_map = SimpleNamespace(rows=6, columns=6, downsample=2)
+    tree = SimpleNamespace(cells=SimpleNamespace(lo=np.array([[1.0, 1.0]])))
+    no_cells = SimpleNamespace(cells=None)
+    fold_index = np.full((6, 6), -1)
+    fold_index[3, 4] = 0
+    mixed_index = np.full((6, 6), -1)
+    mixed_index[4, 2] = 0
+    cells = band_trace.unreliable_cells(ray_map, [tree, no_cells], [SimpleNamespace(index=mixed_index)],
+                                        [SimpleNamespace(index=fold_index)])
+    assert cells.sum() == 3 and cells[1, 1] and cells[3, 4] and cells[4, 2]
+    pixels = band_trace.cell_pixels_mask(cells, 2, 12, 12)
+    # Cell (1, 1) is the square between ray centres 3 and 5 px: pixels 3 and 4 on each axis.
+    np.testing.assert_array_equal(np.argwhere(pixels[:6, :6]), [[3, 3], [3, 4], [4, 3], [4, 4]])
+    labels = np.zeros((12, 12))
+    labels[1:11, 1:11] = 1.0
+    drawn = np.zeros((12, 12), bool)
+    drawn[2:10, 2:10] = True
+    drawn[3, 3] = drawn[6, 6] = False  # a hole in the ray-list cell, one in a camera-leaf cell
+    traced = {tuple(p) for p in band_trace.band_pixels(labels, drawn, radius=0, boundary=pixels).tolist()}
+    assert (3, 3) in traced and (6, 6) not in traced
+    assert all(pixels[y, x] for x, y in traced)  # only pixels of unreliable cells (radius 0)
