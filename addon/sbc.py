@@ -167,25 +167,41 @@ class SampleBasedCamera:
         # project in parallel on threads; each part writes its own rows of the result.
         workers = min(PROJECT_THREADS, os.cpu_count() or 1, max(1, len(finite) // THREAD_MIN_POINTS))
         parts = np.array_split(finite, max(1, -(-len(finite) // PROJECT_BLOCK)))
-        polish = bool(polish) and self.true_rays is not None
+        # Risky answers to polish, collected over every block and polished together at the
+        # end: a traced batch costs about as much for a few rays as for thousands.
+        pending = [] if (polish and self.true_rays is not None) else None
         if workers == 1:
             for part in parts:
-                self._project_points(points, part, result, polish)
+                self._project_points(points, part, result, pending)
         else:
             with ThreadPoolExecutor(workers) as pool:
-                list(pool.map(lambda part: self._project_points(points, part, result, polish), parts))
+                list(pool.map(lambda part: self._project_points(points, part, result, pending), parts))
+        if pending:
+            self._polish_pending(pending, points, result)
         return result
 
-    def _project_points(self, points, index, result: Projection, polish: bool):
+    def _polish_pending(self, pending: list, points, result: Projection) -> None:
+        """Polish the risky answers of every group (``_polish``) and write them into ``result``."""
+        for g in sorted({entry[0] for entry in pending}):
+            target, pixels, reflector_points, s, kind, cells, spacing = (
+                np.concatenate(column) for column in zip(*(entry[1:] for entry in pending if entry[0] == g)))
+            keep = self._polish(g, pixels, reflector_points, s, points[target], kind, cells, spacing)
+            result.reflector_points[g, target] = np.where(keep[:, None], reflector_points, np.nan)
+            result.pixels[g, target] = np.where(keep[:, None], pixels, np.nan)
+            result.ray_distance[g, target] = np.where(keep, s, np.nan)
+            result.valid[g, target] = keep
+            result.leaf_kind[g, target] = np.where(keep, kind, 0)
+
+    def _project_points(self, points, index, result: Projection, pending: list | None):
         points = points[index]
         for g, (tree, grid) in enumerate(zip(self.trees, self.grids)):
             # Only points in the sheet's bounding cone descend its tree (bsp.ray_cones).
             chosen = (np.arange(len(points)) if self.cones is None
                       else np.flatnonzero(in_cones(np.broadcast_to(self.cones[g], (len(points), CONE_SIZE)), points)))
             if len(chosen):
-                self._project_group(g, tree, grid, points[chosen], index[chosen], result, polish)
+                self._project_group(g, tree, grid, points[chosen], index[chosen], result, pending)
 
-    def _project_group(self, g, tree: BSPTree, grid, points, point_index, result: Projection, polish: bool):
+    def _project_group(self, g, tree: BSPTree, grid, points, point_index, result: Projection, pending):
         leaf = tree.leaf[descend_tree(tree, points)]
         if tree.leaf_cones is not None:
             # Points outside their leaf's bounding cone cannot project there (bsp.ray_cones).
@@ -214,10 +230,11 @@ class SampleBasedCamera:
         origins, directions = self.ray_map.view.pixel_rays(pixels)
         target, kind = target[hits], kind[hits]
         reflector_points = origins + first_depth[:, None] * directions
-        if polish:
-            keep = self._polish(g, pixels, reflector_points, s, points[hits], kind, cells[hits], spacing)
-            pixels, reflector_points, s, target, kind = (
-                pixels[keep], reflector_points[keep], s[keep], target[keep], kind[keep])
+        if pending is not None and len(self.histories[g]) == 1:
+            risky = np.flatnonzero((kind == RAY_LIST_LEAF) | _in_fold_cells(self.folds, g, cells[hits]))
+            if len(risky):
+                pending.append((g, target[risky], pixels[risky], reflector_points[risky], s[risky], kind[risky],
+                                cells[hits][risky], spacing[risky]))
         result.reflector_points[g, target] = reflector_points
         result.pixels[g, target] = pixels
         result.valid[g, target] = True

@@ -8,8 +8,10 @@ twin on the GPU (``gpu_shaders/projection.project_points``), measured in one run
 Per scene (bench_sbc's demo scenes and held-out reflectors, the same views and points),
 the camera is built at down-sampling 2 and accuracy 1 px, and ``--points`` points (the
 scene's points repeated, jittered: ``bench_sbc.throughput_points``) are projected in every
-reflection group, alternately by numpy (one thread, as the benchmark of the engine) and
-by the GPU (upload, one point draw per group, read-back), ``--repeats`` times each after
+reflection group, alternately by numpy (``project(points, polish=False)``: the
+interpolated answers, what the GLSL twin computes; polishing ray-list answers on the true
+rays, ``addon/true_rays.py``, runs on the CPU after either) and by the GPU (upload, one
+point draw per group, read-back), ``--repeats`` times each after
 one warm-up; rates are points per second of the medians, and the answers of the two are
 compared (share of (group, point) pairs on which they agree about being projected). The
 GPU on this project's machines is Mesa llvmpipe, i.e. the same CPU cores.
@@ -58,8 +60,8 @@ def measure(name: str, n_points: int, repeats: int) -> dict:
     sbc = build_sample_based_camera(reflectors, view, bounds, downsample=2, accuracy_px=1.0)
     textures = SBCTextures(sbc)
     project_points(textures, points[:1024])
-    sbc.project(points[:1024])
-    numpy_seconds, expected = _timed(lambda: sbc.project(points), repeats)
+    sbc.project(points[:1024], polish=False)
+    numpy_seconds, expected = _timed(lambda: sbc.project(points, polish=False), repeats)
     gpu_seconds, found = _timed(lambda: project_points(textures, points), repeats)
     return {"scene": name, "groups": len(sbc.groups), "points": len(points),
             "numpy": len(points) / numpy_seconds, "gpu": len(points) / gpu_seconds,
