@@ -737,16 +737,20 @@ class ReflectionRenderer:
     (:meth:`projection`, cached until another camera's textures are drawn) and
     :meth:`draw` or :meth:`render` draws any view with it. ``cull``: project in each
     sheet only the vertex chunks that meet the sheet's k-DOP (:mod:`..addon.sheet_bounds`;
-    needs the camera itself, not only its textures).
+    needs the camera itself, not only its textures). ``polish``: the GPU's ray-list and
+    fold-cell answers are polished on the true rays on the CPU (needs the camera too;
+    exact, but the numpy BVH makes it seconds per camera: the live viewport turns it off).
     """
 
     def __init__(self, reflectors, meshes, reflector_colors=None, reflectivity=None,
                  edge_fraction: float | None = subdivision.EDGE_FRACTION, *, fresnel_f0=None,
-                 attenuation_distance=None, mixed_subdivisions: int = MIXED_SUBDIVISIONS, cull: bool = True):
+                 attenuation_distance=None, mixed_subdivisions: int = MIXED_SUBDIVISIONS, cull: bool = True,
+                 polish: bool = True):
         self.geometry = prepare_geometry(reflectors, meshes, reflector_colors, reflectivity, edge_fraction,
                                          fresnel_f0, attenuation_distance)
         self.mixed_subdivisions = int(mixed_subdivisions)
         self.cull = bool(cull)
+        self.polish = bool(polish)
         self.stats = dict(self.geometry.stats)
         #: Names this renderer's vertices for sources that keep work for them (MorphSource).
         self.vertices_token = object()
@@ -1109,7 +1113,7 @@ class ReflectionRenderer:
             if batch is None:
                 batch = _points_batch(np.asarray(positions, np.float32))
             points, eyes = self._project_pass(source, batch, draws, n_texels, setup)
-            if getattr(camera, "true_rays", None) is not None:
+            if self.polish and getattr(camera, "true_rays", None) is not None:
                 _polish_readback(camera, positions, draws, points, eyes, setup)
             return points, eyes
         return source.project(self, positions, batch, draws, n_texels, setup, static)

@@ -155,7 +155,9 @@ def _capture(state: LiveScene, scene, depsgraph, reflectors: bool) -> None:
     lo, hi = scene_bounds(captured.reflectors, captured.meshes)
     # A new renderer has no projection: the next draw projects with the view's camera
     # once (SBC V-A), and later draws reuse it until a camera lands or the meshes change.
-    state.renderer = ReflectionRenderer(captured.reflectors, captured.meshes,
+    # Interpolated answers only: polishing them on the true rays (the headless render
+    # does) costs seconds per camera with the numpy BVH, on the main thread.
+    state.renderer = ReflectionRenderer(captured.reflectors, captured.meshes, polish=False,
                                         **reflector_properties(captured.reflectors, scene))
     state.captured = captured
     state.world = world_color(scene)

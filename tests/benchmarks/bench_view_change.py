@@ -79,7 +79,7 @@ def measure(width: int, height: int, steps: int, jumps: int) -> dict:
     bounds = scene_bounds(captured.reflectors, captured.meshes, BOUNDS_MARGIN * float(np.linalg.norm(hi - lo)))
     settings = scene.curved_reflections
     colors, reflectivity = reflector_appearance(captured.reflectors, scene)
-    renderer = ReflectionRenderer(captured.reflectors, captured.meshes, colors, reflectivity)
+    renderer = ReflectionRenderer(captured.reflectors, captured.meshes, colors, reflectivity, polish=False)  # as live
 
     local = morphing.reflector_in_frame(mirror, morphing.rigid_frame(matrix))
     grid = morphing.grid_on_demand(local, morphing.MorphSettings())
