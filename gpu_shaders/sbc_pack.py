@@ -35,7 +35,9 @@ Textures (names as the GLSL samplers, ``sbc_`` + name):
     14: (cell-centre tail xyz, 0), relative to the origin (bilinear cells only)
     15: (cell-centre unit direction xyz, 0) (bilinear cells only)
 ``scalars`` 1 float per entry, 4 per texel: each group's ray-list CSR offsets
-            ``cell_start``, its ray grid (rows x columns, row-major, ray index or -1),
+            ``cell_start``; once per reflection history (its sheets share the block,
+            at the header's grid offset): its ray grid (rows x columns, row-major, ray
+            index or -1),
             right after it its mixed-cell grid (same layout: the scalar index of the
             cell's sub-ray heads, or -1 where the cell is not mixed; addon.sbc.MixedCells),
             its fold-cell grid (same layout: the patch index of the fold cell's first
@@ -163,6 +165,10 @@ def pack_sample_based_camera(sbc) -> PackedSBC:
     fold_base = cell_base + sum(0 if t.cells is None else len(t.cells.lo) for t in sbc.trees)
     folds = getattr(sbc, "folds", None)
     fold_offsets = {}  # patch index of each distinct FoldCells' first sub-cell (shared by sheets)
+    # Scalar offset of each history's block (its grid, mixed-cell grid and fold-cell grid,
+    # then its mixed cells' heads): the sheets of a history share them, so a view's scalars
+    # grow with its histories, not its sheets (each grid is a whole ray map).
+    blocks = {}
     n_fold_patches = 0
     n_scalars = n_cells = 0
     n_nodes = n_leaves = n_camera_rows = 0
@@ -170,7 +176,7 @@ def pack_sample_based_camera(sbc) -> PackedSBC:
         n_raylists = len(tree.cell_start) - 1
         header = np.zeros((GROUP_TEXELS, 4))
         header[0] = (n_nodes, n_leaves, n_camera_rows, cell_base + n_cells)
-        header[1] = (n_scalars, n_scalars + n_raylists + 1, tree.depth, n_raylists)
+        header[1] = (n_scalars, -1, tree.depth, n_raylists)  # the block offset is set below
         header[2] = (ray_map.columns, ray_map.rows, ray_map.downsample, len(sbc.trees))
         groups.append(header)
 
@@ -191,8 +197,16 @@ def pack_sample_based_camera(sbc) -> PackedSBC:
             cell_patches.append(_pack_patches(tree.cells, bilinear=True))
             n_cells += len(tree.cells.lo)
         scalars.append(_exact("cell_start", tree.cell_start))
+        n_scalars += n_raylists + 1
+        history = tuple(sbc.histories[g])
+        if history in blocks:
+            header[1, 1] = blocks[history]
+            n_nodes += len(tree.leaf)
+            n_leaves += len(tree.leaf_kind)
+            continue
+        blocks[history] = header[1, 1] = n_scalars
         scalars.append(_exact("grid", grid.reshape(-1)))
-        n_scalars += n_raylists + 1 + grid.size
+        n_scalars += grid.size
         mixed = None if getattr(sbc, "mixed", None) is None else sbc.mixed[g]
         heads_start = n_scalars + 2 * grid.size  # after the mixed-cell and fold-cell grids
         mixed_grid = np.full(grid.size, -1, dtype=np.int64)
@@ -273,7 +287,7 @@ def unpack_sample_based_camera(packed: PackedSBC) -> tuple[list, dict]:
         leaf = packed.leaves[leaf_start:leaf_stop].astype(np.float64)
         kind = leaf[:, 0].astype(np.int8)
         row = leaf[:, 1].astype(np.int64)
-        offsets = packed.scalars[scalar_start:grid_start].astype(np.int64)
+        offsets = packed.scalars[scalar_start:scalar_start + n_raylists + 1].astype(np.int64)
         n_cameras = int(row[kind == CAMERA_LEAF].max() + 1) if np.any(kind == CAMERA_LEAF) else 0
         n_cells = int(offsets[-1])
         patches = packed.patches.reshape(-1, PATCH_TEXELS, 4)

@@ -142,7 +142,7 @@ def measure(kind: str, width: int, height: int, target_vertices: int, repeats: i
     sbc = build_sample_based_camera(captured.reflectors, view, bounds, max_order=settings.max_order,
                                     downsample=settings.downsample, accuracy_px=settings.accuracy_px)
     colors, reflectivity = reflector_appearance(captured.reflectors, scene)
-    renderer = ReflectionRenderer(captured.reflectors, meshes, colors, reflectivity)
+    renderer = ReflectionRenderer(captured.reflectors, meshes, colors, reflectivity, polish=False)  # as the viewport
     textures = SBCTextures(sbc)
     no_sheet = SBCTextures(build_sample_based_camera(
         captured.reflectors, _looking_away(view), bounds, downsample=settings.downsample))
