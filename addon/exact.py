@@ -104,7 +104,7 @@ def _solve_chunk(reflector_set, view, points, offset) -> dict:
     barycentric = np.stack([1 - u - v, u, v], axis=1)
     position, normal = reflector_set.surface(triangle, barycentric)
     normal *= orientation[inside][:, None]
-    keep = _first_of_duplicates(point, reflector_set.owner[triangle], position, reflector_set.scale)
+    keep = first_of_duplicates((point, reflector_set.owner[triangle]), (position,), reflector_set.scale)
     return {"point": point[keep] + offset, "triangle": triangle[keep], "barycentric": barycentric[keep],
             "position": position[keep], "normal": normal[keep]}
 
@@ -260,15 +260,28 @@ def _backtrack(residual, active, start, step, size, halvings: int = BACKTRACK_HA
     return np.clip(start - scale[:, None] * step, -2.0, 3.0)
 
 
-def _first_of_duplicates(point, reflector, position, scale) -> np.ndarray:
-    """Mask keeping one of the solutions that several triangles share along an edge."""
-    if len(point) == 0:
+def first_of_duplicates(keys: tuple, positions: tuple, scale: float) -> np.ndarray:
+    """Mask keeping one of the solutions that several triangles share along an edge.
+
+    Solutions are duplicates when every integer array of ``keys`` (the point, the
+    reflector or reflectors of the path) is equal and every (S, 3) array of
+    ``positions`` (the reflection points) agrees to 1e-7 * ``scale``. Sorted by the
+    keys, then by the first position's x, duplicates are adjacent unless another
+    solution's first position falls between, which only happens at 1e-7 * scale.
+    """
+    n = len(keys[0])
+    if n == 0:
         return np.zeros(0, dtype=bool)
-    order = np.lexsort((position[:, 0], reflector, point))
-    p, r, x = point[order], reflector[order], position[order]
-    same = (p[1:] == p[:-1]) & (r[1:] == r[:-1]) & (lengths(x[1:] - x[:-1]) < 1e-7 * scale)
+    order = np.lexsort((positions[0][:, 0],) + tuple(reversed(keys)))
+    same = np.ones(n - 1, dtype=bool)
+    for key in keys:
+        k = key[order]
+        same &= k[1:] == k[:-1]
+    for position in positions:
+        x = position[order]
+        same &= lengths(x[1:] - x[:-1]) < 1e-7 * scale
     keep_sorted = np.concatenate([[True], ~same])
-    keep = np.zeros(len(point), dtype=bool)
+    keep = np.zeros(n, dtype=bool)
     keep[order[keep_sorted]] = True
     return keep
 

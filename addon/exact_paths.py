@@ -45,8 +45,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .bvh import descend
-from .exact import (CONE_SLACK, INSIDE_TOLERANCE, _first_hit_of_view_ray, _foot, half_vector_may_meet_cone,
-                    turn_toward)
+from .exact import (CONE_SLACK, INSIDE_TOLERANCE, _first_hit_of_view_ray, _foot, first_of_duplicates,
+                    half_vector_may_meet_cone, turn_toward)
 from .raytrace import ReflectorSet, reflect
 from .vectors import dot, lengths, normalized
 from .view import View
@@ -289,8 +289,8 @@ def _solve_chunk(reflector_set, view, spheres, first_leg, sources, points, offse
     point, t1, t2, uv, orientation = point[inside], t1[inside], t2[inside], uv[inside], orientation[inside]
     x1 = _positions(reflector_set, t1, uv[:, :2])
     x2 = _positions(reflector_set, t2, uv[:, 2:])
-    keep = _first_of_duplicates(point, reflector_set.owner[t1], reflector_set.owner[t2], x1, x2,
-                                reflector_set.scale)
+    keep = first_of_duplicates((point, reflector_set.owner[t1], reflector_set.owner[t2]), (x1, x2),
+                               reflector_set.scale)
     return {"point": point[keep] + offset, "t1": t1[keep], "t2": t2[keep], "uv": uv[keep],
             "orientation": orientation[keep]}
 
@@ -412,22 +412,6 @@ def _backtrack(rows, eye, start, step, size, halvings: int = BACKTRACK_HALVINGS)
         pending = pending[worse]
         scale[pending] *= 0.5
     return np.clip(start - scale[:, None] * step, -2.0, 3.0)
-
-
-def _first_of_duplicates(point, r1, r2, x1, x2, scale) -> np.ndarray:
-    """Keep one of the solutions that neighbouring triangle pairs share along edges."""
-    if len(point) == 0:
-        return np.zeros(0, dtype=bool)
-    order = np.lexsort((x1[:, 0], r2, r1, point))
-    p, a, b, y1, y2 = point[order], r1[order], r2[order], x1[order], x2[order]
-    # Sorted by x1's first coordinate within a (point, history): duplicates are adjacent
-    # unless another solution's x1 falls between, which only happens at 1e-7 * scale.
-    same = ((p[1:] == p[:-1]) & (a[1:] == a[:-1]) & (b[1:] == b[:-1])
-            & (lengths(y1[1:] - y1[:-1]) < 1e-7 * scale) & (lengths(y2[1:] - y2[:-1]) < 1e-7 * scale))
-    keep_sorted = np.concatenate([[True], ~same])
-    keep = np.zeros(len(point), dtype=bool)
-    keep[order[keep_sorted]] = True
-    return keep
 
 
 # --- visibility ------------------------------------------------------------------------------
