@@ -183,9 +183,9 @@ class SampleBasedCamera:
     def _polish_pending(self, pending: list, points, result: Projection) -> None:
         """Polish the risky answers of every group (``_polish``) and write them into ``result``."""
         for g in sorted({entry[0] for entry in pending}):
-            target, pixels, reflector_points, s, kind, cells, spacing = (
+            target, pixels, reflector_points, s, kind, spacing = (
                 np.concatenate(column) for column in zip(*(entry[1:] for entry in pending if entry[0] == g)))
-            keep = self._polish(g, pixels, reflector_points, s, points[target], kind, cells, spacing)
+            keep = self._polish(g, np.arange(len(target)), pixels, reflector_points, s, points[target], spacing)
             result.reflector_points[g, target] = np.where(keep[:, None], reflector_points, np.nan)
             result.pixels[g, target] = np.where(keep[:, None], pixels, np.nan)
             result.ray_distance[g, target] = np.where(keep, s, np.nan)
@@ -231,24 +231,27 @@ class SampleBasedCamera:
         target, kind = target[hits], kind[hits]
         reflector_points = origins + first_depth[:, None] * directions
         if pending is not None and len(self.histories[g]) == 1:
-            risky = np.flatnonzero((kind == RAY_LIST_LEAF) | _in_fold_cells(self.folds, g, cells[hits]))
+            risky = self._risky(g, kind, cells[hits])
             if len(risky):
                 pending.append((g, target[risky], pixels[risky], reflector_points[risky], s[risky], kind[risky],
-                                cells[hits][risky], spacing[risky]))
+                                spacing[risky]))
         result.reflector_points[g, target] = reflector_points
         result.pixels[g, target] = pixels
         result.valid[g, target] = True
         result.leaf_kind[g, target] = kind
         result.ray_distance[g, target] = s
 
-    def _polish(self, g, pixels, reflector_points, s, points, kind, cells, spacing) -> np.ndarray:
-        """Polish group ``g``'s risky answers in place (first order: those of ray-list leaves
-        and fold cells) on the true reflected rays (true_rays.py); returns which answers
-        stand. ``spacing``: the ray spacing at each point (world units per cell)."""
-        keep = np.ones(len(pixels), dtype=bool)
+    def _risky(self, g: int, kind: np.ndarray, cells: np.ndarray) -> np.ndarray:
+        """Indices of group ``g``'s answers to polish: first order, from a ray-list leaf or in a fold cell."""
         if self.true_rays is None or len(self.histories[g]) != 1:
-            return keep
-        risky = np.flatnonzero((kind == RAY_LIST_LEAF) | _in_fold_cells(self.folds, g, cells))
+            return np.zeros(0, dtype=np.int64)
+        return np.flatnonzero((kind == RAY_LIST_LEAF) | _in_fold_cells(self.folds, g, cells))
+
+    def _polish(self, g, risky, pixels, reflector_points, s, points, spacing) -> np.ndarray:
+        """Polish group ``g``'s ``risky`` answers (``_risky``) in place on the true reflected
+        rays (true_rays.py); returns which answers stand. ``spacing``: the ray spacing at
+        each point (world units per cell)."""
+        keep = np.ones(len(pixels), dtype=bool)
         if len(risky):
             pixels[risky], reflector_points[risky], s[risky], ok = polish_on_true_rays(
                 self.true_rays, self.ray_map.view, self.histories[g][0], pixels[risky], points[risky],
@@ -272,7 +275,7 @@ class SampleBasedCamera:
         mixed = None if self.mixed is None else self.mixed[g]
         hits, _, _, confirmed = _check_on_rays(self.ray_map, self._ray_table, self.grids[g], cells, points, mixed)
         spacing[hits] = confirmed
-        ok = self._polish(g, pixels, reflector_points, s, points, kind, cells, spacing)
+        ok = self._polish(g, self._risky(g, kind, cells), pixels, reflector_points, s, points, spacing)
         return pixels, reflector_points, s, ok
 
     @functools.cached_property

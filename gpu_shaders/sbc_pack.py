@@ -190,6 +190,8 @@ def pack_sample_based_camera(sbc) -> PackedSBC:
         leaf = np.zeros((len(tree.leaf_kind), 4))
         leaf[:, 0], leaf[:, 1], leaf[:, 2] = tree.leaf_kind, tree.leaf_row, tree.leaf_rays
         leaves.append(leaf)
+        n_nodes += len(tree.leaf)
+        n_leaves += len(tree.leaf_kind)
         if tree.cameras is not None:
             camera_patches.append(_pack_patches(tree.cameras, bilinear=False))
             n_camera_rows += len(tree.cameras.lo)
@@ -201,8 +203,6 @@ def pack_sample_based_camera(sbc) -> PackedSBC:
         history = tuple(sbc.histories[g])
         if history in blocks:
             header[1, 1] = blocks[history]
-            n_nodes += len(tree.leaf)
-            n_leaves += len(tree.leaf_kind)
             continue
         blocks[history] = header[1, 1] = n_scalars
         scalars.append(_exact("grid", grid.reshape(-1)))
@@ -229,8 +229,6 @@ def pack_sample_based_camera(sbc) -> PackedSBC:
         scalars.append(_exact("fold grid", fold_grid).astype(np.float32))
         scalars.append(heads.astype(np.float32))
         n_scalars += 2 * grid.size + len(heads)
-        n_nodes += len(tree.leaf)
-        n_leaves += len(tree.leaf_kind)
 
     def stack(parts):
         return np.concatenate(parts).astype(np.float32) if parts else np.zeros((0, 4), np.float32)
