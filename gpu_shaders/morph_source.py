@@ -54,7 +54,6 @@ class MorphSource:
         self.groups = [(grid.reflector_index,) for grid, _ in self.grids for _ in range(self.max_images)]
         self.downsample = 1  # a vertex's image is blended on its own, not read from a ray map
         self.sheet_subdivisions = [MIXED_SUBDIVISIONS] * len(self.groups)
-        self.counts = {"projected": 0, "dropped_images": 0}
 
     def project(self, renderer, positions, batch, draws: list, n_texels: int, setup: dict, static: bool = False):
         """(n_texels, 4) (pixel, depth, valid) and (eye vector, reflected distance) per
@@ -69,10 +68,8 @@ class MorphSource:
             if key not in blended:
                 grid, matrix = self.grids[grid_index]
                 static_key = (renderer.vertices_token, key[1:]) if static else None
-                blended[key] = result = grid.project(positions[first:first + count], self.view, matrix,
-                                                     static_key=static_key)
-                self.counts["projected"] += int(count)
-                self.counts["dropped_images"] += int(result.valid[self.max_images:].sum())
+                blended[key] = grid.project(positions[first:first + count], self.view, matrix,
+                                            static_key=static_key)
             result = blended[key]
             if image >= len(result.groups):
                 continue
