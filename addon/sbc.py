@@ -140,6 +140,9 @@ class SampleBasedCamera:
     #: The reflectors, where first-order answers of ray-list leaves and fold cells are
     #: polished on the true reflected rays (true_rays.py); None: answers as interpolated.
     true_rays: ReflectorSet | None = None
+    #: (trees, 4) per tree, the ray-map cells its sheet owns, lo <= cell < hi as
+    #: (lo u, lo v, hi u, hi v) (``_build_sheets``); None: each tree owns every cell.
+    owned: np.ndarray | None = None
 
     @property
     def groups(self) -> list:
@@ -221,6 +224,12 @@ class SampleBasedCamera:
             cells[on_list], accepted[on_list] = _project_ray_lists(tree, row[on_list], points[on_list])
         if self.folds is not None and len(self.folds[g].valid):
             accepted = _refine_in_folds(self.folds[g], cells, accepted, points)
+        if self.owned is not None:
+            # Next to a seam both sheets' leaves reach half a cell over it: the answer counts
+            # in the sheet owning its cell only, so one image is not answered twice.
+            lo, hi = self.owned[g, :2], self.owned[g, 2:]
+            with np.errstate(invalid="ignore"):
+                accepted &= np.all((cells >= lo) & (cells < hi), axis=1)
 
         found = np.flatnonzero(accepted & np.isfinite(cells).all(axis=1))
         points, cells, kind, target = points[found], cells[found], kind[found], point_index[found]
@@ -470,8 +479,10 @@ def _norm(vectors: np.ndarray) -> np.ndarray:
     return np.sqrt(np.einsum("pd,pd->p", vectors, vectors))
 
 
-def _build_sheets(ray_map: RayMap, rays: np.ndarray, grid: np.ndarray, model, accuracy_px: float) -> list:
-    """Trees for one group's rays, split into sheets where the rays cross in space.
+def _build_sheets(ray_map: RayMap, rays: np.ndarray, grid: np.ndarray, model, accuracy_px: float,
+                  owned: np.ndarray) -> list:
+    """(tree, owned cells) for one group's rays, split into sheets where the rays
+    cross in space (or where a split fails on more than bsp.MAX_RAY_LIST_RAYS rays).
 
     Where rays of one history cross (a concave mirror's caustic, or two parts of a
     mirror reflecting the same region: the Chen-Arvo vase shows points twice), no
@@ -479,11 +490,13 @@ def _build_sheets(ray_map: RayMap, rays: np.ndarray, grid: np.ndarray, model, ac
     halved in ray-map space (at the median cell along the longer side, both halves
     keeping the seam's line of rays) and each half gets its own tree, its own *sheet*,
     recursively. A point may project in several sheets of one history: those are its
-    several images (or, right at a seam, one image twice).
+    several images. ``owned`` (lo u, lo v, hi u, hi v) are the cells the sheet answers
+    for: the halves split it at the seam, so that where both reach over the seam (their
+    leaves accept half a cell beyond their rays) one image is answered once.
     """
     try:
         return [(build_bsp(ray_map, rays, grid, model, accuracy_px,
-                           max_duplication=None if len(rays) <= MIN_SHEET_RAYS else MAX_DUPLICATION), rays)]
+                           max_duplication=None if len(rays) <= MIN_SHEET_RAYS else MAX_DUPLICATION), owned)]
     except RaysCrossError:
         cells = ray_map.cell[rays]
         axis = int(np.argmax(cells.max(axis=0) - cells.min(axis=0)))
@@ -492,32 +505,36 @@ def _build_sheets(ray_map: RayMap, rays: np.ndarray, grid: np.ndarray, model, ac
         # corner rays, two on each side) belong to the upper sheet: no line of holes.
         low, high = cells[:, axis] <= seam, cells[:, axis] >= seam
         if low.all() or high.all():
-            return [(build_bsp(ray_map, rays, grid, model, accuracy_px, max_duplication=None), rays)]
-        return (_build_sheets(ray_map, rays[low], grid, model, accuracy_px)
-                + _build_sheets(ray_map, rays[high], grid, model, accuracy_px))
+            return [(build_bsp(ray_map, rays, grid, model, accuracy_px, max_duplication=None), owned)]
+        owned_low, owned_high = owned.copy(), owned.copy()
+        owned_low[2 + axis] = owned_high[axis] = seam
+        return (_build_sheets(ray_map, rays[low], grid, model, accuracy_px, owned_low)
+                + _build_sheets(ray_map, rays[high], grid, model, accuracy_px, owned_high))
 
 
 def build_from_ray_map(ray_map: RayMap, accuracy_px: float = 1.0, leaf_model: str = "ray_patch") -> SampleBasedCamera:
-    """One BSP tree per reflection group of an existing ray map."""
+    """One BSP tree per reflection group of an existing ray map (or several, its sheets)."""
     if leaf_model not in LEAF_MODELS:
         raise ValueError(f"leaf_model must be one of {sorted(LEAF_MODELS)}, got {leaf_model!r}")
     if not accuracy_px > 0:
         raise ValueError(f"accuracy_px must be positive, got {accuracy_px}")
     start = time.perf_counter()
-    trees, grids, histories, cones = [], [], [], []
+    trees, grids, histories, cones, owned = [], [], [], [], []
+    whole = np.array([0.0, 0.0, ray_map.columns, ray_map.rows])
     for g, history in enumerate(ray_map.histories):
         grid = ray_map.group_grid(g)
         model, rays = LEAF_MODELS[leaf_model], np.flatnonzero(ray_map.group == g)
-        sheets = (_build_sheets(ray_map, rays, grid, model, accuracy_px) if model.splits_into_sheets
-                  else [(build_bsp(ray_map, rays, grid, model, accuracy_px, max_duplication=None), rays)])
-        for tree, sheet_rays in sheets:
+        sheets = (_build_sheets(ray_map, rays, grid, model, accuracy_px, whole) if model.splits_into_sheets
+                  else [(build_bsp(ray_map, rays, grid, model, accuracy_px, max_duplication=None), whole)])
+        for tree, cells in sheets:
             trees.append(tree)
             grids.append(grid)
             histories.append(history)
             cones.append(tree.cone)
+            owned.append(cells)
     seconds = time.perf_counter() - start
     sbc = SampleBasedCamera(ray_map, trees, grids, leaf_model, histories,
-                            cones=np.array(cones).reshape(-1, CONE_SIZE))
+                            cones=np.array(cones).reshape(-1, CONE_SIZE), owned=np.array(owned).reshape(-1, 4))
     sbc.stats = _stats(ray_map, trees, grids, seconds)
     return sbc
 

@@ -15,10 +15,11 @@ indices) are stored as floats, which is exact below 2^24; packing refuses larger
 
 Textures (names as the GLSL samplers, ``sbc_`` + name):
 
-``groups``  3 texels per reflection group (the group's offsets into the shared arrays)
+``groups``  4 texels per reflection group (the group's offsets into the shared arrays)
     0: (node offset, leaf offset, camera-patch offset, cell-patch offset)  [records]
     1: (cell-start offset, grid offset, tree depth, number of ray-list leaves) [scalars]
     2: (ray-map columns, rows, down-sampling factor, number of groups)
+    3: (lo u, lo v, hi u, hi v) the ray-map cells the sheet owns (``sbc.owned``)
 ``nodes``   2 texels per BSP node: (plane normal xyz, plane offset), (left, right, leaf, 0);
             children and leaf ids are local to the group's tree, -1 where none.
 ``leaves``  1 texel per leaf: (kind, row, rays in leaf, 0); row local to the group
@@ -72,7 +73,7 @@ from ..addon.sbc import FOLD_SAMPLES
 
 #: Texels per row of every packed texture; index i lives at (i % W, i // W).
 TEXTURE_WIDTH = 4096
-GROUP_TEXELS, NODE_TEXELS, LEAF_TEXELS, PATCH_TEXELS, RAY_TEXELS = 3, 2, 1, 16, 2
+GROUP_TEXELS, NODE_TEXELS, LEAF_TEXELS, PATCH_TEXELS, RAY_TEXELS = 4, 2, 1, 16, 2
 #: Floats hold integers exactly below this.
 EXACT_INTEGER_LIMIT = 1 << 24
 #: Largest texture height assumed available (OpenGL 4.5 guarantees at least 16384).
@@ -178,6 +179,7 @@ def pack_sample_based_camera(sbc) -> PackedSBC:
         header[0] = (n_nodes, n_leaves, n_camera_rows, cell_base + n_cells)
         header[1] = (n_scalars, -1, tree.depth, n_raylists)  # the block offset is set below
         header[2] = (ray_map.columns, ray_map.rows, ray_map.downsample, len(sbc.trees))
+        header[3] = (0, 0, ray_map.columns, ray_map.rows) if sbc.owned is None else sbc.owned[g]
         groups.append(header)
 
         node = np.zeros((len(tree.leaf), NODE_TEXELS, 4))
@@ -279,6 +281,7 @@ def unpack_sample_based_camera(packed: PackedSBC) -> tuple[list, dict]:
     for g in range(packed.n_groups):
         node_start, leaf_start, camera_start, cell_start = header[g, 0]
         scalar_start, grid_start, depth, n_raylists = header[g, 1]
+        owned = header[g, 3]
         node_stop = header[g + 1, 0, 0] if g + 1 < packed.n_groups else len(packed.nodes) // NODE_TEXELS
         leaf_stop = header[g + 1, 0, 1] if g + 1 < packed.n_groups else len(packed.leaves)
         node = packed.nodes.reshape(-1, NODE_TEXELS, 4)[node_start:node_stop].astype(np.float64)
@@ -303,7 +306,7 @@ def unpack_sample_based_camera(packed: PackedSBC) -> tuple[list, dict]:
             "cells": _unpack_patches(patches[cell_start:cell_start + n_cells].reshape(-1, 4)),
             "grid": grid.reshape(packed.rows, packed.columns),
             "mixed_grid": mixed_grid.reshape(packed.rows, packed.columns),
-            "fold_grid": fold_grid.reshape(packed.rows, packed.columns),
+            "fold_grid": fold_grid.reshape(packed.rows, packed.columns), "owned": owned,
         })
     return out, {"tail": rays[:, 0, :3], "head_distance": np.abs(rays[:, 0, 3]), "blocked": rays[:, 0, 3] > 0,
                  "direction": rays[:, 1, :3], "first_depth": rays[:, 1, 3]}

@@ -227,6 +227,7 @@ bool sbc_project(vec3 p, int group, out vec2 pixel, out float first_depth, out f
   vec4 h0 = SBC_FETCH(sbc_groups, group * SBC_GROUP_TEXELS);
   vec4 h1 = SBC_FETCH(sbc_groups, group * SBC_GROUP_TEXELS + 1);
   vec4 h2 = SBC_FETCH(sbc_groups, group * SBC_GROUP_TEXELS + 2);
+  vec4 owned = SBC_FETCH(sbc_groups, group * SBC_GROUP_TEXELS + 3);
   int node_offset = int(h0.x);
 
   /* 1. BSP descent (sbc.descend_tree): plane_normal . p >= plane_offset goes left. */
@@ -278,6 +279,11 @@ bool sbc_project(vec3 p, int group, out vec2 pixel, out float first_depth, out f
       }
       cell = sub_cell / float(SBC_FOLD_SAMPLES);
     }
+  }
+
+  /* Only the sheet owning the cell answers (sbc.SampleBasedCamera.owned). */
+  if (any(lessThan(cell, owned.xy)) || any(greaterThanEqual(cell, owned.zw))) {
+    return false;
   }
 
   /* 3. The four rays around the cell exist in the group (sbc._interpolate_rays). */

@@ -159,6 +159,7 @@ def test_packing_round_trip(case):
         for name in ("left", "right", "leaf", "leaf_kind", "leaf_row", "leaf_rays", "cell_start"):
             np.testing.assert_array_equal(unpacked[name], getattr(tree, name), err_msg=name)
         np.testing.assert_array_equal(unpacked["grid"], grid)
+        np.testing.assert_array_equal(unpacked["owned"], sbc.owned[g])
         np.testing.assert_array_equal(unpacked["mixed_grid"] >= 0, mixed.index >= 0)
         j, i = np.nonzero(mixed.index >= 0)
         samples = mixed.heads[0].size if len(mixed.heads) else 0
