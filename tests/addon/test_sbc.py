@@ -160,13 +160,20 @@ def test_bad_options_are_clear_errors():
         build_sample_based_camera([reflector], view, BOUNDS).project(np.zeros(3))
 
 
-def test_the_vase_gets_one_sheet_per_image_and_both_images_project():
+@pytest.fixture(scope="module")
+def vase_case():
+    """A concave mirror whose rays cross: the Chen-Arvo vase, several sheets.
+    Tests that change the camera restore it."""
     vase = shapes.vase(segments=64, rings=48)
     reflectors = [Reflector("Vase", vase.vertices, vase.triangles, vase.normals)]
     view = look_at_view([5.0, -2.0, 1.6], [0, 0, 1], width=320, height=240, fov_y_deg=35)
     bounds = (np.array([-3.0, -3.0, -0.5]), np.array([3.0, 3.0, 3.5]))
+    return vase, reflectors, view, bounds, build_sample_based_camera(reflectors, view, bounds, downsample=2)
+
+
+def test_the_vase_gets_one_sheet_per_image_and_both_images_project(vase_case):
+    _, reflectors, view, bounds, sbc = vase_case
     points = np.random.default_rng(4).uniform(bounds[0], bounds[1], (2500, 3))
-    sbc = build_sample_based_camera(reflectors, view, bounds, downsample=2)
     projection = sbc.project(points)
     exact = solve_reflections(ReflectorSet(reflectors), view, points)
     exact = exact.select(exact.visible)
@@ -284,15 +291,11 @@ def test_occlusion_in_mixed_cells_follows_the_true_in_between_rays():
     assert sub_cell > corner_heads + 0.1, (sub_cell, corner_heads)
 
 
-def test_sheets_own_disjoint_cells_so_a_seam_answers_each_image_once():
+def test_sheets_own_disjoint_cells_so_a_seam_answers_each_image_once(vase_case):
     """The sheets of a history tile the ray map (``SampleBasedCamera.owned``); without
     ownership, points next to a seam get the same image from both sheets."""
-    vase = shapes.vase(segments=64, rings=48)
-    reflectors = [Reflector("Vase", vase.vertices, vase.triangles, vase.normals)]
-    view = look_at_view([5.0, -2.0, 1.6], [0, 0, 1], width=320, height=240, fov_y_deg=35)
-    bounds = (np.array([-3.0, -3.0, -0.5]), np.array([3.0, 3.0, 3.5]))
+    _, _, _, bounds, sbc = vase_case
     points = np.random.default_rng(21).uniform(bounds[0], bounds[1], (4000, 3))
-    sbc = build_sample_based_camera(reflectors, view, bounds, downsample=2)
     m = sbc.ray_map
     assert sbc.owned.shape == (len(sbc.trees), 4) and len(sbc.trees) > 10
     cells = np.stack(np.meshgrid(np.arange(m.columns) + 0.5, np.arange(m.rows) + 0.5), axis=-1).reshape(-1, 2)
@@ -312,8 +315,11 @@ def test_sheets_own_disjoint_cells_so_a_seam_answers_each_image_once():
         return count
 
     owned = sbc.project(points)
-    sbc.owned = None
-    unowned = sbc.project(points)
+    boxes, sbc.owned = sbc.owned, None
+    try:
+        unowned = sbc.project(points)
+    finally:
+        sbc.owned = boxes
     # A few twins stay: right at a seam the two sheets' models may differ by a tenth of a
     # cell, one answering just below the seam and the other just above.
     assert twins(owned) <= 0.05 * twins(unowned) and twins(unowned) > 50
@@ -322,21 +328,17 @@ def test_sheets_own_disjoint_cells_so_a_seam_answers_each_image_once():
     np.testing.assert_array_equal(owned.pixels[owned.valid], unowned.pixels[owned.valid])
 
 
-def test_bounding_cones_skip_work_but_change_no_answer():
+def test_bounding_cones_skip_work_but_change_no_answer(vase_case):
     """Sheets and leaves skip points outside their rays' bounding cones (bsp.ray_cones): on
     a many-sheet vase most (point, sheet) pairs are skipped, and every answer, also for
     points outside the scene box, is the one projection without cones gives."""
     from curved_reflections.addon.bsp import in_cones
 
-    vase = shapes.vase(segments=64, rings=48)
-    reflectors = [Reflector("Vase", vase.vertices, vase.triangles, vase.normals)]
-    view = look_at_view([5.0, -2.0, 1.6], [0, 0, 1], width=320, height=240, fov_y_deg=35)
-    bounds = (np.array([-3.0, -3.0, -0.5]), np.array([3.0, 3.0, 3.5]))
+    vase, _, _, bounds, sbc = vase_case
     rng = np.random.default_rng(12)
     near = vase.vertices[rng.integers(0, len(vase.vertices), 3000)] + rng.normal(scale=0.3, size=(3000, 3))
     points = np.concatenate([rng.uniform(bounds[0], bounds[1], (3000, 3)), near,
                              rng.uniform(bounds[0] - 6.0, bounds[1] + 6.0, (1000, 3))])
-    sbc = build_sample_based_camera(reflectors, view, bounds, downsample=2)
     assert sbc.stats["n_sheets"] > 4
     culled = sbc.project(points)
     inside = np.array([in_cones(np.broadcast_to(cone, (len(points), cone.size)), points) for cone in sbc.cones])
