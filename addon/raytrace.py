@@ -16,6 +16,7 @@ the triangle; near silhouettes, interpolated normals can break either condition.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -129,6 +130,67 @@ class ReflectorSet:
             best_triangle[chunk][rays] = triangles
             best_uv[chunk][rays] = uv
         return self._hits(origins, directions, best_t, best_triangle, best_uv)
+
+    def intersect_near(self, origins, directions, near_triangles) -> RayHits:
+        """Hits of rays expected to land next to known triangles (``near_triangles`` (R,),
+        -1 where unknown): the nearest hit among each ray's triangle and those sharing a
+        vertex with it (``ring``); rays that hit none of them, or have no guess, get the
+        nearest hit over all triangles (``intersect``).
+
+        Not always the nearest hit: another part of the mesh, not in the ring, may lie in
+        front. For rays iterated in small steps over one surface (true_rays.py), whose
+        final answer is then checked with ``intersect``, it avoids a BVH descent per step.
+        """
+        origins = np.asarray(origins, dtype=np.float64)
+        directions = np.asarray(directions, dtype=np.float64)
+        near_triangles = np.asarray(near_triangles, dtype=np.int64)
+        start, ring = self.ring
+        guess = np.flatnonzero(near_triangles >= 0)
+        count = np.diff(start)[near_triangles[guess]]
+        rays = np.repeat(guess, count)
+        first = np.repeat(start[near_triangles[guess]] - np.cumsum(count) + count, count) + np.arange(count.sum())
+        triangles = ring[first]
+        t, u, v, _ = self.hit_triangles(origins[rays], directions[rays], triangles)
+        with np.errstate(invalid="ignore"):
+            keep = t > SELF_HIT_EPSILON * self.scale
+        rays, triangles, t, u, v = rays[keep], triangles[keep], t[keep], u[keep], v[keep]
+        order = np.lexsort((t, rays))
+        rays, triangles, t, u, v = rays[order], triangles[order], t[order], u[order], v[order]
+        nearest = np.ones(len(rays), dtype=bool)
+        nearest[1:] = rays[1:] != rays[:-1]
+        best_t = np.full(len(origins), np.inf)
+        best_triangle = np.full(len(origins), -1, dtype=np.int64)
+        best_uv = np.full((len(origins), 2), np.nan)
+        best_t[rays[nearest]] = t[nearest]
+        best_triangle[rays[nearest]] = triangles[nearest]
+        best_uv[rays[nearest]] = np.stack([u[nearest], v[nearest]], axis=1)
+        missed = np.flatnonzero(best_triangle < 0)
+        if len(missed):
+            hits = self.intersect(origins[missed], directions[missed])
+            best_t[missed] = hits.t
+            best_triangle[missed] = hits.triangle
+            best_uv[missed] = hits.barycentric[:, 1:]
+        return self._hits(origins, directions, best_t, best_triangle, best_uv)
+
+    @functools.cached_property
+    def ring(self) -> tuple[np.ndarray, np.ndarray]:
+        """CSR (start (T + 1,), triangles) of each triangle and those sharing a (welded)
+        vertex with it, itself included."""
+        n = len(self.triangles)
+        corner_vertex = self.welded_triangles.reshape(-1)
+        corner_triangle = np.repeat(np.arange(n), 3)
+        order = np.argsort(corner_vertex, kind="stable")
+        vertex, triangle = corner_vertex[order], corner_triangle[order]
+        bounds = np.flatnonzero(np.r_[True, vertex[1:] != vertex[:-1], True])
+        valence = np.diff(bounds)
+        # Every pair of triangles around one vertex: (a, b) for a, b in its fan.
+        fan = np.repeat(np.arange(len(valence)), valence * valence)
+        local = np.arange(len(fan)) - np.repeat(np.cumsum(valence * valence) - valence * valence, valence * valence)
+        a = triangle[bounds[fan] + local // valence[fan]]
+        b = triangle[bounds[fan] + local % valence[fan]]
+        pairs = np.unique(a * n + b)
+        a, b = pairs // n, pairs % n
+        return np.searchsorted(a, np.arange(n + 1)), b
 
     def occluded(self, origins, directions, distances, source_triangles=None) -> np.ndarray:
         """(R,) bool: a reflector lies on the segment of length ``distances`` along each ray."""

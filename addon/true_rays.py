@@ -20,6 +20,14 @@ group's reflector, reflects off its front and reaches p ahead of the mirror, wit
 :data:`MAX_SHIFT_CELLS` ray-map cells of where it started; it then carries the exact
 first reflector point x and distance s. A point whose answer does not converge has no
 image in that group (as a point that no ray reaches has none).
+
+Only the first and the last ray of an image are traced through the BVH; the iterations
+in between intersect the ring of triangles around the previous hit
+(``ReflectorSet.intersect_near``), since a step moves a few pixels at most. A final ray
+that then meets another part of the mirror first, or passes the point farther than
+the iteration's tolerance, has no image. On the ball (200,000 points, 1,549 polished)
+this cut polishing from 0.44 s to 0.11 s, the teapot's from 3.2 s to 1.0 s (20,000
+points), with the same images bar 20 of 26,400.
 """
 
 from __future__ import annotations
@@ -43,12 +51,15 @@ MAX_STEP_PX = 4.0
 MAX_SHIFT_CELLS = 12.0
 
 
-def _true_residual(reflector_set: ReflectorSet, view: View, reflector: int, pixels, points):
+def _true_residual(reflector_set: ReflectorSet, view: View, reflector: int, pixels, points, near=None):
     """Per pixel: (P, 3) offset of the point from the true reflected ray (perpendicular
-    part), the first reflector point, the distance along the reflected ray, and whether
-    the ray is a valid first-order reflection off ``reflector`` reaching the point."""
+    part), the first reflector point, the distance along the reflected ray, whether the
+    ray is a valid first-order reflection off ``reflector`` reaching the point, and the
+    triangle it hits. With ``near`` (P,) triangles, the view ray is intersected with
+    their rings only (``ReflectorSet.intersect_near``), else with the whole mesh."""
     origins, directions = view.pixel_rays(pixels)
-    hits = reflector_set.intersect(origins, directions)
+    hits = (reflector_set.intersect(origins, directions) if near is None
+            else reflector_set.intersect_near(origins, directions, near))
     normal = np.where(hits.hit[:, None], hits.normal, 0.0)
     reflected = reflect(directions, normal)
     offset = points - hits.position
@@ -57,7 +68,7 @@ def _true_residual(reflector_set: ReflectorSet, view: View, reflector: int, pixe
     valid = (hits.hit & (hits.reflector == reflector)
              & reflection_valid(directions, normal, np.where(hits.hit[:, None], hits.face_normal, 0.0))
              & (distance > 0))
-    return np.nan_to_num(residual), hits.position, distance, valid
+    return np.nan_to_num(residual), hits.position, distance, valid, hits.triangle
 
 
 def polish_on_true_rays(reflector_set: ReflectorSet, view: View, reflector: int, pixels: np.ndarray,
@@ -76,8 +87,9 @@ def polish_on_true_rays(reflector_set: ReflectorSet, view: View, reflector: int,
     points = np.asarray(points, dtype=np.float64)
     n = len(pixels)
     polished = pixels.copy()
-    f, position, distance, valid = _true_residual(reflector_set, view, reflector, pixels, points)
+    f, position, distance, valid, triangle = _true_residual(reflector_set, view, reflector, pixels, points)
     converged = np.zeros(n, dtype=bool)
+    tolerance = np.zeros(n)  # residual (world units) a converged image's ray must stay within
     if spacing_px is not None:
         converged = valid & (np.linalg.norm(f, axis=1) < RESIDUAL_PX * np.asarray(spacing_px))
     active = np.flatnonzero(~converged)
@@ -85,12 +97,15 @@ def polish_on_true_rays(reflector_set: ReflectorSet, view: View, reflector: int,
         if len(active) == 0:
             break
         q, p, m = polished[active], points[active], len(active)
-        # The pixel and its two finite-difference neighbours, traced in one batch (a BVH
-        # descent costs about as much for a few rays as for thousands).
-        f, _, _, reflects = _true_residual(reflector_set, view, reflector,
-                                           np.concatenate([q, q + (STEP_PX, 0.0), q + (0.0, STEP_PX)]),
-                                           np.concatenate([p, p, p]))
+        # The pixel and its two finite-difference neighbours, traced in one batch against
+        # the triangles around the pixel's last hit (steps are a few pixels at most); the
+        # final answer is traced against the whole mesh below.
+        near = np.tile(triangle[active], 3)
+        f, _, _, reflects, hit = _true_residual(reflector_set, view, reflector,
+                                                np.concatenate([q, q + (STEP_PX, 0.0), q + (0.0, STEP_PX)]),
+                                                np.concatenate([p, p, p]), near)
         f, fu, fv, reflects = f[:m], f[m:2 * m], f[2 * m:], reflects[:m]
+        triangle[active] = hit[:m]
         ju, jv = (fu - f) / STEP_PX, (fv - f) / STEP_PX
         # Normal equations of the 3x2 least-squares step.
         a, b, c = np.einsum("ij,ij->i", ju, ju), np.einsum("ij,ij->i", ju, jv), np.einsum("ij,ij->i", jv, jv)
@@ -103,12 +118,17 @@ def polish_on_true_rays(reflector_set: ReflectorSet, view: View, reflector: int,
         step *= np.minimum(1.0, MAX_STEP_PX / np.maximum(length, 1e-300))[:, None]
         polished[active] = q - np.where(usable[:, None], step, 0.0)
         # Converged on a root, not on the closest approach of rays that miss the point.
-        done = usable & (length < CONVERGED_PX) & (np.linalg.norm(f, axis=1) < RESIDUAL_PX * np.sqrt(np.minimum(a, c)))
+        limit = RESIDUAL_PX * np.sqrt(np.minimum(a, c))
+        done = usable & (length < CONVERGED_PX) & (np.linalg.norm(f, axis=1) < limit)
         converged[active[done]] = True
+        tolerance[active[done]] = limit[done]
         active = active[usable & ~done]
     moved = np.flatnonzero(np.any(polished != pixels, axis=1))
-    _, position[moved], distance[moved], valid[moved] = _true_residual(reflector_set, view, reflector,
-                                                                       polished[moved], points[moved])
+    f, position[moved], distance[moved], valid[moved], _ = _true_residual(reflector_set, view, reflector,
+                                                                          polished[moved], points[moved])
+    # Traced against the whole mesh, the final ray still reaches the point (no other part
+    # of the mirror in front of the rings the iteration saw).
+    valid[moved] &= np.linalg.norm(f, axis=1) < 2.0 * tolerance[moved]
     inside = ((polished >= 0).all(axis=1) & (polished[:, 0] <= view.width) & (polished[:, 1] <= view.height))
     near = np.linalg.norm(polished - pixels, axis=1) <= MAX_SHIFT_CELLS * cell_px
     ok = converged & valid & inside & near

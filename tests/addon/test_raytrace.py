@@ -55,6 +55,45 @@ def test_nearest_hit_over_several_reflectors_and_occlusion():
     assert reflectors.occluded(origins[:1], directions[:1], [2.0]).tolist() == [False]
 
 
+def test_rings_hold_a_triangle_and_every_triangle_sharing_a_vertex_with_it():
+    reflectors = _sphere_set(subdivisions=2)
+    start, ring = reflectors.ring
+    corners = reflectors.welded_triangles
+    for t in (0, 17, len(corners) - 1):
+        shares = np.flatnonzero(np.isin(corners, corners[t]).any(axis=1))
+        np.testing.assert_array_equal(ring[start[t]:start[t + 1]], shares)
+        assert t in shares and len(shares) in (12, 13)  # 13 around valence-6 corners, 12 next to a valence-5 one
+
+
+def test_rays_near_a_known_triangle_hit_as_the_bvh_finds_and_the_others_fall_back_to_it():
+    """``intersect_near`` gives the BVH's answer where the true hit lies in the guess's
+    ring, and falls back to the BVH without a guess or with one far away."""
+    reflectors = ReflectorSet([icosphere(CENTER, 1.0, 4), icosphere(CENTER + [0.0, -2.2, 0.0], 0.3, 3)])
+    view = look_at_view([4, -3, 2], CENTER, width=80, height=60, fov_y_deg=40)
+    origins, directions = view.pixel_rays(view.pixel_grid(1))
+    exact = reflectors.intersect(origins, directions)
+    assert exact.hit.sum() > 500 and (exact.reflector == 1).sum() > 20  # the small ball hides part of the big one
+    start, ring = reflectors.ring
+    rng = np.random.default_rng(3)
+    # A guess one ring away from the true triangle; no guess for a tenth of the rays.
+    guess = np.where(exact.hit, exact.triangle, -1)
+    neighbour = ring[start[np.maximum(guess, 0)] + rng.integers(0, 6, len(guess))]
+    guess = np.where((guess >= 0) & (rng.random(len(guess)) > 0.1), neighbour, -1)
+    near = reflectors.intersect_near(origins, directions, guess)
+    np.testing.assert_array_equal(near.triangle, exact.triangle)
+    np.testing.assert_allclose(near.position[exact.hit], exact.position[exact.hit], atol=1e-12)
+    np.testing.assert_allclose(near.normal[exact.hit], exact.normal[exact.hit], atol=1e-12)
+    # Guessing where the ray leaves the big ball finds that hit, behind the nearest one:
+    # the ring is all it sees (true_rays.py checks its final answer with ``intersect``).
+    front = exact.reflector == 0
+    exits = reflectors.intersect(exact.position[front] + 1e-6 * directions[front], directions[front])
+    back = np.full(len(origins), -1)
+    back[front] = exits.triangle
+    far = reflectors.intersect_near(origins, directions, back)
+    behind = front & (far.triangle == back)
+    assert behind.sum() > 100 and np.all(far.t[behind] > exact.t[behind] + 0.05)
+
+
 def test_back_faces_are_mirrors_too_with_normals_turned_to_the_ray():
     sheet = Reflector("Sheet", [[-1, -1, 0], [1, -1, 0], [0, 1, 0]], [[0, 1, 2]], np.tile([0, 0, 1.0], (3, 1)))
     hits = ReflectorSet([sheet]).intersect(np.array([[0, 0, -1.0], [0, 0, 1.0]]), np.array([[0, 0, 1.0], [0, 0, -1.0]]))
