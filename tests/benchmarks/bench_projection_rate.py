@@ -75,7 +75,9 @@ def report(results: list, command: str, machine: str) -> str:
         f"Generated {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC by `{command}` on {machine}.",
         "",
         "Points per second of one projection of all points in every reflection group (medians), "
-        "down-sampling 2, accuracy 1 px. Target: 1 M points/s.",
+        "down-sampling 2, accuracy 1 px. Target: 1 M points/s. Numpy: `project(points, polish=False)`, the "
+        "interpolated answers the GLSL twin computes; polishing ray-list answers on the true rays "
+        "(`addon/true_rays.py`) runs on the CPU after either (see sbc.md for the polished numpy rates).",
         "",
         "| scene | groups | points | numpy (M/s) | GPU (M/s) | GPU / numpy | answers agree |",
         "|---|---:|---:|---:|---:|---:|---:|",
