@@ -229,8 +229,9 @@ class ReflectorSet:
             q = np.cross(s, e1)
             v = np.einsum("ij,ij->i", directions, q) * inv
             t = np.einsum("ij,ij->i", e2, q) * inv
-        tolerance = 1e-12
-        inside = (np.abs(det) > 1e-300) & (u >= -tolerance) & (v >= -tolerance) & (u + v <= 1 + tolerance)
+            tolerance = 1e-12
+            # A ray parallel to the plane has NaN or infinite u, v: not inside.
+            inside = (np.abs(det) > 1e-300) & (u >= -tolerance) & (v >= -tolerance) & (u + v <= 1 + tolerance)
         return np.where(inside, t, np.nan), u, v, det
 
     def _hits(self, origins, directions, t, triangles, uv) -> RayHits:
