@@ -29,7 +29,7 @@ import numpy as np
 
 from .ray_patch import RayPatches, fit_patches
 from .raymap import RayMap
-from .segments import segment_max, segment_mean, segment_min, segment_sum
+from .segments import expand_ranges, segment_max, segment_mean, segment_min, segment_sum
 
 MAX_DEPTH = 40
 #: A tree whose leaves hold, in all, more than this many times the group's rays is
@@ -203,8 +203,7 @@ def reachable_rays(ray_map: RayMap, grid: np.ndarray, member_ray: np.ndarray, me
     hi = np.minimum(segment_max(cells, member_leaf, n) + 1, [ray_map.columns - 1, ray_map.rows - 1])
     width, height = hi[:, 0] - lo[:, 0] + 1, hi[:, 1] - lo[:, 1] + 1
     count = width * height
-    leaf = np.repeat(np.arange(n), count)
-    local = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+    leaf, local = expand_ranges(np.zeros(n, dtype=np.int64), count)
     i = lo[leaf, 0] + local % width[leaf]
     j = lo[leaf, 1] + local // width[leaf]
     ray = grid[j, i]

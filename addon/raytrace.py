@@ -24,6 +24,7 @@ import numpy as np
 from .bvh import build_bvh, descend, ray_box_test
 from .errors import SceneInputError
 from .scene import Reflector
+from .segments import expand_ranges
 
 RAY_CHUNK = 1 << 16
 #: Relative (to the scene size) distance below which a hit is taken as the ray's own origin.
@@ -56,6 +57,15 @@ def reflection_valid(directions: np.ndarray, normals: np.ndarray, face_normals: 
     """Incoming ray in front of the (oriented) interpolated normal, reflected ray leaving the face."""
     reflected = reflect(directions, normals)
     return (np.einsum("ij,ij->i", directions, normals) < 0) & (np.einsum("ij,ij->i", reflected, face_normals) > 0)
+
+
+def _nearest_per_ray(rays, triangles, t, u, v):
+    """Of (ray, triangle) hits, each ray's nearest: its rays (sorted), t, triangles and (u, v)."""
+    order = np.lexsort((t, rays))
+    rays, triangles, t, u, v = rays[order], triangles[order], t[order], u[order], v[order]
+    first = np.ones(len(rays), dtype=bool)
+    first[1:] = rays[1:] != rays[:-1]
+    return rays[first], t[first], triangles[first], np.stack([u[first], v[first]], axis=1)
 
 
 class ReflectorSet:
@@ -146,24 +156,16 @@ class ReflectorSet:
         near_triangles = np.asarray(near_triangles, dtype=np.int64)
         start, ring = self.ring
         guess = np.flatnonzero(near_triangles >= 0)
-        count = np.diff(start)[near_triangles[guess]]
-        rays = np.repeat(guess, count)
-        first = np.repeat(start[near_triangles[guess]] - np.cumsum(count) + count, count) + np.arange(count.sum())
-        triangles = ring[first]
+        owner, member = expand_ranges(start[near_triangles[guess]], np.diff(start)[near_triangles[guess]])
+        rays, triangles = guess[owner], ring[member]
         t, u, v, _ = self.hit_triangles(origins[rays], directions[rays], triangles)
         with np.errstate(invalid="ignore"):
             keep = t > SELF_HIT_EPSILON * self.scale
-        rays, triangles, t, u, v = rays[keep], triangles[keep], t[keep], u[keep], v[keep]
-        order = np.lexsort((t, rays))
-        rays, triangles, t, u, v = rays[order], triangles[order], t[order], u[order], v[order]
-        nearest = np.ones(len(rays), dtype=bool)
-        nearest[1:] = rays[1:] != rays[:-1]
+        rays, t, triangles, uv = _nearest_per_ray(rays[keep], triangles[keep], t[keep], u[keep], v[keep])
         best_t = np.full(len(origins), np.inf)
         best_triangle = np.full(len(origins), -1, dtype=np.int64)
         best_uv = np.full((len(origins), 2), np.nan)
-        best_t[rays[nearest]] = t[nearest]
-        best_triangle[rays[nearest]] = triangles[nearest]
-        best_uv[rays[nearest]] = np.stack([u[nearest], v[nearest]], axis=1)
+        best_t[rays], best_triangle[rays], best_uv[rays] = t, triangles, uv
         missed = np.flatnonzero(best_triangle < 0)
         if len(missed):
             hits = self.intersect(origins[missed], directions[missed])
@@ -184,8 +186,7 @@ class ReflectorSet:
         bounds = np.flatnonzero(np.r_[True, vertex[1:] != vertex[:-1], True])
         valence = np.diff(bounds)
         # Every pair of triangles around one vertex: (a, b) for a, b in its fan.
-        fan = np.repeat(np.arange(len(valence)), valence * valence)
-        local = np.arange(len(fan)) - np.repeat(np.cumsum(valence * valence) - valence * valence, valence * valence)
+        fan, local = expand_ranges(np.zeros(len(valence), dtype=np.int64), valence * valence)
         a = triangle[bounds[fan] + local // valence[fan]]
         b = triangle[bounds[fan] + local % valence[fan]]
         pairs = np.unique(a * n + b)
@@ -205,12 +206,7 @@ class ReflectorSet:
         with np.errstate(invalid="ignore"):
             keep = (t > t_min[rays]) & (t <= t_max[rays])
         keep &= ~self.neighbours(sources[rays], triangles) & (triangles != sources[rays])
-        rays, triangles, t, u, v = rays[keep], triangles[keep], t[keep], u[keep], v[keep]
-        order = np.lexsort((t, rays))
-        rays, triangles, t, u, v = rays[order], triangles[order], t[order], u[order], v[order]
-        first = np.ones(len(rays), dtype=bool)
-        first[1:] = rays[1:] != rays[:-1]
-        return rays[first], t[first], triangles[first], np.stack([u[first], v[first]], axis=1)
+        return _nearest_per_ray(rays[keep], triangles[keep], t[keep], u[keep], v[keep])
 
     def hit_triangles(self, origins, directions, triangles):
         """Batched Moller-Trumbore of ray i against triangle i.

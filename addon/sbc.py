@@ -35,6 +35,7 @@ from .pinhole import PinholeLeaves
 from .ray_patch import RayPatches, RayPatchLeaves, invert_patches
 from .raymap import RayMap, box_exit_distance, trace_ray_map
 from .raytrace import ReflectorSet, reflect, reflection_valid
+from .segments import expand_ranges
 from .true_rays import polish_on_true_rays
 from .view import View
 
@@ -329,8 +330,7 @@ def _project_ray_lists(tree: BSPTree, row, points):
     """
     start, stop = tree.cell_start[row], tree.cell_start[row + 1]
     count = stop - start
-    pair_point = np.repeat(np.arange(len(points)), count)
-    pair_cell = np.repeat(start - np.cumsum(count) + count, count) + np.arange(count.sum())
+    pair_point, pair_cell = expand_ranges(start, count)
     pair_point, pair_cell = _closest_cells(tree.cells, pair_point, pair_cell, points)
     cells, distance, residual = invert_patches(tree.cells, pair_cell, points[pair_point])
     local = cells - tree.cells.lo[pair_cell]

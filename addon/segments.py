@@ -4,11 +4,20 @@
 The BSP builder processes every node of a tree level at once: members (node, ray) are
 rows, and a node's statistics are reductions over the rows that carry its index.
 ``np.add.reduceat`` on rows sorted by node does this in one pass, with no per-node loop.
+The other way round, ``expand_ranges`` lists the members of CSR ranges as rows.
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+
+def expand_ranges(start: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every index of the ranges start[k] .. start[k] + count[k] - 1, in order: (owner k,
+    index) per entry. With start 0 this is each entry's place in its range."""
+    count = np.asarray(count, dtype=np.int64)
+    owner = np.repeat(np.arange(len(count)), count)
+    return owner, np.repeat(np.asarray(start, dtype=np.int64) - np.cumsum(count) + count, count) + np.arange(count.sum())
 
 
 def _sorted_starts(node: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
