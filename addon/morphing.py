@@ -330,11 +330,9 @@ def build_node(reflector_set: ReflectorSet, eye, bounds, settings: MorphSettings
         check_view_outside_reflectors(reflector_set, views[0])
     except SceneInputError:
         return NodeCamera(NODE_INSIDE, [None] * 6, time.perf_counter() - start, time.process_time() - cpu)
-    # The sphere around the box's centre through the farthest vertex: a face whose frustum
-    # misses it sees no triangle (the box's circumsphere let through faces with empty ray maps).
-    vertices = reflector_set.vertices
-    centre = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0))
-    radius = float(np.sqrt(np.max(np.einsum("vd,vd->v", vertices - centre, vertices - centre))))
+    # A face whose frustum misses the reflectors' bounding sphere sees no triangle (the
+    # box's circumsphere, larger, let through faces with empty ray maps).
+    centre, radius = reflector_set.bounding_sphere
     faces = []
     for view in views:
         if not _face_sees_sphere(view, centre, radius):

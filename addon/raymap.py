@@ -97,9 +97,7 @@ def _primary_hits(reflector_set: ReflectorSet, origins: np.ndarray, directions: 
     percent of their rays (SBC paper VI), so this skips most of their BVH descents.
     Every ray gets exactly the hit that tracing it in full gives.
     """
-    vertices = reflector_set.vertices
-    centre = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0))
-    radius = float(np.sqrt(np.max(np.einsum("vd,vd->v", vertices - centre, vertices - centre))))
+    centre, radius = reflector_set.bounding_sphere
     radius *= 1.0 + SPHERE_CULL_MARGIN
     across = np.cross(centre - origins, directions)  # its length: the line's distance to the centre
     near = np.flatnonzero(np.einsum("rd,rd->r", across, across) <= radius * radius)

@@ -175,6 +175,14 @@ class ReflectorSet:
         return self._hits(origins, directions, best_t, best_triangle, best_uv)
 
     @functools.cached_property
+    def bounding_sphere(self) -> tuple[np.ndarray, float]:
+        """(centre, radius): the sphere around the vertices' box centre through the
+        farthest vertex; every triangle lies inside it."""
+        centre = 0.5 * (self.vertices.min(axis=0) + self.vertices.max(axis=0))
+        offset = self.vertices - centre
+        return centre, float(np.sqrt(np.max(np.einsum("vd,vd->v", offset, offset))))
+
+    @functools.cached_property
     def ring(self) -> tuple[np.ndarray, np.ndarray]:
         """CSR (start (T + 1,), triangles) of each triangle and those sharing a (welded)
         vertex with it, itself included."""
