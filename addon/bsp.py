@@ -18,6 +18,10 @@ frustum straddles the plane go to both children, so a point between rays always 
 all four rays around it in its leaf. A split fails when one side receives every ray;
 the rays are then kept in a ray-list leaf, whose cells (four member rays around a
 unit square of the ray map) project by bilinear ray patches.
+
+Where a node's rays focus in front of the mirror, no patch holds near the focus however
+small the node, yet it holds before and after: such a node becomes a camera leaf with a
+*band* of depth along its rays whose points its own cells answer (``_depth_bands``).
 """
 
 from __future__ import annotations
@@ -27,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .ray_patch import RayPatches, fit_patches
+from .ray_patch import ERROR_SAMPLE_FRACTIONS, RayPatches, fit_patches
 from .raymap import RayMap
 from .segments import expand_ranges, segment_max, segment_mean, segment_min, segment_sum
 
@@ -39,6 +43,16 @@ MAX_DUPLICATION = 6.0
 
 #: A split that fails on a node of more rays than this means crossing rays too.
 MAX_RAY_LIST_RAYS = 64
+#: A camera leaf's band where it has none (lo < s < hi holds for no s); see _depth_bands.
+NO_BAND = np.array([0.0, 0.0])
+#: Band ends open toward the tail or past the head (finite, for float32 textures).
+BAND_INFINITY = 1e30
+#: Nodes of at most this many rays may become banded camera leaves.
+MAX_BAND_RAYS = 64
+#: A band is excused only where at least this share of the node's rays focus in it.
+FOCUSING_SHARE = 0.75
+#: Fractions of the ray sampled between a band's coarse ends, to narrow it.
+BAND_REFINEMENT = 8
 
 
 class RaysCrossError(Exception):
@@ -69,11 +83,18 @@ class BSPTree:
     depth: int
     leaf_cones: np.ndarray | None = None  # (n_leaves, CONE_SIZE) bounding cones (see ray_cones)
     cone: np.ndarray | None = None  # (CONE_SIZE,) bounding cone of the whole tree
+    #: (n_cameras, 2) per camera leaf, the band of distance along its rays, lo < s < hi,
+    #: where its answers are not trusted (_depth_bands); NO_BAND where there is none.
+    camera_band: np.ndarray | None = None
+    #: (n_leaves,) per leaf, the ray-list row (into ``cell_start``) that answers a banded
+    #: camera leaf's points in its band or where its Newton fails; -1 where none.
+    leaf_fallback: np.ndarray | None = None
 
     @property
     def nbytes(self) -> int:
+        optional = (self.leaf_cones, self.camera_band, self.leaf_fallback)
         arrays = (self.plane_normal, self.plane_offset, self.left, self.right, self.leaf, self.leaf_kind,
-                  self.leaf_row, self.cell_start) + (() if self.leaf_cones is None else (self.leaf_cones,))
+                  self.leaf_row, self.cell_start) + tuple(a for a in optional if a is not None)
         models = [m.nbytes for m in (self.cameras, self.cells) if m is not None]
         return int(sum(a.nbytes for a in arrays)) + int(sum(models))
 
@@ -125,9 +146,10 @@ def build_bsp(ray_map: RayMap, rays: np.ndarray, grid: np.ndarray, model, accura
     """
     frustum_points = (half_frustum_points(ray_map, grid, rays) if model.half_frustum
                       else unit_frustum_points(ray_map, grid, rays))
+    focal = focal_distances(ray_map, grid, rays) if model.depth_bands else None
 
     levels = []  # one record of whole arrays per tree level
-    camera_parts, raylist_rows, raylist_rays, leaf_nodes, leaf_rays = [], [], [], [], []
+    camera_parts, camera_bands, raylist_rows, raylist_rays, leaf_nodes, leaf_rays = [], [], [], [], [], []
     n_nodes, n_cameras, n_raylists = 1, 0, 0
     level_ids = np.zeros(1, dtype=np.int64)
     member_node = np.zeros(len(rays), dtype=np.int64)  # node rows local to the level
@@ -139,6 +161,12 @@ def build_bsp(ray_map: RayMap, rays: np.ndarray, grid: np.ndarray, model, accura
         counts = np.bincount(member_node, minlength=n)
         well_posed = model.well_posed(params, counts)
         is_camera = _within_accuracy(ray_map, model, params, member_ray, member_node, accuracy_px, well_posed)
+        band = np.broadcast_to(NO_BAND, (n, 2))
+        if model.depth_bands:
+            banded, band = _depth_bands(ray_map, grid, model, params, member_ray, member_node, accuracy_px,
+                                        well_posed & ~is_camera & (counts <= MAX_BAND_RAYS),
+                                        focal[member_slot])
+            is_camera |= banded
         plane_normal, plane_offset = _split_planes(ray_map, member_ray, member_node, n)
         side = (np.einsum("mkd,md->mk", frustum_points[member_slot], plane_normal[member_node])
                 - plane_offset[member_node, None])
@@ -153,22 +181,28 @@ def build_bsp(ray_map: RayMap, rays: np.ndarray, grid: np.ndarray, model, accura
         row = np.full(n, -1, dtype=np.int64)
         cameras_here, raylists_here = kind == CAMERA_LEAF, kind == RAY_LIST_LEAF
         row[cameras_here] = n_cameras + np.arange(cameras_here.sum())
-        row[raylists_here] = n_raylists + np.arange(raylists_here.sum())
+        # Ray-list rows: ray-list leaves, and banded camera leaves' fallbacks.
+        listed = raylists_here | (cameras_here & (band[:, 0] < band[:, 1]))
+        list_row = np.full(n, -1, dtype=np.int64)
+        list_row[listed] = n_raylists + np.arange(listed.sum())
+        row[raylists_here] = list_row[raylists_here]
+        fallback = np.where(cameras_here, list_row, -1)
         if cameras_here.any():
             camera_parts.append(params.take(np.flatnonzero(cameras_here)))
+            camera_bands.append(band[cameras_here])
         in_leaf = kind[member_node] > 0
         leaf_nodes.append(level_ids[member_node[in_leaf]])
         leaf_rays.append(member_ray[in_leaf])
-        in_raylist = raylists_here[member_node]
-        raylist_rows.append(row[member_node[in_raylist]])
+        in_raylist = listed[member_node]
+        raylist_rows.append(list_row[member_node[in_raylist]])
         raylist_rays.append(member_ray[in_raylist])
         n_cameras += int(cameras_here.sum())
-        n_raylists += int(raylists_here.sum())
+        n_raylists += int(listed.sum())
 
         splits = kind == 0
         child = np.full((n, 2), -1, dtype=np.int64)
         child[splits] = n_nodes + np.arange(2 * splits.sum()).reshape(-1, 2)
-        levels.append((level_ids, kind, row, counts, plane_normal, plane_offset, child))
+        levels.append((level_ids, kind, row, counts, plane_normal, plane_offset, child, fallback))
         if not splits.any():
             break
         n_nodes += 2 * int(splits.sum())
@@ -183,7 +217,7 @@ def build_bsp(ray_map: RayMap, rays: np.ndarray, grid: np.ndarray, model, accura
 
     cell_start, cells = _raylist_cells(ray_map, grid, np.concatenate(raylist_rows), np.concatenate(raylist_rays),
                                        n_raylists)
-    tree = _assemble_tree(levels, n_nodes, model, camera_parts, cell_start, cells, depth)
+    tree = _assemble_tree(levels, n_nodes, model, camera_parts, camera_bands, cell_start, cells, depth)
     reach_ray, reach_leaf = reachable_rays(ray_map, grid, np.concatenate(leaf_rays),
                                            tree.leaf[np.concatenate(leaf_nodes)], len(tree.leaf_kind))
     cones = ray_cones(ray_map, grid, reach_ray, reach_leaf, len(tree.leaf_kind))
@@ -321,10 +355,11 @@ def in_cones(cones: np.ndarray, points: np.ndarray) -> np.ndarray:
     return (along >= cones[:, 8]) & (squared <= reach * reach)
 
 
-def _assemble_tree(levels, n_nodes, model, camera_parts, cell_start, cells, depth) -> BSPTree:
-    ids, kind, row, counts, normal, offset, child = (np.concatenate(parts) for parts in zip(*levels))
+def _assemble_tree(levels, n_nodes, model, camera_parts, camera_bands, cell_start, cells, depth) -> BSPTree:
+    ids, kind, row, counts, normal, offset, child, fallback = (np.concatenate(parts) for parts in zip(*levels))
     order = np.argsort(ids)
-    kind, row, counts, normal, offset, child = kind[order], row[order], counts[order], normal[order], offset[order], child[order]
+    kind, row, counts, normal, offset, child, fallback = (
+        kind[order], row[order], counts[order], normal[order], offset[order], child[order], fallback[order])
     is_leaf = kind > 0
     leaf = np.full(n_nodes, -1, dtype=np.int64)
     leaf[is_leaf] = np.arange(is_leaf.sum())
@@ -334,6 +369,8 @@ def _assemble_tree(levels, n_nodes, model, camera_parts, cell_start, cells, dept
         leaf_row=row[is_leaf], leaf_rays=counts[is_leaf],
         cameras=model.concatenate(camera_parts) if camera_parts else None,
         cell_start=cell_start, cells=cells, depth=depth,
+        camera_band=np.concatenate(camera_bands) if camera_bands else np.zeros((0, 2)),
+        leaf_fallback=fallback[is_leaf],
     )
 
 
@@ -377,10 +414,132 @@ def _within_accuracy(ray_map, model, params, member_ray, member_node, accuracy_p
 def _sample_within(ray_map, model, params, member_ray, member_node, accuracy_px):
     """Error samples of members (owner row per sample) and whether each is within accuracy."""
     owner, points = model.error_samples(ray_map, member_ray)
-    cells, inside = model.project(params, member_node[owner], points, ray_map)
-    error = np.linalg.norm(cells - ray_map.cell[member_ray[owner]], axis=1) * ray_map.downsample
+    return owner, _projects_within(ray_map, model, params, member_ray[owner], member_node[owner], points,
+                                   accuracy_px)
+
+
+def _projects_within(ray_map, model, params, ray, node, points, accuracy_px) -> np.ndarray:
+    """Whether each point, sampled on ``ray``, projects in ``node``'s leaf model within
+    ``accuracy_px`` desired-view pixels of that ray's cell."""
+    cells, inside, _ = model.project(params, node, points, ray_map)
+    error = np.linalg.norm(cells - ray_map.cell[ray], axis=1) * ray_map.downsample
     with np.errstate(invalid="ignore"):
-        return owner, inside & (error <= accuracy_px)
+        return inside & (error <= accuracy_px)
+
+
+def _depth_bands(ray_map, grid, model, params, member_ray, member_node, accuracy_px, candidates, focal):
+    """Camera leaves that hold along their rays everywhere but in one band of depth.
+
+    Where a leaf's rays focus (the neck of a vase, any concave stretch of mirror), they
+    cross near their focal distance: a point there lies on several of the leaf's rays
+    and its cell is ill-conditioned, so no patch keeps within the accuracy over that
+    depth however small the leaf, and the node used to end as a ray list. Before and
+    after the crossing the patch holds. Such a node becomes a camera leaf with a *band*:
+    the distances along its rays between the nearest passing error samples on either
+    side of all its failing ones. Answers in the band, and points whose Newton fails,
+    are answered by the leaf's ray list (its cells, as a ray-list leaf's); every answer
+    outside it keeps the measured accuracy. The band is found at the error samples of
+    ``model.error_samples``, then narrowed at BAND_REFINEMENT more fractions between
+    its ends. A node is banded only where that is the cause: the patch holds next to
+    the mirror (the band starts past the first samples) and at least FOCUSING_SHARE of
+    its rays focus inside the band (``focal_distances``); where the patch is merely too
+    coarse (a crease, a tight fillet) splitting the node does better.
+
+    Returns (n,) which ``candidates`` are banded leaves and their (n, 2) bands (lo, hi)
+    in distance along the ray (NO_BAND for the others).
+    """
+    n = len(candidates)
+    band = np.tile(NO_BAND, (n, 1))
+    with np.errstate(invalid="ignore"):
+        ahead = np.any(focal > 0, axis=1)  # a focus in front of the mirror: necessary for a band
+    candidates = candidates & (np.bincount(member_node, weights=ahead, minlength=n)
+                               >= FOCUSING_SHARE * np.bincount(member_node, minlength=n))
+    rows = np.flatnonzero(candidates[member_node])
+    if len(rows) == 0:
+        return np.zeros(n, dtype=bool), band
+    rays, nodes = member_ray[rows], member_node[rows]
+    coarse = np.broadcast_to(ERROR_SAMPLE_FRACTIONS, (len(rows), len(ERROR_SAMPLE_FRACTIONS)))
+    samples = [_fraction_samples(ray_map, model, params, rays, nodes, coarse, accuracy_px)]
+    low, high = _band_ends(*samples[0], n)
+    # Narrow the band between its coarse ends (0 and 1 where the tail or head fails).
+    start, stop = np.maximum(low, 0.0)[nodes], np.minimum(high, 1.0)[nodes]
+    steps = np.linspace(0.0, 1.0, BAND_REFINEMENT + 2)[1:-1]
+    samples.append(_fraction_samples(ray_map, model, params, rays, nodes,
+                                     start[:, None] + (stop - start)[:, None] * steps, accuracy_px))
+    low, high = _band_ends(*(np.concatenate(column) for column in zip(*samples)), n)
+    head = ray_map.head_distance[rays]
+    shortest, longest = np.full(n, np.inf), np.zeros(n)
+    np.minimum.at(shortest, nodes, head)
+    np.maximum.at(longest, nodes, head)
+    with np.errstate(invalid="ignore"):
+        lo = np.maximum(low * shortest, -BAND_INFINITY)
+        hi = np.minimum(high * longest, BAND_INFINITY)
+        focuses = np.any((focal[rows] > lo[nodes, None]) & (focal[rows] < hi[nodes, None]), axis=1)
+    focusing = np.bincount(nodes[focuses], minlength=n) >= FOCUSING_SHARE * np.bincount(nodes, minlength=n)
+    # The band's points need cells to be answered in.
+    with_cells = np.bincount(_complete_cells(ray_map, grid, nodes, rays)[0], minlength=n) > 0
+    banded = candidates & (low > 0) & focusing & with_cells
+    band[banded, 0], band[banded, 1] = lo[banded], hi[banded]
+    return banded, band
+
+
+def focal_distances(ray_map: RayMap, grid: np.ndarray, rays: np.ndarray) -> np.ndarray:
+    """(R, 2) distances along each ray where its neighbours cross it (its focal points),
+    NaN where there is none (or a neighbour is missing).
+
+    The rays t(u, v) + s r(u, v) around a ray focus where the Jacobian columns
+    t_u + s r_u, t_v + s r_v and r are coplanar: det(t_u + s r_u, t_v + s r_v, r) = 0, a
+    quadratic in s, with derivatives by central differences over the ray map (the two
+    focal distances of the reflected wavefront, Chen-Arvo 2000 section 3; where the
+    ray field folds over, its caustic).
+    """
+    i, j = ray_map.cell[rays, 0], ray_map.cell[rays, 1]
+    rows, columns = grid.shape
+
+    def neighbour(di, dj):
+        ii, jj = i + di, j + dj
+        inside = (ii >= 0) & (ii < columns) & (jj >= 0) & (jj < rows)
+        return np.where(inside, grid[np.clip(jj, 0, rows - 1), np.clip(ii, 0, columns - 1)], -1)
+
+    east, west, north, south = neighbour(1, 0), neighbour(-1, 0), neighbour(0, 1), neighbour(0, -1)
+    complete = (east >= 0) & (west >= 0) & (north >= 0) & (south >= 0)
+    t, r = ray_map.tail, ray_map.direction
+    e, w, nn, ss = (np.maximum(x, 0) for x in (east, west, north, south))
+    t_u, r_u, t_v, r_v = t[e] - t[w], r[e] - r[w], t[nn] - t[ss], r[nn] - r[ss]
+    direction = r[rays]
+
+    def det(a, b):
+        return np.einsum("rd,rd->r", np.cross(a, b), direction)
+
+    c0, c1, c2 = det(t_u, t_v), det(t_u, r_v) + det(r_u, t_v), det(r_u, r_v)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        root = np.sqrt(c1 * c1 - 4 * c0 * c2)
+        focal = np.stack([(-c1 - root) / (2 * c2), (-c1 + root) / (2 * c2)], axis=1)
+    focal[~complete] = np.nan
+    return focal
+
+
+def _fraction_samples(ray_map, model, params, rays, nodes, fractions, accuracy_px):
+    """(node, fraction, within accuracy) of every error sample at ``fractions`` (R, K) of
+    the rays' tail-to-head segments."""
+    owner, points = model.error_samples(ray_map, rays, fractions)
+    return nodes[owner], fractions.reshape(-1), _projects_within(ray_map, model, params, rays[owner], nodes[owner],
+                                                                 points, accuracy_px)
+
+
+def _band_ends(node, fraction, good, n):
+    """Per node, the largest passing fraction below every failing sample (-inf if none)
+    and the smallest passing one above them all (+inf if none); NaN where none fails."""
+    first_fail, last_fail = np.full(n, np.inf), np.full(n, -np.inf)
+    np.minimum.at(first_fail, node[~good], fraction[~good])
+    np.maximum.at(last_fail, node[~good], fraction[~good])
+    below = good & (fraction < first_fail[node])
+    above = good & (fraction > last_fail[node])
+    low, high = np.full(n, -np.inf), np.full(n, np.inf)
+    np.maximum.at(low, node[below], fraction[below])
+    np.minimum.at(high, node[above], fraction[above])
+    fails = np.isfinite(first_fail)
+    return np.where(fails, low, np.nan), np.where(fails, high, np.nan)
 
 
 def _split_planes(ray_map, member_ray, member_node, n):
@@ -397,6 +556,20 @@ def _split_planes(ray_map, member_ray, member_node, n):
     return normal, np.einsum("nd,nd->n", normal, centroid)
 
 
+def _complete_cells(ray_map: RayMap, grid: np.ndarray, owner: np.ndarray, ray: np.ndarray):
+    """Unit cells of the ray map whose four corner rays all belong to one owner (members
+    given as (owner, ray) rows): (owner, (C, 4) corner rays 00, 10, 01, 11) per cell."""
+    i, j = ray_map.cell[ray, 0], ray_map.cell[ray, 1]
+    inside = (i + 1 < ray_map.columns) & (j + 1 < ray_map.rows)
+    owner, ray, i, j = owner[inside], ray[inside], i[inside], j[inside]
+    corners = np.stack([ray, grid[j, i + 1], grid[j + 1, i], grid[j + 1, i + 1]], axis=1)
+    member_keys = owner * ray_map.n_rays + ray
+    complete = np.all(corners >= 0, axis=1)
+    for k in range(1, 4):
+        complete &= np.isin(owner * ray_map.n_rays + corners[:, k], member_keys)
+    return owner[complete], corners[complete]
+
+
 def _raylist_cells(ray_map: RayMap, grid: np.ndarray, leaf_row, ray, n_raylists):
     """Unit cells whose four corner rays all belong to one ray-list leaf, as bilinear patches.
 
@@ -404,15 +577,7 @@ def _raylist_cells(ray_map: RayMap, grid: np.ndarray, leaf_row, ray, n_raylists)
     """
     if len(ray) == 0:
         return np.zeros(n_raylists + 1, dtype=np.int64), None
-    i, j = ray_map.cell[ray, 0], ray_map.cell[ray, 1]
-    inside = (i + 1 < ray_map.columns) & (j + 1 < ray_map.rows)
-    leaf_row, ray, i, j = leaf_row[inside], ray[inside], i[inside], j[inside]
-    corners = np.stack([ray, grid[j, i + 1], grid[j + 1, i], grid[j + 1, i + 1]], axis=1)
-    member_keys = leaf_row * ray_map.n_rays + ray
-    complete = np.all(corners >= 0, axis=1)
-    for k in range(1, 4):
-        complete &= np.isin(leaf_row * ray_map.n_rays + corners[:, k], member_keys)
-    leaf_row, corners = leaf_row[complete], corners[complete]
+    leaf_row, corners = _complete_cells(ray_map, grid, leaf_row, ray)
     order = np.argsort(leaf_row, kind="stable")
     leaf_row, corners = leaf_row[order], corners[order]
     cell_start = np.concatenate([[0], np.cumsum(np.bincount(leaf_row, minlength=n_raylists))])

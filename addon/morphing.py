@@ -47,7 +47,7 @@ from .bsp import CAMERA_LEAF
 from .errors import SceneInputError
 from .ray_patch import RayPatches, solve_charts
 from .raytrace import ReflectorSet
-from .sbc import SampleBasedCamera, build_sample_based_camera, check_view_outside_reflectors, descend_tree
+from .sbc import SampleBasedCamera, build_sample_based_camera, check_view_outside_reflectors, descend_tree, in_band
 from .scene import Reflector
 from .view import View, look_at_view
 
@@ -621,9 +621,12 @@ def _extended_tails(tree, points: np.ndarray) -> np.ndarray:
     if len(on_camera) == 0 or not isinstance(tree.cameras, RayPatches):
         return result
     p = points[on_camera]
-    u, v, s, tail, miss = solve_charts(tree.cameras, tree.leaf_row[leaf[on_camera]], p)
+    rows = tree.leaf_row[leaf[on_camera]]
+    u, v, s, tail, miss = solve_charts(tree.cameras, rows, p)
     ok = ((miss < 1e-6 * (1 + np.linalg.norm(p, axis=1))) & (np.abs(u) <= EXTENDED_CHART)
           & (np.abs(v) <= EXTENDED_CHART) & (s >= 0))
+    if tree.camera_band is not None:
+        ok &= ~in_band(tree, rows, s)  # where the leaf's rays focus its patch is not trusted
     result[on_camera[ok]] = tail[ok]
     return result
 

@@ -113,6 +113,7 @@ class PinholeLeaves:
     #: The baseline is built as the paper builds it: one tree per reflection group.
     splits_into_sheets = False
     half_frustum = False  # the paper's unit frustum
+    depth_bands = False  # the paper's leaves answer every depth or none
 
     def well_posed(self, cameras: PinholeCameras, counts: np.ndarray) -> np.ndarray:
         """Every camera is usable, as in the paper (its error decides)."""
@@ -125,7 +126,7 @@ class PinholeLeaves:
     def project(self, cameras: PinholeCameras, leaf, points, ray_map):
         first_points, inside = project_cameras(cameras, leaf, points)
         pixels, _ = ray_map.view.to_pixels(first_points)
-        return pixels / ray_map.downsample - 0.5, inside & np.all(np.isfinite(pixels), axis=1)
+        return pixels / ray_map.downsample - 0.5, inside & np.all(np.isfinite(pixels), axis=1), None
 
     def error_samples(self, ray_map, rays):
         owner = np.concatenate([np.arange(len(rays)), np.arange(len(rays))])

@@ -240,15 +240,16 @@ def _cross(a, b):
 
 
 def project_patches(patches: RayPatches, leaf: np.ndarray, points: np.ndarray, margin: float = 0.5):
-    """Cells, ray distance and an ``inside`` mask: converged, within the leaf's cells, s >= 0."""
+    """Cells, ray distance (NaN where Newton did not converge: no ray of the patch passes
+    through the point) and an ``inside`` mask: converged and within the leaf's cells."""
     cells, distance, residual = invert_patches(patches, leaf, points)
-    scale = np.linalg.norm(points, axis=1) + 1.0
+    converged = residual < 1e-6 * (np.linalg.norm(points, axis=1) + 1.0)
     inside = (
-        (residual < 1e-6 * scale)
+        converged
         & np.all(cells >= patches.lo[leaf] - margin, axis=1)
         & np.all(cells <= patches.hi[leaf] + margin, axis=1)
     )
-    return cells, distance, inside
+    return cells, np.where(converged, distance, np.nan), inside
 
 
 class RayPatchLeaves:
@@ -273,13 +274,21 @@ class RayPatchLeaves:
     def fit(self, ray_map, rays, node, n_nodes) -> RayPatches:
         return fit_patches(ray_map.cell[rays], ray_map.tail[rays], ray_map.direction[rays], node, n_nodes)
 
-    def project(self, patches: RayPatches, leaf, points, ray_map):
-        cells, _, inside = project_patches(patches, leaf, points)
-        return cells, inside
+    #: A leaf may excuse one band of depth along its rays, answered by its ray list (bsp._depth_bands).
+    depth_bands = True
 
-    def error_samples(self, ray_map, rays):
-        """Points along each ray from tail to head: where points will really be projected."""
-        fractions = np.tile(ERROR_SAMPLE_FRACTIONS, len(rays))
-        owner = np.repeat(np.arange(len(rays)), len(ERROR_SAMPLE_FRACTIONS))
+    def project(self, patches: RayPatches, leaf, points, ray_map):
+        """Cells, the ``inside`` test and the distance along the ray of each point (NaN
+        where Newton did not converge)."""
+        cells, distance, inside = project_patches(patches, leaf, points)
+        return cells, inside, distance
+
+    def error_samples(self, ray_map, rays, fractions=ERROR_SAMPLE_FRACTIONS):
+        """Points along each ray from tail to head: where points will really be projected.
+
+        ``fractions`` of the tail-to-head segment, (K,) for every ray or (R, K) per ray;
+        the samples are ray-major (sample k of ray i is row i * K + k)."""
+        fractions = np.broadcast_to(fractions, (len(rays), np.shape(fractions)[-1]))
+        owner = np.repeat(np.arange(len(rays)), fractions.shape[1])
         r = rays[owner]
-        return owner, ray_map.tail[r] + (fractions * ray_map.head_distance[r])[:, None] * ray_map.direction[r]
+        return owner, ray_map.tail[r] + (fractions.reshape(-1) * ray_map.head_distance[r])[:, None] * ray_map.direction[r]

@@ -55,6 +55,9 @@ MIN_SHEET_RAYS = 64
 SUBCELL_SAMPLES = 8
 #: Ray-list cells tried per point, nearest central ray first.
 CANDIDATE_CELLS = 3
+#: The same for the ray list of a banded camera leaf (bsp._depth_bands), whose cells are
+#: many and whose band lies where its rays cross, so several centre rays pass close.
+BAND_CANDIDATES = 8
 #: Sub-cells per side traced in each *fold* cell (see FoldCells).
 FOLD_SAMPLES = 8
 #: Fold sub-cells tried per point, nearest central ray first.
@@ -216,15 +219,29 @@ class SampleBasedCamera:
         cells = np.full((len(points), 2), np.nan)
         accepted = np.zeros(len(points), dtype=bool)
 
+        folds = self.folds[g] if self.folds is not None and len(self.folds[g].valid) else None
+
         on_camera = np.flatnonzero(kind == CAMERA_LEAF)
         if len(on_camera):
             model = LEAF_MODELS[self.model_name]
-            cells[on_camera], accepted[on_camera] = model.project(tree.cameras, row[on_camera], points[on_camera], self.ray_map)
+            cells[on_camera], accepted[on_camera], distance = model.project(
+                tree.cameras, row[on_camera], points[on_camera], self.ray_map)
+            projected = accepted[on_camera]
+            if folds is not None:
+                accepted = _refine_in_folds(folds, cells, accepted, points)
+            if distance is not None and tree.leaf_fallback is not None:
+                refused = projected & ~accepted[on_camera]
+                to_list = on_camera[to_fallback(tree, leaf[on_camera], row[on_camera], distance, refused)]
+                kind[to_list], row[to_list], accepted[to_list] = RAY_LIST_LEAF, tree.leaf_fallback[leaf[to_list]], False
         on_list = np.flatnonzero(kind == RAY_LIST_LEAF)
         if len(on_list) and tree.cells is not None:
-            cells[on_list], accepted[on_list] = _project_ray_lists(tree, row[on_list], points[on_list])
-        if self.folds is not None and len(self.folds[g].valid):
-            accepted = _refine_in_folds(self.folds[g], cells, accepted, points)
+            # A banded leaf's ray list holds a camera leaf's many cells: more candidates.
+            keep = np.where(tree.leaf_kind[leaf[on_list]] == CAMERA_LEAF, BAND_CANDIDATES, CANDIDATE_CELLS)
+            cells[on_list], accepted[on_list] = _project_ray_lists(tree, row[on_list], points[on_list], keep)
+            if folds is not None:
+                listed = np.zeros(len(points), dtype=bool)
+                listed[on_list] = accepted[on_list]
+                accepted[on_list] = _refine_in_folds(folds, cells, listed, points)[on_list]
         if self.owned is not None:
             # Next to a seam both sheets' leaves reach half a cell over it: the answer counts
             # in the sheet owning its cell only, so one image is not answered twice.
@@ -323,15 +340,35 @@ def descend_tree(tree: BSPTree, points: np.ndarray) -> np.ndarray:
     return node
 
 
-def _project_ray_lists(tree: BSPTree, row, points):
+def to_fallback(tree: BSPTree, leaf, camera_row, distance, refused) -> np.ndarray:
+    """Which points of camera leaves go to the leaf's ray list (bsp._depth_bands): those
+    of a banded leaf whose distance along the ray lies in its band, or is NaN (Newton did
+    not converge: near the band the patch is ill-conditioned), or whose answer was
+    ``refused`` by its fold cell (whose sub-rays refine only an answer already in the
+    right cell, which the leaf's cells, exact at their rays, give where the smooth patch
+    may be a hair off). An answer outside the leaf's cells is not handed on: outside its
+    band the patch is accurate, so the point is not on the leaf's rays."""
+    return (tree.leaf_fallback[leaf] >= 0) & (in_band(tree, camera_row, distance) | np.isnan(distance) | refused)
+
+
+def in_band(tree: BSPTree, camera_row, distance) -> np.ndarray:
+    """Whether distances along the rays of camera leaves lie in the leaves' bands
+    (bsp._depth_bands), where their patches are not trusted; False where NaN."""
+    band = tree.camera_band[camera_row]
+    with np.errstate(invalid="ignore"):
+        return (distance > band[:, 0]) & (distance < band[:, 1])
+
+
+def _project_ray_lists(tree: BSPTree, row, points, keep=CANDIDATE_CELLS):
     """Find, among a ray-list leaf's cells, the one whose bilinear ray patch holds the point.
 
-    Newton runs only on the few cells whose central ray passes closest to the point.
+    Newton runs only on the ``keep`` cells (per point, or one count for all) whose
+    central ray passes closest to the point.
     """
     start, stop = tree.cell_start[row], tree.cell_start[row + 1]
     count = stop - start
     pair_point, pair_cell = expand_ranges(start, count)
-    pair_point, pair_cell = _closest_cells(tree.cells, pair_point, pair_cell, points)
+    pair_point, pair_cell = _closest_cells(tree.cells, pair_point, pair_cell, points, keep)
     cells, distance, residual = invert_patches(tree.cells, pair_cell, points[pair_point])
     local = cells - tree.cells.lo[pair_cell]
     inside = (np.all((local >= -CELL_TOLERANCE) & (local <= 1 + CELL_TOLERANCE), axis=1)
@@ -396,8 +433,9 @@ def _refine_in_folds(folds: FoldCells, cells, accepted, points):
     return accepted
 
 
-def _closest_cells(cells, pair_point, pair_cell, points, keep: int = CANDIDATE_CELLS):
-    """Per point, the ``keep`` (point, cell) pairs whose cell-centre ray passes closest.
+def _closest_cells(cells, pair_point, pair_cell, points, keep=CANDIDATE_CELLS):
+    """Per point, the ``keep`` (point, cell) pairs whose cell-centre ray passes closest
+    (``keep``: one count, or one per point).
 
     Cells whose central ray passes farther from the point than twice the cell's size at
     that depth cannot hold it and are dropped first (no effect on the result, only on
@@ -415,7 +453,7 @@ def _closest_cells(cells, pair_point, pair_cell, points, keep: int = CANDIDATE_C
     sorted_point = pair_point[order]
     group_start = np.flatnonzero(np.concatenate([[True], sorted_point[1:] != sorted_point[:-1]]))
     rank = np.arange(len(order)) - np.repeat(group_start, np.diff(np.concatenate([group_start, [len(order)]])))
-    chosen = order[rank < keep]
+    chosen = order[rank < (keep if np.isscalar(keep) else keep[sorted_point])]
     return pair_point[chosen], pair_cell[chosen]
 
 
@@ -753,6 +791,7 @@ def _stats(ray_map: RayMap, trees: list, grids: list, seconds: float) -> dict:
         "n_leaves": int(len(kinds)),
         "n_camera_leaves": int((kinds == CAMERA_LEAF).sum()),
         "n_raylist_leaves": int((kinds == RAY_LIST_LEAF).sum()),
+        "n_banded_leaves": int(sum(int((t.leaf_fallback >= 0).sum()) for t in trees if t.leaf_fallback is not None)),
         "rays_per_leaf": float(rays_in_leaves.mean()) if len(rays_in_leaves) else 0.0,
         "max_depth": int(max((t.depth for t in trees), default=0)),
         "build_seconds": seconds,

@@ -48,7 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from ..addon import ray_patch, sbc as sbc_module
-from ..addon.bsp import CAMERA_LEAF
+from ..addon.bsp import CAMERA_LEAF, RAY_LIST_LEAF
 from . import sbc_pack
 
 #: Newton's step tolerance on the GPU (chart coordinates span [-1, 1]; float32 resolves ~1e-7).
@@ -80,12 +80,15 @@ def defines() -> dict:
         "SBC_PATCH_TEXELS": str(sbc_pack.PATCH_TEXELS),
         "SBC_RAY_TEXELS": str(sbc_pack.RAY_TEXELS),
         "SBC_CAMERA_LEAF": str(CAMERA_LEAF),
+        "SBC_RAY_LIST_LEAF": str(RAY_LIST_LEAF),
         "SBC_NEWTON_ITERATIONS": str(ray_patch.NEWTON_ITERATIONS),
         "SBC_CANDIDATE_CELLS": str(sbc_module.CANDIDATE_CELLS),
+        "SBC_BAND_CANDIDATES": str(sbc_module.BAND_CANDIDATES),
         "SBC_SUBCELL_SAMPLES": str(sbc_module.SUBCELL_SAMPLES),
         "SBC_FOLD_SAMPLES": str(sbc_module.FOLD_SAMPLES),
         "SBC_FOLD_CANDIDATES": str(sbc_module.FOLD_CANDIDATES),
-        "SBC_MAX_CANDIDATES": str(max(sbc_module.CANDIDATE_CELLS, sbc_module.FOLD_CANDIDATES)),
+        "SBC_MAX_CANDIDATES": str(max(sbc_module.CANDIDATE_CELLS, sbc_module.BAND_CANDIDATES,
+                                      sbc_module.FOLD_CANDIDATES)),
         "SBC_MISS_CELLS": _float(sbc_module.MISS_CELLS),
         "SBC_STEP_TOLERANCE": _float(STEP_TOLERANCE),
         "SBC_RESIDUAL_TOLERANCE": _float(RESIDUAL_TOLERANCE),

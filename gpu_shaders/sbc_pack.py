@@ -22,8 +22,9 @@ Textures (names as the GLSL samplers, ``sbc_`` + name):
     3: (lo u, lo v, hi u, hi v) the ray-map cells the sheet owns (``sbc.owned``)
 ``nodes``   2 texels per BSP node: (plane normal xyz, plane offset), (left, right, leaf, 0);
             children and leaf ids are local to the group's tree, -1 where none.
-``leaves``  1 texel per leaf: (kind, row, rays in leaf, 0); row local to the group
-            (camera-leaf patch or ray-list leaf).
+``leaves``  1 texel per leaf: (kind, row, rays in leaf, fallback); row local to the group
+            (camera-leaf patch or ray-list leaf); fallback: a banded camera leaf's ray-list
+            row (``BSPTree.leaf_fallback``), else -1.
 ``patches`` 16 texels per ray patch; the camera-leaf patches of all groups, then the
             bilinear ray-list cell patches of all groups (offsets in ``groups``), then
             the bilinear sub-cell patches of every group's fold cells (addon.sbc.FoldCells,
@@ -33,7 +34,9 @@ Textures (names as the GLSL samplers, ``sbc_`` + name):
     1..6: (tail coefficient k xyz, cell coefficient k x), k = 1, u, v, u^2, uv, v^2
     7..12: (direction coefficient k xyz, cell coefficient k y)
     13: (lo.x, lo.y, hi.x, hi.y) the member cells' bounds
-    14: (cell-centre tail xyz, 0), relative to the origin (bilinear cells only)
+    14: (cell-centre tail xyz, 0), relative to the origin (bilinear cells only);
+        camera leaves: (band lo, band hi, 0, 0), the distances along the ray whose
+        answers go to the leaf's ray list (``BSPTree.camera_band``)
     15: (cell-centre unit direction xyz, 0) (bilinear cells only)
 ``scalars`` 1 float per entry, 4 per texel: each group's ray-list CSR offsets
             ``cell_start``; once per reflection history (its sheets share the block,
@@ -124,7 +127,7 @@ def _exact(name: str, values) -> np.ndarray:
     return values.astype(np.float32)
 
 
-def _pack_patches(patches, bilinear: bool, valid=None) -> np.ndarray:
+def _pack_patches(patches, bilinear: bool, valid=None, band=None) -> np.ndarray:
     """(n * PATCH_TEXELS, 4) float32 texels of ray patches, tails relative to their origin."""
     n = len(patches.lo)
     tail = patches.tail.astype(np.float64).copy()
@@ -148,6 +151,8 @@ def _pack_patches(patches, bilinear: bool, valid=None) -> np.ndarray:
         centre_tail, centre_direction, _, _ = patches.centre_rays  # as sbc._closest_cells uses them
         out[:, 14, :3] = centre_tail - origin.astype(np.float64)
         out[:, 15, :3] = centre_direction
+    if band is not None:
+        out[:, 14, :2] = band
     return out.reshape(-1, 4).astype(np.float32)
 
 
@@ -191,11 +196,12 @@ def pack_sample_based_camera(sbc) -> PackedSBC:
         nodes.append(node.reshape(-1, 4))
         leaf = np.zeros((len(tree.leaf_kind), 4))
         leaf[:, 0], leaf[:, 1], leaf[:, 2] = tree.leaf_kind, tree.leaf_row, tree.leaf_rays
+        leaf[:, 3] = -1 if tree.leaf_fallback is None else tree.leaf_fallback
         leaves.append(leaf)
         n_nodes += len(tree.leaf)
         n_leaves += len(tree.leaf_kind)
         if tree.cameras is not None:
-            camera_patches.append(_pack_patches(tree.cameras, bilinear=False))
+            camera_patches.append(_pack_patches(tree.cameras, bilinear=False, band=tree.camera_band))
             n_camera_rows += len(tree.cameras.lo)
         if tree.cells is not None:
             cell_patches.append(_pack_patches(tree.cells, bilinear=True))
@@ -265,6 +271,7 @@ def _unpack_patches(texels: np.ndarray) -> dict:
         "origin": origin, "bilinear": patch[:, 0, 3] > 0.5, "tail": tail, "direction": patch[:, 7:13, :3],
         "cell": np.stack([patch[:, 1:7, 3], patch[:, 7:13, 3]], axis=2), "lo": patch[:, 13, :2],
         "hi": patch[:, 13, 2:], "valid": patch[:, 0, 3] > -0.5, "centre_tail": patch[:, 14, :3] + origin, "centre_direction": patch[:, 15, :3],
+        "band": patch[:, 14, :2],
     }
 
 
@@ -300,7 +307,8 @@ def unpack_sample_based_camera(packed: PackedSBC) -> tuple[list, dict]:
             "plane_normal": node[:, 0, :3], "plane_offset": node[:, 0, 3],
             "left": node[:, 1, 0].astype(np.int64), "right": node[:, 1, 1].astype(np.int64),
             "leaf": node[:, 1, 2].astype(np.int64), "leaf_kind": kind, "leaf_row": row,
-            "leaf_rays": leaf[:, 2].astype(np.int64), "depth": int(depth), "cell_start": offsets,
+            "leaf_rays": leaf[:, 2].astype(np.int64), "leaf_fallback": leaf[:, 3].astype(np.int64),
+            "depth": int(depth), "cell_start": offsets,
             "n_raylists": int(n_raylists),
             "cameras": _unpack_patches(patches[camera_start:camera_start + n_cameras].reshape(-1, 4)),
             "cells": _unpack_patches(patches[cell_start:cell_start + n_cells].reshape(-1, 4)),

@@ -6,7 +6,8 @@
  * the textures packed by gpu_shaders/sbc_pack.py (layout documented there):
  *   1. descend the group's BSP tree to a leaf;
  *   2. camera leaf: Newton on the leaf's ray patch t(a, b) + s r(a, b) = p (ray_patch._newton),
- *      accepted on a small residual and a cell within the leaf's cells +- 0.5;
+ *      accepted on a small residual and a cell within the leaf's cells +- 0.5; a banded
+ *      leaf hands answers in its band of s, and failures, to its ray list (sbc.in_band);
  *      ray-list leaf: the CANDIDATE_CELLS cells whose centre ray passes closest
  *      (sbc._closest_cells), Newton on each in order of distance, the first inside wins;
  *   3. the four rays around the cell must exist in the group and the point must lie
@@ -101,18 +102,20 @@ vec2 sbc_patch_cell(int base, vec2 uv)
   return c[0] + uv.x * (c[1] + uv.x * c[3] + uv.y * c[4]) + uv.y * (c[2] + uv.y * c[5]);
 }
 
-/* Camera leaf (ray_patch.project_patches): converged, and within the member cells +- margin. */
-bool sbc_project_camera(int patch_index, vec3 p, out vec2 cell)
+/* Camera leaf (ray_patch.project_patches): converged, and within the member cells +- margin;
+ * `s` is the distance along the patch's ray. */
+bool sbc_project_camera(int patch_index, vec3 p, out vec2 cell, out float s, out bool converged)
 {
   int base = patch_index * SBC_PATCH_TEXELS;
   vec3 origin = SBC_FETCH(sbc_patches, base).xyz;
   vec2 uv;
-  float s, residual;
+  float residual;
   vec3 q = p - origin;
   sbc_newton(base, q, 0.0, uv, s, residual);
   cell = sbc_patch_cell(base, uv);
   vec4 bounds = SBC_FETCH(sbc_patches, base + 13);
-  return sbc_converged(residual, p, q, s) &&
+  converged = sbc_converged(residual, p, q, s);
+  return converged &&
          all(greaterThanEqual(cell, bounds.xy - SBC_CELL_MARGIN)) &&
          all(lessThanEqual(cell, bounds.zw + SBC_CELL_MARGIN));
 }
@@ -206,6 +209,27 @@ bool sbc_project_ray_list(int first_patch, int first_cell, int stop_cell, vec3 p
   return false;
 }
 
+/* An answer `cell` in a fold cell is solved again on the cell's traced sub-rays
+ * (sbc._refine_in_folds), the fold-cell grid starting at scalar `block` + 2 rows x columns;
+ * false where no sub-cell holds p. Answers in other cells stand as they are. */
+bool sbc_refine_in_fold(int block, int columns, int rows, vec3 p, inout vec2 cell)
+{
+  vec2 base = floor(cell);
+  if (base.x < 0.0 || base.y < 0.0 || base.x >= float(columns) || base.y >= float(rows)) {
+    return true;
+  }
+  int fold = int(sbc_scalar(block + (2 * rows + int(base.y)) * columns + int(base.x)));
+  if (fold < 0) {
+    return true;
+  }
+  vec2 sub_cell;
+  if (!sbc_project_ray_list(fold, 0, SBC_FOLD_SAMPLES * SBC_FOLD_SAMPLES, p, SBC_FOLD_CANDIDATES, true, sub_cell)) {
+    return false;
+  }
+  cell = sub_cell / float(SBC_FOLD_SAMPLES);
+  return true;
+}
+
 /* Project world point p in reflection group `group` (SampleBasedCamera.project).
  * Returns whether the point is seen reflected in this group; then `pixel` is its
  * desired-view pixel (x right, y up, origin bottom-left), `first_depth` the distance
@@ -250,35 +274,36 @@ bool sbc_project(vec3 p, int group, out vec2 pixel, out float first_depth, out f
   int kind = int(leaf_texel.x);
   int row = int(leaf_texel.y);
 
-  /* 2. The leaf's model gives the fractional ray-map cell. */
+  /* 2. The leaf's model gives the fractional ray-map cell; an answer in a fold cell is
+   * solved again on the cell's traced sub-rays. */
+  int columns = int(h2.x);
+  int rows = int(h2.y);
   vec2 cell;
-  bool accepted;
+  bool accepted = false;
+  int fallback = int(leaf_texel.w);
   if (kind == SBC_CAMERA_LEAF) {
-    accepted = sbc_project_camera(int(h0.z) + row, p, cell);
+    float s;
+    bool converged;
+    bool projected = sbc_project_camera(int(h0.z) + row, p, cell, s, converged);
+    accepted = projected && sbc_refine_in_fold(int(h1.y), columns, rows, p, cell);
+    /* A banded leaf's answers in its band, where Newton fails and where its fold cell
+     * refuses them come from its ray list (bsp._depth_bands, sbc.to_fallback). */
+    if (fallback >= 0) {
+      vec4 band = SBC_FETCH(sbc_patches, (int(h0.z) + row) * SBC_PATCH_TEXELS + 14);
+      if (!converged || (projected && !accepted) || (s > band.x && s < band.y)) {
+        kind = SBC_RAY_LIST_LEAF;
+        row = fallback;
+      }
+    }
   }
-  else {
+  if (kind != SBC_CAMERA_LEAF) {
     int starts = int(h1.x);
-    accepted = sbc_project_ray_list(int(h0.w), int(sbc_scalar(starts + row)),
-                                    int(sbc_scalar(starts + row + 1)), p, SBC_CANDIDATE_CELLS, false, cell);
+    accepted = sbc_project_ray_list(int(h0.w), int(sbc_scalar(starts + row)), int(sbc_scalar(starts + row + 1)),
+                                    p, fallback >= 0 ? SBC_BAND_CANDIDATES : SBC_CANDIDATE_CELLS, false, cell)
+               && sbc_refine_in_fold(int(h1.y), columns, rows, p, cell);
   }
   if (!accepted) {
     return false;
-  }
-  int columns = int(h2.x);
-  int rows = int(h2.y);
-
-  /* An answer in a fold cell is solved again on its traced sub-rays (sbc._refine_in_folds). */
-  vec2 base = floor(cell);
-  if (base.x >= 0.0 && base.y >= 0.0 && base.x < float(columns) && base.y < float(rows)) {
-    int fold = int(sbc_scalar(int(h1.y) + (2 * rows + int(base.y)) * columns + int(base.x)));
-    if (fold >= 0) {
-      vec2 sub_cell;
-      if (!sbc_project_ray_list(fold, 0, SBC_FOLD_SAMPLES * SBC_FOLD_SAMPLES, p, SBC_FOLD_CANDIDATES, true,
-                                sub_cell)) {
-        return false;
-      }
-      cell = sub_cell / float(SBC_FOLD_SAMPLES);
-    }
   }
 
   /* Only the sheet owning the cell answers (sbc.SampleBasedCamera.owned). */
@@ -287,7 +312,7 @@ bool sbc_project(vec3 p, int group, out vec2 pixel, out float first_depth, out f
   }
 
   /* 3. The four rays around the cell exist in the group (sbc._interpolate_rays). */
-  base = floor(cell);
+  vec2 base = floor(cell);
   vec2 frac = cell - base;
   int i0 = int(base.x);
   int j0 = int(base.y);

@@ -194,6 +194,58 @@ def test_the_vase_gets_one_sheet_per_image_and_both_images_project(vase_case):
     assert sbc.stats["n_leaves"] <= sbc.stats["n_rays"] / 3
 
 
+def _images_found(projection, exact, within_px=1.0):
+    """How many exact images some group of ``projection`` answers within ``within_px``."""
+    found = np.zeros(len(exact.point), dtype=bool)
+    for g in range(len(projection.groups)):
+        distance = np.linalg.norm(projection.pixels[g, exact.point] - exact.pixel, axis=1)
+        found |= projection.valid[g, exact.point] & (distance <= within_px)
+    return int(found.sum())
+
+
+def test_leaves_whose_rays_focus_hand_their_focal_band_to_their_ray_list(vase_case, monkeypatch):
+    """The vase's neck focuses its rays in front of the mirror: camera leaves there hold
+    everywhere but in a band of depth around the focus (bsp._depth_bands), so far more
+    answers come from camera leaves than when such nodes end as ray lists, and no
+    image is lost."""
+    from curved_reflections.addon import bsp
+    from curved_reflections.addon.sbc import descend_tree
+
+    _, reflectors, view, bounds, sbc = vase_case
+    points = np.random.default_rng(4).uniform(bounds[0], bounds[1], (2500, 3))
+    exact = solve_reflections(ReflectorSet(reflectors), view, points)
+    exact = exact.select(exact.visible)
+    banded = [tree.leaf_fallback >= 0 for tree in sbc.trees]
+    assert sum(int(b.sum()) for b in banded) >= 10
+    for tree, b in zip(sbc.trees, banded):
+        band = tree.camera_band[tree.leaf_row[b]]
+        assert (band[:, 0] > 0).all() and (band[:, 0] < band[:, 1]).all()
+        rows = tree.leaf_fallback[b]
+        assert (tree.cell_start[rows + 1] > tree.cell_start[rows]).all()  # each has cells to answer with
+    projection = sbc.project(points)
+    handed = 0
+    for g, tree in enumerate(sbc.trees):
+        leaf = tree.leaf[descend_tree(tree, points)]
+        valid = projection.valid[g] & banded[g][leaf]
+        band = tree.camera_band[tree.leaf_row[leaf[valid]]]
+        camera = projection.leaf_kind[g, valid] == 1
+        s = projection.ray_distance[g, valid]
+        # Camera answers keep clear of their band (up to the patch's and the ray map's
+        # slightly different distances); answers in it come from the ray list.
+        width = band[:, 1] - band[:, 0]
+        assert not np.any(camera & (s > band[:, 0] + 0.01 * width) & (s < band[:, 1] - 0.01 * width))
+        handed += int((~camera).sum())
+    assert handed >= 20
+
+    monkeypatch.setattr(bsp, "MAX_BAND_RAYS", 0)
+    unbanded = build_sample_based_camera(reflectors, view, bounds, downsample=2)
+    plain = unbanded.project(points)
+    share = (projection.leaf_kind[projection.valid] == 1).mean()
+    assert share >= (plain.leaf_kind[plain.valid] == 1).mean() + 0.15
+    assert _images_found(projection, exact) >= _images_found(plain, exact)
+    assert sbc.stats["n_leaves"] < unbanded.stats["n_leaves"]
+
+
 def test_camera_leaves_are_fitted_to_enough_rays_in_two_directions(ellipsoid_case):
     (sbc, _, _), _ = ellipsoid_case
     for tree in sbc.trees:
@@ -433,7 +485,7 @@ def test_staged_error_probes_build_the_same_trees_for_fewer_samples(ellipsoid_ca
     def every_sample(ray_map, model, params, member_ray, member_node, accuracy_px, candidates):
         measured["every"] += int(candidates[member_node].sum())
         owner, points = model.error_samples(ray_map, member_ray)
-        cells, inside = model.project(params, member_node[owner], points, ray_map)
+        cells, inside, _ = model.project(params, member_node[owner], points, ray_map)
         error = np.linalg.norm(cells - ray_map.cell[member_ray[owner]], axis=1) * ray_map.downsample
         error = np.where(inside & np.isfinite(error), error, np.inf)
         return (segment_max(error, member_node[owner], len(candidates)) <= accuracy_px) & candidates

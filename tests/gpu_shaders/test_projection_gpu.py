@@ -21,6 +21,7 @@ import pytest
 from curved_reflections.addon import Reflector, build_sample_based_camera, look_at_view, scene_bounds
 from curved_reflections.addon.shapes import vase
 from curved_reflections.addon import sbc as sbc_module
+from curved_reflections.addon.sbc import descend_tree
 from curved_reflections.addon.sphere import icosphere
 from curved_reflections.gpu_shaders import sbc_pack
 
@@ -93,6 +94,13 @@ def test_gpu_projection_matches_numpy(gpu_ready, case):
     assert pixel_error <= PIXEL_TOLERANCE, pixel_error
     np.testing.assert_array_equal(gpu.leaf_kind[both], cpu.leaf_kind[both])
     assert set(np.unique(cpu.leaf_kind[both])) == {1, 2}  # both leaf kinds are exercised
+    if name == "vase_and_ball":
+        # The vase's banded camera leaves (bsp._depth_bands) hand points to their ray lists.
+        handed = np.zeros_like(cpu.valid)
+        for g, tree in enumerate(sbc.trees):
+            leaf = tree.leaf[descend_tree(tree, points.astype(np.float64))]
+            handed[g] = (tree.leaf_fallback[leaf] >= 0) & (cpu.leaf_kind[g] == 2)
+        assert (handed & both).sum() >= 20
 
     # Answers in fold cells (the vase's concave inside) are solved again on traced sub-rays
     # (sbc.FoldCells): the GPU does the same and agrees there too.
@@ -156,7 +164,7 @@ def test_packing_round_trip(case):
         np.testing.assert_allclose(actual, expected, rtol=1e-6, atol=1e-6 * scale)
 
     for g, (unpacked, tree, grid, mixed) in enumerate(zip(groups, sbc.trees, sbc.grids, sbc.mixed)):
-        for name in ("left", "right", "leaf", "leaf_kind", "leaf_row", "leaf_rays", "cell_start"):
+        for name in ("left", "right", "leaf", "leaf_kind", "leaf_row", "leaf_rays", "leaf_fallback", "cell_start"):
             np.testing.assert_array_equal(unpacked[name], getattr(tree, name), err_msg=name)
         np.testing.assert_array_equal(unpacked["grid"], grid)
         np.testing.assert_array_equal(unpacked["owned"], sbc.owned[g])
@@ -190,6 +198,8 @@ def test_packing_round_trip(case):
                 close(got["origin"], patches.origin, 10.0)
             for field in ("tail", "direction", "cell", "lo", "hi"):
                 close(got[field], getattr(patches, field), 200.0)
+            if key == "cameras":  # bands of depth handed to the leaf's ray list (bsp._depth_bands)
+                close(got["band"], tree.camera_band, 10.0)
         if tree.cells is not None:  # the cell-centre rays of sbc._closest_cells
             t, d = tree.cells.tail, tree.cells.direction
             centre = d[:, 0] + 0.5 * (d[:, 1] + d[:, 2]) + 0.25 * d[:, 4]
