@@ -196,7 +196,8 @@ def band_pixels(labels: np.ndarray, drawn: np.ndarray, radius: int, edges_of_dra
 def unreliable_cells(ray_map, trees, mixed=None, folds=None) -> np.ndarray:
     """(rows, columns) bool: ray-map cells (by their lower-left corner ray) where the
     sample-based camera itself knows its projection is unreliable: cells of ray-list
-    leaves (no plane split the rays, SBC section IV-C), fold cells (the rays cross: a
+    leaves (no plane split the rays, SBC section IV-C) and of banded camera leaves' ray
+    lists (their rays focus, ``bsp._depth_bands``), fold cells (the rays cross: a
     caustic, ``sbc.FoldCells``) and mixed cells (an occluder's silhouette crosses the
     cell, ``sbc.MixedCells``). Reflections there may be missing although the mirror
     shows an object (thin, strongly curved parts: a teapot's spout)."""
