@@ -226,13 +226,19 @@ class SampleBasedCamera:
             model = LEAF_MODELS[self.model_name]
             cells[on_camera], accepted[on_camera], distance = model.project(
                 tree.cameras, row[on_camera], points[on_camera], self.ray_map)
-            projected = accepted[on_camera]
+            banded = distance is not None and tree.leaf_fallback is not None
+            handed = (to_fallback(tree, leaf[on_camera], row[on_camera], distance) if banded
+                      else np.zeros(len(on_camera), dtype=bool))
+            accepted[on_camera[handed]] = False  # not refined in fold cells: the ray list answers
             if folds is not None:
+                projected = accepted[on_camera]
                 accepted = _refine_in_folds(folds, cells, accepted, points)
-            if distance is not None and tree.leaf_fallback is not None:
-                refused = projected & ~accepted[on_camera]
-                to_list = on_camera[to_fallback(tree, leaf[on_camera], row[on_camera], distance, refused)]
-                kind[to_list], row[to_list], accepted[to_list] = RAY_LIST_LEAF, tree.leaf_fallback[leaf[to_list]], False
+                if banded:
+                    # A fold cell refines only an answer already in the right cell, which
+                    # the leaf's cells, exact at their rays, give where the patch may be a hair off.
+                    handed |= (tree.leaf_fallback[leaf[on_camera]] >= 0) & projected & ~accepted[on_camera]
+            to_list = on_camera[handed]
+            kind[to_list], row[to_list] = RAY_LIST_LEAF, tree.leaf_fallback[leaf[to_list]]
         on_list = np.flatnonzero(kind == RAY_LIST_LEAF)
         if len(on_list) and tree.cells is not None:
             # A banded leaf's ray list holds a camera leaf's many cells: more candidates.
@@ -340,15 +346,13 @@ def descend_tree(tree: BSPTree, points: np.ndarray) -> np.ndarray:
     return node
 
 
-def to_fallback(tree: BSPTree, leaf, camera_row, distance, refused) -> np.ndarray:
+def to_fallback(tree: BSPTree, leaf, camera_row, distance) -> np.ndarray:
     """Which points of camera leaves go to the leaf's ray list (bsp._depth_bands): those
     of a banded leaf whose distance along the ray lies in its band, or is NaN (Newton did
-    not converge: near the band the patch is ill-conditioned), or whose answer was
-    ``refused`` by its fold cell (whose sub-rays refine only an answer already in the
-    right cell, which the leaf's cells, exact at their rays, give where the smooth patch
-    may be a hair off). An answer outside the leaf's cells is not handed on: outside its
-    band the patch is accurate, so the point is not on the leaf's rays."""
-    return (tree.leaf_fallback[leaf] >= 0) & (in_band(tree, camera_row, distance) | np.isnan(distance) | refused)
+    not converge: near the band the patch is ill-conditioned). So do answers its fold
+    cell refuses (``_project_group``). An answer outside the leaf's cells is not handed
+    on: outside its band the patch is accurate, so the point is not on the leaf's rays."""
+    return (tree.leaf_fallback[leaf] >= 0) & (in_band(tree, camera_row, distance) | np.isnan(distance))
 
 
 def in_band(tree: BSPTree, camera_row, distance) -> np.ndarray:

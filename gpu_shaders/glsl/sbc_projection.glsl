@@ -7,7 +7,7 @@
  *   1. descend the group's BSP tree to a leaf;
  *   2. camera leaf: Newton on the leaf's ray patch t(a, b) + s r(a, b) = p (ray_patch._newton),
  *      accepted on a small residual and a cell within the leaf's cells +- 0.5; a banded
- *      leaf hands answers in its band of s, and failures, to its ray list (sbc.in_band);
+ *      leaf hands answers in its band of s, and failures, to its ray list (sbc.to_fallback);
  *      ray-list leaf: the CANDIDATE_CELLS cells whose centre ray passes closest
  *      (sbc._closest_cells), Newton on each in order of distance, the first inside wins;
  *   3. the four rays around the cell must exist in the group and the point must lie
@@ -284,16 +284,21 @@ bool sbc_project(vec3 p, int group, out vec2 pixel, out float first_depth, out f
   if (kind == SBC_CAMERA_LEAF) {
     float s;
     bool converged;
-    bool projected = sbc_project_camera(int(h0.z) + row, p, cell, s, converged);
-    accepted = projected && sbc_refine_in_fold(int(h1.y), columns, rows, p, cell);
+    accepted = sbc_project_camera(int(h0.z) + row, p, cell, s, converged);
     /* A banded leaf's answers in its band, where Newton fails and where its fold cell
      * refuses them come from its ray list (bsp._depth_bands, sbc.to_fallback). */
+    bool handed = false;
     if (fallback >= 0) {
       vec4 band = SBC_FETCH(sbc_patches, (int(h0.z) + row) * SBC_PATCH_TEXELS + 14);
-      if (!converged || (projected && !accepted) || (s > band.x && s < band.y)) {
-        kind = SBC_RAY_LIST_LEAF;
-        row = fallback;
-      }
+      handed = !converged || (s > band.x && s < band.y);
+    }
+    if (!handed && accepted) {
+      accepted = sbc_refine_in_fold(int(h1.y), columns, rows, p, cell);
+      handed = fallback >= 0 && !accepted;
+    }
+    if (handed) {
+      kind = SBC_RAY_LIST_LEAF;
+      row = fallback;
     }
   }
   if (kind != SBC_CAMERA_LEAF) {
