@@ -138,21 +138,24 @@ class BandTracer:
 
 def history_boundary(ray_map, width: int, height: int, max_order: int) -> np.ndarray:
     """(H, W) bool: pixels between ray-map cells whose deepest ray (of order <= max_order)
-    has different reflection histories, or where one of those cells has no ray.
+    has different surface histories (``RayMap.surfaces``: reflectors and their smooth
+    pieces), or where one of those cells has no ray.
 
     A pixel is drawn from the four cells around its centre (a projection needs four rays
-    of one group). Where those cells end in different histories (inside a footprint: the
-    silhouette of another reflector seen in this one, where the rays go on to a second
-    order) no group has all four rays there, so neither side's reflection reaches the
-    pixel: the same band as along a footprint's edge, inside it (SBC section IV).
+    of one tree's grid). Where those cells end in different histories (inside a
+    footprint: the silhouette of another reflector seen in this one, where the rays go
+    on to a second order; or a sharp edge of the mirror, where the trees of its two
+    sides end: sbc.surface_sets) no tree has all four rays there, so neither side's
+    reflection reaches the pixel: the same band as along a footprint's edge, inside it
+    (SBC section IV).
     """
     d = ray_map.downsample
     columns, rows = ray_map.columns, ray_map.rows
-    n_groups = max(1, len(ray_map.histories))
+    n_groups = max(1, len(ray_map.surfaces))
     keep = ray_map.order <= max_order
     key = np.full((rows, columns), -1, dtype=np.int64)
     cells = ray_map.cell[keep]
-    np.maximum.at(key, (cells[:, 1], cells[:, 0]), ray_map.order[keep] * n_groups + ray_map.group[keep])
+    np.maximum.at(key, (cells[:, 1], cells[:, 0]), ray_map.order[keep] * n_groups + ray_map.surface[keep])
     final = np.where(key >= 0, key % n_groups, -1)
 
     def brackets(n_pixels, n_cells):

@@ -46,6 +46,11 @@ class RayMap:
     head_distance: np.ndarray  # (R,) length of the segment from tail to head
     triangle: np.ndarray  # (R,) triangle of the tail
     blocked: np.ndarray  # (R,) bool: the head is on a reflector (else where the ray leaves the box)
+    #: Surface histories: the smooth pieces (ReflectorSet.piece) met so far, as
+    #: ``histories`` lists the reflectors; ``surface`` indexes it. The ray field is
+    #: continuous over the rays of one surface history, and jumps between two.
+    surfaces: list
+    surface: np.ndarray  # (R,) int index into surfaces
 
     @property
     def head(self) -> np.ndarray:
@@ -59,10 +64,14 @@ class RayMap:
         """Desired-view pixel coordinates of (fractional) ray-map cells."""
         return (np.asarray(cells, dtype=np.float64) + 0.5) * self.downsample
 
-    def group_grid(self, group: int) -> np.ndarray:
-        """(rows, columns) int: the ray index of ``group`` at each cell, -1 where none."""
+    def group_grid(self, group: int, surfaces=None) -> np.ndarray:
+        """(rows, columns) int: the ray index of ``group`` at each cell, -1 where none;
+        with ``surfaces`` (indices into ``self.surfaces``), only the rays of those."""
         grid = np.full((self.rows, self.columns), -1, dtype=np.int64)
-        members = np.flatnonzero(self.group == group)
+        member = self.group == group
+        if surfaces is not None:
+            member &= np.isin(self.surface, surfaces)
+        members = np.flatnonzero(member)
         grid[self.cell[members, 1], self.cell[members, 0]] = members
         return grid
 
@@ -142,37 +151,33 @@ def reflect_primary_hits(reflector_set, view, bounds, downsample, max_order, hit
     source = triangle[alive]
     first_point, first_depth = tail.copy(), depth[alive]
     history = reflector_set.owner[source][:, None]
+    pieces = reflector_set.piece[source][:, None]
     rays = []
     for order in range(1, max_order + 1):
         valid = reflection_valid(incoming, normal, face)
         keep = np.flatnonzero(valid)
         alive, tail, incoming, source = alive[keep], tail[keep], incoming[keep], source[keep]
         normal, first_point, first_depth, history = normal[keep], first_point[keep], first_depth[keep], history[keep]
+        pieces = pieces[keep]
         outgoing = reflect(incoming, normal)
         box = box_exit_distance(tail, outgoing, lo, hi)
         nxt = reflector_set.intersect(tail, outgoing, box, source)
         head_distance = np.where(nxt.hit, nxt.t, box)
         rays.append((alive, order, history, first_point, first_depth, tail, outgoing, head_distance, source,
-                     nxt.hit.copy()))
+                     nxt.hit.copy(), pieces))
         more = np.flatnonzero(nxt.hit)
         alive, tail, incoming, source = alive[more], nxt.position[more], outgoing[more], nxt.triangle[more]
         normal, face = nxt.normal[more], nxt.face_normal[more]
         first_point, first_depth = first_point[more], first_depth[more]
         history = np.concatenate([history[more], nxt.reflector[more, None]], axis=1)
+        pieces = np.concatenate([pieces[more], reflector_set.piece[nxt.triangle[more], None]], axis=1)
     return _assemble(view, downsample, columns, rows, cells, rays)
 
 
 def _assemble(view, downsample, columns, rows, cells, rays) -> RayMap:
     """Concatenate the rays of every order; number the histories, lower orders first."""
-    max_order = len(rays)
-    padded = np.concatenate([
-        np.pad(history, ((0, 0), (0, max_order - history.shape[1])), constant_values=-1) for _, _, history, *_ in rays
-    ])
-    unique, group = np.unique(padded, axis=0, return_inverse=True)
-    rank = np.argsort((unique >= 0).sum(axis=1), kind="stable")  # by order, then lexicographic
-    renumber = np.empty(len(unique), dtype=np.int64)
-    renumber[rank] = np.arange(len(unique))
-    histories = [tuple(int(x) for x in unique[k][unique[k] >= 0]) for k in rank]
+    histories, group = _number_histories([r[2] for r in rays])
+    surfaces, surface = _number_histories([r[10] for r in rays])
 
     def stacked(k):
         return np.concatenate([r[k] for r in rays])
@@ -180,6 +185,19 @@ def _assemble(view, downsample, columns, rows, cells, rays) -> RayMap:
     return RayMap(
         view=view, downsample=downsample, columns=columns, rows=rows, histories=histories,
         cell=cells[stacked(0)], order=np.concatenate([np.full(len(r[0]), r[1]) for r in rays]).astype(np.int64),
-        group=renumber[group.reshape(-1)], first_point=stacked(3), first_depth=stacked(4), tail=stacked(5),
+        group=group, first_point=stacked(3), first_depth=stacked(4), tail=stacked(5),
         direction=stacked(6), head_distance=stacked(7), triangle=stacked(8), blocked=stacked(9),
+        surfaces=surfaces, surface=surface,
     )
+
+
+def _number_histories(per_order: list) -> tuple[list, np.ndarray]:
+    """Distinct rows of the (rays, order) arrays of every order, as tuples numbered lower
+    orders first, then lexicographically; and each ray's number."""
+    max_order = len(per_order)
+    padded = np.concatenate([np.pad(h, ((0, 0), (0, max_order - h.shape[1])), constant_values=-1) for h in per_order])
+    unique, index = np.unique(padded, axis=0, return_inverse=True)
+    rank = np.argsort((unique >= 0).sum(axis=1), kind="stable")  # by order, then lexicographic
+    renumber = np.empty(len(unique), dtype=np.int64)
+    renumber[rank] = np.arange(len(unique))
+    return [tuple(int(x) for x in unique[k][unique[k] >= 0]) for k in rank], renumber[index.reshape(-1)]

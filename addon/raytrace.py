@@ -23,7 +23,7 @@ import numpy as np
 
 from .bvh import build_bvh, descend, ray_box_test
 from .errors import SceneInputError
-from .scene import Reflector
+from .scene import Reflector, smooth_pieces
 from .segments import expand_ranges
 
 RAY_CHUNK = 1 << 16
@@ -95,12 +95,14 @@ class ReflectorSet:
         # triangles meeting at a split still count as neighbours.
         _, welded = np.unique(self.vertices, axis=0, return_inverse=True)
         self.welded_triangles = welded.reshape(-1)[self.triangles]
+        # Smooth pieces never span reflectors: each reflector's vertices are its own.
+        self.piece = smooth_pieces(self.triangles, len(self.vertices))
         self.bvh = build_bvh(self.vertices, self.triangles, self.normals, leaf_size=leaf_size)
 
     @property
     def nbytes(self) -> int:
         arrays = (self.vertices, self.normals, self.triangles, self.owner, self.v0, self.e1, self.e2,
-                  self.face_normals, self.welded_triangles)
+                  self.face_normals, self.welded_triangles, self.piece)
         return int(sum(a.nbytes for a in arrays)) + self.bvh.nbytes
 
     def surface(self, triangles: np.ndarray, barycentric: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

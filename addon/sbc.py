@@ -58,6 +58,9 @@ CANDIDATE_CELLS = 3
 #: The same for the ray list of a banded camera leaf (bsp._depth_bands), whose cells are
 #: many and whose band lies where its rays cross, so several centre rays pass close.
 BAND_CANDIDATES = 8
+#: Camera answers up to this many cells past their leaf's rays, across a sharp edge of
+#: the mirror, are polished on the true rays (SampleBasedCamera._across_edge).
+EDGE_REACH_CELLS = 1.0
 #: Sub-cells per side traced in each *fold* cell (see FoldCells).
 FOLD_SAMPLES = 8
 #: Fold sub-cells tried per point, nearest central ray first.
@@ -147,6 +150,9 @@ class SampleBasedCamera:
     #: (trees, 4) per tree, the ray-map cells its sheet owns, lo <= cell < hi as
     #: (lo u, lo v, hi u, hi v) (``_build_sheets``); None: each tree owns every cell.
     owned: np.ndarray | None = None
+    #: Per tree, the surface histories (indices into ``ray_map.surfaces``) whose rays it
+    #: holds (``surface_sets``), or None for all of its group's; None: all trees hold all.
+    surfaces: list | None = None
 
     @property
     def groups(self) -> list:
@@ -190,9 +196,16 @@ class SampleBasedCamera:
     def _polish_pending(self, pending: list, points, result: Projection) -> None:
         """Polish the risky answers of every group (``_polish``) and write them into ``result``."""
         for g in sorted({entry[0] for entry in pending}):
-            target, pixels, reflector_points, s, kind, spacing = (
+            target, pixels, reflector_points, s, kind, spacing, edge = (
                 np.concatenate(column) for column in zip(*(entry[1:] for entry in pending if entry[0] == g)))
             keep = self._polish(g, np.arange(len(target)), pixels, reflector_points, s, points[target], spacing)
+            # Answers across an edge were never checked against the rays' heads: the
+            # reflected segment must reach the point past every reflector.
+            check = np.flatnonzero(edge & keep)
+            if len(check):
+                offset = points[target[check]] - reflector_points[check]
+                length = _norm(offset)
+                keep[check] = ~self.true_rays.occluded(reflector_points[check], offset / length[:, None], length)
             result.reflector_points[g, target] = np.where(keep[:, None], reflector_points, np.nan)
             result.pixels[g, target] = np.where(keep[:, None], pixels, np.nan)
             result.ray_distance[g, target] = np.where(keep, s, np.nan)
@@ -222,6 +235,7 @@ class SampleBasedCamera:
         folds = self.folds[g] if self.folds is not None and len(self.folds[g].valid) else None
 
         on_camera = np.flatnonzero(kind == CAMERA_LEAF)
+        edge, edge_distance = np.zeros(0, dtype=np.int64), np.zeros(0)  # answers across a sharp edge
         if len(on_camera):
             model = LEAF_MODELS[self.model_name]
             cells[on_camera], accepted[on_camera], distance = model.project(
@@ -239,6 +253,16 @@ class SampleBasedCamera:
                     handed |= (tree.leaf_fallback[leaf[on_camera]] >= 0) & projected & ~accepted[on_camera]
             to_list = on_camera[handed]
             kind[to_list], row[to_list] = RAY_LIST_LEAF, tree.leaf_fallback[leaf[to_list]]
+            if pending is not None and distance is not None and self._has_edges(g):
+                own = np.flatnonzero(kind[on_camera] == CAMERA_LEAF)
+                leaf_row = row[on_camera[own]]
+                with np.errstate(invalid="ignore"):
+                    near = (np.all(cells[on_camera[own]] >= tree.cameras.lo[leaf_row] - EDGE_REACH_CELLS, axis=1)
+                            & np.all(cells[on_camera[own]] <= tree.cameras.hi[leaf_row] + EDGE_REACH_CELLS, axis=1))
+                own = own[near]
+                across = own[self._across_edge(g, cells[on_camera[own]], distance[own])]
+                edge, edge_distance = on_camera[across], distance[across]
+                accepted[edge] = False
         on_list = np.flatnonzero(kind == RAY_LIST_LEAF)
         if len(on_list) and tree.cells is not None:
             # A banded leaf's ray list holds a camera leaf's many cells: more candidates.
@@ -254,6 +278,13 @@ class SampleBasedCamera:
             lo, hi = self.owned[g, :2], self.owned[g, 2:]
             with np.errstate(invalid="ignore"):
                 accepted &= np.all((cells >= lo) & (cells < hi), axis=1)
+                owned_edge = np.all((cells[edge] >= lo) & (cells[edge] < hi), axis=1)
+            edge, edge_distance = edge[owned_edge], edge_distance[owned_edge]
+        if len(edge):
+            # Answers across a sharp edge of the mirror are found on the true rays only.
+            pixels = self.ray_map.cell_pixels(cells[edge])
+            pending.append((g, point_index[edge], pixels, np.full((len(edge), 3), np.nan), edge_distance,
+                            kind[edge], np.zeros(len(edge)), np.ones(len(edge), dtype=bool)))
 
         found = np.flatnonzero(accepted & np.isfinite(cells).all(axis=1))
         points, cells, kind, target = points[found], cells[found], kind[found], point_index[found]
@@ -267,12 +298,41 @@ class SampleBasedCamera:
             risky = self._risky(g, kind, cells[hits])
             if len(risky):
                 pending.append((g, target[risky], pixels[risky], reflector_points[risky], s[risky], kind[risky],
-                                spacing[risky]))
+                                spacing[risky], np.zeros(len(risky), dtype=bool)))
         result.reflector_points[g, target] = reflector_points
         result.pixels[g, target] = pixels
         result.valid[g, target] = True
         result.leaf_kind[g, target] = kind
         result.ray_distance[g, target] = s
+
+    def _has_edges(self, g: int) -> bool:
+        """Whether tree ``g`` holds the first-order rays of some of its reflector's smooth
+        pieces only (``surface_sets``), so that its reflector goes on past its rays' edge."""
+        return (self.true_rays is not None and self.surfaces is not None and self.surfaces[g] is not None
+                and len(self.histories[g]) == 1)
+
+    def _across_edge(self, g: int, cells, distance) -> np.ndarray:
+        """Indices of leaf answers (``cells``, ray ``distance``) of tree ``g`` that lie just
+        across a sharp edge of its mirror: in front of the mirror, in a cell whose four
+        rays exist in the history but not all in the tree's surfaces (the ray map cannot
+        check them: the cell's rays straddle the edge).
+
+        Between the last ray of one smooth piece and the first of the next, the tree's
+        cells end, yet the piece goes on up to the edge and reflects points there. The
+        camera leaf's patch, extrapolated less than EDGE_REACH_CELLS past its rays,
+        seeds the true-ray polish, which keeps an image only on the tree's pieces
+        (``polish_on_true_rays``).
+        """
+        with np.errstate(invalid="ignore"):
+            near = np.flatnonzero(np.isfinite(cells).all(axis=1) & (distance >= 0))
+        return near[_complete(self._history_grids[g], cells[near]) & ~_complete(self.grids[g], cells[near])]
+
+    @functools.cached_property
+    def _history_grids(self) -> list:
+        """Per tree, the grid of every ray of its history (all surfaces)."""
+        grids = {h: self.ray_map.group_grid(self.ray_map.histories.index(tuple(h))) for h in dict.fromkeys(
+            tuple(h) for h in self.histories)}
+        return [grids[tuple(h)] for h in self.histories]
 
     def _risky(self, g: int, kind: np.ndarray, cells: np.ndarray) -> np.ndarray:
         """Indices of group ``g``'s answers to polish: first order, from a ray-list leaf or in a fold cell."""
@@ -288,7 +348,8 @@ class SampleBasedCamera:
         if len(risky):
             pixels[risky], reflector_points[risky], s[risky], ok = polish_on_true_rays(
                 self.true_rays, self.ray_map.view, self.histories[g][0], pixels[risky], points[risky],
-                self.ray_map.downsample, spacing[risky] / self.ray_map.downsample)
+                self.ray_map.downsample, spacing[risky] / self.ray_map.downsample,
+                first_pieces(self.ray_map, self.grids[g]) if self.surfaces and self.surfaces[g] else None)
             keep[risky[~ok]] = False
         return keep
 
@@ -316,6 +377,16 @@ class SampleBasedCamera:
         """(R, 8) rows tail, direction, head distance, first-hit depth: one gather per corner."""
         m = self.ray_map
         return np.concatenate([m.tail, m.direction, m.head_distance[:, None], m.first_depth[:, None]], axis=1)
+
+
+def _complete(grid: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """Whether the four rays around each fractional cell exist in ``grid``."""
+    base = np.floor(cells).astype(np.int64)
+    rows, columns = grid.shape
+    i, j = base[:, 0], base[:, 1]
+    inside = (i >= 0) & (j >= 0) & (i + 1 < columns) & (j + 1 < rows)
+    i, j = np.where(inside, i, 0), np.where(inside, j, 0)
+    return inside & (grid[j, i] >= 0) & (grid[j, i + 1] >= 0) & (grid[j + 1, i] >= 0) & (grid[j + 1, i + 1] >= 0)
 
 
 def descend_tree(tree: BSPTree, points: np.ndarray) -> np.ndarray:
@@ -554,6 +625,32 @@ def _build_sheets(ray_map: RayMap, rays: np.ndarray, grid: np.ndarray, model, ac
                 + _build_sheets(ray_map, rays[high], grid, model, accuracy_px, owned_high))
 
 
+def surface_sets(ray_map: RayMap, group: int) -> list:
+    """The rays of a reflection group, split by surface history (``RayMap.surfaces``):
+    tuples of surface indices, each set getting its own trees; [None] where the group
+    is not split (one set holds all its rays).
+
+    Across a sharp edge of a mirror (a teapot's lid on its body, a spout joining it)
+    the reflected rays jump, so no leaf straddling the edge is accurate however small,
+    and the BSP ended there in ray lists and sheets (SBC paper IV: leaves model a
+    continuous ray field; groups there are split by reflector for the same reason).
+    Each surface of at least MIN_SHEET_RAYS rays gets its own trees; the smaller ones
+    (a faceted mirror's flat faces) stay together in one set, as the whole group was.
+    """
+    counts = np.bincount(ray_map.surface[ray_map.group == group], minlength=len(ray_map.surfaces))
+    present = np.flatnonzero(counts)
+    large = present[counts[present] >= MIN_SHEET_RAYS]
+    small = present[counts[present] < MIN_SHEET_RAYS]
+    sets = [(int(k),) for k in large] + ([tuple(int(k) for k in small)] if len(small) else [])
+    return [None] if len(sets) <= 1 else sets
+
+
+def first_pieces(ray_map: RayMap, grid: np.ndarray) -> np.ndarray:
+    """The smooth pieces (ReflectorSet.piece) that the rays of ``grid`` first reflect off."""
+    surfaces = np.unique(ray_map.surface[grid[grid >= 0]])
+    return np.unique([ray_map.surfaces[k][0] for k in surfaces]).astype(np.int64)
+
+
 def build_from_ray_map(ray_map: RayMap, accuracy_px: float = 1.0, leaf_model: str = "ray_patch") -> SampleBasedCamera:
     """One BSP tree per reflection group of an existing ray map (or several, its sheets)."""
     if leaf_model not in LEAF_MODELS:
@@ -561,22 +658,26 @@ def build_from_ray_map(ray_map: RayMap, accuracy_px: float = 1.0, leaf_model: st
     if not accuracy_px > 0:
         raise ValueError(f"accuracy_px must be positive, got {accuracy_px}")
     start = time.perf_counter()
-    trees, grids, histories, cones, owned = [], [], [], [], []
+    trees, grids, histories, cones, owned, surfaces = [], [], [], [], [], []
     whole = np.array([0.0, 0.0, ray_map.columns, ray_map.rows])
+    model = LEAF_MODELS[leaf_model]
     for g, history in enumerate(ray_map.histories):
-        grid = ray_map.group_grid(g)
-        model, rays = LEAF_MODELS[leaf_model], np.flatnonzero(ray_map.group == g)
-        sheets = (_build_sheets(ray_map, rays, grid, model, accuracy_px, whole) if model.splits_into_sheets
-                  else [(build_bsp(ray_map, rays, grid, model, accuracy_px, max_duplication=None), whole)])
-        for tree, cells in sheets:
-            trees.append(tree)
-            grids.append(grid)
-            histories.append(history)
-            cones.append(tree.cone)
-            owned.append(cells)
+        for surface_set in surface_sets(ray_map, g):
+            grid = ray_map.group_grid(g, surface_set)
+            rays = grid[grid >= 0]
+            sheets = (_build_sheets(ray_map, rays, grid, model, accuracy_px, whole) if model.splits_into_sheets
+                      else [(build_bsp(ray_map, rays, grid, model, accuracy_px, max_duplication=None), whole)])
+            for tree, cells in sheets:
+                trees.append(tree)
+                grids.append(grid)
+                histories.append(history)
+                surfaces.append(surface_set)
+                cones.append(tree.cone)
+                owned.append(cells)
     seconds = time.perf_counter() - start
     sbc = SampleBasedCamera(ray_map, trees, grids, leaf_model, histories,
-                            cones=np.array(cones).reshape(-1, CONE_SIZE), owned=np.array(owned).reshape(-1, 4))
+                            cones=np.array(cones).reshape(-1, CONE_SIZE), owned=np.array(owned).reshape(-1, 4),
+                            surfaces=surfaces)
     sbc.stats = _stats(ray_map, trees, grids, seconds)
     return sbc
 
@@ -702,6 +803,7 @@ def _fold_cells(reflector_set: ReflectorSet, ray_map: RayMap, grid: np.ndarray) 
     origins, incoming = ray_map.view.pixel_rays(ray_map.cell_pixels(sub.reshape(-1, 2) / m))
     hits = reflector_set.intersect(origins, incoming)
     ok = (hits.reflector == history[0]) & reflection_valid(incoming, hits.normal, hits.face_normal)
+    ok &= np.isin(reflector_set.piece[np.maximum(hits.triangle, 0)], first_pieces(ray_map, grid))
     tails = origins + np.where(ok, hits.t, 0.0)[:, None] * incoming
     directions = reflect(incoming, hits.normal)
     n = len(j)

@@ -7,7 +7,7 @@ fixed-width string arrays. The walk is generic over dataclass fields (the camera
 ray map and view, its BSP trees, their leaf models, its mixed-cell tables), so a field
 added to any of them is stored too; a class is named by a string and looked up in
 :data:`CLASSES` when read back. Group grids are not stored: they are recomputed from
-the ray map (one per sheet, by its history).
+the ray map (one per surface set of a history, shared by its sheets).
 """
 
 from __future__ import annotations
@@ -85,7 +85,11 @@ def _get(data, key: str):
                   if f.name not in DERIVED.get(name, ()) + TRANSIENT.get(name, ()) and f.init}
         if name == "SampleBasedCamera":
             ray_map = values["ray_map"]
-            values["grids"] = [ray_map.group_grid(ray_map.histories.index(h)) for h in values["histories"]]
+            surfaces = values["surfaces"] or [None] * len(values["histories"])
+            keys = [(tuple(h), None if s is None else tuple(s)) for h, s in zip(values["histories"], surfaces)]
+            # The sheets of one surface set share one grid object, as when built.
+            grids = {key: ray_map.group_grid(ray_map.histories.index(key[0]), key[1]) for key in dict.fromkeys(keys)}
+            values["grids"] = [grids[key] for key in keys]
         return cls(**values)
     raise KeyError(f"{key} is not stored")
 

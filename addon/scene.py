@@ -56,6 +56,33 @@ def triangle_areas(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
 
 
+def smooth_pieces(triangles: np.ndarray, n_vertices: int) -> np.ndarray:
+    """(M,) the smooth piece of each triangle, numbered 0, 1, ... in order of first triangle.
+
+    Triangles that share a vertex share its normal, so the interpolated normal field is
+    continuous across them; across a sharp edge (split vertices) it jumps, and so do the
+    reflected rays. A piece is a connected set of triangles through shared vertices: the
+    mirror surfaces over which the reflected ray field is continuous. Connected
+    components by minimum-label propagation with pointer jumping (whole arrays; a few
+    dozen passes even for long thin pieces).
+    """
+    triangles = np.asarray(triangles, dtype=np.int64)
+    label = np.arange(n_vertices)
+    corners = triangles.reshape(-1)
+    while True:
+        lowest = np.repeat(label[triangles].min(axis=1), 3)
+        merged = label.copy()
+        np.minimum.at(merged, corners, lowest)
+        merged = merged[merged]
+        if np.array_equal(merged, label):
+            break
+        label = merged
+    _, first, piece = np.unique(label[triangles[:, 0]], return_index=True, return_inverse=True)
+    renumber = np.empty(len(first), dtype=np.int64)
+    renumber[np.argsort(first, kind="stable")] = np.arange(len(first))
+    return renumber[piece.reshape(-1)]
+
+
 @dataclass(frozen=True)
 class Reflector:
     """A mirror: world-space triangle mesh with unit per-vertex normals.

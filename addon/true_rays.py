@@ -51,12 +51,14 @@ MAX_STEP_PX = 4.0
 MAX_SHIFT_CELLS = 12.0
 
 
-def _true_residual(reflector_set: ReflectorSet, view: View, reflector: int, pixels, points, near=None):
+def _true_residual(reflector_set: ReflectorSet, view: View, reflector: int, pixels, points, near=None,
+                   pieces=None):
     """Per pixel: (P, 3) offset of the point from the true reflected ray (perpendicular
     part), the first reflector point, the distance along the reflected ray, whether the
-    ray is a valid first-order reflection off ``reflector`` reaching the point, and the
-    triangle it hits. With ``near`` (P,) triangles, the view ray is intersected with
-    their rings only (``ReflectorSet.intersect_near``), else with the whole mesh."""
+    ray is a valid first-order reflection off ``reflector`` (on one of its smooth
+    ``pieces``, if given) reaching the point, and the triangle it hits. With ``near``
+    (P,) triangles, the view ray is intersected with their rings only
+    (``ReflectorSet.intersect_near``), else with the whole mesh."""
     origins, directions = view.pixel_rays(pixels)
     hits = (reflector_set.intersect(origins, directions) if near is None
             else reflector_set.intersect_near(origins, directions, near))
@@ -68,11 +70,14 @@ def _true_residual(reflector_set: ReflectorSet, view: View, reflector: int, pixe
     valid = (hits.hit & (hits.reflector == reflector)
              & reflection_valid(directions, normal, np.where(hits.hit[:, None], hits.face_normal, 0.0))
              & (distance > 0))
+    if pieces is not None:
+        valid &= np.isin(reflector_set.piece[np.maximum(hits.triangle, 0)], pieces)
     return np.nan_to_num(residual), hits.position, distance, valid, hits.triangle
 
 
 def polish_on_true_rays(reflector_set: ReflectorSet, view: View, reflector: int, pixels: np.ndarray,
-                        points: np.ndarray, cell_px: float, spacing_px: np.ndarray | None = None):
+                        points: np.ndarray, cell_px: float, spacing_px: np.ndarray | None = None,
+                        pieces: np.ndarray | None = None):
     """Polish first-order images of ``points`` in ``reflector`` starting at ``pixels``.
 
     Returns (pixels (P, 2), first reflector points (P, 3), distances along the reflected
@@ -81,13 +86,17 @@ def polish_on_true_rays(reflector_set: ReflectorSet, view: View, reflector: int,
     ``spacing_px`` (P,), where known, is how far apart (world units) the traced rays of
     neighbouring pixels pass at the point: an answer whose true ray already passes
     within :data:`RESIDUAL_PX` of such spacings is kept after one traced ray, with no
-    Jacobian (most answers, away from caustics).
+    Jacobian (most answers, away from caustics). With ``pieces``, an image must lie on
+    one of those smooth pieces of the reflector (``ReflectorSet.piece``): the answer of
+    a tree built over one piece does not slide over a sharp edge onto another piece,
+    whose own tree answers that image.
     """
     pixels = np.asarray(pixels, dtype=np.float64)
     points = np.asarray(points, dtype=np.float64)
     n = len(pixels)
     polished = pixels.copy()
-    f, position, distance, valid, triangle = _true_residual(reflector_set, view, reflector, pixels, points)
+    f, position, distance, valid, triangle = _true_residual(reflector_set, view, reflector, pixels, points,
+                                                            pieces=pieces)
     converged = np.zeros(n, dtype=bool)
     tolerance = np.zeros(n)  # residual (world units) a converged image's ray must stay within
     if spacing_px is not None:
@@ -103,7 +112,7 @@ def polish_on_true_rays(reflector_set: ReflectorSet, view: View, reflector: int,
         near = np.tile(triangle[active], 3)
         f, _, _, reflects, hit = _true_residual(reflector_set, view, reflector,
                                                 np.concatenate([q, q + (STEP_PX, 0.0), q + (0.0, STEP_PX)]),
-                                                np.concatenate([p, p, p]), near)
+                                                np.concatenate([p, p, p]), near, pieces)
         f, fu, fv, reflects = f[:m], f[m:2 * m], f[2 * m:], reflects[:m]
         triangle[active] = hit[:m]
         ju, jv = (fu - f) / STEP_PX, (fv - f) / STEP_PX
@@ -125,7 +134,8 @@ def polish_on_true_rays(reflector_set: ReflectorSet, view: View, reflector: int,
         active = active[usable & ~done]
     moved = np.flatnonzero(np.any(polished != pixels, axis=1))
     f, position[moved], distance[moved], valid[moved], _ = _true_residual(reflector_set, view, reflector,
-                                                                          polished[moved], points[moved])
+                                                                          polished[moved], points[moved],
+                                                                          pieces=pieces)
     # Traced against the whole mesh, the final ray still reaches the point (no other part
     # of the mirror in front of the rings the iteration saw).
     valid[moved] &= np.linalg.norm(f, axis=1) < 2.0 * tolerance[moved]

@@ -171,9 +171,10 @@ def pack_sample_based_camera(sbc) -> PackedSBC:
     fold_base = cell_base + sum(0 if t.cells is None else len(t.cells.lo) for t in sbc.trees)
     folds = getattr(sbc, "folds", None)
     fold_offsets = {}  # patch index of each distinct FoldCells' first sub-cell (shared by sheets)
-    # Scalar offset of each history's block (its grid, mixed-cell grid and fold-cell grid,
-    # then its mixed cells' heads): the sheets of a history share them, so a view's scalars
-    # grow with its histories, not its sheets (each grid is a whole ray map).
+    # Scalar offset of each grid's block (its grid, mixed-cell grid and fold-cell grid,
+    # then its mixed cells' heads), one per history and surface set: the sheets of a set
+    # share them, so a view's scalars grow with its grids, not its sheets (each grid is a
+    # whole ray map).
     blocks = {}
     n_fold_patches = 0
     n_scalars = n_cells = 0
@@ -208,11 +209,11 @@ def pack_sample_based_camera(sbc) -> PackedSBC:
             n_cells += len(tree.cells.lo)
         scalars.append(_exact("cell_start", tree.cell_start))
         n_scalars += n_raylists + 1
-        history = tuple(sbc.histories[g])
-        if history in blocks:
-            header[1, 1] = blocks[history]
+        block = id(grid)  # one grid object per history and surface set, shared by its sheets
+        if block in blocks:
+            header[1, 1] = blocks[block]
             continue
-        blocks[history] = header[1, 1] = n_scalars
+        blocks[block] = header[1, 1] = n_scalars
         scalars.append(_exact("grid", grid.reshape(-1)))
         n_scalars += grid.size
         mixed = None if getattr(sbc, "mixed", None) is None else sbc.mixed[g]

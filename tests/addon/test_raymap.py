@@ -51,6 +51,27 @@ def test_two_spheres_give_histories_up_to_the_max_order_and_clip_heads():
     on_box = np.isclose(ray_map.head[free], BOUNDS[0], atol=1e-9) | np.isclose(ray_map.head[free], BOUNDS[1], atol=1e-9)
     assert free.any() and on_box.any(axis=1).all()
     np.testing.assert_array_equal(ray_map.first_point[follow], ray_map.first_point[first_then])
+    # Each sphere is one smooth piece: surface histories follow the reflection histories.
+    assert ray_map.surfaces == [(0,), (1,), (0, 1), (1, 0)]
+    np.testing.assert_array_equal(ray_map.surface, ray_map.group)
+
+
+def test_surface_histories_follow_the_smooth_pieces_of_a_mirror():
+    """A teapot's rays are numbered by the piece they reflect off (body, lid, spout...);
+    one reflection history, several surface histories, each ray's surface its tail's piece."""
+    from curved_reflections.addon import Reflector, shapes
+
+    teapot = shapes.teapot(32)
+    reflectors = ReflectorSet([Reflector("Teapot", teapot.vertices, teapot.triangles, teapot.normals)])
+    view = look_at_view([4.5, -3.0, 2.6], [0.3, 0, 0.8], width=160, height=120)
+    ray_map = trace_ray_map(reflectors, view, BOUNDS, downsample=2)
+    assert ray_map.histories == [(0,)] and len(ray_map.surfaces) >= 4
+    np.testing.assert_array_equal([ray_map.surfaces[k][0] for k in ray_map.surface],
+                                  reflectors.piece[ray_map.triangle])
+    body = ray_map.group_grid(0, [0])
+    everything = ray_map.group_grid(0)
+    assert 0 < (body >= 0).sum() < (everything >= 0).sum()
+    np.testing.assert_array_equal(body[body >= 0], everything[body >= 0])
 
 
 def test_box_exit_distance():

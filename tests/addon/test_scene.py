@@ -51,3 +51,19 @@ def test_scene_bounds_cover_everything_with_margin():
     np.testing.assert_allclose(hi, [4.5, 4.5, 3.5])
     with pytest.raises(SceneInputError, match="empty"):
         scene_bounds([])
+
+
+def test_smooth_pieces_follow_shared_vertices_not_positions():
+    """Two quads meeting along an edge are one piece where they share its vertices and
+    two where the edge is sharp (its vertices split, same positions)."""
+    from curved_reflections.addon import shapes
+    from curved_reflections.addon.scene import smooth_pieces
+
+    shared = np.array([[0, 1, 2], [1, 3, 2], [2, 3, 4], [3, 5, 4]])
+    np.testing.assert_array_equal(smooth_pieces(shared, 6), [0, 0, 0, 0])
+    split = np.array([[0, 1, 2], [1, 3, 2], [6, 7, 4], [7, 5, 4]])  # 6, 7 copy 2, 3
+    np.testing.assert_array_equal(smooth_pieces(split, 8), [0, 0, 1, 1])
+    # The teapot: body, base, lid, knob, spout and handle meet at creases.
+    teapot = shapes.teapot(32)
+    pieces = smooth_pieces(teapot.triangles, len(teapot.vertices))
+    assert pieces.max() + 1 == 6 and pieces[0] == 0

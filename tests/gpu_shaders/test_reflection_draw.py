@@ -87,15 +87,22 @@ def test_band_pixels_are_missing_reflections_along_the_footprint_edge():
 
 def test_history_boundary_marks_pixels_between_cells_of_different_histories():
     """Cells 0-1 of a 4 x 2 ray map end in history 0, cells 2-3 go on to history 1
-    (second order): at d = 2 the pixels x = 3, 4 lie between cells 1 and 2."""
+    (second order): at d = 2 the pixels x = 3, 4 lie between cells 1 and 2. So do they
+    where cells 2-3 reflect off another smooth piece of the same mirror (a sharp edge)."""
     from types import SimpleNamespace
 
     cells = np.array([(i, j) for j in range(2) for i in range(4)])
     second = cells[cells[:, 0] >= 2]
+    group = np.r_[np.zeros(len(cells), int), np.ones(len(second), int)]
     ray_map = SimpleNamespace(downsample=2, columns=4, rows=2, histories=[(0,), (0, 1)],
-                              cell=np.concatenate([cells, second]),
-                              order=np.r_[np.ones(len(cells), int), np.full(len(second), 2)],
-                              group=np.r_[np.zeros(len(cells), int), np.ones(len(second), int)])
+                              surfaces=[(0,), (0, 1)], cell=np.concatenate([cells, second]),
+                              order=np.r_[np.ones(len(cells), int), np.full(len(second), 2)], group=group,
+                              surface=group)
+    edge = SimpleNamespace(downsample=2, columns=4, rows=2, histories=[(0,)], surfaces=[(0,), (1,)], cell=cells,
+                           order=np.ones(len(cells), int), group=np.zeros(len(cells), int),
+                           surface=(cells[:, 0] >= 2).astype(int))
+    np.testing.assert_array_equal(band_trace.history_boundary(edge, 8, 4, max_order=1),
+                                  band_trace.history_boundary(ray_map, 8, 4, max_order=2))
     boundary = band_trace.history_boundary(ray_map, 8, 4, max_order=2)
     assert set(np.flatnonzero(boundary.any(axis=0)).tolist()) == {3, 4}
     assert boundary[:, [3, 4]].all()
