@@ -358,7 +358,8 @@ def test_redraws_reuse_the_projection_and_a_moved_view_places_the_world_reflecto
 
 
 def test_per_sheet_culling_leaves_the_image_identical(gpu_ready):
-    """The teapot at 320 x 240 splits its reflection into 42 sheets; projecting in each
+    """The teapot at 320 x 240 splits its reflection into sheets (per smooth piece, and
+    where rays cross); projecting in each
     sheet only the vertex chunks that meet its bounds (addon/sheet_bounds.py) skips
     vertices (about 3 %: the floor is seen by most sheets) and changes no pixel."""
     import bpy
