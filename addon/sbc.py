@@ -2,10 +2,11 @@
 """Sample-based cameras: where does a 3D point appear, reflected, in this view?
 
 Popescu, Sacks, Mei (2006). The reflected rays of the desired view (ray map, section
-III-B) are split into reflection groups by history; each group gets a BSP tree of leaf
-cameras (section IV). A point is projected in every group: it descends the group's
-tree to a leaf, the leaf's model gives the ray-map position (u, v) of the ray through
-the point, and the first reflector point is the point on the desired view ray of
+III-B) are split into reflection groups by history, and a group further by the smooth
+pieces of its mirrors (``surface_sets``: across a sharp edge the rays jump); each gets
+a BSP tree of leaf cameras (section IV). A point is projected in every tree: it
+descends to a leaf, the leaf's model gives the ray-map position (u, v) of the ray
+through the point, and the first reflector point is the point on the desired view ray of
 (u, v) at the ray map's (interpolated) first-hit depth.
 
 A projection is accepted where the four rays around (u, v) exist in the group (the
