@@ -89,10 +89,15 @@ class BSPTree:
     #: (n_leaves,) per leaf, the ray-list row (into ``cell_start``) that answers a banded
     #: camera leaf's points in its band or where its Newton fails; -1 where none.
     leaf_fallback: np.ndarray | None = None
+    #: (n_raylist + 1,) CSR offsets into ``list_rays``, and the rays each ray-list row
+    #: holds: its leaf's rays, with those no complete cell of the leaf has (a strip one
+    #: ray wide along a sharp edge of the mirror), which seed sbc's answers across it.
+    list_ray_start: np.ndarray | None = None
+    list_rays: np.ndarray | None = None
 
     @property
     def nbytes(self) -> int:
-        optional = (self.leaf_cones, self.camera_band, self.leaf_fallback)
+        optional = (self.leaf_cones, self.camera_band, self.leaf_fallback, self.list_ray_start, self.list_rays)
         arrays = (self.plane_normal, self.plane_offset, self.left, self.right, self.leaf, self.leaf_kind,
                   self.leaf_row, self.cell_start) + tuple(a for a in optional if a is not None)
         models = [m.nbytes for m in (self.cameras, self.cells) if m is not None]
@@ -215,14 +220,17 @@ def build_bsp(ray_map: RayMap, rays: np.ndarray, grid: np.ndarray, model, accura
             raise RaysCrossError(f"{len(member_slot)} memberships for {len(rays)} rays at depth {depth + 1}")
         level_ids = child[splits].reshape(-1)
 
-    cell_start, cells = _raylist_cells(ray_map, grid, np.concatenate(raylist_rows), np.concatenate(raylist_rays),
-                                       n_raylists)
+    raylist_rows, raylist_rays = np.concatenate(raylist_rows), np.concatenate(raylist_rays)
+    cell_start, cells = _raylist_cells(ray_map, grid, raylist_rows, raylist_rays, n_raylists)
+    order = np.argsort(raylist_rows, kind="stable")
+    list_ray_start = np.concatenate([[0], np.cumsum(np.bincount(raylist_rows, minlength=n_raylists))])
     tree = _assemble_tree(levels, n_nodes, model, camera_parts, camera_bands, cell_start, cells, depth)
     reach_ray, reach_leaf = reachable_rays(ray_map, grid, np.concatenate(leaf_rays),
                                            tree.leaf[np.concatenate(leaf_nodes)], len(tree.leaf_kind))
     cones = ray_cones(ray_map, grid, reach_ray, reach_leaf, len(tree.leaf_kind))
     whole = ray_cones(ray_map, grid, np.unique(reach_ray), np.zeros(len(np.unique(reach_ray)), np.int64), 1)[0]
-    return dataclasses.replace(tree, leaf_cones=cones, cone=whole)
+    return dataclasses.replace(tree, leaf_cones=cones, cone=whole, list_ray_start=list_ray_start,
+                               list_rays=raylist_rays[order])
 
 
 def reachable_rays(ray_map: RayMap, grid: np.ndarray, member_ray: np.ndarray, member_leaf: np.ndarray, n: int):

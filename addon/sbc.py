@@ -200,6 +200,9 @@ class SampleBasedCamera:
             target, pixels, reflector_points, s, kind, spacing, edge = (
                 np.concatenate(column) for column in zip(*(entry[1:] for entry in pending if entry[0] == g)))
             keep = self._polish(g, np.arange(len(target)), pixels, reflector_points, s, points[target], spacing)
+            if self.owned is not None:
+                # Polished from a seed, an image across an edge may come to rest in another sheet's cells.
+                keep[edge] &= self._owns(g, pixels[edge] / self.ray_map.downsample - 0.5)
             # Answers across an edge were never checked against the rays' heads: the
             # reflected segment must reach the point past every reflector.
             check = np.flatnonzero(edge & keep)
@@ -236,7 +239,9 @@ class SampleBasedCamera:
         folds = self.folds[g] if self.folds is not None and len(self.folds[g].valid) else None
 
         on_camera = np.flatnonzero(kind == CAMERA_LEAF)
-        edge, edge_distance = np.zeros(0, dtype=np.int64), np.zeros(0)  # answers across a sharp edge
+        edges = pending is not None and self._has_edges(g)
+        seeded = np.zeros(0, dtype=np.int64)  # ray-list answers to seed from the rays along an edge
+        near_edge = []  # (indices, ray distances) of answers that may lie just across a sharp edge
         if len(on_camera):
             model = LEAF_MODELS[self.model_name]
             cells[on_camera], accepted[on_camera], distance = model.project(
@@ -254,32 +259,46 @@ class SampleBasedCamera:
                     handed |= (tree.leaf_fallback[leaf[on_camera]] >= 0) & projected & ~accepted[on_camera]
             to_list = on_camera[handed]
             kind[to_list], row[to_list] = RAY_LIST_LEAF, tree.leaf_fallback[leaf[to_list]]
-            if pending is not None and distance is not None and self._has_edges(g):
+            if edges and distance is not None:
                 own = np.flatnonzero(kind[on_camera] == CAMERA_LEAF)
                 leaf_row = row[on_camera[own]]
                 with np.errstate(invalid="ignore"):
                     near = (np.all(cells[on_camera[own]] >= tree.cameras.lo[leaf_row] - EDGE_REACH_CELLS, axis=1)
                             & np.all(cells[on_camera[own]] <= tree.cameras.hi[leaf_row] + EDGE_REACH_CELLS, axis=1))
-                own = own[near]
-                across = own[self._across_edge(g, cells[on_camera[own]], distance[own])]
-                edge, edge_distance = on_camera[across], distance[across]
-                accepted[edge] = False
+                near_edge.append((on_camera[own[near]], distance[own[near]]))
         on_list = np.flatnonzero(kind == RAY_LIST_LEAF)
         if len(on_list) and tree.cells is not None:
             # A banded leaf's ray list holds a camera leaf's many cells: more candidates.
             keep = np.where(tree.leaf_kind[leaf[on_list]] == CAMERA_LEAF, BAND_CANDIDATES, CANDIDATE_CELLS)
-            cells[on_list], accepted[on_list] = _project_ray_lists(tree, row[on_list], points[on_list], keep)
+            cells[on_list], accepted[on_list], list_distance = _project_ray_lists(
+                tree, row[on_list], points[on_list], keep, EDGE_REACH_CELLS if edges else 0.0)
+            if edges:
+                unheld = np.flatnonzero(~accepted[on_list])
+                near_edge.append((on_list[unheld], list_distance[unheld]))
+                seeded = on_list[unheld[np.isnan(list_distance[unheld])]]
             if folds is not None:
                 listed = np.zeros(len(points), dtype=bool)
                 listed[on_list] = accepted[on_list]
                 accepted[on_list] = _refine_in_folds(folds, cells, listed, points)[on_list]
+        edge, edge_distance = np.zeros(0, dtype=np.int64), np.zeros(0)  # answers across a sharp edge
+        if near_edge:
+            index, ray_distance = (np.concatenate(column) for column in zip(*near_edge))
+            across = self._across_edge(g, cells[index], ray_distance)
+            edge, edge_distance = index[across], ray_distance[across]
+            accepted[edge] = False
+            if len(seeded) and tree.list_rays is not None:
+                # No cell of the ray list reaches the point: its rays along the edge seed it.
+                seed_cells, seed_distance = _edge_seeds(self.ray_map, grid, tree, row[seeded], points[seeded],
+                                                        self._edge_rays[g])
+                reached = np.flatnonzero(np.isfinite(seed_distance))
+                cells[seeded[reached]] = seed_cells[reached]
+                edge = np.concatenate([edge, seeded[reached]])
+                edge_distance = np.concatenate([edge_distance, seed_distance[reached]])
         if self.owned is not None:
             # Next to a seam both sheets' leaves reach half a cell over it: the answer counts
             # in the sheet owning its cell only, so one image is not answered twice.
-            lo, hi = self.owned[g, :2], self.owned[g, 2:]
-            with np.errstate(invalid="ignore"):
-                accepted &= np.all((cells >= lo) & (cells < hi), axis=1)
-                owned_edge = np.all((cells[edge] >= lo) & (cells[edge] < hi), axis=1)
+            accepted &= self._owns(g, cells)
+            owned_edge = self._owns(g, cells[edge])
             edge, edge_distance = edge[owned_edge], edge_distance[owned_edge]
         if len(edge):
             # Answers across a sharp edge of the mirror are found on the true rays only.
@@ -306,6 +325,12 @@ class SampleBasedCamera:
         result.leaf_kind[g, target] = kind
         result.ray_distance[g, target] = s
 
+    def _owns(self, g: int, cells) -> np.ndarray:
+        """Whether tree ``g``'s sheet owns each ray-map position (``owned``; False for NaN)."""
+        lo, hi = self.owned[g, :2], self.owned[g, 2:]
+        with np.errstate(invalid="ignore"):
+            return np.all((cells >= lo) & (cells < hi), axis=1)
+
     def _has_edges(self, g: int) -> bool:
         """Whether tree ``g`` holds the first-order rays of some of its reflector's smooth
         pieces only (``surface_sets``), so that its reflector goes on past its rays' edge."""
@@ -320,13 +345,31 @@ class SampleBasedCamera:
 
         Between the last ray of one smooth piece and the first of the next, the tree's
         cells end, yet the piece goes on up to the edge and reflects points there. The
-        camera leaf's patch, extrapolated less than EDGE_REACH_CELLS past its rays,
-        seeds the true-ray polish, which keeps an image only on the tree's pieces
-        (``polish_on_true_rays``).
+        leaf's model (a camera leaf's patch, a ray-list leaf's nearest cell patch),
+        extrapolated less than EDGE_REACH_CELLS past its rays, seeds the true-ray
+        polish, which keeps an image only on the tree's pieces (``polish_on_true_rays``).
         """
         with np.errstate(invalid="ignore"):
             near = np.flatnonzero(np.isfinite(cells).all(axis=1) & (distance >= 0))
         return near[_complete(self._history_grids[g], cells[near]) & ~_complete(self.grids[g], cells[near])]
+
+    @functools.cached_property
+    def _edge_rays(self) -> list:
+        """Per tree, (R,) bool: its rays at a corner of a cell whose four rays exist in the
+        history but not all in the tree (the rays along a sharp edge of its mirror,
+        ``_across_edge``); None for a tree without edges. Sheets of one set share theirs."""
+        masks = {}
+        for g, (grid, history) in enumerate(zip(self.grids, self._history_grids)):
+            if self._has_edges(g) and id(grid) not in masks:
+                edge = _complete_quads(history) & ~_complete_quads(grid)
+                corner = np.zeros(grid.shape, dtype=bool)
+                for dj in (0, 1):
+                    for di in (0, 1):
+                        corner[dj:dj + edge.shape[0], di:di + edge.shape[1]] |= edge
+                mask = np.zeros(self.ray_map.n_rays, dtype=bool)
+                mask[grid[corner & (grid >= 0)]] = True
+                masks[id(grid)] = mask
+        return [masks.get(id(grid)) if self._has_edges(g) else None for g, grid in enumerate(self.grids)]
 
     @functools.cached_property
     def _history_grids(self) -> list:
@@ -378,6 +421,58 @@ class SampleBasedCamera:
         """(R, 8) rows tail, direction, head distance, first-hit depth: one gather per corner."""
         m = self.ray_map
         return np.concatenate([m.tail, m.direction, m.head_distance[:, None], m.first_depth[:, None]], axis=1)
+
+
+def _complete_quads(grid: np.ndarray) -> np.ndarray:
+    """(rows - 1, columns - 1) whether the four rays at the corners of each unit cell exist in ``grid``."""
+    present = grid >= 0
+    return present[:-1, :-1] & present[:-1, 1:] & present[1:, :-1] & present[1:, 1:]
+
+
+def _edge_seeds(ray_map: RayMap, grid: np.ndarray, tree: BSPTree, row, points, edge_rays: np.ndarray):
+    """Seeds for images just across a sharp edge, on ray-list rows ``row`` (P,) that no
+    cell answers: per point, the row's ray along the edge (``edge_rays``) whose line
+    passes closest to it, relative to how far the neighbouring rays pass there (within
+    EDGE_REACH_CELLS of them). Returns (ray-map cells (P, 2), distance along the ray (P,)),
+    NaN where no such ray passes near.
+
+    A ray-list leaf one ray wide along the edge has no complete cell, so neither its
+    cells nor their extrapolation reach the point; the true-ray polish starts at the ray.
+    """
+    start, stop = tree.list_ray_start[row], tree.list_ray_start[row + 1]
+    pair_point, pair_ray = expand_ranges(start, stop - start)
+    ray = tree.list_rays[pair_ray]
+    on_edge = edge_rays[ray]
+    pair_point, ray = pair_point[on_edge], ray[on_edge]
+    offset = points[pair_point] - ray_map.tail[ray]
+    along = np.einsum("ij,ij->i", offset, ray_map.direction[ray])
+    miss = np.sqrt(np.maximum(np.einsum("ij,ij->i", offset, offset) - along * along, 0.0))
+    tail_step, direction_step = _ray_steps(ray_map, grid, ray)
+    ratio = miss / np.maximum(EDGE_REACH_CELLS * (tail_step + np.maximum(along, 0.0) * direction_step), 1e-300)
+    near = np.flatnonzero((along >= 0) & (ratio <= 1.0))
+    order = near[np.lexsort((ratio[near], pair_point[near]))]
+    first = order[np.concatenate([[True], pair_point[order][1:] != pair_point[order][:-1]])] if len(order) else order
+    cells = np.full((len(points), 2), np.nan)
+    distance = np.full(len(points), np.nan)
+    cells[pair_point[first]] = ray_map.cell[ray[first]]
+    distance[pair_point[first]] = along[first]
+    return cells, distance
+
+
+def _ray_steps(ray_map: RayMap, grid: np.ndarray, rays: np.ndarray):
+    """How far each ray's tail and unit direction (R,) lie from those of its nearest
+    neighbours in ``grid`` (the largest over the four that exist)."""
+    i, j = ray_map.cell[rays, 0], ray_map.cell[rays, 1]
+    tail, direction = np.zeros(len(rays)), np.zeros(len(rays))
+    for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+        ni, nj = i + di, j + dj
+        inside = np.flatnonzero((ni >= 0) & (nj >= 0) & (ni < grid.shape[1]) & (nj < grid.shape[0]))
+        other = grid[nj[inside], ni[inside]]
+        inside, other = inside[other >= 0], other[other >= 0]
+        tail[inside] = np.maximum(tail[inside], _norm(ray_map.tail[other] - ray_map.tail[rays[inside]]))
+        direction[inside] = np.maximum(direction[inside],
+                                       _norm(ray_map.direction[other] - ray_map.direction[rays[inside]]))
+    return tail, direction
 
 
 def _complete(grid: np.ndarray, cells: np.ndarray) -> np.ndarray:
@@ -435,11 +530,14 @@ def in_band(tree: BSPTree, camera_row, distance) -> np.ndarray:
         return (distance > band[:, 0]) & (distance < band[:, 1])
 
 
-def _project_ray_lists(tree: BSPTree, row, points, keep=CANDIDATE_CELLS):
+def _project_ray_lists(tree: BSPTree, row, points, keep=CANDIDATE_CELLS, reach: float = 0.0):
     """Find, among a ray-list leaf's cells, the one whose bilinear ray patch holds the point.
 
     Newton runs only on the ``keep`` cells (per point, or one count for all) whose
-    central ray passes closest to the point.
+    central ray passes closest to the point. Returns (cells (P, 2), found (P,),
+    distance (P,)). With ``reach`` > 0, a point no cell holds gets the answer of the
+    nearest patch extrapolated less than ``reach`` cells past it (found stays False):
+    a seed for an image just across a sharp edge (``SampleBasedCamera._across_edge``).
     """
     start, stop = tree.cell_start[row], tree.cell_start[row + 1]
     count = stop - start
@@ -447,14 +545,19 @@ def _project_ray_lists(tree: BSPTree, row, points, keep=CANDIDATE_CELLS):
     pair_point, pair_cell = _closest_cells(tree.cells, pair_point, pair_cell, points, keep)
     cells, distance, residual = invert_patches(tree.cells, pair_cell, points[pair_point])
     local = cells - tree.cells.lo[pair_cell]
-    inside = (np.all((local >= -CELL_TOLERANCE) & (local <= 1 + CELL_TOLERANCE), axis=1)
-              & (residual < 1e-6 * (1 + np.linalg.norm(points[pair_point], axis=1))) & (distance >= 0))
+    solved = (residual < 1e-6 * (1 + np.linalg.norm(points[pair_point], axis=1))) & (distance >= 0)
+    inside = solved & np.all((local >= -CELL_TOLERANCE) & (local <= 1 + CELL_TOLERANCE), axis=1)
     result = np.full((len(points), 2), np.nan)
+    along = np.full(len(points), np.nan)
     found = np.zeros(len(points), dtype=bool)
+    if reach > 0:
+        near = solved & np.all((local >= -reach) & (local <= 1 + reach), axis=1)
+        first = np.flatnonzero(near)[::-1]
+        result[pair_point[first]], along[pair_point[first]] = cells[first], distance[first]
     first = np.flatnonzero(inside)[::-1]  # reversed so the first match per point is written last
-    result[pair_point[first]] = cells[first]
+    result[pair_point[first]], along[pair_point[first]] = cells[first], distance[first]
     found[pair_point[first]] = True
-    return result, found
+    return result, found, along
 
 
 def _in_fold_cells(folds: list | None, g: int, cells: np.ndarray) -> np.ndarray:
