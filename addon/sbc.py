@@ -275,7 +275,7 @@ class SampleBasedCamera:
             if edges:
                 unheld = np.flatnonzero(~accepted[on_list])
                 near_edge.append((on_list[unheld], list_distance[unheld]))
-                seeded = on_list[unheld[np.isnan(list_distance[unheld])]]
+                seeded = on_list[unheld]
             if folds is not None:
                 listed = np.zeros(len(points), dtype=bool)
                 listed[on_list] = accepted[on_list]
@@ -286,8 +286,10 @@ class SampleBasedCamera:
             across = self._across_edge(g, cells[index], ray_distance)
             edge, edge_distance = index[across], ray_distance[across]
             accepted[edge] = False
+            seeded = np.setdiff1d(seeded, edge)
             if len(seeded) and tree.list_rays is not None:
-                # No cell of the ray list reaches the point: its rays along the edge seed it.
+                # No cell of the ray list holds the point, nor reaches it across the edge:
+                # its rays along the edge seed it.
                 seed_cells, seed_distance = _edge_seeds(self.ray_map, grid, tree, row[seeded], points[seeded],
                                                         self._edge_rays[g])
                 reached = np.flatnonzero(np.isfinite(seed_distance))
@@ -430,14 +432,15 @@ def _complete_quads(grid: np.ndarray) -> np.ndarray:
 
 
 def _edge_seeds(ray_map: RayMap, grid: np.ndarray, tree: BSPTree, row, points, edge_rays: np.ndarray):
-    """Seeds for images just across a sharp edge, on ray-list rows ``row`` (P,) that no
-    cell answers: per point, the row's ray along the edge (``edge_rays``) whose line
-    passes closest to it, relative to how far the neighbouring rays pass there (within
-    EDGE_REACH_CELLS of them). Returns (ray-map cells (P, 2), distance along the ray (P,)),
-    NaN where no such ray passes near.
+    """Seeds for images near a sharp edge, on ray-list rows ``row`` (P,) whose cells
+    neither hold the point nor reach it across the edge: per point, the row's ray along
+    the edge (``edge_rays``) whose line passes closest to it, relative to how far the
+    neighbouring rays pass there (within EDGE_REACH_CELLS of them). Returns (ray-map
+    cells (P, 2), distance along the ray (P,)), NaN where no such ray passes near.
 
-    A ray-list leaf one ray wide along the edge has no complete cell, so neither its
-    cells nor their extrapolation reach the point; the true-ray polish starts at the ray.
+    A ray-list leaf one ray wide along the edge has no complete cell, and next to where
+    three pieces meet a point's image may lie in the cells of another leaf than the one
+    it descends to; the true-ray polish starts at the ray.
     """
     start, stop = tree.list_ray_start[row], tree.list_ray_start[row + 1]
     pair_point, pair_ray = expand_ranges(start, stop - start)

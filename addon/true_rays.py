@@ -15,8 +15,9 @@ by iterating on the true geometry. The answer's desired-view pixel q starts Gaus
 on the exact first-order reflection law: trace the view ray through q to the reflector
 (first hit x, interpolated normal n), reflect it (r), and drive the part of p - x
 perpendicular to r to zero; the 3x2 Jacobian comes from two more traced rays a quarter
-pixel away. An image is kept where the iteration converges to a ray that meets the
-group's reflector, reflects off its front and reaches p ahead of the mirror, within
+pixel away, on the side that stays on the mirror (or on its smooth piece) next to an
+edge. An image is kept where the iteration converges to a ray that meets the group's
+reflector, reflects off its front and reaches p ahead of the mirror, within
 :data:`MAX_SHIFT_CELLS` ray-map cells of where it started; it then carries the exact
 first reflector point x and distance s. A point whose answer does not converge has no
 image in that group (as a point that no ray reaches has none).
@@ -110,12 +111,19 @@ def polish_on_true_rays(reflector_set: ReflectorSet, view: View, reflector: int,
         # the triangles around the pixel's last hit (steps are a few pixels at most); the
         # final answer is traced against the whole mesh below.
         near = np.tile(triangle[active], 3)
-        f, _, _, reflects, hit = _true_residual(reflector_set, view, reflector,
-                                                np.concatenate([q, q + (STEP_PX, 0.0), q + (0.0, STEP_PX)]),
-                                                np.concatenate([p, p, p]), near, pieces)
+        offsets = np.concatenate([np.zeros((m, 2)), np.tile((STEP_PX, 0.0), (m, 1)), np.tile((0.0, STEP_PX), (m, 1))])
+        f, _, _, reflects, hit = _true_residual(reflector_set, view, reflector, np.tile(q, (3, 1)) + offsets,
+                                                np.tile(p, (3, 1)), near, pieces)
+        # Next to an edge of the mirror (or of a smooth piece) a neighbour may leave it,
+        # where the residual jumps: that derivative is taken on the other side instead.
+        back = np.flatnonzero(~reflects[m:] & np.tile(reflects[:m], 2))
+        if len(back):
+            offsets[m + back] *= -1.0
+            f[m + back], _, _, _, _ = _true_residual(reflector_set, view, reflector, q[back % m] + offsets[m + back],
+                                                     p[back % m], near[back], pieces)
         f, fu, fv, reflects = f[:m], f[m:2 * m], f[2 * m:], reflects[:m]
         triangle[active] = hit[:m]
-        ju, jv = (fu - f) / STEP_PX, (fv - f) / STEP_PX
+        ju, jv = (fu - f) / offsets[m:2 * m, :1], (fv - f) / offsets[2 * m:, 1:]
         # Normal equations of the 3x2 least-squares step.
         a, b, c = np.einsum("ij,ij->i", ju, ju), np.einsum("ij,ij->i", ju, jv), np.einsum("ij,ij->i", jv, jv)
         gu, gv = np.einsum("ij,ij->i", ju, f), np.einsum("ij,ij->i", jv, f)

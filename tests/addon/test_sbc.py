@@ -578,6 +578,65 @@ def test_images_just_across_a_sharp_edge_are_found_on_the_true_rays_once(teapot_
     assert len(same) > 100 and (gap > 1.0).all()
 
 
+def _points_seen_across_edges(sbc, reflectors, count, rng):
+    """Points reflected in cells that straddle a sharp edge (four rays in the history,
+    not all in any tree): a view ray through a random spot of such a cell, reflected
+    off the mirror, carries the point 0.3 to 3 units out."""
+    from curved_reflections.addon.raytrace import reflect
+    from curved_reflections.addon.sbc import _complete_quads
+
+    ray_map = sbc.ray_map
+    straddling = _complete_quads(ray_map.group_grid(0)) & ~np.any([_complete_quads(g) for g in sbc.grids], axis=0)
+    j, i = np.nonzero(straddling)
+    pick = rng.integers(0, len(i), count)
+    cells = np.stack([i[pick], j[pick]], axis=1) + rng.uniform(0.05, 0.95, (count, 2))
+    origins, directions = ray_map.view.pixel_rays(ray_map.cell_pixels(cells))
+    hits = ReflectorSet(reflectors).intersect(origins, directions)
+    reflected = reflect(directions, np.where(hits.hit[:, None], hits.normal, 0.0))
+    points = hits.position + rng.uniform(0.3, 3.0, (count, 1)) * reflected
+    return points[hits.hit]
+
+
+def test_ray_lists_along_an_edge_seed_the_images_across_it(monkeypatch):
+    """Along a sharp edge the BSP ends in ray-list leaves, some one ray wide with no
+    complete cell, so no cell patch holds, or extrapolates to, a point reflected between
+    their rays and the edge: the leaf's ray along the edge passing closest seeds the
+    true-ray polish (sbc._edge_seeds). On points reflected just across the teapot's
+    edges, the seeds find images that are otherwise lost, every one an exact image
+    within a pixel, and change no other answer."""
+    from curved_reflections.addon import sbc as sbc_module
+
+    # The demo teapot (operators/demo_scenes.build_teapot), where the handle, the body
+    # and the base meet within a few cells of its view.
+    teapot = shapes.teapot(64)
+    angle = np.radians(-15.0)
+    turn = np.array([[np.cos(angle), -np.sin(angle), 0.0], [np.sin(angle), np.cos(angle), 0.0], [0.0, 0.0, 1.0]])
+    reflectors = [Reflector("Teapot", teapot.vertices @ turn.T, teapot.triangles, teapot.normals @ turn.T)]
+    view = look_at_view([3.0, -5.2, 2.6], [0.1, 0.0, 0.75], width=480, height=320,
+                        fov_y_deg=np.degrees(2 * np.arctan(18.0 / 45.0 * 320 / 480)))
+    sbc = build_sample_based_camera(reflectors, view, (np.array([-9.0, -9.0, -0.1]), np.array([9.0, 9.0, 2.9])),
+                                    downsample=2)
+    cellless = 0
+    for g, tree in enumerate(sbc.trees):
+        if sbc._edge_rays[g] is None:
+            continue
+        rays, cells = np.diff(tree.list_ray_start), np.diff(tree.cell_start)
+        along_edge = np.add.reduceat(sbc._edge_rays[g][tree.list_rays], tree.list_ray_start[:-1][rays > 0]) > 0
+        cellless += int(((cells[rays > 0] == 0) & along_edge).sum())
+    assert cellless >= 5
+    points = _points_seen_across_edges(sbc, reflectors, 600, np.random.default_rng(11))
+    exact = solve_reflections(ReflectorSet(reflectors), view, points)
+    exact = exact.select(exact.visible)
+    seeded = sbc.project(points)
+    monkeypatch.setattr(sbc_module, "_edge_seeds", lambda ray_map, grid, tree, row, points, edge_rays: (
+        np.full((len(points), 2), np.nan), np.full(len(points), np.nan)))
+    unseeded = sbc.project(points)
+    added = seeded.valid & ~unseeded.valid
+    assert added.sum() >= 15 and not (unseeded.valid & ~seeded.valid).any()
+    assert _images_found(seeded, exact) - _images_found(unseeded, exact) == added.sum()
+    np.testing.assert_allclose(seeded.pixels[unseeded.valid], unseeded.pixels[unseeded.valid], atol=1e-9)
+
+
 def test_a_stored_camera_rebuilds_its_per_piece_grids(teapot_case):
     """Grids are not stored (sbc_arrays): they are rebuilt from the ray map per history
     and surface set, one object shared by the sheets of a set, and answer the same."""

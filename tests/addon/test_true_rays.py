@@ -56,3 +56,32 @@ def test_a_point_no_reflected_ray_reaches_has_no_image():
     inside = np.zeros((len(exact.point), 3))  # the sphere's centre: behind every mirror point
     _, _, _, ok = polish_on_true_rays(reflector_set, view, 0, exact.pixel, inside, 2.0)
     assert not ok.any()
+
+
+def test_images_within_a_step_of_the_mirror_edge_converge():
+    """Where the finite-difference neighbour a quarter pixel right of (or below) an image
+    leaves the mirror, the residual jumps there: the derivative is taken on the other
+    side, so images 0.2 px inside the right and lower rim converge (taken across the rim,
+    none of them did)."""
+    reflector_set, view, _, _ = _scene()
+    centre = view.to_pixels(np.zeros((1, 3)))[0][0]
+    rows = centre[1] + np.linspace(-30.0, 30.0, 7)
+    rim = {}
+    for axis, across in ((0, rows), (1, centre[0] + np.linspace(-30.0, 30.0, 7))):
+        inner, outer = np.full(7, centre[axis]), np.full(7, centre[axis] + 150.0)
+        for _ in range(30):  # bisection on where the view rays leave the sphere
+            middle = 0.5 * (inner + outer)
+            pixels = np.stack([middle, across] if axis == 0 else [across, middle], axis=1)
+            hit = reflector_set.intersect(*view.pixel_rays(pixels)).hit
+            inner, outer = np.where(hit, middle, inner), np.where(hit, outer, middle)
+        rim[axis] = np.stack([inner - 0.2, across] if axis == 0 else [across, inner - 0.2], axis=1)
+    images = np.concatenate([rim[0], rim[1]])
+    origins, directions = view.pixel_rays(images)
+    hits = reflector_set.intersect(origins, directions)
+    assert hits.hit.all()
+    reflected = directions - 2.0 * np.einsum("ij,ij->i", directions, hits.normal)[:, None] * hits.normal
+    points = hits.position + 1.5 * reflected
+    start = images - np.array([0.4, 0.3])
+    pixels, _, _, ok = polish_on_true_rays(reflector_set, view, 0, start, points, 2.0)
+    assert ok.all()
+    assert np.linalg.norm(pixels - images, axis=1).max() < 0.01
