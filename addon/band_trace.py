@@ -203,12 +203,19 @@ def unreliable_cells(ray_map, trees, mixed=None, folds=None) -> np.ndarray:
     lists (their rays focus, ``bsp._depth_bands``), fold cells (the rays cross: a
     caustic, ``sbc.FoldCells``) and mixed cells (an occluder's silhouette crosses the
     cell, ``sbc.MixedCells``). Reflections there may be missing although the mirror
-    shows an object (thin, strongly curved parts: a teapot's spout)."""
+    shows an object (thin, strongly curved parts: a teapot's spout). A ray-list leaf's
+    rays (``BSPTree.list_rays``) mark the four cells around each: a leaf one ray wide
+    along a sharp edge of the mirror has no complete cell of its own."""
     out = np.zeros((ray_map.rows, ray_map.columns), dtype=bool)
     for tree in trees:
         if tree.cells is not None and len(tree.cells.lo):
             corner = np.rint(tree.cells.lo).astype(np.int64)
             out[corner[:, 1], corner[:, 0]] = True
+        if getattr(tree, "list_rays", None) is not None and len(tree.list_rays):
+            i, j = ray_map.cell[tree.list_rays, 0], ray_map.cell[tree.list_rays, 1]
+            for di in (0, 1):
+                for dj in (0, 1):
+                    out[np.maximum(j - dj, 0), np.maximum(i - di, 0)] = True
     for cells in list(mixed or []) + list(folds or []):
         if cells is not None:
             out |= cells.index >= 0

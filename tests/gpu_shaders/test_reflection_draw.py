@@ -395,19 +395,20 @@ def test_per_sheet_culling_leaves_the_image_identical(gpu_ready):
 
 def test_unreliable_cells_mark_ray_list_fold_and_mixed_cells_and_their_pixels():
     """A pixel without a drawn reflection inside a ray-list, fold or mixed cell is traced
-    (band_trace.unreliable_cells); one in a camera-leaf cell far from any edge is not."""
+    (band_trace.unreliable_cells), and so is one in the four cells around a ray of a
+    ray-list leaf with no complete cell; one in a camera-leaf cell far from any edge is not."""
     from types import SimpleNamespace
 
-    ray_map = SimpleNamespace(rows=6, columns=6, downsample=2)
-    tree = SimpleNamespace(cells=SimpleNamespace(lo=np.array([[1.0, 1.0]])))
-    no_cells = SimpleNamespace(cells=None)
+    ray_map = SimpleNamespace(rows=6, columns=6, downsample=2, cell=np.array([[0, 0], [5, 0], [5, 5]]))
+    tree = SimpleNamespace(cells=SimpleNamespace(lo=np.array([[1.0, 1.0]])), list_rays=np.zeros(0, np.int64))
+    no_cells = SimpleNamespace(cells=None, list_rays=np.array([2]))  # one ray, at cell (5, 5)
     fold_index = np.full((6, 6), -1)
     fold_index[3, 4] = 0
     mixed_index = np.full((6, 6), -1)
     mixed_index[4, 2] = 0
     cells = band_trace.unreliable_cells(ray_map, [tree, no_cells], [SimpleNamespace(index=mixed_index)],
                                         [SimpleNamespace(index=fold_index)])
-    assert cells.sum() == 3 and cells[1, 1] and cells[3, 4] and cells[4, 2]
+    assert cells.sum() == 7 and cells[1, 1] and cells[3, 4] and cells[4, 2] and cells[4:, 4:].all()
     pixels = band_trace.cell_pixels_mask(cells, 2, 12, 12)
     # Cell (1, 1) is the square between ray centres 3 and 5 px: pixels 3 and 4 on each axis.
     np.testing.assert_array_equal(np.argwhere(pixels[:6, :6]), [[3, 3], [3, 4], [4, 3], [4, 4]])
