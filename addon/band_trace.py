@@ -211,7 +211,7 @@ def unreliable_cells(ray_map, trees, mixed=None, folds=None) -> np.ndarray:
         if tree.cells is not None and len(tree.cells.lo):
             corner = np.rint(tree.cells.lo).astype(np.int64)
             out[corner[:, 1], corner[:, 0]] = True
-        if getattr(tree, "list_rays", None) is not None and len(tree.list_rays):
+        if tree.list_rays is not None and len(tree.list_rays):
             i, j = ray_map.cell[tree.list_rays, 0], ray_map.cell[tree.list_rays, 1]
             for di in (0, 1):
                 for dj in (0, 1):
