@@ -200,8 +200,6 @@ def causes(ours, reference, mask, world: int, band_px: int):
 
 def causes_image(reference_image, cause):
     """The reference dimmed, each disagreeing pixel in its cause's colour (:data:`CAUSES`)."""
-    import numpy as np
-
     panel = 0.35 * reference_image[..., :3].copy()
     for index, colour in enumerate(CAUSES.values()):
         panel[cause == index] = colour

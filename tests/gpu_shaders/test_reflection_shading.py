@@ -9,7 +9,6 @@ makes every expected pixel exact: the reflection of p in the plane z = 0 is p mi
 """
 
 import numpy as np
-import pytest
 
 from curved_reflections.addon import DiffuseMesh, Reflector, build_sample_based_camera, look_at_view, scene_bounds
 from curved_reflections.addon.band_trace import SHADE_AMBIENT
