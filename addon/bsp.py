@@ -33,7 +33,7 @@ import numpy as np
 
 from .ray_patch import ERROR_SAMPLE_FRACTIONS, RayPatches, fit_patches
 from .raymap import RayMap
-from .segments import expand_ranges, segment_max, segment_mean, segment_min, segment_sum
+from .segments import expand_ranges, range_offsets, segment_max, segment_mean, segment_min, segment_sum
 
 MAX_DEPTH = 40
 #: A tree whose leaves hold, in all, more than this many times the group's rays is
@@ -104,6 +104,15 @@ class BSPTree:
         return int(sum(a.nbytes for a in arrays)) + int(sum(models))
 
 
+def grid_neighbour(grid: np.ndarray, i: np.ndarray, j: np.ndarray, di: int, dj: int) -> np.ndarray:
+    """Ray index at cell (i + di, j + dj) of ``grid`` (RayMap.group_grid), -1 where there
+    is none or the cell lies outside."""
+    rows, columns = grid.shape
+    ii, jj = i + di, j + dj
+    inside = (ii >= 0) & (ii < columns) & (jj >= 0) & (jj < rows)
+    return np.where(inside, grid[np.clip(jj, 0, rows - 1), np.clip(ii, 0, columns - 1)], -1)
+
+
 def diagonal_neighbours(ray_map: RayMap, grid: np.ndarray, rays: np.ndarray) -> np.ndarray:
     """(R, 4) ray indices of each ray's unit-frustum corners in its group; itself where missing.
 
@@ -112,11 +121,23 @@ def diagonal_neighbours(ray_map: RayMap, grid: np.ndarray, rays: np.ndarray) -> 
     i, j = ray_map.cell[rays, 0], ray_map.cell[rays, 1]
     corners = []
     for di, dj in ((-1, -1), (1, -1), (-1, 1), (1, 1)):
-        ii, jj = i + di, j + dj
-        ok = (ii >= 0) & (ii < ray_map.columns) & (jj >= 0) & (jj < ray_map.rows)
-        neighbour = np.where(ok, grid[np.clip(jj, 0, ray_map.rows - 1), np.clip(ii, 0, ray_map.columns - 1)], -1)
+        neighbour = grid_neighbour(grid, i, j, di, dj)
         corners.append(np.where(neighbour >= 0, neighbour, rays))
     return np.stack(corners, axis=1)
+
+
+def neighbour_spacing(ray_map: RayMap, grid: np.ndarray, rays: np.ndarray):
+    """How far each ray's tail and unit direction (R,) lie from those of its four
+    neighbours in ``grid`` (the largest; 0 where it has none): a point at distance s
+    along the ray lies between it and its neighbours within tail + s * direction."""
+    i, j = ray_map.cell[rays, 0], ray_map.cell[rays, 1]
+    tail, direction = np.zeros(len(rays)), np.zeros(len(rays))
+    for di, dj in ((1, 0), (0, 1), (-1, 0), (0, -1)):
+        neighbour = grid_neighbour(grid, i, j, di, dj)
+        other = np.where(neighbour >= 0, neighbour, rays)
+        tail = np.maximum(tail, np.linalg.norm(ray_map.tail[other] - ray_map.tail[rays], axis=1))
+        direction = np.maximum(direction, np.linalg.norm(ray_map.direction[other] - ray_map.direction[rays], axis=1))
+    return tail, direction
 
 
 def unit_frustum_points(ray_map: RayMap, grid: np.ndarray, rays: np.ndarray) -> np.ndarray:
@@ -223,7 +244,7 @@ def build_bsp(ray_map: RayMap, rays: np.ndarray, grid: np.ndarray, model, accura
     raylist_rows, raylist_rays = np.concatenate(raylist_rows), np.concatenate(raylist_rays)
     cell_start, cells = _raylist_cells(ray_map, grid, raylist_rows, raylist_rays, n_raylists)
     order = np.argsort(raylist_rows, kind="stable")
-    list_ray_start = np.concatenate([[0], np.cumsum(np.bincount(raylist_rows, minlength=n_raylists))])
+    list_ray_start = range_offsets(raylist_rows, n_raylists)
     tree = _assemble_tree(levels, n_nodes, model, camera_parts, camera_bands, cell_start, cells, depth)
     reach_ray, reach_leaf = reachable_rays(ray_map, grid, np.concatenate(leaf_rays),
                                            tree.leaf[np.concatenate(leaf_nodes)], len(tree.leaf_kind))
@@ -280,19 +301,9 @@ def ray_cones(ray_map: RayMap, grid: np.ndarray, member_ray: np.ndarray, member_
     cones[:, 6], cones[:, 8] = np.inf, -np.inf  # nodes without rays (none expected) accept everything
     if len(member_ray) == 0:
         return cones
-    i, j = ray_map.cell[member_ray, 0], ray_map.cell[member_ray, 1]
     head = ray_map.head
     rays, nodes = member_ray, member_node
-    spacing_tail = np.zeros(len(member_ray))
-    spacing_direction = np.zeros(len(member_ray))
-    for di, dj in ((1, 0), (0, 1), (-1, 0), (0, -1)):
-        ii, jj = i + di, j + dj
-        ok = (ii >= 0) & (ii < ray_map.columns) & (jj >= 0) & (jj < ray_map.rows)
-        neighbour = np.where(ok, grid[np.clip(jj, 0, ray_map.rows - 1), np.clip(ii, 0, ray_map.columns - 1)], -1)
-        other = np.where(neighbour >= 0, neighbour, member_ray)
-        spacing_tail = np.maximum(spacing_tail, np.linalg.norm(ray_map.tail[other] - ray_map.tail[member_ray], axis=1))
-        spacing_direction = np.maximum(spacing_direction, np.linalg.norm(
-            ray_map.direction[other] - ray_map.direction[member_ray], axis=1))
+    spacing_tail, spacing_direction = neighbour_spacing(ray_map, grid, member_ray)
     present = np.bincount(nodes, minlength=n) > 0
     reduce = _SortedSegments(nodes, n)
     tails, directions = ray_map.tail[rays], ray_map.direction[rays]
@@ -502,14 +513,7 @@ def focal_distances(ray_map: RayMap, grid: np.ndarray, rays: np.ndarray) -> np.n
     ray field folds over, its caustic).
     """
     i, j = ray_map.cell[rays, 0], ray_map.cell[rays, 1]
-    rows, columns = grid.shape
-
-    def neighbour(di, dj):
-        ii, jj = i + di, j + dj
-        inside = (ii >= 0) & (ii < columns) & (jj >= 0) & (jj < rows)
-        return np.where(inside, grid[np.clip(jj, 0, rows - 1), np.clip(ii, 0, columns - 1)], -1)
-
-    east, west, north, south = neighbour(1, 0), neighbour(-1, 0), neighbour(0, 1), neighbour(0, -1)
+    east, west, north, south = (grid_neighbour(grid, i, j, di, dj) for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1)))
     complete = (east >= 0) & (west >= 0) & (north >= 0) & (south >= 0)
     t, r = ray_map.tail, ray_map.direction
     e, w, nn, ss = (np.maximum(x, 0) for x in (east, west, north, south))
@@ -588,7 +592,7 @@ def _raylist_cells(ray_map: RayMap, grid: np.ndarray, leaf_row, ray, n_raylists)
     leaf_row, corners = _complete_cells(ray_map, grid, leaf_row, ray)
     order = np.argsort(leaf_row, kind="stable")
     leaf_row, corners = leaf_row[order], corners[order]
-    cell_start = np.concatenate([[0], np.cumsum(np.bincount(leaf_row, minlength=n_raylists))])
+    cell_start = range_offsets(leaf_row, n_raylists)
     if len(corners) == 0:
         return cell_start, None
     rays = corners.reshape(-1)

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .bsp import (CAMERA_LEAF, CONE_SIZE, MAX_DUPLICATION, RAY_LIST_LEAF, BSPTree, RaysCrossError, build_bsp,
-                  in_cones)
+                  in_cones, neighbour_spacing)
 from .errors import SceneInputError
 from .pinhole import PinholeLeaves
 from .ray_patch import RayPatches, RayPatchLeaves, invert_patches
@@ -290,8 +290,8 @@ class SampleBasedCamera:
             if len(seeded) and tree.list_rays is not None:
                 # No cell of the ray list holds the point, nor reaches it across the edge:
                 # its rays along the edge seed it.
-                seed_cells, seed_distance = _edge_seeds(self.ray_map, grid, tree, row[seeded], points[seeded],
-                                                        self._edge_rays[g])
+                seed_cells, seed_distance = _edge_seeds(self.ray_map, tree, row[seeded], points[seeded],
+                                                        self._edge_rays[g], self._ray_spacing[g])
                 reached = np.flatnonzero(np.isfinite(seed_distance))
                 cells[seeded[reached]] = seed_cells[reached]
                 edge = np.concatenate([edge, seeded[reached]])
@@ -374,6 +374,20 @@ class SampleBasedCamera:
         return [masks.get(id(grid)) if self._has_edges(g) else None for g, grid in enumerate(self.grids)]
 
     @functools.cached_property
+    def _ray_spacing(self) -> list:
+        """Per tree, (tail, direction) (R,) each: how far its rays lie from their
+        neighbours in its grid (``bsp.neighbour_spacing``), 0 for rays not in it; None for
+        a tree without edges. Sheets of one set share theirs."""
+        spacing = {}
+        for g, grid in enumerate(self.grids):
+            if self._has_edges(g) and id(grid) not in spacing:
+                rays = grid[grid >= 0]
+                tail, direction = np.zeros(self.ray_map.n_rays), np.zeros(self.ray_map.n_rays)
+                tail[rays], direction[rays] = neighbour_spacing(self.ray_map, grid, rays)
+                spacing[id(grid)] = tail, direction
+        return [spacing.get(id(grid)) if self._has_edges(g) else None for g, grid in enumerate(self.grids)]
+
+    @functools.cached_property
     def _history_grids(self) -> list:
         """Per tree, the grid of every ray of its history (all surfaces)."""
         grids = {h: self.ray_map.group_grid(self.ray_map.histories.index(tuple(h))) for h in dict.fromkeys(
@@ -431,11 +445,12 @@ def _complete_quads(grid: np.ndarray) -> np.ndarray:
     return present[:-1, :-1] & present[:-1, 1:] & present[1:, :-1] & present[1:, 1:]
 
 
-def _edge_seeds(ray_map: RayMap, grid: np.ndarray, tree: BSPTree, row, points, edge_rays: np.ndarray):
+def _edge_seeds(ray_map: RayMap, tree: BSPTree, row, points, edge_rays: np.ndarray, spacing):
     """Seeds for images near a sharp edge, on ray-list rows ``row`` (P,) whose cells
     neither hold the point nor reach it across the edge: per point, the row's ray along
     the edge (``edge_rays``) whose line passes closest to it, relative to how far the
-    neighbouring rays pass there (within EDGE_REACH_CELLS of them). Returns (ray-map
+    neighbouring rays pass there (``spacing``: per ray, (tail, direction) of
+    ``bsp.neighbour_spacing``; within EDGE_REACH_CELLS of them). Returns (ray-map
     cells (P, 2), distance along the ray (P,)), NaN where no such ray passes near.
 
     A ray-list leaf one ray wide along the edge has no complete cell, and next to where
@@ -450,7 +465,7 @@ def _edge_seeds(ray_map: RayMap, grid: np.ndarray, tree: BSPTree, row, points, e
     offset = points[pair_point] - ray_map.tail[ray]
     along = np.einsum("ij,ij->i", offset, ray_map.direction[ray])
     miss = np.sqrt(np.maximum(np.einsum("ij,ij->i", offset, offset) - along * along, 0.0))
-    tail_step, direction_step = _ray_steps(ray_map, grid, ray)
+    tail_step, direction_step = spacing[0][ray], spacing[1][ray]
     ratio = miss / np.maximum(EDGE_REACH_CELLS * (tail_step + np.maximum(along, 0.0) * direction_step), 1e-300)
     near = np.flatnonzero((along >= 0) & (ratio <= 1.0))
     order = near[np.lexsort((ratio[near], pair_point[near]))]
@@ -460,22 +475,6 @@ def _edge_seeds(ray_map: RayMap, grid: np.ndarray, tree: BSPTree, row, points, e
     cells[pair_point[first]] = ray_map.cell[ray[first]]
     distance[pair_point[first]] = along[first]
     return cells, distance
-
-
-def _ray_steps(ray_map: RayMap, grid: np.ndarray, rays: np.ndarray):
-    """How far each ray's tail and unit direction (R,) lie from those of its nearest
-    neighbours in ``grid`` (the largest over the four that exist)."""
-    i, j = ray_map.cell[rays, 0], ray_map.cell[rays, 1]
-    tail, direction = np.zeros(len(rays)), np.zeros(len(rays))
-    for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-        ni, nj = i + di, j + dj
-        inside = np.flatnonzero((ni >= 0) & (nj >= 0) & (ni < grid.shape[1]) & (nj < grid.shape[0]))
-        other = grid[nj[inside], ni[inside]]
-        inside, other = inside[other >= 0], other[other >= 0]
-        tail[inside] = np.maximum(tail[inside], _norm(ray_map.tail[other] - ray_map.tail[rays[inside]]))
-        direction[inside] = np.maximum(direction[inside],
-                                       _norm(ray_map.direction[other] - ray_map.direction[rays[inside]]))
-    return tail, direction
 
 
 def _complete(grid: np.ndarray, cells: np.ndarray) -> np.ndarray:

@@ -20,6 +20,11 @@ def expand_ranges(start: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.
     return owner, np.repeat(np.asarray(start, dtype=np.int64) - np.cumsum(count) + count, count) + np.arange(count.sum())
 
 
+def range_offsets(owner: np.ndarray, n: int) -> np.ndarray:
+    """(n + 1,) offsets of each owner's range once entries are sorted by ``owner`` (CSR)."""
+    return np.concatenate([[0], np.cumsum(np.bincount(owner, minlength=n))])
+
+
 def _sorted_starts(node: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
     order = np.argsort(node, kind="stable")
     counts = np.bincount(node, minlength=n_nodes)

@@ -120,7 +120,7 @@ def polish_on_true_rays(reflector_set: ReflectorSet, view: View, reflector: int,
         if len(back):
             offsets[m + back] *= -1.0
             f[m + back], _, _, _, _ = _true_residual(reflector_set, view, reflector, q[back % m] + offsets[m + back],
-                                                     p[back % m], near[back], pieces)
+                                                     p[back % m], near[m + back], pieces)
         f, fu, fv, reflects = f[:m], f[m:2 * m], f[2 * m:], reflects[:m]
         triangle[active] = hit[:m]
         ju, jv = (fu - f) / offsets[m:2 * m, :1], (fv - f) / offsets[2 * m:, 1:]

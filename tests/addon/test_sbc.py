@@ -628,7 +628,7 @@ def test_ray_lists_along_an_edge_seed_the_images_across_it(monkeypatch):
     exact = solve_reflections(ReflectorSet(reflectors), view, points)
     exact = exact.select(exact.visible)
     seeded = sbc.project(points)
-    monkeypatch.setattr(sbc_module, "_edge_seeds", lambda ray_map, grid, tree, row, points, edge_rays: (
+    monkeypatch.setattr(sbc_module, "_edge_seeds", lambda ray_map, tree, row, points, edge_rays, spacing: (
         np.full((len(points), 2), np.nan), np.full(len(points), np.nan)))
     unseeded = sbc.project(points)
     added = seeded.valid & ~unseeded.valid

@@ -10,7 +10,7 @@ import numpy as np
 
 from curved_reflections.addon import look_at_view
 from curved_reflections.addon.exact import solve_reflections
-from curved_reflections.addon.raytrace import ReflectorSet
+from curved_reflections.addon.raytrace import ReflectorSet, reflect
 from curved_reflections.addon.sphere import icosphere
 from curved_reflections.addon.true_rays import polish_on_true_rays
 
@@ -79,7 +79,7 @@ def test_images_within_a_step_of_the_mirror_edge_converge():
     origins, directions = view.pixel_rays(images)
     hits = reflector_set.intersect(origins, directions)
     assert hits.hit.all()
-    reflected = directions - 2.0 * np.einsum("ij,ij->i", directions, hits.normal)[:, None] * hits.normal
+    reflected = reflect(directions, hits.normal)
     points = hits.position + 1.5 * reflected
     start = images - np.array([0.4, 0.3])
     pixels, _, _, ok = polish_on_true_rays(reflector_set, view, 0, start, points, 2.0)
