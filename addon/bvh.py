@@ -156,17 +156,22 @@ def ray_box_test(bvh: BVH, origins: np.ndarray, directions: np.ndarray,
     the slab distances stay finite (no 0 * inf NaNs on box faces).
     """
     safe = np.where(np.abs(directions) < 1e-30, np.where(directions < 0, -1e-30, 1e-30), directions)
-    inv_directions = 1.0 / safe
+    # Structure of arrays: one gather per side gives every coordinate as a contiguous row.
+    rays = np.concatenate([origins, 1.0 / safe], axis=1).T.copy()
+    # Empty nodes (lo = +inf, hi = -inf) get NaN bounds: np.maximum and np.minimum carry
+    # NaN through, and NaN <= far is False, so every test rejects them.
+    boxes = [np.where((lo <= hi).all(axis=1), np.concatenate([lo, hi], axis=1).T, np.nan).copy()
+             for lo, hi in zip(bvh.box_lo, bvh.box_hi)]
 
     def test(queries: np.ndarray, level: int, nodes: np.ndarray) -> np.ndarray:
-        lo, hi = bvh.box_lo[level][nodes], bvh.box_hi[level][nodes]
-        o = origins[queries]
-        inv = inv_directions[queries]
-        t0 = (lo - o) * inv
-        t1 = (hi - o) * inv
-        near = np.minimum(t0, t1).max(axis=1)
-        far = np.maximum(t0, t1).min(axis=1)
-        non_empty = lo[:, 0] <= hi[:, 0]
-        return non_empty & (near <= far) & (far >= t_min[queries]) & (near <= t_max[queries])
+        box = boxes[level][:, nodes]
+        ray = rays[:, queries]
+        near, far = t_min[queries], t_max[queries]
+        for d in range(3):
+            t0 = (box[d] - ray[d]) * ray[d + 3]
+            t1 = (box[d + 3] - ray[d]) * ray[d + 3]
+            near = np.maximum(near, np.minimum(t0, t1))
+            far = np.minimum(far, np.maximum(t0, t1))
+        return near <= far
 
     return test

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .segments import segment_max, segment_mean, segment_min, segment_sum, solve_least_squares
+from .vectors import cross_rows, dot_rows
 
 NEWTON_ITERATIONS = 8
 #: Iterations run on every point before only the unconverged ones go on.
@@ -176,7 +177,7 @@ def solve_charts(patches: RayPatches, leaf: np.ndarray, points: np.ndarray):
     u = np.full(len(points), start)
     v = np.full(len(points), start)
     ray = _ray(k, u, v)
-    s = _dot([p[d] - ray[d] for d in range(3)], ray[3:]) / np.maximum(np.sqrt(_dot(ray[3:], ray[3:])), 1e-300)
+    s = dot_rows([p[d] - ray[d] for d in range(3)], ray[3:]) / np.maximum(np.sqrt(dot_rows(ray[3:], ray[3:])), 1e-300)
     # The first steps, far from the root, run in float32 (twice the numbers per vector
     # instruction); float64 steps then polish to full precision, so the answer is the
     # float64 root. Most points converge in a few steps: after FIRST_ITERATIONS in all,
@@ -195,7 +196,7 @@ def solve_charts(patches: RayPatches, leaf: np.ndarray, points: np.ndarray):
         u[rest], v[rest], s[rest] = sub_u, sub_v, sub_s
     ray = _ray(k, u, v)
     miss = [ray[d] + s * ray[d + 3] - p[d] for d in range(3)]
-    return u, v, s, np.stack(ray[:3], axis=1) + origin, np.sqrt(_dot(miss, miss))
+    return u, v, s, np.stack(ray[:3], axis=1) + origin, np.sqrt(dot_rows(miss, miss))
 
 
 def _ray(k, u, v):
@@ -216,27 +217,19 @@ def _newton_steps(k, p, u, v, s, iterations: int, check: bool = True):
         a = [du[d] + s * du[d + 3] for d in range(3)]
         b = [dv[d] + s * dv[d + 3] for d in range(3)]
         f = [ray[d] + s * r[d] - p[d] for d in range(3)]
-        bc, ca, ab = _cross(b, r), _cross(r, a), _cross(a, b)
-        det = _dot(a, bc)
+        bc, ca, ab = cross_rows(b, r), cross_rows(r, a), cross_rows(a, b)
+        det = dot_rows(a, bc)
         det = np.where(np.abs(det) > tiny, det, tiny)
-        step_u, step_v = _dot(f, bc) / det, _dot(f, ca) / det
+        step_u, step_v = dot_rows(f, bc) / det, dot_rows(f, ca) / det
         u = np.clip(u - step_u, -4.0, 4.0)
         v = np.clip(v - step_v, -4.0, 4.0)
-        s = s - _dot(f, ab) / det
+        s = s - dot_rows(f, ab) / det
         if not check:
             continue
         moving = np.abs(step_u) + np.abs(step_v) >= STEP_TOLERANCE
         if not moving.any():
             break
     return u, v, s, moving
-
-
-def _dot(a, b):
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-def _cross(a, b):
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
 def project_patches(patches: RayPatches, leaf: np.ndarray, points: np.ndarray, margin: float = 0.5):

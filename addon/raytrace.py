@@ -25,6 +25,7 @@ from .bvh import build_bvh, descend, ray_box_test
 from .errors import SceneInputError
 from .scene import Reflector, smooth_pieces
 from .segments import expand_ranges
+from .vectors import cross, cross_rows, dot_rows
 
 RAY_CHUNK = 1 << 16
 #: Relative (to the scene size) distance below which a hit is taken as the ray's own origin.
@@ -86,9 +87,11 @@ class ReflectorSet:
         self.v0 = corners[:, 0]
         self.e1 = corners[:, 1] - corners[:, 0]
         self.e2 = corners[:, 2] - corners[:, 0]
-        cross = np.cross(self.e1, self.e2)
-        self.area2 = np.linalg.norm(cross, axis=1)
-        self.face_normals = cross / np.maximum(self.area2, 1e-300)[:, None]
+        face = cross(self.e1, self.e2)
+        self.area2 = np.linalg.norm(face, axis=1)
+        self.face_normals = face / np.maximum(self.area2, 1e-300)[:, None]
+        # v0, e1 and e2 as nine rows: one gather gives a batch's corners coordinate by coordinate.
+        self.corner_rows = np.concatenate([self.v0, self.e1, self.e2], axis=1).T.copy()
         lo, hi = self.vertices.min(axis=0), self.vertices.max(axis=0)
         self.scale = float(max(np.linalg.norm(hi - lo), 1e-12))
         # Split vertices (sharp edges, custom normals) share positions: weld them so that
@@ -215,7 +218,10 @@ class ReflectorSet:
         t, u, v, _ = self.hit_triangles(origins[rays], directions[rays], triangles)
         with np.errstate(invalid="ignore"):
             keep = (t > t_min[rays]) & (t <= t_max[rays])
-        keep &= ~self.neighbours(sources[rays], triangles) & (triangles != sources[rays])
+        # Rays from a reflector skip the triangle they start from and its one-ring.
+        from_surface = np.flatnonzero(keep & (sources[rays] >= 0))
+        keep[from_surface] &= (~self.neighbours(sources[rays[from_surface]], triangles[from_surface])
+                               & (triangles[from_surface] != sources[rays[from_surface]]))
         return _nearest_per_ray(rays[keep], triangles[keep], t[keep], u[keep], v[keep])
 
     def hit_triangles(self, origins, directions, triangles):
@@ -225,16 +231,18 @@ class ReflectorSet:
         the ray parallel to its plane); u, v weigh corners 1 and 2; det is the test's
         determinant, -(d . face normal) times twice the area.
         """
-        e1, e2 = self.e1[triangles], self.e2[triangles]
-        p = np.cross(directions, e2)
-        det = np.einsum("ij,ij->i", e1, p)
+        rows = self.corner_rows[:, triangles]
+        v0, e1, e2 = rows[0:3], rows[3:6], rows[6:9]
+        d = np.ascontiguousarray(directions.T)
+        p = cross_rows(d, e2)
+        det = dot_rows(e1, p)
         with np.errstate(divide="ignore", invalid="ignore"):
             inv = 1.0 / det
-            s = origins - self.v0[triangles]
-            u = np.einsum("ij,ij->i", s, p) * inv
-            q = np.cross(s, e1)
-            v = np.einsum("ij,ij->i", directions, q) * inv
-            t = np.einsum("ij,ij->i", e2, q) * inv
+            s = origins.T - v0
+            u = dot_rows(s, p) * inv
+            q = cross_rows(s, e1)
+            v = dot_rows(d, q) * inv
+            t = dot_rows(e2, q) * inv
             tolerance = 1e-12
             # A ray parallel to the plane has NaN or infinite u, v: not inside.
             inside = (np.abs(det) > 1e-300) & (u >= -tolerance) & (v >= -tolerance) & (u + v <= 1 + tolerance)
