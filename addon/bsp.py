@@ -34,6 +34,7 @@ import numpy as np
 from .ray_patch import ERROR_SAMPLE_FRACTIONS, RayPatches, fit_patches
 from .raymap import RayMap
 from .segments import expand_ranges, range_offsets, segment_max, segment_mean, segment_min, segment_sum
+from .vectors import cross
 
 MAX_DEPTH = 40
 #: A tree whose leaves hold, in all, more than this many times the group's rays is
@@ -311,7 +312,7 @@ def ray_cones(ray_map: RayMap, grid: np.ndarray, member_ray: np.ndarray, member_
     axis = reduce.sum(directions)
     axis /= np.maximum(np.linalg.norm(axis, axis=1), 1e-300)[:, None]
     cos = np.einsum("md,md->m", directions, axis[nodes])
-    sin = np.linalg.norm(np.cross(directions, axis[nodes]), axis=1)
+    sin = np.linalg.norm(cross(directions, axis[nodes]), axis=1)
     growth = reduce.max(np.where(cos > CONE_MIN_COS, sin / np.maximum(cos, CONE_MIN_COS), np.inf))
     bounded = present & np.isfinite(growth)
     safe_growth = np.where(bounded, growth, 0.0)
@@ -521,7 +522,7 @@ def focal_distances(ray_map: RayMap, grid: np.ndarray, rays: np.ndarray) -> np.n
     direction = r[rays]
 
     def det(a, b):
-        return np.einsum("rd,rd->r", np.cross(a, b), direction)
+        return np.einsum("rd,rd->r", cross(a, b), direction)
 
     c0, c1, c2 = det(t_u, t_v), det(t_u, r_v) + det(r_u, t_v), det(r_u, r_v)
     with np.errstate(divide="ignore", invalid="ignore"):

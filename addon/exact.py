@@ -31,7 +31,7 @@ import numpy as np
 
 from .bvh import descend
 from .raytrace import ReflectorSet
-from .vectors import dot, lengths, normalized
+from .vectors import cross, dot, lengths, normalized
 from .view import View
 
 NEWTON_ITERATIONS = 24
@@ -197,7 +197,7 @@ def _newton(reflector_set: ReflectorSet, view: View, points: np.ndarray, triangl
     n0, n1, n2 = (reflector_set.normals[corners[:, k]] for k in range(3))
     face = reflector_set.face_normals[triangles]
     axis_u = normalized(e1)
-    axis_v = np.cross(face, axis_u)
+    axis_v = cross(face, axis_u)
     centroid = v0 + (e1 + e2) / 3
     orientation = np.where(dot(view.directions_to_eye(centroid), face) >= 0, 1.0, -1.0)
 

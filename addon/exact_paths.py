@@ -48,7 +48,7 @@ from .bvh import descend
 from .exact import (CONE_SLACK, INSIDE_TOLERANCE, _first_hit_of_view_ray, _foot, first_of_duplicates,
                     half_vector_may_meet_cone, turn_toward)
 from .raytrace import ReflectorSet, reflect
-from .vectors import dot, lengths, normalized
+from .vectors import cross, dot, lengths, normalized
 from .view import View
 
 NEWTON_ITERATIONS = 30
@@ -317,7 +317,7 @@ def _facet_table(reflector_set: ReflectorSet, triangles: np.ndarray, orientation
     turn = orientation[:, None]
     return [reflector_set.v0[triangles], e1, reflector_set.e2[triangles], n0 * turn,
             (reflector_set.normals[corners[:, 1]] - n0) * turn, (reflector_set.normals[corners[:, 2]] - n0) * turn,
-            axis_u, np.cross(reflector_set.face_normals[triangles], axis_u)]
+            axis_u, cross(reflector_set.face_normals[triangles], axis_u)]
 
 
 def _unit(v):

@@ -49,6 +49,7 @@ from .ray_patch import RayPatches, solve_charts
 from .raytrace import ReflectorSet
 from .sbc import SampleBasedCamera, build_sample_based_camera, check_view_outside_reflectors, descend_tree, in_band
 from .scene import Reflector
+from .vectors import cross
 from .view import View, look_at_view
 
 #: Version of everything that shapes a baked grid; part of the cache key.
@@ -718,8 +719,8 @@ def _fit_and_reflect(images, present, usable, normals, normal, nz, origin, point
     rows not yet converged only."""
     q = len(images)
     helper = np.where(np.abs(normal[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
-    t1 = _unit(np.cross(normal, helper))
-    t2 = np.cross(normal, t1)
+    t1 = _unit(cross(normal, helper))
+    t2 = cross(normal, t1)
     offset = images - origin[:, None]
     a, b, h = (np.einsum("qnd,qd->qn", offset, axis) for axis in (t1, t2, normal))
     spread = np.maximum(np.sqrt(np.max(np.where(present, a * a + b * b, 0.0), axis=1)), 1e-12)
@@ -770,7 +771,7 @@ def _fit_and_reflect(images, present, usable, normals, normal, nz, origin, point
             break
     every = np.arange(q)
     x, ta, tb = surface(every, u, v)
-    fitted_normal = _unit(np.cross(ta, tb))
+    fitted_normal = _unit(cross(ta, tb))
     fitted_normal *= np.where(np.einsum("qd,qd->q", fitted_normal, normal) < 0, -1.0, 1.0)[:, None]
     ok = ((np.abs(residual(every, u, v)).max(axis=1) < 1e-8) & (u * u + v * v <= SURFACE_REACH ** 2)
           & np.isfinite(x).all(axis=1))

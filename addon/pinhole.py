@@ -24,6 +24,7 @@ import numpy as np
 
 from .ray_patch import quadratic_basis
 from .segments import segment_max, segment_mean, segment_min, segment_sum, solve_least_squares
+from .vectors import cross
 
 
 @dataclass(frozen=True)
@@ -65,7 +66,7 @@ def fit_cameras(tails, directions, heads, first_points, node, n_nodes) -> Pinhol
     mean_direction = segment_mean(directions, node, n_nodes)
     normal *= np.where(np.einsum("nd,nd->n", normal, mean_direction) < 0, -1.0, 1.0)[:, None]
     u_axis = vectors[:, :, 2]
-    axes = np.stack([u_axis, np.cross(normal, u_axis), normal], axis=1)
+    axes = np.stack([u_axis, cross(normal, u_axis), normal], axis=1)
     scale = np.maximum(np.sqrt(segment_max(np.einsum("md,md->m", offset, offset), node, n_nodes)), 1e-12)
     partial = PinholeCameras(centre, origin, axes, scale, np.zeros((n_nodes, 6, 3)),
                              np.zeros((n_nodes, 2)), np.zeros((n_nodes, 2)))

@@ -24,6 +24,7 @@ import numpy as np
 
 from .errors import SceneInputError
 from .raytrace import ReflectorSet, reflect, reflection_valid
+from .vectors import cross
 from .view import View
 
 
@@ -108,7 +109,7 @@ def _primary_hits(reflector_set: ReflectorSet, origins: np.ndarray, directions: 
     """
     centre, radius = reflector_set.bounding_sphere
     radius *= 1.0 + SPHERE_CULL_MARGIN
-    across = np.cross(centre - origins, directions)  # its length: the line's distance to the centre
+    across = cross(centre - origins, directions)  # its length: the line's distance to the centre
     near = np.flatnonzero(np.einsum("rd,rd->r", across, across) <= radius * radius)
     n = len(origins)
     hit, triangle, depth = np.zeros(n, dtype=bool), np.full(n, -1, dtype=np.int64), np.full(n, np.inf)

@@ -38,6 +38,7 @@ from .raymap import RayMap, box_exit_distance, trace_ray_map
 from .raytrace import ReflectorSet, reflect, reflection_valid
 from .segments import expand_ranges
 from .true_rays import polish_on_true_rays
+from .vectors import cross
 from .view import View
 
 LEAF_MODELS = {"ray_patch": RayPatchLeaves(), "pinhole": PinholeLeaves()}
@@ -844,9 +845,9 @@ def _orientations(tail: np.ndarray, direction: np.ndarray) -> np.ndarray:
     for k, (a, b, c) in enumerate(FOLD_TRIANGLES):
         e1t, e1d = tail[:, b] - tail[:, a], direction[:, b] - direction[:, a]
         e2t, e2d = tail[:, c] - tail[:, a], direction[:, c] - direction[:, a]
-        out[:, k, 0] = np.einsum("nd,nd->n", np.cross(e1t, e2t), mean)
-        out[:, k, 1] = np.einsum("nd,nd->n", np.cross(e1t, e2d) + np.cross(e1d, e2t), mean)
-        out[:, k, 2] = np.einsum("nd,nd->n", np.cross(e1d, e2d), mean)
+        out[:, k, 0] = np.einsum("nd,nd->n", cross(e1t, e2t), mean)
+        out[:, k, 1] = np.einsum("nd,nd->n", cross(e1t, e2d) + cross(e1d, e2t), mean)
+        out[:, k, 2] = np.einsum("nd,nd->n", cross(e1d, e2d), mean)
     return out
 
 
