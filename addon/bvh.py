@@ -17,6 +17,7 @@ that to discard nodes where no mirror reflection can occur.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Callable
 
@@ -71,6 +72,15 @@ class BVH:
     def nbytes(self) -> int:
         arrays = [self.order, *self.box_lo, *self.box_hi, *self.cone_axis, *self.cone_cos]
         return int(sum(a.nbytes for a in arrays))
+
+    @functools.cached_property
+    def box_rows(self) -> list:
+        """Per level, the boxes as six coordinate rows (lo x, y, z, hi x, y, z; (6, 2**k)),
+        so that one gather gives a batch's boxes coordinate by coordinate (:func:`ray_box_test`).
+        Empty nodes get NaN bounds: np.maximum and np.minimum carry NaN through, and
+        NaN <= far is False, so every slab test rejects them."""
+        return [np.where((lo <= hi).all(axis=1), np.concatenate([lo, hi], axis=1).T, np.nan).copy()
+                for lo, hi in zip(self.box_lo, self.box_hi)]
 
 
 def build_bvh(vertices: np.ndarray, triangles: np.ndarray, normals: np.ndarray | None = None,
@@ -158,10 +168,7 @@ def ray_box_test(bvh: BVH, origins: np.ndarray, directions: np.ndarray,
     safe = np.where(np.abs(directions) < 1e-30, np.where(directions < 0, -1e-30, 1e-30), directions)
     # Structure of arrays: one gather per side gives every coordinate as a contiguous row.
     rays = np.concatenate([origins, 1.0 / safe], axis=1).T.copy()
-    # Empty nodes (lo = +inf, hi = -inf) get NaN bounds: np.maximum and np.minimum carry
-    # NaN through, and NaN <= far is False, so every test rejects them.
-    boxes = [np.where((lo <= hi).all(axis=1), np.concatenate([lo, hi], axis=1).T, np.nan).copy()
-             for lo, hi in zip(bvh.box_lo, bvh.box_hi)]
+    boxes = bvh.box_rows
 
     def test(queries: np.ndarray, level: int, nodes: np.ndarray) -> np.ndarray:
         box = boxes[level][:, nodes]

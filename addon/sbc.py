@@ -220,11 +220,16 @@ class SampleBasedCamera:
     def _project_points(self, points, index, result: Projection, pending: list | None):
         points = points[index]
         for g, (tree, grid) in enumerate(zip(self.trees, self.grids)):
-            # Only points in the sheet's bounding cone descend its tree (bsp.ray_cones).
-            chosen = (np.arange(len(points)) if self.cones is None
-                      else np.flatnonzero(in_cones(np.broadcast_to(self.cones[g], (len(points), CONE_SIZE)), points)))
+            chosen = self._sheet_points(g, points, index)
             if len(chosen):
                 self._project_group(g, tree, grid, points[chosen], index[chosen], result, pending)
+
+    def _sheet_points(self, g: int, points, index) -> np.ndarray:
+        """Which of ``points`` (rows ``index`` of the points ``project`` was given) descend
+        tree ``g``: those in the sheet's bounding cone (bsp.ray_cones)."""
+        if self.cones is None:
+            return np.arange(len(points))
+        return np.flatnonzero(in_cones(np.broadcast_to(self.cones[g], (len(points), CONE_SIZE)), points))
 
     def _project_group(self, g, tree: BSPTree, grid, points, point_index, result: Projection, pending):
         leaf = tree.leaf[descend_tree(tree, points)]

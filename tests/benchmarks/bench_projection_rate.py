@@ -27,7 +27,6 @@ import shlex
 import statistics
 import sys
 import time
-import types
 from pathlib import Path
 
 import numpy as np
@@ -79,29 +78,21 @@ def measure(name: str, n_points: int, repeats: int) -> dict:
 
 def _share_in_cones(sbc, points) -> float:
     """Share of the (sheet, point) pairs inside the sheet's bounding cone (``bsp.ray_cones``):
-    those that descend its tree."""
-    from curved_reflections.addon.bsp import CONE_SIZE, in_cones
-
-    inside = sum(int(in_cones(np.broadcast_to(cone, (len(points), CONE_SIZE)), points).sum()) for cone in sbc.cones)
-    return inside / float(len(sbc.cones) * len(points))
+    those that descend its tree (``SampleBasedCamera._sheet_points``)."""
+    every = np.arange(len(points))
+    inside = sum(len(sbc._sheet_points(g, points, every)) for g in range(len(sbc.trees)))
+    return inside / float(len(sbc.trees) * len(points))
 
 
 def _project_with_oracle(sbc, points, valid):
     """``sbc.project(points, polish=False)`` with a perfect cull: each sheet is handed only
     the points it projects (``valid``, known from a first run). No conservative bound
     can do better, so its rate caps what culling sheets could ever buy."""
-    def project_points(self, all_points, index, result, pending):
-        chosen_points = all_points[index]
-        for g, (tree, grid) in enumerate(zip(self.trees, self.grids)):
-            chosen = np.flatnonzero(valid[g, index])
-            if len(chosen):
-                self._project_group(g, tree, grid, chosen_points[chosen], index[chosen], result, pending)
-
-    sbc._project_points = types.MethodType(project_points, sbc)
+    sbc._sheet_points = lambda g, sheet_points, index: np.flatnonzero(valid[g, index])
     try:
         return sbc.project(points, polish=False)
     finally:
-        del sbc._project_points
+        del sbc._sheet_points
 
 
 def report(results: list, command: str, machine: str) -> str:

@@ -3,7 +3,8 @@
 
 Run by ``make bench`` (``make test`` ignores tests/benchmarks), in a child process as from
 the command line. Only the shape of the output is checked (and that numpy and the GPU
-agree, and that the cone holds every projected pair): the rates themselves are what the full run reports (docs/benchmarks/projection_rate.md).
+agree, and that the cone holds every projected pair): the rates themselves are what the
+full run reports (docs/benchmarks/projection_rate.md).
 """
 
 import re
