@@ -33,6 +33,7 @@ from .bsp import (CAMERA_LEAF, CONE_SIZE, MAX_DUPLICATION, RAY_LIST_LEAF, BSPTre
                   in_cones, neighbour_spacing)
 from .errors import SceneInputError
 from .pinhole import PinholeLeaves
+from .projection import Projection
 from .ray_patch import RayPatches, RayPatchLeaves, invert_patches
 from .raymap import RayMap, box_exit_distance, trace_ray_map
 from .raytrace import ReflectorSet, reflect, reflection_valid
@@ -69,18 +70,6 @@ FOLD_SAMPLES = 8
 FOLD_CANDIDATES = 16
 #: Corner triangles of a cell (corners 00, 10, 01, 11) whose orientation decides a fold.
 FOLD_TRIANGLES = ((0, 1, 2), (1, 3, 0), (3, 2, 1), (2, 0, 3))
-
-
-@dataclass(frozen=True)
-class Projection:
-    """Result of :meth:`SampleBasedCamera.project` for P points and G reflection groups."""
-
-    groups: list  # G reflection histories, tuples of reflector indices
-    reflector_points: np.ndarray  # (G, P, 3) first reflector point, NaN where not projected
-    valid: np.ndarray  # (G, P) bool
-    leaf_kind: np.ndarray  # (G, P) int8: 0 not projected, 1 camera leaf, 2 ray-list leaf
-    pixels: np.ndarray  # (G, P, 2) desired-view pixel of the reflection, NaN where not projected
-    ray_distance: np.ndarray  # (G, P) distance from the last reflector point along the ray
 
 
 @dataclass(frozen=True)

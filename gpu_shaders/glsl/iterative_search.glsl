@@ -1,0 +1,270 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later */
+/* The iterative search for reflection points (Roger & Holzschuch 2006), compute stage.
+ *
+ * The float32 twin of addon/methods/iterative/search.py, step by step: one invocation
+ * per diffuse vertex (texel of `vertex_positions`), every frame. The reflector is the
+ * cube map of its radius and normal around its centre O (`reflector_map`, layout in
+ * addon/methods/iterative/reflector_map.py); the vertex's reflection point P is where
+ * the normal bisects the directions to the eye and to the vertex:
+ *   1. first guess: the reflection on the sphere of the map's mean radius, by bisection
+ *      on the arc between the directions to the eye and to the vertex (section 3.3.4);
+ *   2. damped Newton in a gnomonic chart around it on the tangent part of the half
+ *      vector (section 3.3.2-3.3.3), Jacobian by finite differences, restarts around
+ *      the guess where a start fails;
+ *   3. stop when a step moves P by less than `stop_per_w` times the view's clip w at P
+ *      (a share of the accuracy in pixels, section 3.2);
+ *   4. checks: P faces the eye and the vertex, the residual vanishes, and on a
+ *      non-convex mirror nothing of it lies between P and either.
+ * Everything runs relative to O. Output texel: (P relative to the renderer's shift,
+ * (status + 8) + 16 * steps), status as the numpy twin's (FOUND = 1). */
+
+#define FOUND 1
+#define NOT_CONVERGED 0
+#define NO_SURFACE -1
+#define FACES_AWAY -2
+#define OCCLUDED -3
+#define INSIDE -4
+
+/* Push constants: camera (eye relative to the shift, w 1; or the unit direction toward
+ * the viewer, w 0), centre (O relative to the shift, w the map's mean radius), w_row
+ * (the view-projection's last row, for clip w), limits (stop_per_w, max_radius),
+ * face_size, n_vertices, positions_width, convex. */
+
+vec3 to_eye(vec3 p)
+{
+  return camera.w > 0.5 ? normalize(camera.xyz - centre.xyz - p) : camera.xyz;
+}
+
+/* Bilinear radius and normal of the map along unit direction d; false on a hole. */
+bool map_surface(vec3 d, out float radius, out vec3 normal)
+{
+  vec3 m = abs(d);
+  int axis = (m.x >= m.y && m.x >= m.z) ? 0 : ((m.y >= m.z) ? 1 : 2);
+  float major = d[axis];
+  float scale = 1.0 / max(abs(major), 1e-30);
+  float u = d[(axis + 1) % 3] * scale;
+  float v = d[(axis + 2) % 3] * scale;
+  int face = 2 * axis + (major < 0.0 ? 1 : 0);
+  float size = float(face_size);
+  float fx = (u + 1.0) * 0.5 * size + 0.5;
+  float fy = (v + 1.0) * 0.5 * size + 0.5;
+  float i = clamp(floor(fx), 0.0, size);
+  float j = clamp(floor(fy), 0.0, size);
+  float tx = fx - i;
+  float ty = fy - j;
+  ivec2 base = ivec2(int(i), face * (face_size + 2) + int(j));
+  vec4 a = texelFetch(reflector_map, base, 0);
+  vec4 b = texelFetch(reflector_map, base + ivec2(1, 0), 0);
+  vec4 c = texelFetch(reflector_map, base + ivec2(0, 1), 0);
+  vec4 e = texelFetch(reflector_map, base + ivec2(1, 1), 0);
+  vec4 value = (1.0 - tx) * (1.0 - ty) * a + tx * (1.0 - ty) * b + (1.0 - tx) * ty * c + tx * ty * e;
+  bool valid = min(min(a.x, b.x), min(c.x, e.x)) > 0.0;
+  radius = valid ? value.x : 0.0;
+  normal = value.yzw / max(length(value.yzw), 1e-30);
+  return valid;
+}
+
+bool inside_surface(vec3 p)
+{
+  float distance = length(p);
+  float radius;
+  vec3 normal;
+  bool valid = map_surface(p / max(distance, 1e-30), radius, normal);
+  return valid && distance < radius;
+}
+
+vec3 perpendicular(vec3 d)
+{
+  vec3 m = abs(d);
+  vec3 helper = (m.x <= m.y && m.x <= m.z) ? vec3(1.0, 0.0, 0.0) :
+                ((m.y <= m.z) ? vec3(0.0, 1.0, 0.0) : vec3(0.0, 0.0, 1.0));
+  return normalize(cross(d, helper));
+}
+
+vec3 sphere_guess(vec3 point)
+{
+  float distance = length(point);
+  vec3 b = point / max(distance, 1e-30);
+  vec3 a;
+  float reach;
+  if (camera.w > 0.5) {
+    vec3 eye = camera.xyz - centre.xyz;
+    a = normalize(eye);
+    reach = min(distance, length(eye));
+  }
+  else {
+    a = camera.xyz;
+    reach = distance;
+  }
+  float cosine = clamp(dot(a, b), -1.0, 1.0);
+  float theta = acos(cosine);
+  vec3 c = b - cosine * a;
+  float across = length(c);
+  c = across > 1e-9 ? c / across : perpendicular(a);
+  float sphere = min(centre.w, 0.999 * reach);
+  float lo = 0.0;
+  float hi = theta;
+  for (int k = 0; k < GUESS_BISECTIONS; k++) {
+    float mid = 0.5 * (lo + hi);
+    vec3 u = cos(mid) * a + sin(mid) * c;
+    vec3 p = sphere * u;
+    float balance = dot(to_eye(p), u) - dot(normalize(point - p), u);
+    if (balance > 0.0) {
+      lo = mid;
+    }
+    else {
+      hi = mid;
+    }
+  }
+  float phi = 0.5 * (lo + hi);
+  return cos(phi) * a + sin(phi) * c;
+}
+
+/* The chart around the guess and the residual there. */
+vec3 chart_axis;
+vec3 chart_t1;
+vec3 chart_t2;
+vec3 vertex;
+
+bool evaluate(vec2 x, out vec2 f, out vec3 p, out vec3 n, out vec3 h)
+{
+  vec3 d = normalize(chart_axis + x.x * chart_t1 + x.y * chart_t2);
+  float radius;
+  bool valid = map_surface(d, radius, n);
+  p = radius * d;
+  h = to_eye(p) + normalize(vertex - p);
+  vec3 tangent = h - dot(h, n) * n;
+  f = vec2(dot(tangent, chart_t1), dot(tangent, chart_t2));
+  return valid;
+}
+
+float pixel_tolerance(vec3 p)
+{
+  return limits.x * abs(dot(w_row, vec4(p + centre.xyz, 1.0)));
+}
+
+float segment_exit(vec3 start, vec3 direction, float radius)
+{
+  float b = dot(start, direction);
+  float c = dot(start, start) - radius * radius;
+  return max(-b + sqrt(max(b * b - c, 0.0)), 0.0);
+}
+
+bool segment_blocked(vec3 p, vec3 direction, float length_)
+{
+  float reach = min(length_, segment_exit(p, direction, limits.y));
+  for (int k = 0; k < OCCLUSION_SAMPLES; k++) {
+    float fraction = float(k + 1) / float(OCCLUSION_SAMPLES);
+    if (inside_surface(p + reach * fraction * fraction * direction)) {
+      return true;
+    }
+  }
+  return false;
+}
+
+int check(vec3 p, vec3 n, vec3 h)
+{
+  vec3 e = to_eye(p);
+  vec3 v = normalize(vertex - p);
+  float sine = length(cross(n, h)) / max(length(h), 1e-30);
+  if (sine >= RESIDUAL_TOLERANCE) {
+    return NOT_CONVERGED;
+  }
+  if (!(dot(n, e) > 0.0 && dot(n, v) > 0.0)) {
+    return FACES_AWAY;
+  }
+  if (convex == 0) {
+    float eye_length = camera.w > 0.5 ? length(camera.xyz - centre.xyz - p) : 1e30;
+    if (segment_blocked(p, e, eye_length) || segment_blocked(p, v, length(vertex - p))) {
+      return OCCLUDED;
+    }
+  }
+  return FOUND;
+}
+
+/* Damped Newton from chart point x; returns NOT_CONVERGED, NO_SURFACE or the verdict
+ * of check() on the converged sample (in p). */
+int newton(vec2 x, inout int steps, out vec3 p)
+{
+  vec2 f;
+  vec3 n, h;
+  if (!evaluate(x, f, p, n, h)) {
+    return NO_SURFACE;
+  }
+  for (int step = 0; step < MAX_ITERATIONS; step++) {
+    vec2 fu, fv, ft;
+    vec3 pt, nt, ht;
+    evaluate(x + vec2(DERIVATIVE_STEP, 0.0), fu, pt, nt, ht);
+    evaluate(x + vec2(0.0, DERIVATIVE_STEP), fv, pt, nt, ht);
+    vec2 ju = (fu - f) / DERIVATIVE_STEP;
+    vec2 jv = (fv - f) / DERIVATIVE_STEP;
+    float det = ju.x * jv.y - jv.x * ju.y;
+    vec2 delta = abs(det) > 1e-30 ? -vec2(jv.y * f.x - jv.x * f.y, ju.x * f.y - ju.y * f.x) / det : vec2(0.0);
+    float reach = length(delta);
+    if (reach > TRUST_RADIUS) {
+      delta *= TRUST_RADIUS / reach;
+    }
+    /* Line search: scales 1, 1/2, ... until |F| falls; the last one is taken regardless. */
+    float current = length(f);
+    float scale = 1.0;
+    vec3 previous = p;
+    bool valid = false;
+    for (int k = 0; k <= HALVINGS; k++) {
+      valid = evaluate(x + scale * delta, ft, pt, nt, ht);
+      if (valid && length(ft) < current || k == HALVINGS) {
+        break;
+      }
+      scale *= 0.5;
+    }
+    x += scale * delta;
+    f = ft;
+    p = pt;
+    n = nt;
+    h = ht;
+    steps += 1;
+    if (!valid || length(x) > MAX_CHART) {
+      return NO_SURFACE;
+    }
+    if (length(p - previous) < pixel_tolerance(p)) {
+      return check(p, n, h);
+    }
+  }
+  return NOT_CONVERGED;
+}
+
+const vec2 starts[5] = vec2[5](vec2(0.0, 0.0), vec2(RESTART_OFFSET, 0.0), vec2(-RESTART_OFFSET, 0.0),
+                               vec2(0.0, RESTART_OFFSET), vec2(0.0, -RESTART_OFFSET));
+
+void main()
+{
+  ivec2 texel = ivec2(gl_GlobalInvocationID.xy);
+  int index = texel.y * positions_width + texel.x;
+  if (texel.x >= positions_width || index >= n_vertices) {
+    return;
+  }
+  vertex = texelFetch(vertex_positions, texel, 0).xyz - centre.xyz;
+  int status = NO_SURFACE;
+  int steps = 0;
+  vec3 p = vec3(0.0);
+  bool eye_inside = camera.w > 0.5 && inside_surface(camera.xyz - centre.xyz);
+  if (eye_inside || length(vertex) <= 1e-9 * max(limits.y, 1e-30) || inside_surface(vertex)) {
+    status = INSIDE;
+  }
+  else {
+    chart_axis = sphere_guess(vertex);
+    chart_t1 = perpendicular(chart_axis);
+    chart_t2 = cross(chart_axis, chart_t1);
+    for (int attempt = 0; attempt < 5; attempt++) {
+      vec3 answer;
+      int verdict = newton(starts[attempt], steps, answer);
+      if (attempt == 0 || verdict == FOUND) {
+        status = verdict;
+        p = answer;
+      }
+      if (verdict == FOUND) {
+        break;
+      }
+    }
+  }
+  imageStore(result, texel, vec4(p + centre.xyz, float(status + 8) + 16.0 * float(steps)));
+}

@@ -1,0 +1,254 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The iterative search on the GPU: every frame, every diffuse vertex, no CPU work.
+
+Roger & Holzschuch (2006), section 3.3.7: the search runs on the GPU, and its second
+strategy (compute the reflected positions in one pass, draw them in another), which
+the paper could not use for want of render-to-vertex-buffer, is the one here: a compute
+shader (``glsl/iterative_search.glsl``, the twin of ``addon/methods/iterative/search.py``)
+writes each vertex's reflection point into a float texture, one texel per vertex, and
+the reflected meshes' vertex stage (``glsl/iterative_mesh_vert.glsl``) reads it back
+where each corner of a triangle is drawn. What is uploaded once: the diffuse vertices
+(a texture) with their triangles' corners and shading data (a vertex buffer), and each
+star-shaped reflector's cube map (:class:`MapTexture`, re-uploaded alone when that
+reflector changes). What runs per frame: one dispatch and one draw per reflector, with
+the view in push constants.
+"""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+
+import numpy as np
+
+from ..addon.methods.iterative import search as search_module
+
+_GLSL = Path(__file__).resolve().parent / "glsl"
+#: Texels per row of the vertex and result textures.
+TEXTURE_WIDTH = 4096
+#: Invocations per work group of the search (along x).
+LOCAL_SIZE = 64
+#: The result texel's code for a found answer: (FOUND + 8) + 16 steps, modulo 16.
+FOUND_CODE = search_module.FOUND + 8
+
+
+def search_defines() -> dict:
+    """The engine's constants, as the search shader's ``#define`` s."""
+    s = search_module
+    return {"MAX_ITERATIONS": s.MAX_ITERATIONS, "GUESS_BISECTIONS": s.GUESS_BISECTIONS,
+            "DERIVATIVE_STEP": f"{s.DERIVATIVE_STEP:.9e}", "TRUST_RADIUS": f"{s.TRUST_RADIUS:.9e}",
+            "HALVINGS": s.HALVINGS, "MAX_CHART": f"{s.MAX_CHART:.9e}",
+            "RESIDUAL_TOLERANCE": f"{s.RESIDUAL_TOLERANCE:.9e}", "OCCLUSION_SAMPLES": s.OCCLUSION_SAMPLES,
+            "RESTART_OFFSET": f"{s.RESTARTS[1][0]:.9e}"}
+
+
+def _source(name: str, defines: dict) -> str:
+    lines = [f"#define {key} {value}" for key, value in defines.items()]
+    return "\n".join(lines) + "\n" + (_GLSL / name).read_text(encoding="utf-8")
+
+
+@functools.cache
+def search_shader():
+    """The compute shader of the search, built on first use."""
+    import gpu
+
+    info = gpu.types.GPUShaderCreateInfo()
+    info.push_constant('VEC4', "camera")
+    info.push_constant('VEC4', "centre")
+    info.push_constant('VEC4', "w_row")
+    info.push_constant('VEC2', "limits")
+    info.push_constant('INT', "face_size")
+    info.push_constant('INT', "n_vertices")
+    info.push_constant('INT', "positions_width")
+    info.push_constant('INT', "convex")
+    info.sampler(0, 'FLOAT_2D', "vertex_positions")
+    info.sampler(1, 'FLOAT_2D', "reflector_map")
+    info.image(0, 'RGBA32F', 'FLOAT_2D', "result", qualifiers={'WRITE'})
+    info.local_group_size(LOCAL_SIZE, 1)
+    info.compute_source(_source("iterative_search.glsl", search_defines()))
+    return gpu.shader.create_from_info(info)
+
+
+@functools.cache
+def reflected_shader():
+    """The reflected meshes' shader, built on first use (fragment stage shared with the
+    sample-based camera's reflected meshes)."""
+    import gpu
+
+    from .reflection_draw import _shading_source, _source as draw_source
+
+    interface = gpu.types.GPUStageInterfaceInfo("curved_reflections_iterative_interface")
+    interface.smooth('VEC4', "color_interp")
+    interface.smooth('VEC3', "normal_interp")
+    interface.smooth('VEC3', "eye_interp")
+    interface.smooth('VEC2', "uv_interp")
+    interface.smooth('FLOAT', "distance_interp")
+    interface.flat('FLOAT', "lit_interp")
+    interface.flat('FLOAT', "reflector_interp")
+    info = gpu.types.GPUShaderCreateInfo()
+    info.push_constant('MAT4', "view_projection")
+    info.push_constant('INT', "result_width")
+    info.push_constant('FLOAT', "inverse_diameter")
+    info.push_constant('FLOAT', "order_range")
+    info.push_constant('FLOAT', "reflector_id")
+    info.push_constant('INT', "use_image")
+    info.sampler(0, 'FLOAT_2D', "search_result")
+    info.sampler(1, 'FLOAT_2D', "vertex_positions")
+    info.sampler(2, 'FLOAT_2D', "prepass_labels")
+    info.sampler(3, 'FLOAT_2D', "image")
+    info.vertex_in(0, 'IVEC4', "corners")
+    info.vertex_in(1, 'VEC4', "color")
+    info.vertex_in(2, 'VEC4', "normal_lit")
+    info.vertex_in(3, 'VEC2', "uv")
+    info.vertex_out(interface)
+    info.fragment_out(0, 'VEC4', "color_out")
+    info.vertex_source(_source("iterative_mesh_vert.glsl", {"FOUND_CODE": FOUND_CODE}))
+    info.fragment_source(_shading_source() + draw_source("reflection_mesh_frag.glsl"))
+    return gpu.shader.create_from_info(info)
+
+
+def _texture(texels: np.ndarray, width: int):
+    import gpu
+
+    height = max(1, -(-len(texels) // width))
+    padded = np.zeros((width * height, 4), np.float32)
+    padded[:len(texels), :texels.shape[1]] = texels
+    data = gpu.types.Buffer('FLOAT', padded.size, padded.reshape(-1))
+    return gpu.types.GPUTexture((width, height), format='RGBA32F', data=data)
+
+
+class MapTexture:
+    """One reflector's cube map on the GPU, with what the search needs to know of it."""
+
+    def __init__(self, method):
+        import gpu
+
+        rmap = method.reflector_map
+        texels = np.ascontiguousarray(rmap.texels, dtype=np.float32)
+        height, width = texels.shape[:2]
+        data = gpu.types.Buffer('FLOAT', texels.size, texels.reshape(-1))
+        self.texture = gpu.types.GPUTexture((width, height), format='RGBA32F', data=data)
+        self.method = method
+        self.centre = np.asarray(rmap.centre, dtype=np.float64)
+        self.mean_radius = rmap.mean_radius
+
+
+class IterativePass:
+    """The iterative method's GPU side for one renderer's reflected geometry (a
+    ``reflection_draw.DrawGeometry``) and its star-shaped reflectors
+    (``addon.methods.iterative.IterativeReflector`` each)."""
+
+    def __init__(self, geometry, methods):
+        self.geometry = geometry
+        self.methods = list(methods)
+        self.n_vertices = len(geometry.vertices)
+        self.width = max(1, min(self.n_vertices, TEXTURE_WIDTH))
+        self.height = max(1, -(-self.n_vertices // self.width))
+        self._positions = None
+        self._batch = None
+        self._maps: dict = {}
+        self._results: dict = {}
+        self.counts = {"searches": 0}
+
+    @property
+    def reflector_indices(self) -> list:
+        return [m.index for m in self.methods]
+
+    def replace(self, method) -> None:
+        """Use ``method`` for its reflector from now on (a re-baked map: only it is uploaded)."""
+        self.methods = [method if m.index == method.index else m for m in self.methods]
+        self._maps.pop(method.index, None)
+
+    def _ensure(self) -> None:
+        import gpu
+
+        from .reflection_draw import _vertex_buffer
+
+        if self._positions is None:
+            g = self.geometry
+            self._positions = _texture((g.vertices - g.shift).astype(np.float32), self.width)
+            corners = np.asarray(g.triangles, dtype=np.int32)
+            which = np.tile(np.arange(3, dtype=np.int32), len(corners))
+            index = corners.reshape(-1)
+            attributes = {"corners": (np.c_[np.repeat(corners, 3, axis=0), which].astype(np.int32), 'I32', 'INT'),
+                          "color": (g.colors[index], 'F32', 'FLOAT'),
+                          "normal_lit": (np.c_[g.normals, g.lit][index].astype(np.float32), 'F32', 'FLOAT'),
+                          "uv": (g.uvs[index], 'F32', 'FLOAT')}
+            if len(index):
+                self._batch = gpu.types.GPUBatch(type='TRIS', buf=_vertex_buffer(attributes))
+        for method in self.methods:
+            if method.index not in self._maps:
+                self._maps[method.index] = MapTexture(method)
+            if method.index not in self._results:
+                self._results[method.index] = gpu.types.GPUTexture((self.width, self.height), format='RGBA32F')
+
+    def search(self, view) -> None:
+        """This frame's search: one dispatch per reflector, into its result texture."""
+        import gpu
+
+        if self.n_vertices == 0 or not self.methods:
+            return
+        self._ensure()
+        shift = self.geometry.shift
+        world_to_clip = np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix)
+        translate = np.eye(4)
+        translate[:3, 3] = shift
+        w_row = (world_to_clip @ translate)[3]
+        pixel_scale = 2.0 / (float(view.projection_matrix[0][0]) * view.width)
+        if view.is_perspective:
+            camera = (*(view.eye - shift), 1.0)
+        else:
+            camera = (*view.backward, 0.0)
+        shader = search_shader()
+        shader.bind()
+        shader.uniform_float("camera", tuple(float(c) for c in camera))
+        shader.uniform_float("w_row", tuple(float(c) for c in w_row))
+        shader.uniform_int("n_vertices", self.n_vertices)
+        shader.uniform_int("positions_width", self.width)
+        shader.uniform_sampler("vertex_positions", self._positions)
+        groups = (-(-self.width // LOCAL_SIZE), self.height, 1)
+        for method in self.methods:
+            gpu_map = self._maps[method.index]
+            rmap = method.reflector_map
+            stop = search_module.STOP_FRACTION * method.accuracy_px * pixel_scale
+            shader.uniform_float("centre", (*(gpu_map.centre - shift), gpu_map.mean_radius))
+            shader.uniform_float("limits", (stop, float(rmap.max_radius)))
+            shader.uniform_int("face_size", int(rmap.face_size))
+            shader.uniform_int("convex", int(bool(rmap.convex)))
+            shader.uniform_sampler("reflector_map", gpu_map.texture)
+            shader.image("result", self._results[method.index])
+            gpu.compute.dispatch(shader, *groups)
+        self.counts["searches"] += 1
+
+    def draw(self, view_projection, prepass_labels, setup: dict, image_of) -> None:
+        """The reflected meshes of every reflector into the bound framebuffer (depth
+        test on), placed by ``view_projection`` (a ``mathutils.Matrix`` relative to
+        the shift); ``image_of(k)`` is the texture of image ``k`` (-1: none)."""
+        if self._batch is None or not self.methods:
+            return
+        shader = reflected_shader()
+        shader.bind()
+        shader.uniform_float("view_projection", view_projection)
+        shader.uniform_int("result_width", self.width)
+        shader.uniform_float("inverse_diameter", setup["inverse_diameter"])
+        shader.uniform_float("order_range", setup["order_range"])
+        shader.uniform_sampler("vertex_positions", self._positions)
+        shader.uniform_sampler("prepass_labels", prepass_labels)
+        for method in self.methods:
+            shader.uniform_sampler("search_result", self._results[method.index])
+            shader.uniform_float("reflector_id", float(method.index + 1))
+            for image, first, count in self.geometry.ranges:
+                shader.uniform_int("use_image", int(image >= 0))
+                shader.uniform_sampler("image", image_of(image))
+                self._batch.draw_range(shader, elem_start=3 * first, elem_count=3 * count)
+
+    def read(self, reflector_index: int) -> search_module.SearchResult:
+        """The last search of one reflector, read back (tests, the status counts)."""
+        from .reflection_draw import _read_texture
+
+        texels = _read_texture(self._results[reflector_index], self.width, self.height).reshape(-1, 4)
+        texels = texels[:self.n_vertices].astype(np.float64)
+        code = texels[:, 3].astype(np.int64)
+        status = (code % 16 - 8).astype(np.int8)
+        positions = np.where((status == search_module.FOUND)[:, None], texels[:, :3] + self.geometry.shift, np.nan)
+        return search_module.SearchResult(positions, status, (code // 16).astype(np.int16))
