@@ -252,3 +252,16 @@ class IterativePass:
         status = (code % 16 - 8).astype(np.int8)
         positions = np.where((status == search_module.FOUND)[:, None], texels[:, :3] + self.geometry.shift, np.nan)
         return search_module.SearchResult(positions, status, (code // 16).astype(np.int16))
+
+    def status_counts(self) -> dict:
+        """{reflector name: {"found", "not_converged", "unanswered"}} of the last search,
+        read back: the vertices the search could not settle are counted, not drawn."""
+        counts = {}
+        for method in self.methods:
+            if method.index not in self._results:
+                continue
+            status = self.read(method.index).status
+            counts[method.name] = {"found": int((status == search_module.FOUND).sum()),
+                                   "not_converged": int((status == search_module.NOT_CONVERGED).sum()),
+                                   "unanswered": int((status != search_module.FOUND).sum())}
+        return counts

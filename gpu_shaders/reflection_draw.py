@@ -107,6 +107,7 @@ import numpy as np
 
 from ..addon import band_trace, sheet_bounds, subdivision
 from . import projection
+from .iterative_draw import IterativePass
 
 _GLSL = Path(__file__).resolve().parent / "glsl"
 
@@ -131,6 +132,10 @@ MIXED_SUB_PX = 1.0
 MIXED_COARSE_FACTOR = 4
 #: Float targets hold vertex indices exactly below 2^24.
 MAX_VERTICES = 1 << 24
+#: Depth range of the iterative search's first-order reflections (as SBC V-A's g for
+#: max order 1); they never share pixels with another method's, the pre-pass ids keep
+#: each reflection on its own mirror.
+ITERATIVE_ORDER_RANGE = 0.5
 #: Texels of the vertex projection target (16 bytes each): the sheets of one history
 #: are projected side by side (for stitching) as far as this allows.
 MAX_PROJECTED_TEXELS = 1 << 22
@@ -745,9 +750,12 @@ class ReflectionRenderer:
     def __init__(self, reflectors, meshes, reflector_colors=None, reflectivity=None,
                  edge_fraction: float | None = subdivision.EDGE_FRACTION, *, fresnel_f0=None,
                  attenuation_distance=None, mixed_subdivisions: int = MIXED_SUBDIVISIONS, cull: bool = True,
-                 polish: bool = True):
+                 polish: bool = True, iterative=()):
         self.geometry = prepare_geometry(reflectors, meshes, reflector_colors, reflectivity, edge_fraction,
                                          fresnel_f0, attenuation_distance)
+        #: The star-shaped reflectors drawn by the iterative search every frame
+        #: (``addon.methods.iterative.IterativeReflector`` each); the others by ``textures``.
+        self.iterative = IterativePass(self.geometry, iterative)
         self.mixed_subdivisions = int(mixed_subdivisions)
         self.cull = bool(cull)
         self.polish = bool(polish)
@@ -822,7 +830,7 @@ class ReflectionRenderer:
 
         targets = self.draw_passes(view, textures, camera)
         if fill_radius is None:
-            fill_radius = textures.downsample
+            fill_radius = 0 if textures is None else textures.downsample
         x, y, width, height = gpu.state.viewport_get()
         # A viewport of the view's size is drawn into where it is; otherwise from (0, 0).
         origin = (x, y) if (width, height) == (targets.width, targets.height) else None
@@ -846,7 +854,7 @@ class ReflectionRenderer:
             self._batches = self._make_batches()
         batches, g = self._batches, self.geometry
         camera_view = camera.ray_map.view if camera is not None else getattr(textures, "view", view)
-        cached = self.projection(textures, camera_view, camera)
+        cached = None if textures is None else self.projection(textures, camera_view, camera)
         targets = self.targets(view.width, view.height)
         width, height = targets.width, targets.height
         translate = np.eye(4)
@@ -870,10 +878,17 @@ class ReflectionRenderer:
                         shader.uniform_int("use_image", int(image >= 0))
                         shader.uniform_sampler("image", self._image(image))
                         batch.draw(shader)
+            self.iterative.search(view)
             with targets.reflection.bind():
                 gpu.state.viewport_set(0, 0, width, height)
                 targets.reflection.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
-                if cached.batch is not None:
+                if self.iterative.methods:
+                    gpu.state.depth_test_set('LESS')
+                    gpu.state.depth_mask_set(True)
+                    self.iterative.draw(view_projection, targets.prepass_labels,
+                                        {"inverse_diameter": 1.0 / g.diameter, "order_range": ITERATIVE_ORDER_RANGE},
+                                        self._image)
+                if cached is not None and cached.batch is not None:
                     gpu.state.depth_test_set('LESS')
                     gpu.state.depth_mask_set(True)
                     shader = _shader("reflected")
@@ -886,7 +901,7 @@ class ReflectionRenderer:
                         shader.uniform_int("use_image", int(image >= 0))
                         shader.uniform_sampler("image", self._image(image))
                         cached.batch.draw_range(shader, elem_start=first, elem_count=count)
-        self.stats["mixed_triangles"] = cached.mixed_triangles
+        self.stats["mixed_triangles"] = 0 if cached is None else cached.mixed_triangles
         self.counts["frames"] += 1
         targets.traced = None
         return targets
@@ -953,6 +968,8 @@ class ReflectionRenderer:
         if self._tracer is None:
             self._tracer = band_trace.BandTracer(self._reflectors, self._meshes)
         labels = _read_texture(targets.prepass_labels, targets.width, targets.height)[..., 0]
+        # The iterative search reaches a mirror's silhouette: its reflectors have no band.
+        labels = np.where(np.isin(np.rint(labels) - 1, self.iterative.reflector_indices), 0.0, labels)
         drawn = _read_texture(targets.reflection_colors, targets.width, targets.height)[..., 3] > 0.5
         boundary = None if ray_map is None else band_trace.history_boundary(
             ray_map, targets.width, targets.height, max_order)
@@ -1305,8 +1322,9 @@ class ReflectionRenderer:
         """Draw ``view`` offscreen and read it back: (H, W, 4) float32 linear RGBA, rows bottom to top.
 
         ``sbc_or_textures``: a ``SampleBasedCamera`` built for this view, its
-        ``projection.SBCTextures``, or another projection source of this view
-        (:class:`SheetSources`, :class:`.morph_source.MorphSource`). With ``trace`` the band along each footprint's edge
+        ``projection.SBCTextures``, another projection source of this view
+        (:class:`SheetSources`, :class:`.morph_source.MorphSource`), or ``None`` when
+        the iterative search draws every reflector. With ``trace`` the band along each footprint's edge
         that the camera cannot reach (d pixels wide) is ray traced (:meth:`trace_band`);
         without, it gets the composite's fill (``fill_radius``, ``None``: d). With
         ``trace_edges`` also the reflector pixels within d of a drawn reflection that got
@@ -1324,13 +1342,13 @@ class ReflectionRenderer:
             textures = cached.source if cached is not None and cached.camera is camera else (
                 projection.SBCTextures(camera))
         uploaded = time.perf_counter()
-        downsample = textures.downsample
+        downsample = 0 if textures is None else textures.downsample
         targets = self.draw_passes(view, textures, camera)
         if camera is not None:
             self._projection.camera = camera
         drawn = time.perf_counter()
         traced = 0
-        if trace and textures.groups:
+        if trace and textures is not None and textures.groups:
             max_order = max(len(h) for h in textures.groups)
             traced = self.trace_band(view, targets, max_order, world_color, downsample, trace_edges,
                                      getattr(sbc_or_textures, "ray_map", None), camera)
@@ -1343,6 +1361,7 @@ class ReflectionRenderer:
             self.composite(targets, world_color, False, fill_radius)
         image = _read_texture(texture, targets.width, targets.height)
         end = time.perf_counter()
+        self.stats["iterative"] = self.iterative.status_counts()
         self.stats.update({"upload_seconds": uploaded - start, "pass_seconds": drawn - uploaded,
                            "band_seconds": band - drawn, "composite_seconds": end - band,
                            "draw_seconds": end - start, "traced_pixels": traced})
