@@ -1039,8 +1039,11 @@ class ReflectionRenderer:
         stitch_px = STITCH_CELLS * textures.downsample
         kdops = _culling(textures, camera, g.diameter) if self.cull else None
         pieces, mixed_blocks, projected = [], [], 0
+        searched = self.iterative.reflector_indices
         for sheets in _sheet_chunks(histories, max(1, MAX_PROJECTED_TEXELS // n_vertices)):
             history = histories[sheets[0]]
+            if len(history) == 1 and history[0] in searched:
+                continue  # the iterative search draws these first-order reflections every frame
             draws = []
             for layer, sheet in enumerate(sheets):
                 for first, count in self._vertex_runs(kdops, sheet):

@@ -7,7 +7,7 @@ they are registered in module order and unregistered in reverse.
 
 import bpy
 
-from . import bake, demo_scenes, live, morph_bake, panel, properties, reflectors, render_image
+from . import bake, demo_scenes, live, methods, morph_bake, panel, properties, reflectors, render_image
 
 _modules = (
     properties,
@@ -33,6 +33,7 @@ def register():
 
 def unregister():
     live.unregister()
+    methods.forget()
     properties.unregister_pointers()
     for cls in reversed(_classes()):
         bpy.utils.unregister_class(cls)

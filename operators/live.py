@@ -63,6 +63,7 @@ from ..addon.raytrace import ReflectorSet
 from ..addon.sbc import build_sample_based_camera
 from ..addon.scene import scene_bounds
 from ..addon.view import View
+from . import methods
 from .capture import capture_scene, view_from_camera, view_from_region
 from .render_image import BOUNDS_MARGIN, reflector_properties, world_color
 
@@ -107,6 +108,7 @@ class LiveScene:
     reflector_set: object = None
     reflector_names: frozenset = frozenset()
     grids: list = field(default_factory=list)  # (MorphingGrid, matrix) of the baked reflectors in Morphing mode
+    plan: object = field(default_factory=lambda: methods.MethodPlan())  # which method draws each reflector
     bounds: tuple | None = None
     world: tuple = (0.0, 0.0, 0.0, 1.0)
     cameras: dict = field(default_factory=dict)  # view key -> ViewCamera
@@ -153,21 +155,25 @@ def _capture(state: LiveScene, scene, depsgraph, reflectors: bool) -> None:
 
     captured = capture_scene(depsgraph)
     lo, hi = scene_bounds(captured.reflectors, captured.meshes)
+    if reflectors or state.reflector_set is None:
+        state.reflector_set = ReflectorSet(list(captured.reflectors))
+        state.reflector_names = _marked_reflectors(scene)
+        state.grids = _load_grids(scene, captured.reflectors)
+        state.plan = methods.plan(scene, captured.reflectors, state.settings[2],
+                                  baked={grid.reflector_name for grid, _ in state.grids})
     # A new renderer has no projection: the next draw projects with the view's camera
     # once (SBC V-A), and later draws reuse it until a camera lands or the meshes change.
     # Interpolated answers only: polishing them on the true rays (the headless render
-    # does) costs seconds per camera with the numpy BVH, on the main thread.
+    # does) costs seconds per camera with the numpy BVH, on the main thread. Star-shaped
+    # reflectors are searched on the GPU every frame (their maps come from the plan).
     state.renderer = ReflectionRenderer(captured.reflectors, captured.meshes, polish=False,
+                                        iterative=state.plan.iterative,
                                         **reflector_properties(captured.reflectors, scene))
     state.captured = captured
     state.world = world_color(scene)
     state.bounds = (lo, hi)
     state.drawing = True
-    if reflectors or state.reflector_set is None:
-        state.reflector_set = ReflectorSet(list(captured.reflectors))
-        state.reflector_names = _marked_reflectors(scene)
-        state.grids = _load_grids(scene, captured.reflectors)
-        state.generation += 1
+    if reflectors:
         state.counts["bakes"] += 1
     else:
         state.counts["remeshes"] += 1
@@ -183,7 +189,7 @@ def _load_grids(scene, reflectors) -> list:
     grids = []
     for index, reflector in enumerate(reflectors):
         obj = scene.objects.get(reflector.name)
-        if obj is None or obj.curved_reflections.mode != 'MORPHING':
+        if obj is None or not methods.wants_grid(scene, reflector):
             continue
         matrix = np.array(obj.matrix_world, dtype=np.float64)
         grid = load_morphing(reflector, matrix, scene, index)
@@ -211,9 +217,11 @@ def _covering_grids(state: LiveScene, view: View) -> list:
 
 
 def _needs_camera(state: LiveScene, covering: list, settings: tuple) -> bool:
-    """Whether a sample-based camera must be built: a reflector not drawn from a grid,
-    or reflections of a higher order (grids give first-order ones only)."""
-    return len(covering) < len(state.reflector_set.reflectors) or settings[0] > 1
+    """Whether a sample-based camera must be built: a reflector drawn neither from a grid
+    nor by the iterative search, or reflections of a higher order (grids and the search
+    give first-order ones only)."""
+    drawn = len(covering) + len(state.plan.iterative)
+    return drawn < len(state.reflector_set.reflectors) or settings[0] > 1
 
 
 def _marked_reflectors(scene) -> frozenset:
@@ -313,6 +321,7 @@ def _update_stats(state: LiveScene, sbc, covering: list) -> None:
         "views": len(state.cameras),
         "reflected_triangles": int(len(geometry.triangles)),
         "morphing": ", ".join(grid.reflector_name for grid, _ in covering),
+        "iterative": ", ".join(m.name for m in state.plan.iterative),
     })
 
 
@@ -321,7 +330,7 @@ def _report_visibility(state: LiveScene, sbc, covering: list) -> None:
     A reflector drawn from its grid counts as seen (its grid decides per vertex)."""
     names = [r.name for r in state.captured.reflectors]
     seen = {int(history[0]) for history in ([] if sbc is None else sbc.groups)}
-    seen |= {grid.reflector_index for grid, _ in covering}
+    seen |= {grid.reflector_index for grid, _ in covering} | state.plan.iterative_indices
     unseen = [name for k, name in enumerate(names) if k not in seen]
     quoted = ", ".join(repr(n) for n in unseen)
     if not seen:
@@ -447,6 +456,9 @@ def draw(scene, key, view: View) -> bool:
     failed = state.failed.get(key)
     if failed is not None and _same_view(failed, view):
         return False  # the status line says why; a new view or a Refresh tries again
+    if not _needs_camera(state, [], state.settings):
+        # Every reflector is searched on the GPU: nothing to build when the view changes.
+        return _draw_with(state, view, None, None)
     camera = state.cameras.get(key)
     current = camera is not None and camera.generation == state.generation and camera.settings == state.settings
     if (camera is None or not current or not _same_view(camera.view, view)) and key not in state.jobs:
@@ -454,17 +466,21 @@ def draw(scene, key, view: View) -> bool:
             request_view(state, key, view)
     if camera is None:
         return False
-    if camera.source is None:
+    if camera.source is None and (camera.sbc is not None or camera.morph):
         camera.source = _projection_source(camera)
+    camera.last_drawn = time.monotonic()
+    plain = isinstance(camera.source, SBCTextures)
+    return _draw_with(state, view, camera.source, camera.sbc if plain else None)
+
+
+def _draw_with(state: LiveScene, view: View, source, sbc) -> bool:
+    """One draw of ``view`` with a projection source (``None``: the iterative search alone)."""
     start = time.perf_counter()
     projections = state.renderer.counts["projections"]
-    plain = isinstance(camera.source, SBCTextures)
-    state.renderer.draw(view, camera.source, state.world, reflectors_only=True,
-                        camera=camera.sbc if plain else None)
+    state.renderer.draw(view, source, state.world, reflectors_only=True, camera=sbc)
     if state.renderer.counts["projections"] != projections:
         state.counts["projections"] += 1
         state.stats["projection_ms"] = 1000.0 * state.renderer.stats.get("projection_seconds", 0.0)
-    camera.last_drawn = time.monotonic()
     state.stats["draw_ms"] = 1000.0 * (time.perf_counter() - start)
     state.counts["draws"] += 1
     return True
@@ -636,6 +652,7 @@ def on_load_pre(*_args) -> None:
 
     clear_all()
     forget_statuses()
+    methods.forget()
 
 
 @persistent
@@ -687,6 +704,7 @@ def unregister() -> None:
 
     clear_all()
     forget_statuses()
+    methods.forget()
     if _executor is not None:
         _executor.shutdown(wait=False, cancel_futures=True)
         _executor = None

@@ -24,6 +24,7 @@ import numpy as np
 from ..addon import bake, bake_cache
 from ..addon.errors import SceneInputError
 from ..addon.morphing import MorphSettings
+from . import methods
 from .capture import capture_scene
 
 #: Per scene name: {"running": bool, "done": int, "total": int, "reflector": str, "message": str}
@@ -74,7 +75,7 @@ def morphing_reflectors(context):
     chosen = []
     for reflector in captured.reflectors:
         obj = context.scene.objects.get(reflector.name)
-        if obj is None or obj.curved_reflections.mode != 'MORPHING':
+        if obj is None or not methods.wants_grid(context.scene, reflector):
             continue
         chosen.append((reflector, np.array(obj.matrix_world, dtype=np.float64)))
     return chosen
@@ -112,7 +113,7 @@ def reflector_modes(scene) -> list[tuple[str, str]]:
     lines = []
     for obj in scene.objects:
         settings = obj.curved_reflections
-        if settings.is_reflector and settings.mode == 'MORPHING':
+        if settings.is_reflector and methods.grid_wanted_by_last_plan(scene, obj):
             lines.append((obj.name, _REFLECTOR_STATUS.get(obj.name, "runtime mode: not baked or loaded yet")))
     return lines
 

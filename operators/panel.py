@@ -9,7 +9,7 @@ that do not apply are greyed, not hidden, so the layout does not jump.
 
 import bpy
 
-from . import live, morph_bake
+from . import live, methods, morph_bake
 from .capture import SURFACE_TYPES
 
 _STATUS_ICONS = {'INFO': 'INFO', 'WARNING': 'ERROR', 'ERROR': 'CANCEL'}
@@ -28,6 +28,22 @@ def _reflector_settings(layout, obj) -> None:
     facing.prop(settings, "fresnel_f0")
     details.prop(settings, "attenuation_distance")
     details.prop(settings, "mode")
+
+
+_METHOD_ICONS = {methods.ITERATIVE: 'SHADERFX', methods.MORPHING: 'LIGHTPROBE_VOLUME', methods.RUNTIME: 'CAMERA_DATA'}
+
+
+def _reflector_methods(box, scene, reflectors) -> None:
+    """Each reflector with the method drawing it and why (the last plan: Bake or Render)."""
+    choices = {c.reflector: c for c in methods.last_choices(scene)}
+    for reflector in reflectors:
+        choice = choices.get(reflector.name)
+        if choice is None:
+            box.label(text=f"{reflector.name}: {reflector.curved_reflections.mode.title()} (not baked yet)",
+                      icon='MOD_MIRROR')
+            continue
+        box.label(text=f"{reflector.name}: {choice.method.title()}", icon=_METHOD_ICONS[choice.method])
+        box.label(text=choice.reason)
 
 
 def _live_section(layout, scene) -> None:
@@ -90,8 +106,7 @@ class VIEW3D_PT_curved_reflections(bpy.types.Panel):
         reflectors = [o for o in scene.objects if o.curved_reflections.is_reflector]
         box = layout.box()
         if reflectors:
-            for reflector in reflectors:
-                box.label(text=reflector.name, icon='MOD_MIRROR')
+            _reflector_methods(box, scene, reflectors)
         else:
             box.label(text="No reflector marked", icon='INFO')
         layout.operator("curved_reflections.mark_reflector", icon='MOD_MIRROR')
@@ -102,7 +117,7 @@ class VIEW3D_PT_curved_reflections(bpy.types.Panel):
         column.prop(scene_settings, "accuracy_px")
         column.prop(scene_settings, "max_order")
         column.prop(scene_settings, "auto_refresh")
-        morphing = any(o.curved_reflections.mode == 'MORPHING' for o in reflectors)
+        morphing = any(methods.grid_wanted_by_last_plan(scene, o) for o in reflectors)
         morph = column.column()
         morph.active = morphing
         morph.prop(scene_settings, "morph_grid")

@@ -54,11 +54,15 @@ class CurvedReflectionsObjectSettings(bpy.types.PropertyGroup):
         name="Mode",
         description="How this reflector's reflections are computed",
         items=(
+            ('AUTO', "Auto", "Iterative where the reflector is star-shaped, Morphing where a baked grid covers the "
+                             "view, Runtime otherwise; the panel says which and why"),
+            ('ITERATIVE', "Iterative (GPU)", "Find every vertex's reflection on the GPU each frame (Roger & "
+                                             "Holzschuch 2006); star-shaped reflectors only, others use Runtime"),
             ('RUNTIME', "Runtime", "Rebuild the sample-based camera for every new view (SBC paper IV)"),
             ('MORPHING', "Morphing", "Bake a grid of panoramic cameras around the reflector and blend them "
                                      "as the view moves (SBC paper VI)"),
         ),
-        default='RUNTIME',
+        default='AUTO',
         update=_reflector_toggled,
     )
 

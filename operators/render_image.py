@@ -21,19 +21,22 @@ same shading as their reflections (a headlight Lambert, ``addon/band_trace.shade
 
 from __future__ import annotations
 
+import hashlib
+import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import bpy
 import numpy as np
-from bpy.props import StringProperty
+from bpy.props import BoolProperty, StringProperty
 
 from ..addon.errors import SceneInputError
 from ..addon.metrics import linear_to_srgb
 from ..addon.sbc import build_sample_based_camera
 from ..addon.scene import scene_bounds
 from ..addon.view import View
+from . import methods
 from .capture import capture_scene, view_from_camera
 from .gpu_init import ensure_gpu
 from .material_color import material_color
@@ -115,17 +118,51 @@ def reflector_appearance(reflectors, scene) -> tuple[np.ndarray, np.ndarray]:
     return properties["reflector_colors"], properties["reflectivity"]
 
 
+def captured_key(captured) -> tuple:
+    """(reflectors, meshes) hashes: a frame whose key matches the last one's reuses its
+    renderer (meshes uploaded and subdivided once) and its method plan."""
+    def digest(items, fields) -> str:
+        hasher = hashlib.sha1()
+        for item in items:
+            hasher.update(item.name.encode("utf-8", "surrogatepass"))
+            for name in fields:
+                value = getattr(item, name)
+                if value is not None:
+                    hasher.update(np.ascontiguousarray(value).tobytes())
+        return hasher.hexdigest()
+
+    return (digest(captured.reflectors, ("vertices", "triangles", "normals")),
+            digest(captured.meshes, ("vertices", "triangles", "colors", "uvs", "normals", "image")))
+
+
+@dataclass
+class FrameState:
+    """What frames of one render keep between them: the capture's key, the method plan
+    and the renderer (shaders, uploaded meshes, reflector maps). Only what changed is
+    made again: moved reflectors are planned again, moved meshes get a new renderer."""
+
+    key: tuple = ()
+    plan: object = None
+    renderer: object = None
+    frames: int = 0
+    reused: int = 0
+
+
 def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: int | None = None,
-                 accuracy_px: float | None = None, trace_edges: bool = False) -> ReflectionRender:
+                 accuracy_px: float | None = None, trace_edges: bool = False,
+                 state: FrameState | None = None) -> ReflectionRender:
     """Render ``scene.camera`` at the render resolution with reflections (offscreen).
 
-    Settings not given come from ``scene.curved_reflections``. The band along each
-    reflector's visible edge, which a sample-based camera cannot reach, is ray traced;
-    ``trace_edges`` also traces the mirror pixels next to a drawn reflection that got
-    none (dropped mixed triangles, creases of the mirror; see
-    ``gpu_shaders/reflection_draw.py``). Bad input (no camera, no reflector, a reflector
-    without faces, the camera inside a reflector) raises :class:`SceneInputError`
-    naming the object; the GPU is initialised if needed.
+    Each reflector is drawn by the method its mode chooses (:mod:`.methods`): the
+    iterative search on the GPU where it is star-shaped (Auto, Iterative), a sample-based
+    camera of this view otherwise (built only when some reflector or a higher order
+    needs one). Settings not given come from ``scene.curved_reflections``. The band
+    along each sample-based reflector's visible edge, which its camera cannot reach, is
+    ray traced; ``trace_edges`` also traces the mirror pixels next to a drawn reflection
+    that got none (see ``gpu_shaders/reflection_draw.py``). ``state`` keeps the
+    renderer and the plan between the frames of an animation. Bad input (no camera, no
+    reflector, a reflector without faces, the camera inside a reflector) raises
+    :class:`SceneInputError` naming the object; the GPU is initialised if needed.
     """
     from ..gpu_shaders.reflection_draw import ReflectionRenderer
 
@@ -133,35 +170,72 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
     max_order = settings.max_order if max_order is None else max_order
     downsample = settings.downsample if downsample is None else downsample
     accuracy_px = settings.accuracy_px if accuracy_px is None else accuracy_px
+    state = FrameState() if state is None else state
     start = time.perf_counter()
     view = view_from_camera(scene.camera, scene, depsgraph)
     captured = capture_scene(depsgraph)
-    captured_at = time.perf_counter()
-    lo, hi = scene_bounds(captured.reflectors, captured.meshes)
-    bounds = scene_bounds(captured.reflectors, captured.meshes, BOUNDS_MARGIN * float(np.linalg.norm(hi - lo)))
-    sbc = build_sample_based_camera(captured.reflectors, view, bounds, max_order=max_order,
-                                    downsample=downsample, accuracy_px=accuracy_px)
-    built_at = time.perf_counter()
     ensure_gpu()
-    renderer = ReflectionRenderer(captured.reflectors, captured.meshes,
-                                  **reflector_properties(captured.reflectors, scene))
-    image = renderer.render(view, sbc, world_color(scene), trace_edges=trace_edges)
+    captured_at = time.perf_counter()
+    key = captured_key(captured)
+    if state.plan is None or key[0] != state.key[0]:
+        state.plan = methods.plan(scene, captured.reflectors, accuracy_px)
+        state.renderer = None
+    if state.renderer is None or key != state.key:
+        state.renderer = ReflectionRenderer(captured.reflectors, captured.meshes, iterative=state.plan.iterative,
+                                            **reflector_properties(captured.reflectors, scene))
+    else:
+        state.reused += 1
+    state.key = key
+    planned_at = time.perf_counter()
+    sbc = None
+    if len(state.plan.iterative) < len(captured.reflectors) or max_order > 1:
+        lo, hi = scene_bounds(captured.reflectors, captured.meshes)
+        bounds = scene_bounds(captured.reflectors, captured.meshes, BOUNDS_MARGIN * float(np.linalg.norm(hi - lo)))
+        sbc = build_sample_based_camera(captured.reflectors, view, bounds, max_order=max_order,
+                                        downsample=downsample, accuracy_px=accuracy_px)
+    built_at = time.perf_counter()
+    image = state.renderer.render(view, sbc, world_color(scene), trace_edges=trace_edges)
     end = time.perf_counter()
-    seconds = {"capture": captured_at - start, "sbc": built_at - captured_at, "draw": end - built_at,
-               "total": end - start, "trace": sbc.stats.get("trace_seconds", float("nan"))}
-    stats = {**sbc.stats, **renderer.stats}
+    state.frames += 1
+    seconds = {"capture": captured_at - start, "plan": planned_at - captured_at, "sbc": built_at - planned_at,
+               "draw": end - built_at, "total": end - start,
+               "trace": sbc.stats.get("trace_seconds", float("nan")) if sbc is not None else 0.0}
+    stats = {**(sbc.stats if sbc is not None else {}), **state.renderer.stats,
+             "methods": {c.reflector: c.method for c in state.plan.choices}}
     return ReflectionRender(image, view, seconds, stats)
 
 
+def frame_filepath(filepath: str, frame: int) -> str:
+    """The PNG path of ``frame``: the last run of ``#`` becomes the zero-padded frame
+    number, as in Blender's output path; without ``#`` the number (4 digits) is appended."""
+    path = bpy.path.ensure_ext(filepath, ".png")
+    stem, extension = path[:-4], path[-4:]
+    runs = list(re.finditer(r"#+", stem))
+    if not runs:
+        return f"{stem}{frame:04d}{extension}"
+    run = runs[-1]
+    return f"{stem[:run.start()]}{frame:0{len(run.group())}d}{stem[run.end():]}{extension}"
+
+
+def _write(path: Path, result: ReflectionRender) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_png(path, result.display)
+
+
 class CURVED_REFLECTIONS_OT_render_image(bpy.types.Operator):
-    """Render the scene camera with curved reflections to a PNG image"""
+    """Render the scene camera with curved reflections to a PNG image, or every frame of the animation"""
 
     bl_idname = "curved_reflections.render_image"
     bl_label = "Render Reflections Image"
     bl_options = {'REGISTER'}
 
-    filepath: StringProperty(name="File Path", description="PNG file to write", subtype='FILE_PATH')
+    filepath: StringProperty(name="File Path", description="PNG file to write; for an animation, # characters "
+                             "are the zero-padded frame number (else it is appended)", subtype='FILE_PATH')
     filter_glob: StringProperty(default="*.png", options={'HIDDEN'})
+    animation: BoolProperty(name="Animation", description="Render every frame from the scene's start to its end "
+                            "frame, one PNG each", default=False)
+    #: Set by invoke: an animation started from the UI runs modally (progress, Esc cancels).
+    interactive: BoolProperty(default=False, options={'HIDDEN', 'SKIP_SAVE'})
 
     @classmethod
     def poll(cls, context):
@@ -169,34 +243,93 @@ class CURVED_REFLECTIONS_OT_render_image(bpy.types.Operator):
 
     def invoke(self, context, event):
         if not self.filepath:
-            self.filepath = "//reflections.png"
+            self.filepath = "//reflections_####.png" if self.animation else "//reflections.png"
+        self.interactive = True
         context.window_manager.fileselect_add(self)
         return {'RUNNING_MODAL'}
+
+    def _render(self, context, path: Path) -> ReflectionRender | None:
+        """One frame to ``path``; reports and returns None on bad input or a write error."""
+        try:
+            result = render_scene(context.scene, context.evaluated_depsgraph_get(), state=self._state)
+        except (SceneInputError, RuntimeError) as error:  # RuntimeError: the GPU could not be initialised
+            self.report({'ERROR'}, str(error))
+            return None
+        try:
+            _write(path, result)
+        except (OSError, RuntimeError) as error:
+            self.report({'ERROR'}, f"Could not write {str(path)!r}: {error}")
+            return None
+        return result
 
     def execute(self, context):
         if not self.filepath:
             self.report({'ERROR'}, "No file path given for the image")
             return {'CANCELLED'}
+        self._state = FrameState()
+        if self.animation:
+            scene = context.scene
+            self._frames = list(range(scene.frame_start, scene.frame_end + 1, max(1, scene.frame_step)))
+            self._original_frame = scene.frame_current
+            self._done = 0
+            self._seconds = 0.0
+            if self.interactive and not bpy.app.background:
+                context.window_manager.progress_begin(0, len(self._frames))
+                self._timer = context.window_manager.event_timer_add(0.001, window=context.window)
+                context.window_manager.modal_handler_add(self)
+                return {'RUNNING_MODAL'}
+            while self._done < len(self._frames):
+                if not self._next_frame(context):
+                    return self._finish(context, cancelled=True)
+            return self._finish(context)
         path = Path(bpy.path.abspath(bpy.path.ensure_ext(self.filepath, ".png")))
-        try:
-            result = render_scene(context.scene, context.evaluated_depsgraph_get())
-        except SceneInputError as error:
-            self.report({'ERROR'}, str(error))
-            return {'CANCELLED'}
-        except RuntimeError as error:  # the GPU could not be initialised
-            self.report({'ERROR'}, str(error))
-            return {'CANCELLED'}
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            write_png(path, result.display)
-        except (OSError, RuntimeError) as error:
-            self.report({'ERROR'}, f"Could not write {str(path)!r}: {error}")
+        result = self._render(context, path)
+        if result is None:
             return {'CANCELLED'}
         view, seconds = result.view, result.seconds
         self.report({'INFO'}, f"Rendered {view.width}x{view.height} with reflections to {str(path)!r} in "
                               f"{seconds['total']:.2f} s (camera {seconds['sbc']:.2f} s, "
                               f"drawing {seconds['draw']:.2f} s)")
         return {'FINISHED'}
+
+    def _next_frame(self, context) -> bool:
+        frame = self._frames[self._done]
+        context.scene.frame_set(frame)
+        path = Path(bpy.path.abspath(frame_filepath(self.filepath, frame)))
+        result = self._render(context, path)
+        if result is None:
+            return False
+        self._seconds += result.seconds["total"]
+        self._done += 1
+        return True
+
+    def _finish(self, context, cancelled: bool = False):
+        scene = context.scene
+        scene.frame_set(self._original_frame)
+        if getattr(self, "_timer", None) is not None:
+            context.window_manager.event_timer_remove(self._timer)
+            context.window_manager.progress_end()
+            self._timer = None
+        if cancelled:
+            return {'CANCELLED'}
+        per_frame = self._seconds / max(1, self._done)
+        self.report({'INFO'}, f"Rendered {self._done} frames with reflections to "
+                              f"{frame_filepath(self.filepath, self._frames[0])!r}... in {self._seconds:.1f} s "
+                              f"({per_frame:.2f} s per frame)")
+        return {'FINISHED'}
+
+    def modal(self, context, event):
+        if event.type == 'ESC':
+            self.report({'WARNING'}, f"Animation cancelled after {self._done} of {len(self._frames)} frames")
+            return self._finish(context, cancelled=True)
+        if event.type != 'TIMER':
+            return {'PASS_THROUGH'}
+        if not self._next_frame(context):
+            return self._finish(context, cancelled=True)
+        context.window_manager.progress_update(self._done)
+        if self._done == len(self._frames):
+            return self._finish(context)
+        return {'RUNNING_MODAL'}
 
 
 classes = (CURVED_REFLECTIONS_OT_render_image,)

@@ -1,0 +1,180 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Which method draws each reflector, and why: the one place that decides.
+
+Per reflector, ``obj.curved_reflections.mode``:
+
+- ``AUTO`` (the default): the iterative search (Roger & Holzschuch 2006) where the
+  reflector is star-shaped (``addon/methods/iterative/star.py``), else Morphing where
+  a baked grid exists (the live view and the renderer then check per view that the eye
+  is inside it), else Runtime;
+- ``ITERATIVE``: the iterative search, or Runtime with the reason when the reflector is
+  not star-shaped;
+- ``MORPHING`` and ``RUNTIME``: the sample-based camera's modes (SBC paper VI and IV).
+
+The star-shape verdict and the cube map are made once per reflector geometry (kept by
+a hash of its arrays, :data:`CACHED_MAPS` of them): a viewport orbit or an animation
+frame in which the mirror did not change reuses them. The map is baked on the GPU when
+it is initialised (``gpu_shaders/iterative_bake.py``, milliseconds), else traced on the
+CPU. :func:`plan` is what the live view, Render Image and the panel use; its choices
+say per reflector which method and why, and the last ones are kept for the panel.
+
+Higher orders: the iterative search draws first-order reflections; reflections of
+order 2 and more, in every mode, come from the sample-based camera, which is built for
+them (and for the reflectors it draws) alone.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections import OrderedDict
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..addon.methods.iterative import IterativeReflector, StarShape, check_star_shaped
+from ..addon.methods.iterative.reflector_map import bake_reflector_map
+from ..addon.raytrace import ReflectorSet
+
+#: Cube-map face size of the iterative search's reflector maps (texels along a side).
+FACE_SIZE = 256
+#: Reflector geometries whose verdict and map are kept.
+CACHED_MAPS = 16
+
+ITERATIVE, MORPHING, RUNTIME = 'ITERATIVE', 'MORPHING', 'RUNTIME'
+
+
+@dataclass(frozen=True)
+class MethodChoice:
+    """What draws one reflector, and why (one panel line)."""
+
+    reflector: str
+    method: str  # ITERATIVE, MORPHING (where the view allows) or RUNTIME
+    reason: str
+
+
+@dataclass
+class MethodPlan:
+    """The iterative reflectors (engine objects, for the renderer) and every choice."""
+
+    iterative: list = field(default_factory=list)
+    choices: list = field(default_factory=list)
+
+    @property
+    def iterative_indices(self) -> frozenset:
+        return frozenset(m.index for m in self.iterative)
+
+    def method_of(self, name: str) -> str | None:
+        return next((c.method for c in self.choices if c.reflector == name), None)
+
+
+_maps: OrderedDict = OrderedDict()
+_last_choices: dict = {}
+
+
+def geometry_key(reflector) -> str:
+    """A hash of a reflector's arrays: the same mirror, moved or not, gets the same key
+    only if its world-space geometry is the same."""
+    digest = hashlib.sha1()
+    for array in (reflector.vertices, reflector.triangles, reflector.normals):
+        digest.update(np.ascontiguousarray(array).tobytes())
+    return digest.hexdigest()
+
+
+def _bake(reflector, centre, face_size: int):
+    """The full-resolution map: on the GPU when it is ready, else traced on the CPU."""
+    try:
+        from ..gpu_shaders.iterative_bake import bake_reflector_map_gpu
+        from .gpu_init import gpu_ready
+
+        if gpu_ready():
+            return bake_reflector_map_gpu(reflector, centre, face_size)
+    except ImportError:
+        pass
+    return bake_reflector_map(ReflectorSet([reflector]), centre, face_size)
+
+
+def star_map(reflector, face_size: int = FACE_SIZE):
+    """(StarShape, ReflectorMap or None) of one reflector, cached by its geometry."""
+    key = (geometry_key(reflector), int(face_size))
+    if key in _maps:
+        _maps.move_to_end(key)
+        return _maps[key]
+    shape = check_star_shaped(reflector)
+    rmap = None
+    if shape.star_shaped:
+        bake = _bake(reflector, shape.centre, face_size)
+        if bake.crossings:
+            shape = StarShape(shape.name, False, shape.centre,
+                              f"{reflector.name!r} is not star-shaped: from its best centre, some rays meet its "
+                              "surface more than once (a thin fold)", bake.crossings, shape.hidden_share,
+                              bake.min_cosine)
+        else:
+            rmap = bake.reflector_map
+    _maps[key] = (shape, rmap)
+    while len(_maps) > CACHED_MAPS:
+        _maps.popitem(last=False)
+    return shape, rmap
+
+
+def _mode_of(scene, name: str) -> str:
+    obj = scene.objects.get(name)
+    return 'AUTO' if obj is None else obj.curved_reflections.mode
+
+
+def plan(scene, reflectors, accuracy_px: float | None = None, baked=frozenset()) -> MethodPlan:
+    """Every reflector's method. ``baked``: names of the reflectors with a loaded
+    morphing grid (AUTO uses it where the reflector is not star-shaped)."""
+    accuracy = float(scene.curved_reflections.accuracy_px if accuracy_px is None else accuracy_px)
+    result = MethodPlan()
+    for index, reflector in enumerate(reflectors):
+        mode = _mode_of(scene, reflector.name)
+        if mode in ('AUTO', ITERATIVE):
+            shape, rmap = star_map(reflector)
+            if rmap is not None:
+                result.iterative.append(IterativeReflector(index, reflector.name, rmap, accuracy))
+                centre = ", ".join(f"{c:.2f}" for c in shape.centre)
+                result.choices.append(MethodChoice(reflector.name, ITERATIVE,
+                                                   f"star-shaped around ({centre}): iterative search on the GPU"))
+                continue
+            if mode == 'AUTO' and reflector.name in baked:
+                result.choices.append(MethodChoice(reflector.name, MORPHING,
+                                                   f"{shape.reason}; its baked morphing grid draws it"))
+            else:
+                fallback = "no baked morphing grid, so Runtime" if mode == 'AUTO' else "drawn in Runtime mode"
+                result.choices.append(MethodChoice(reflector.name, RUNTIME, f"{shape.reason}; {fallback}"))
+        elif mode == MORPHING:
+            result.choices.append(MethodChoice(reflector.name, MORPHING if reflector.name in baked else RUNTIME,
+                                               "Morphing mode" if reflector.name in baked
+                                               else "Morphing mode without a baked grid: Runtime"))
+        else:
+            result.choices.append(MethodChoice(reflector.name, RUNTIME, "Runtime mode: a camera per view"))
+    _last_choices[scene.name] = result.choices
+    return result
+
+
+def wants_grid(scene, reflector) -> bool:
+    """Whether a morphing grid is baked and loaded for this reflector: Morphing mode, or
+    Auto mode where it is not star-shaped."""
+    mode = _mode_of(scene, reflector.name)
+    return mode == MORPHING or (mode == 'AUTO' and star_map(reflector)[1] is None)
+
+
+def last_choices(scene) -> list:
+    """The choices of the last :func:`plan` for ``scene`` (the panel's lines)."""
+    return _last_choices.get(scene.name, [])
+
+
+def grid_wanted_by_last_plan(scene, obj) -> bool:
+    """:func:`wants_grid` from what is known without checking any geometry (for the
+    panel, which must not wait): Morphing mode, or Auto mode not planned as Iterative."""
+    mode = obj.curved_reflections.mode
+    if mode == MORPHING:
+        return True
+    chosen = next((c.method for c in last_choices(scene) if c.reflector == obj.name), None)
+    return mode == 'AUTO' and chosen in (MORPHING, RUNTIME)
+
+
+def forget() -> None:
+    """Drop the cached maps and choices (another file is being loaded, or unregister)."""
+    _maps.clear()
+    _last_choices.clear()
