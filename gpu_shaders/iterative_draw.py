@@ -28,6 +28,10 @@ _GLSL = Path(__file__).resolve().parent / "glsl"
 TEXTURE_WIDTH = 4096
 #: Invocations per work group of the search (along x).
 LOCAL_SIZE = 64
+#: A reflected fragment is kept only where the interpolated validity of its triangle's
+#: corners reaches this: 1 inside triangles whose corners all have an answer, below it
+#: everywhere else but within 1e-4 of an edge's length from a valid corner.
+VALID_THRESHOLD = 0.9999
 #: The result texel's code for a found answer: (FOUND + 8) + 16 steps, modulo 16.
 FOUND_CODE = search_module.FOUND + 8
 
@@ -61,9 +65,10 @@ def search_shader():
     info.push_constant('INT', "n_vertices")
     info.push_constant('INT', "positions_width")
     info.push_constant('INT', "convex")
+    info.push_constant('INT', "warm")
     info.sampler(0, 'FLOAT_2D', "vertex_positions")
     info.sampler(1, 'FLOAT_2D', "reflector_map")
-    info.image(0, 'RGBA32F', 'FLOAT_2D', "result", qualifiers={'WRITE'})
+    info.image(0, 'RGBA32F', 'FLOAT_2D', "result", qualifiers={'READ', 'WRITE'})
     info.local_group_size(LOCAL_SIZE, 1)
     info.compute_source(_source("iterative_search.glsl", search_defines()))
     return gpu.shader.create_from_info(info)
@@ -85,6 +90,7 @@ def reflected_shader():
     interface.smooth('FLOAT', "distance_interp")
     interface.flat('FLOAT', "lit_interp")
     interface.flat('FLOAT', "reflector_interp")
+    interface.smooth('FLOAT', "valid_interp")
     info = gpu.types.GPUShaderCreateInfo()
     info.push_constant('MAT4', "view_projection")
     info.push_constant('INT', "result_width")
@@ -96,14 +102,15 @@ def reflected_shader():
     info.sampler(1, 'FLOAT_2D', "vertex_positions")
     info.sampler(2, 'FLOAT_2D', "prepass_labels")
     info.sampler(3, 'FLOAT_2D', "image")
-    info.vertex_in(0, 'IVEC4', "corners")
+    info.vertex_in(0, 'INT', "vertex_index")
     info.vertex_in(1, 'VEC4', "color")
     info.vertex_in(2, 'VEC4', "normal_lit")
     info.vertex_in(3, 'VEC2', "uv")
     info.vertex_out(interface)
     info.fragment_out(0, 'VEC4', "color_out")
     info.vertex_source(_source("iterative_mesh_vert.glsl", {"FOUND_CODE": FOUND_CODE}))
-    info.fragment_source(_shading_source() + draw_source("reflection_mesh_frag.glsl"))
+    info.fragment_source(f"#define SEARCHED\n#define VALID_THRESHOLD {VALID_THRESHOLD}\n" + _shading_source()
+                         + draw_source("reflection_mesh_frag.glsl"))
     return gpu.shader.create_from_info(info)
 
 
@@ -167,23 +174,23 @@ class IterativePass:
         if self._positions is None:
             g = self.geometry
             self._positions = _texture((g.vertices - g.shift).astype(np.float32), self.width)
-            corners = np.asarray(g.triangles, dtype=np.int32)
-            which = np.tile(np.arange(3, dtype=np.int32), len(corners))
-            index = corners.reshape(-1)
-            attributes = {"corners": (np.c_[np.repeat(corners, 3, axis=0), which].astype(np.int32), 'I32', 'INT'),
-                          "color": (g.colors[index], 'F32', 'FLOAT'),
-                          "normal_lit": (np.c_[g.normals, g.lit][index].astype(np.float32), 'F32', 'FLOAT'),
-                          "uv": (g.uvs[index], 'F32', 'FLOAT')}
-            if len(index):
-                self._batch = gpu.types.GPUBatch(type='TRIS', buf=_vertex_buffer(attributes))
+            attributes = {"vertex_index": (np.arange(self.n_vertices, dtype=np.int32), 'I32', 'INT'),
+                          "color": (g.colors, 'F32', 'FLOAT'),
+                          "normal_lit": (np.c_[g.normals, g.lit].astype(np.float32), 'F32', 'FLOAT'),
+                          "uv": (g.uvs, 'F32', 'FLOAT')}
+            if len(g.triangles):
+                self._batch = gpu.types.GPUBatch(type='TRIS', buf=_vertex_buffer(attributes), elem=gpu.types.GPUIndexBuf(
+                    type='TRIS', seq=np.asarray(g.triangles, dtype=np.int32)))
         for method in self.methods:
             if method.index not in self._maps:
                 self._maps[method.index] = MapTexture(method)
             if method.index not in self._results:
                 self._results[method.index] = gpu.types.GPUTexture((self.width, self.height), format='RGBA32F')
 
-    def search(self, view) -> None:
-        """This frame's search: one dispatch per reflector, into its result texture."""
+    def search(self, view, warm: bool = False) -> None:
+        """This frame's search: one dispatch per reflector, into its result texture.
+        ``warm``: each vertex starts from its last answer (a viewport whose view moves
+        a little each frame); cold, the answer depends on this view alone."""
         import gpu
 
         if self.n_vertices == 0 or not self.methods:
@@ -205,6 +212,7 @@ class IterativePass:
         shader.uniform_float("w_row", tuple(float(c) for c in w_row))
         shader.uniform_int("n_vertices", self.n_vertices)
         shader.uniform_int("positions_width", self.width)
+        shader.uniform_int("warm", int(bool(warm)))
         shader.uniform_sampler("vertex_positions", self._positions)
         groups = (-(-self.width // LOCAL_SIZE), self.height, 1)
         for method in self.methods:

@@ -828,7 +828,7 @@ class ReflectionRenderer:
         """
         import gpu
 
-        targets = self.draw_passes(view, textures, camera)
+        targets = self.draw_passes(view, textures, camera, warm=True)
         if fill_radius is None:
             fill_radius = 0 if textures is None else textures.downsample
         x, y, width, height = gpu.state.viewport_get()
@@ -837,7 +837,7 @@ class ReflectionRenderer:
         self.composite(targets, world_color, reflectors_only, fill_radius, origin)
         return targets
 
-    def draw_passes(self, view, textures, camera=None) -> FrameTargets:
+    def draw_passes(self, view, textures, camera=None, warm: bool = False) -> FrameTargets:
         """The pre-pass and the reflected triangles of ``view`` into its frame targets.
 
         The reflected triangles come from :meth:`projection` of ``textures``: made now
@@ -845,7 +845,10 @@ class ReflectionRenderer:
         in the camera's own view: ``camera.ray_map.view`` when the camera is given, else
         ``view`` (which must then be the camera's view). A ``view`` other than the
         camera's (the viewport moved, a new camera is being built) draws the cached
-        first reflector points where ``view`` sees them.
+        first reflector points where ``view`` sees them. The iterative search's
+        reflectors are searched for ``view`` itself; ``warm`` starts each vertex from
+        its last answer (the viewport's :meth:`draw` does; a render does not, so that
+        its image depends on its view alone).
         """
         import gpu
         from mathutils import Matrix
@@ -878,7 +881,7 @@ class ReflectionRenderer:
                         shader.uniform_int("use_image", int(image >= 0))
                         shader.uniform_sampler("image", self._image(image))
                         batch.draw(shader)
-            self.iterative.search(view)
+            self.iterative.search(view, warm)
             with targets.reflection.bind():
                 gpu.state.viewport_set(0, 0, width, height)
                 targets.reflection.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)

@@ -28,7 +28,8 @@
 /* Push constants: camera (eye relative to the shift, w 1; or the unit direction toward
  * the viewer, w 0), centre (O relative to the shift, w the map's mean radius), w_row
  * (the view-projection's last row, for clip w), limits (stop_per_w, max_radius),
- * face_size, n_vertices, positions_width, convex. */
+ * face_size, n_vertices, positions_width, convex, warm (start from the answer of the
+ * last search, still in `result`, where it had one). */
 
 vec3 to_eye(vec3 p)
 {
@@ -243,6 +244,8 @@ void main()
     return;
   }
   vertex = texelFetch(vertex_positions, texel, 0).xyz - centre.xyz;
+  vec4 last = imageLoad(result, texel);
+  bool resume = warm != 0 && int(last.w) % 16 == FOUND + 8;
   int status = NO_SURFACE;
   int steps = 0;
   vec3 p = vec3(0.0);
@@ -251,18 +254,35 @@ void main()
     status = INSIDE;
   }
   else {
-    chart_axis = sphere_guess(vertex);
-    chart_t1 = perpendicular(chart_axis);
-    chart_t2 = cross(chart_axis, chart_t1);
-    for (int attempt = 0; attempt < 5; attempt++) {
+    /* Last frame's answer first (the view moved a little), then the restarts around the
+     * sphere guess. */
+    bool found = false;
+    if (resume) {
+      chart_axis = normalize(last.xyz - centre.xyz);
+      chart_t1 = perpendicular(chart_axis);
+      chart_t2 = cross(chart_axis, chart_t1);
       vec3 answer;
-      int verdict = newton(starts[attempt], steps, answer);
-      if (attempt == 0 || verdict == FOUND) {
+      int verdict = newton(vec2(0.0), steps, answer);
+      if (verdict == FOUND) {
         status = verdict;
         p = answer;
+        found = true;
       }
-      if (verdict == FOUND) {
-        break;
+    }
+    if (!found) {
+      chart_axis = sphere_guess(vertex);
+      chart_t1 = perpendicular(chart_axis);
+      chart_t2 = cross(chart_axis, chart_t1);
+      for (int attempt = 0; attempt < 5; attempt++) {
+        vec3 answer;
+        int verdict = newton(starts[attempt], steps, answer);
+        if (attempt == 0 || verdict == FOUND) {
+          status = verdict;
+          p = answer;
+        }
+        if (verdict == FOUND) {
+          break;
+        }
       }
     }
   }

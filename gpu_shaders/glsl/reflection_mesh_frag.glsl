@@ -15,6 +15,12 @@
 
 void main()
 {
+#ifdef SEARCHED
+  /* Iterative search (iterative_mesh_vert.glsl): a triangle with an unanswered corner. */
+  if (valid_interp < VALID_THRESHOLD) {
+    discard;
+  }
+#endif
   float id = texelFetch(prepass_labels, ivec2(gl_FragCoord.xy), 0).x;
   if (abs(id - reflector_interp) > 0.5) {
     discard;

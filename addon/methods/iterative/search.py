@@ -220,9 +220,11 @@ def _newton(chart: _Chart, view: View, rows: np.ndarray, start, accuracy_px: flo
     return converged, left, position, normal, half, steps
 
 
-def search_reflections(rmap: ReflectorMap, view: View, points, accuracy_px: float = 1.0) -> SearchResult:
+def search_reflections(rmap: ReflectorMap, view: View, points, accuracy_px: float = 1.0,
+                       previous: np.ndarray | None = None) -> SearchResult:
     """The reflection point of every point (P, 3) on the mapped reflector, seen from
-    ``view``'s eye (or, orthographic, its direction)."""
+    ``view``'s eye (or, orthographic, its direction). ``previous`` (P, 3), NaN where
+    none: last frame's answers, tried first (a view that moved a little)."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     n = len(points)
     status = np.full(n, NO_SURFACE, np.int8)
@@ -239,10 +241,23 @@ def search_reflections(rmap: ReflectorMap, view: View, points, accuracy_px: floa
     active = np.flatnonzero(finite & ~inside)
     if len(active) == 0:
         return SearchResult(answer, status, iterations)
-    guess = np.zeros((n, 3))
-    guess[active] = sphere_guess(rmap.centre, camera, perspective, points[active], rmap.mean_radius)
-    chart = _Chart(rmap, camera, perspective, points, guess)
     pending = active
+    if previous is not None:
+        resumed = pending[np.isfinite(previous[pending]).all(axis=1)]
+        axis = np.zeros((n, 3))
+        axis[resumed] = _unit(previous[resumed] - rmap.centre)
+        converged, left, position, normal, half, steps = _newton(
+            _Chart(rmap, camera, perspective, points, axis), view, resumed, (0.0, 0.0), accuracy_px)
+        iterations[resumed] += steps
+        verdict = np.full(len(resumed), NOT_CONVERGED, np.int8)
+        verdict[converged] = _check(rmap, camera, perspective, points[resumed[converged]], position[converged],
+                                    normal[converged], half[converged])
+        status[resumed[verdict == FOUND]] = FOUND
+        answer[resumed[verdict == FOUND]] = position[verdict == FOUND]
+        pending = np.setdiff1d(pending, resumed[verdict == FOUND])
+    guess = np.zeros((n, 3))
+    guess[pending] = sphere_guess(rmap.centre, camera, perspective, points[pending], rmap.mean_radius)
+    chart = _Chart(rmap, camera, perspective, points, guess)
     for attempt, start in enumerate(RESTARTS):
         if len(pending) == 0:
             break

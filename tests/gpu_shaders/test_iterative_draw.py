@@ -1,0 +1,159 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The iterative search on the GPU (gpu_shaders/iterative_draw.py, glsl/iterative_search.glsl)
+against its numpy twin (addon/methods/iterative/search.py), and its reflected meshes drawn."""
+
+import numpy as np
+import pytest
+
+from curved_reflections.addon.methods.iterative import IterativeReflector, prepare_iterative, search_reflections
+from curved_reflections.addon.methods.iterative import search as search_module
+from curved_reflections.addon.scene import DiffuseMesh, Reflector, vertex_normals
+from curved_reflections.addon.sphere import icosphere
+from curved_reflections.addon.view import View, look_at_view
+
+FACE_SIZE = 32
+
+
+def _bumpy(amplitude=0.05):
+    base = icosphere((0.3, -0.2, 0.1), 1.0, 4)
+    d = base.normals
+    theta, phi = np.arccos(np.clip(d[:, 2], -1, 1)), np.arctan2(d[:, 1], d[:, 0])
+    vertices = (0.3, -0.2, 0.1) + d * (1 + amplitude * np.sin(5 * phi) * np.sin(4 * theta))[:, None]
+    return Reflector("Bumpy", vertices, base.triangles, vertex_normals(vertices, base.triangles))
+
+
+def _ellipsoid():
+    base = icosphere((0.0, 0.0, 0.0), 1.0, 4)
+    radii = np.array([1.2, 0.7, 0.5])
+    return Reflector("Ellipsoid", base.vertices * radii, base.triangles, base.vertices / radii ** 2)
+
+
+def _orthographic(eye, target, width=320, height=240, half_height=2.5):
+    view = look_at_view(eye, target, width=width, height=height)
+    projection = np.eye(4)
+    projection[0, 0] = 1.0 / (half_height * width / height)
+    projection[1, 1] = 1.0 / half_height
+    projection[2, 2], projection[2, 3] = -2.0 / 99.9, -100.1 / 99.9
+    return View(view.view_matrix, projection, width, height, name="orthographic")
+
+
+def _cloud(count: int, seed: int) -> np.ndarray:
+    points = np.random.default_rng(seed).uniform(-3.0, 3.0, (3 * count, 3))
+    return points[np.linalg.norm(points, axis=1) > 1.2][:count]
+
+
+def _geometry(reflector, points):
+    from curved_reflections.gpu_shaders.reflection_draw import prepare_geometry
+
+    triangles = np.arange(len(points) - len(points) % 3).reshape(-1, 3)
+    mesh = DiffuseMesh("cloud", points, triangles, np.ones((len(points), 4)))
+    return prepare_geometry([reflector], [mesh], edge_fraction=None)
+
+
+@pytest.mark.parametrize("make_reflector, view", [
+    (_bumpy, look_at_view((3.5, -2.0, 1.5), (0, 0, 0), width=640, height=480)),
+    (_ellipsoid, look_at_view((-1.0, 3.2, 2.0), (0, 0, 0), width=640, height=480)),
+    (_bumpy, _orthographic((3.5, -2.0, 1.5), (0, 0, 0))),
+])
+def test_gpu_search_agrees_with_the_numpy_twin(gpu_ready, make_reflector, view):
+    from curved_reflections.gpu_shaders.iterative_draw import IterativePass
+
+    reflector = make_reflector()
+    shape, bake = prepare_iterative(reflector, FACE_SIZE)
+    assert shape.star_shaped, shape.reason
+    geometry = _geometry(reflector, _cloud(6000, 11))
+    method = IterativeReflector(0, reflector.name, bake.reflector_map, 1.0)
+    gpu_pass = IterativePass(geometry, [method])
+    gpu_pass.search(view)
+    gpu = gpu_pass.read(0)
+    twin = search_reflections(bake.reflector_map, view, geometry.vertices, 1.0)
+    assert (gpu.status == twin.status).mean() >= 0.995
+    both = gpu.found & twin.found
+    assert both.sum() >= 0.6 * len(both)
+    gpu_px, _ = view.to_pixels(gpu.reflector_points[both])
+    twin_px, _ = view.to_pixels(twin.reflector_points[both])
+    error = np.linalg.norm(gpu_px - twin_px, axis=1)
+    # A few points have several reflections; float32 rounding can send a restart to another one.
+    assert np.mean(error <= 0.05) >= 0.995, np.percentile(error, [50, 99, 100])
+    assert np.isfinite(gpu.reflector_points[gpu.found]).all()
+
+
+def test_degenerate_input_draws_no_nan(gpu_ready):
+    """A vertex at O, vertices inside the mirror, grazing reflections, zero-area
+    triangles and the eye inside the reflector: no exception, no NaN, nothing drawn at a
+    wrong place (inside vertices are unanswered)."""
+    from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
+
+    reflector = icosphere((0.0, 0.0, 0.0), 1.0, 3)
+    shape, bake = prepare_iterative(reflector, FACE_SIZE)
+    rmap = bake.reflector_map
+    grazing = np.array([[0.0, -3.0, 0.0], [0.0, -3.0, 0.001], [0.0, -3.0, -0.001]])  # behind, seen past the rim
+    at_centre = np.array([rmap.centre, rmap.centre + 1e-6, rmap.centre + (0.5, 0, 0)])
+    flat = np.array([[2.0, 0.0, 0.0], [2.0, 0.0, 0.0], [2.0, 1.0, 0.0]])  # a zero-area triangle
+    points = np.concatenate([grazing, at_centre, flat])
+    mesh = DiffuseMesh("odd", points, np.arange(9).reshape(3, 3), np.ones((9, 4)))
+    method = IterativeReflector(0, reflector.name, rmap, 1.0)
+    renderer = ReflectionRenderer([reflector], [mesh], edge_fraction=None, iterative=[method])
+    outside = look_at_view((0.0, 3.0, 0.2), (0, 0, 0), width=96, height=64)
+    inside = look_at_view((0.1, 0.2, 0.0), (0, 3, 0), width=96, height=64)
+    for view in (outside, inside):
+        image = renderer.render(view, None, (0.1, 0.2, 0.3, 1.0))
+        assert np.isfinite(image).all()
+        found = renderer.iterative.read(0)
+        assert np.isfinite(found.reflector_points[found.found]).all()
+        assert (found.status == search_module.INSIDE).sum() >= (3 if view is outside else 9), found.status
+    assert renderer.stats["iterative"]["Sphere"]["found"] == 0  # eye inside: nothing answered
+
+
+def test_iterative_render_matches_a_sample_based_render(gpu_ready):
+    """Both methods draw the same mirror ball scene: the images agree on nearly every pixel."""
+    from curved_reflections.addon.sbc import build_sample_based_camera
+    from curved_reflections.addon.scene import scene_bounds
+    from curved_reflections.addon.shapes import checker_tiles
+    from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
+
+    reflector = icosphere((0.0, 0.0, 1.0), 1.0, 4)
+    meshes = []
+    for parity, colour in ((0, (1.0, 0.3, 0.3, 1.0)), (1, (1.0, 1.0, 0.4, 1.0))):
+        tiles = checker_tiles(8, 0.75, parity)
+        meshes.append(DiffuseMesh(f"floor{parity}", tiles.vertices, tiles.triangles,
+                                  np.tile(colour, (len(tiles.vertices), 1)), emissive=True))
+    view = look_at_view((4.0, -3.0, 2.5), (0.0, 0.0, 0.8), fov_y_deg=35.0, width=160, height=120)
+    shape, bake = prepare_iterative(reflector, 64)
+    method = IterativeReflector(0, reflector.name, bake.reflector_map, 1.0)
+    searched = ReflectionRenderer([reflector], meshes, iterative=[method]).render(view, None)
+    lo, hi = scene_bounds([reflector], meshes)
+    margin = 0.05 * float(np.linalg.norm(hi - lo))
+    sbc = build_sample_based_camera([reflector], view, (lo - margin, hi + margin))
+    camera = ReflectionRenderer([reflector], meshes).render(view, sbc)
+    differing = np.abs(searched[..., :3] - camera[..., :3]).max(axis=2) > 0.05
+    assert differing.mean() < 0.01
+    assert (np.abs(searched[..., :3] - camera[..., :3]).max(axis=2) < 1e-3).mean() > 0.9
+
+
+def test_warm_start_from_the_last_answers_agrees_with_the_twin(gpu_ready):
+    """The viewport's search starts each vertex from its answer of the last frame: with
+    the view turned by 1 degree the answers agree with the numpy twin given the same
+    previous answers, and with a cold search to the stop tolerance, in fewer steps."""
+    from curved_reflections.gpu_shaders.iterative_draw import IterativePass
+
+    reflector = _ellipsoid()
+    shape, bake = prepare_iterative(reflector, FACE_SIZE)
+    geometry = _geometry(reflector, _cloud(4000, 5))
+    gpu_pass = IterativePass(geometry, [IterativeReflector(0, reflector.name, bake.reflector_map, 1.0)])
+    first = look_at_view((-1.0, 3.2, 2.0), (0, 0, 0), width=640, height=480)
+    turned = np.radians(1.0)
+    rotation = np.array([[np.cos(turned), -np.sin(turned), 0], [np.sin(turned), np.cos(turned), 0], [0, 0, 1]])
+    second = look_at_view(rotation @ np.array([-1.0, 3.2, 2.0]), (0, 0, 0), width=640, height=480)
+    gpu_pass.search(first)
+    previous = gpu_pass.read(0)
+    gpu_pass.search(second, warm=True)
+    warm = gpu_pass.read(0)
+    twin = search_reflections(bake.reflector_map, second, geometry.vertices, 1.0, previous=previous.reflector_points)
+    cold = search_reflections(bake.reflector_map, second, geometry.vertices, 1.0)
+    assert (warm.status == twin.status).mean() >= 0.995
+    both = warm.found & twin.found & cold.found
+    px = [second.to_pixels(r.reflector_points[both])[0] for r in (warm, twin, cold)]
+    assert np.mean(np.linalg.norm(px[0] - px[1], axis=1) <= 0.05) >= 0.995
+    assert np.percentile(np.linalg.norm(px[0] - px[2], axis=1), 99) <= 0.1  # the stop tolerance
+    assert warm.iterations[both].mean() < 0.6 * cold.iterations[both].mean()
