@@ -458,6 +458,12 @@ def draw(scene, key, view: View) -> bool:
         return False  # the status line says why; a new view or a Refresh tries again
     if not _needs_camera(state, [], state.settings):
         # Every reflector is searched on the GPU: nothing to build when the view changes.
+        inside = _reflector_around(state, view)
+        if inside is not None:
+            state.report('ERROR', f"{inside!r}: the view is inside this reflector; move the view outside it")
+            return False
+        if state.level == 'ERROR' and "the view is inside" in state.status:
+            state.report('INFO', "Reflections up to date")
         return _draw_with(state, view, None, None)
     camera = state.cameras.get(key)
     current = camera is not None and camera.generation == state.generation and camera.settings == state.settings
@@ -484,6 +490,15 @@ def _draw_with(state: LiveScene, view: View, source, sbc) -> bool:
     state.stats["draw_ms"] = 1000.0 * (time.perf_counter() - start)
     state.counts["draws"] += 1
     return True
+
+
+def _reflector_around(state: LiveScene, view: View) -> str | None:
+    """The name of the searched reflector the (perspective) view's eye is inside, if any:
+    a lookup in each reflector's map, no tracing."""
+    if not view.is_perspective:
+        return None
+    eye = view.eye[None]
+    return next((m.name for m in state.plan.iterative if m.reflector_map.inside(eye)[0]), None)
 
 
 def _projection_source(camera: ViewCamera):

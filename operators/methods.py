@@ -93,9 +93,11 @@ def _bake(reflector, centre, face_size: int):
     return bake_reflector_map(ReflectorSet([reflector]), centre, face_size)
 
 
-def star_map(reflector, face_size: int = FACE_SIZE):
-    """(StarShape, ReflectorMap or None) of one reflector, cached by its geometry."""
-    key = (geometry_key(reflector), int(face_size))
+def star_map(reflector, face_size: int | None = None):
+    """(StarShape, ReflectorMap or None) of one reflector, cached by its geometry
+    (``face_size``: default :data:`FACE_SIZE`)."""
+    face_size = FACE_SIZE if face_size is None else int(face_size)
+    key = (geometry_key(reflector), face_size)
     if key in _maps:
         _maps.move_to_end(key)
         return _maps[key]

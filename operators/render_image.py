@@ -33,7 +33,8 @@ from bpy.props import BoolProperty, StringProperty
 
 from ..addon.errors import SceneInputError
 from ..addon.metrics import linear_to_srgb
-from ..addon.sbc import build_sample_based_camera
+from ..addon.raytrace import ReflectorSet
+from ..addon.sbc import build_sample_based_camera, check_view_outside_reflectors
 from ..addon.scene import scene_bounds
 from ..addon.view import View
 from . import methods
@@ -188,6 +189,8 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
     state.key = key
     planned_at = time.perf_counter()
     sbc = None
+    if state.plan.iterative:
+        check_view_outside_reflectors(ReflectorSet(list(captured.reflectors)), view)
     if len(state.plan.iterative) < len(captured.reflectors) or max_order > 1:
         lo, hi = scene_bounds(captured.reflectors, captured.meshes)
         bounds = scene_bounds(captured.reflectors, captured.meshes, BOUNDS_MARGIN * float(np.linalg.norm(hi - lo)))

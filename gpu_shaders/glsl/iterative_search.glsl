@@ -273,7 +273,8 @@ void main()
       chart_axis = sphere_guess(vertex);
       chart_t1 = perpendicular(chart_axis);
       chart_t2 = cross(chart_axis, chart_t1);
-      for (int attempt = 0; attempt < 5; attempt++) {
+      int attempts = convex != 0 ? 1 : 5;  /* one reflection at most on a convex mirror */
+      for (int attempt = 0; attempt < attempts; attempt++) {
         vec3 answer;
         int verdict = newton(starts[attempt], steps, answer);
         if (attempt == 0 || verdict == FOUND) {

@@ -17,7 +17,7 @@ void main()
 {
 #ifdef SEARCHED
   /* Iterative search (iterative_mesh_vert.glsl): a triangle with an unanswered corner. */
-  if (valid_interp < VALID_THRESHOLD) {
+  if (!(valid_interp >= VALID_THRESHOLD)) {  /* NaN too */
     discard;
   }
 #endif

@@ -84,7 +84,48 @@ def scaled_meshes(meshes, levels: int):
     return result
 
 
-def _timed(function, framebuffer) -> float:
+def levels_for(captured, target_vertices: int) -> int:
+    """Levels of uniform splitting whose drawn vertex count is nearest the target (log scale)."""
+    from curved_reflections.gpu_shaders.reflection_draw import prepare_geometry
+
+    counts = {}
+    for levels in range(0, 6):
+        geometry = prepare_geometry(captured.reflectors, scaled_meshes(captured.meshes, levels))
+        counts[levels] = len(geometry.vertices)
+        if counts[levels] >= target_vertices:
+            break
+    return min(counts, key=lambda k: abs(math.log(counts[k] / target_vertices)))
+
+
+class PlainDraw:
+    """The baseline every reflected pass is compared with: a renderer's diffuse triangles
+    drawn once with one colour and the depth test."""
+
+    def __init__(self, geometry):
+        import gpu
+
+        self.shader = _plain_shader()
+        buffer = gpu.types.GPUVertBuf(_position_format(), len(geometry.vertices))
+        buffer.attr_fill("position", np.ascontiguousarray(geometry.vertices.astype(np.float32)))
+        self.batch = gpu.types.GPUBatch(type='TRIS', buf=buffer, elem=gpu.types.GPUIndexBuf(
+            type='TRIS', seq=geometry.triangles.astype(np.int32)))
+
+    def draw(self, view) -> None:
+        import gpu
+        from mathutils import Matrix
+
+        gpu.state.depth_test_set('LESS_EQUAL')
+        gpu.state.depth_mask_set(True)
+        self.shader.bind()
+        self.shader.uniform_float("view_projection", Matrix(
+            (np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix)).tolist()))
+        self.shader.uniform_float("uniform_color", (0.8, 0.3, 0.2, 1.0))
+        self.batch.draw(self.shader)
+        gpu.state.depth_test_set('NONE')
+        gpu.state.depth_mask_set(False)
+
+
+def timed(function, framebuffer) -> float:
     start = time.perf_counter()
     function()
     framebuffer.read_color(0, 0, 1, 1, 4, 0, 'FLOAT')  # waits for the GPU to finish
@@ -108,12 +149,11 @@ def measure(kind: str, width: int, height: int, target_vertices: int, repeats: i
             projection_repeats: int) -> dict:
     import bpy
     import gpu
-    from mathutils import Matrix
 
     from curved_reflections.addon.sbc import build_sample_based_camera
     from curved_reflections.addon.scene import scene_bounds
     from curved_reflections.gpu_shaders.projection import SBCTextures
-    from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer, prepare_geometry
+    from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
     from curved_reflections.operators import demo_scenes
     from curved_reflections.operators.capture import capture_scene, view_from_camera
     from curved_reflections.operators.gpu_init import ensure_gpu
@@ -126,14 +166,7 @@ def measure(kind: str, width: int, height: int, target_vertices: int, repeats: i
     captured = capture_scene(depsgraph)
     view = view_from_camera(scene.camera, scene, depsgraph)
 
-    # Levels of uniform splitting whose drawn vertex count is nearest the target (log scale).
-    counts = {}
-    for levels in range(0, 6):
-        geometry = prepare_geometry(captured.reflectors, scaled_meshes(captured.meshes, levels))
-        counts[levels] = len(geometry.vertices)
-        if counts[levels] >= target_vertices:
-            break
-    levels = min(counts, key=lambda k: abs(math.log(counts[k] / target_vertices)))
+    levels = levels_for(captured, target_vertices)
     meshes = scaled_meshes(captured.meshes, levels)
 
     lo, hi = scene_bounds(captured.reflectors, meshes)
@@ -150,22 +183,10 @@ def measure(kind: str, width: int, height: int, target_vertices: int, repeats: i
     world = world_color(scene)
     g = renderer.geometry
 
-    plain_shader = _plain_shader()
-    buffer = gpu.types.GPUVertBuf(_position_format(), len(g.vertices))
-    buffer.attr_fill("position", np.ascontiguousarray(g.vertices.astype(np.float32)))
-    plain_batch = gpu.types.GPUBatch(type='TRIS', buf=buffer,
-                                     elem=gpu.types.GPUIndexBuf(type='TRIS', seq=g.triangles.astype(np.int32)))
-    view_projection = Matrix((np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix)).tolist())
+    plain_draw = PlainDraw(g)
 
     def plain():
-        gpu.state.depth_test_set('LESS_EQUAL')
-        gpu.state.depth_mask_set(True)
-        plain_shader.bind()
-        plain_shader.uniform_float("view_projection", view_projection)
-        plain_shader.uniform_float("uniform_color", (0.8, 0.3, 0.2, 1.0))
-        plain_batch.draw(plain_shader)
-        gpu.state.depth_test_set('NONE')
-        gpu.state.depth_mask_set(False)
+        plain_draw.draw(view)
 
     moved = _turned(view, MOVED_DEGREES)
     calls = {
@@ -188,7 +209,7 @@ def measure(kind: str, width: int, height: int, target_vertices: int, repeats: i
             for repeat in range(warmup + repeats):
                 for name, call in calls.items():
                     framebuffer.clear(depth=1.0)
-                    seconds = _timed(call, framebuffer)
+                    seconds = timed(call, framebuffer)
                     if repeat >= warmup:
                         times[name].append(seconds)
             # Every frame above drew the cached projection (the empty camera's is cached too).
@@ -241,7 +262,7 @@ def _projection_times(renderer, textures, view, sbc, framebuffer, repeats: int) 
             for _ in range(repeats):
                 renderer.invalidate()
                 spent[0] = 0.0
-                totals.append(_timed(lambda: renderer.projection(textures, view, sbc), framebuffer))
+                totals.append(timed(lambda: renderer.projection(textures, view, sbc), framebuffer))
                 gpu_parts.append(spent[0])
         finally:
             del renderer._project_pass

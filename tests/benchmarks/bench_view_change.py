@@ -22,6 +22,16 @@ does after the view changed (``operators/live.py``):
 
 Medians over the path's views. On this project's machines the GPU is Mesa llvmpipe
 (the CPU): compare the ratios measured in this one run, not absolute times.
+
+**Iterative rows** (Roger & Holzschuch 2006, ``gpu_shaders/iterative_draw.py``): the
+star-shaped demo scenes with their meshes split to about ``--vertices`` drawn vertices,
+the view orbiting by ``--orbit-degrees`` every frame, each frame timed as the viewport
+draws it (``ReflectionRenderer.draw``: pre-pass, this frame's search from the last
+frame's answers, reflected meshes, composite) and, apart, the iterative reflected pass
+alone (search and reflected meshes), against the plain draw of the same meshes
+(``bench_draw``: the renderer's diffuse triangles, one colour, depth test), medians of
+the frames. Then ``render_image(animation=True)`` at 480x320 with the camera moving
+every frame against Workbench's ``render.render(animation=True)`` on the same scene.
 """
 
 from __future__ import annotations
@@ -170,6 +180,162 @@ def report(result: dict, command: str, machine: str) -> str:
     return "\n".join(lines)
 
 
+#: Star-shaped demo scenes the Iterative rows are measured on.
+ITERATIVE_SCENES = ("sbc_fig3", "two_spheres")
+
+
+def _orbit(view, degrees: float, frames: int) -> list:
+    """``frames`` views turning about the world's vertical axis through the origin."""
+    from curved_reflections.addon.view import View
+
+    views = []
+    for k in range(frames):
+        angle = np.radians(degrees * k)
+        rotation = np.eye(4)
+        rotation[:2, :2] = [[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]]
+        views.append(View(np.asarray(view.view_matrix) @ rotation, view.projection_matrix, view.width,
+                          view.height))
+    return views
+
+
+def measure_iterative(kind: str, width: int, height: int, target_vertices: int, frames: int,
+                      orbit_degrees: float) -> dict:
+    """Per frame of an orbit: the viewport's draw and the iterative pass against a plain draw."""
+    import bpy
+    import gpu
+    from mathutils import Matrix
+
+    from curved_reflections.gpu_shaders.reflection_draw import ITERATIVE_ORDER_RANGE, ReflectionRenderer
+    from curved_reflections.operators import demo_scenes, methods
+    from curved_reflections.operators.capture import capture_scene, view_from_camera
+    from curved_reflections.operators.gpu_init import ensure_gpu
+    from curved_reflections.operators.render_image import reflector_properties, world_color
+
+    ensure_gpu()
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    scene = demo_scenes.build(kind, bpy.context.scene, width, height)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    captured = capture_scene(depsgraph)
+    start = time.perf_counter()
+    plan = methods.plan(scene, captured.reflectors)
+    plan_seconds = time.perf_counter() - start
+    assert len(plan.iterative) == len(captured.reflectors), plan.choices
+    levels = bench_draw.levels_for(captured, target_vertices)
+    meshes = bench_draw.scaled_meshes(captured.meshes, levels)
+    renderer = ReflectionRenderer(captured.reflectors, meshes, polish=False, iterative=plan.iterative,
+                                  **reflector_properties(captured.reflectors, scene))
+    g = renderer.geometry
+    world = world_color(scene)
+    views = _orbit(view_from_camera(scene.camera, scene, depsgraph), orbit_degrees, frames)
+    plain = bench_draw.PlainDraw(g)
+    setup = {"inverse_diameter": 1.0 / g.diameter, "order_range": ITERATIVE_ORDER_RANGE}
+
+    def matrix(view):
+        translate = np.eye(4)
+        translate[:3, 3] = g.shift
+        return Matrix((np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix) @ translate).tolist())
+
+    def reflected_pass(view):
+        renderer.iterative.search(view, warm=True)
+        gpu.state.depth_test_set('LESS')
+        gpu.state.depth_mask_set(True)
+        renderer.iterative.draw(matrix(view), targets.prepass_labels, setup, renderer._image)
+        gpu.state.depth_test_set('NONE')
+        gpu.state.depth_mask_set(False)
+
+    times = {"frame": [], "iterative pass": [], "plain": []}
+    offscreen = gpu.types.GPUOffScreen(width, height, format='RGBA16F')
+    try:
+        with offscreen.bind():
+            framebuffer = gpu.state.active_framebuffer_get()
+            targets = renderer.targets(width, height)
+            for view in views[:2]:  # warm-up: shaders built, textures uploaded
+                renderer.draw(view, None, world, reflectors_only=True)
+            for k, view in enumerate(views):
+                framebuffer.clear(color=(0.0, 0.0, 0.0, 1.0), depth=1.0)
+                times["frame"].append(bench_draw.timed(lambda: renderer.draw(view, None, world, reflectors_only=True),
+                                                       framebuffer))
+                following = views[(k + 1) % len(views)]
+                times["iterative pass"].append(bench_draw.timed(lambda: reflected_pass(following), framebuffer))
+                times["plain"].append(bench_draw.timed(lambda: plain.draw(view), framebuffer))
+        counts = renderer.iterative.status_counts()
+    finally:
+        offscreen.free()
+    ms = {name: 1000.0 * statistics.median(values) for name, values in times.items()}
+    return {"scene": kind, "width": width, "height": height, "vertices": int(len(g.vertices)),
+            "triangles": int(len(g.triangles)), "frames": frames, "orbit_degrees": orbit_degrees, "ms": ms,
+            "plan_seconds": plan_seconds, "counts": counts}
+
+
+def measure_animation(kind: str, frames: int, orbit_degrees: float) -> dict:
+    """``render_image(animation=True)`` at 480x320 against Workbench's animation render."""
+    import tempfile
+
+    import bpy
+
+    from curved_reflections.operators import demo_scenes
+    from curved_reflections.operators.gpu_init import ensure_gpu
+
+    ensure_gpu()
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    scene = demo_scenes.build(kind, bpy.context.scene, 480, 320)
+    camera = scene.camera
+    base = np.array(camera.location)
+    target = bpy.data.objects.new("orbit target", None)
+    scene.collection.objects.link(target)
+    track = camera.constraints.new('TRACK_TO')
+    track.target = target
+    target.location = (0.0, 0.0, float(base[2]) * 0.3)
+    scene.frame_start, scene.frame_end = 1, frames
+    for frame in range(1, frames + 1):
+        angle = np.radians(orbit_degrees * (frame - 1))
+        camera.location = (np.cos(angle) * base[0] - np.sin(angle) * base[1],
+                           np.sin(angle) * base[0] + np.cos(angle) * base[1], base[2])
+        camera.keyframe_insert("location", frame=frame)
+    with tempfile.TemporaryDirectory() as folder:
+        start = time.perf_counter()
+        assert bpy.ops.curved_reflections.render_image(filepath=f"{folder}/ours_###", animation=True) == {'FINISHED'}
+        ours = time.perf_counter() - start
+        written = len(list(Path(folder).glob("ours_*.png")))
+        scene.render.engine = 'BLENDER_WORKBENCH'
+        scene.render.filepath = f"{folder}/workbench_"
+        start = time.perf_counter()
+        bpy.ops.render.render(animation=True)
+        workbench = time.perf_counter() - start
+    assert written == frames
+    return {"scene": kind, "frames": frames, "ours": ours / frames, "workbench": workbench / frames}
+
+
+def iterative_report(rows: list, animations: list) -> list:
+    lines = [
+        "## Iterative mode (GPU search every frame)",
+        "",
+        "The view orbits every frame; milliseconds, medians over the frames. *Frame*: what the viewport "
+        "draws (pre-pass, search from the last frame's answers, reflected meshes, composite). *Iterative "
+        "pass*: the search and the reflected meshes alone. *Plain*: the same meshes drawn once with one "
+        "colour and the depth test (bench_draw). The plan (star-shaped check and cube maps) is made once "
+        "per reflector geometry, not per frame.",
+        "",
+        "| scene | size | drawn vertices | triangles | frame ms | iterative pass ms | plain ms | "
+        "pass / plain | frame / plain | unanswered vertices | plan s |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in rows:
+        ms = r["ms"]
+        unanswered = sum(c["unanswered"] for c in r["counts"].values())
+        lines.append(f"| {r['scene']} | {r['width']}x{r['height']} | {r['vertices']:,} | {r['triangles']:,} | "
+                     f"{ms['frame']:.1f} | {ms['iterative pass']:.1f} | {ms['plain']:.1f} | "
+                     f"**{ms['iterative pass'] / ms['plain']:.2f}x** | {ms['frame'] / ms['plain']:.2f}x | "
+                     f"{unanswered:,} | {r['plan_seconds']:.2f} |")
+    lines += ["", "`render_image(animation=True)`, 480x320, camera orbiting every frame, against Workbench's "
+              "`bpy.ops.render.render(animation=True)` on the same scene (seconds per frame, both writing PNGs):",
+              "", "| scene | frames | ours s/frame | Workbench s/frame | ratio |", "|---|---:|---:|---:|---:|"]
+    for a in animations:
+        lines.append(f"| {a['scene']} | {a['frames']} | {a['ours']:.3f} | {a['workbench']:.3f} | "
+                     f"**{a['ours'] / a['workbench']:.2f}x** |")
+    return lines + [""]
+
+
 def parse_args(argv):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="markdown file to write")
@@ -177,10 +343,15 @@ def parse_args(argv):
     parser.add_argument("--height", type=int, default=480)
     parser.add_argument("--steps", type=int, default=6, help="views per arc (0.4 degree apart)")
     parser.add_argument("--jumps", type=int, default=3, help="arcs, 35 degrees apart")
+    parser.add_argument("--vertices", type=int, default=100_000, help="drawn vertices of the Iterative rows")
+    parser.add_argument("--frames", type=int, default=24, help="frames of the Iterative rows and the animation")
+    parser.add_argument("--orbit-degrees", type=float, default=2.0, help="view turn per frame (Iterative rows)")
+    parser.add_argument("--iterative-only", action="store_true", help="only the Iterative rows and the animation")
     parser.add_argument("--quick", action="store_true", help="small: 160x120, 2 arcs of 3 views")
     args = parser.parse_args(argv)
     if args.quick:
         args.width, args.height, args.steps, args.jumps = 160, 120, 3, 2
+        args.vertices, args.frames = 5_000, 4
     return args
 
 
@@ -188,9 +359,17 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     args = parse_args(argv)
     bench_sbc.import_package()
-    result = measure(args.width, args.height, args.steps, args.jumps)
     command = " ".join([".venv/bin/python", "tests/benchmarks/bench_view_change.py"] + [shlex.quote(a) for a in argv])
-    text = report(result, command, bench_draw._machine())
+    rows = [measure_iterative(kind, args.width, args.height, args.vertices, args.frames, args.orbit_degrees)
+            for kind in ITERATIVE_SCENES]
+    animations = [measure_animation(kind, args.frames, args.orbit_degrees) for kind in ITERATIVE_SCENES]
+    if args.iterative_only:
+        generated = f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M}"
+        text = "\n".join([f"# Iterative mode per frame\n\nGenerated {generated} UTC by `{command}` on "
+                          f"{bench_draw._machine()}.", ""] + iterative_report(rows, animations))
+    else:
+        result = measure(args.width, args.height, args.steps, args.jumps)
+        text = report(result, command, bench_draw._machine()) + "\n" + "\n".join(iterative_report(rows, animations))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(text, encoding="utf-8")
     print(text)

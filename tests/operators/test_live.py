@@ -25,7 +25,11 @@ WIDTH, HEIGHT = 128, 96
 
 @pytest.fixture
 def fig3(empty_scene, registered, gpu_ready):
-    return demo_scenes.build("sbc_fig3", bpy.context.scene, WIDTH, HEIGHT)
+    """sbc_fig3 with its mirror in Runtime mode: these tests are of the camera per view
+    (its worker, debounce and caches); Auto mode is tested in test_live_iterative.py."""
+    scene = demo_scenes.build("sbc_fig3", bpy.context.scene, WIDTH, HEIGHT)
+    bpy.data.objects["MirrorSphere"].curved_reflections.mode = 'RUNTIME'
+    return scene
 
 
 def _camera_view(scene):

@@ -26,6 +26,7 @@ SETTINGS = morphing.MorphSettings(grid=(7, 7, 5), margin=0.8, face_resolution=48
 @pytest.fixture
 def fig3_morphing(empty_scene, registered, gpu_ready, monkeypatch):
     scene = demo_scenes.build("sbc_fig3", bpy.context.scene, WIDTH, HEIGHT)
+    bpy.data.objects["MirrorSphere"].curved_reflections.mode = 'RUNTIME'  # each test chooses its mode
 
     def grid_on_demand(reflector, matrix, scene, reflector_index=0):
         local = morphing.reflector_in_frame(reflector, morphing.rigid_frame(matrix))

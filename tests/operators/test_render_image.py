@@ -89,3 +89,74 @@ def test_reflector_settings_reach_the_renderer(fig3):
     assert np.isnan(properties["fresnel_f0"][1:]).all() and (properties["attenuation_distance"][1:] == 0).all()
     colors, reflectivity = reflector_appearance(reflectors, fig3)  # the older two-value form
     np.testing.assert_array_equal(reflectivity, properties["reflectivity"])
+
+
+def test_render_honours_each_reflectors_mode(fig3):
+    from curved_reflections.operators.render_image import render_scene
+
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    searched = render_scene(fig3, depsgraph)
+    assert searched.stats["methods"] == {"MirrorSphere": "ITERATIVE"}
+    assert searched.seconds["sbc"] < 0.05 and "n_rays" not in searched.stats  # no camera built
+    assert searched.stats["iterative"]["MirrorSphere"]["found"] > 1000
+    bpy.data.objects["MirrorSphere"].curved_reflections.mode = 'RUNTIME'
+    camera = render_scene(fig3, depsgraph)
+    assert camera.stats["methods"] == {"MirrorSphere": "RUNTIME"} and camera.stats["n_rays"] > 100
+    # Both draw the same reflections: the images agree on nearly every pixel.
+    differing = np.abs(searched.image[..., :3] - camera.image[..., :3]).max(axis=2) > 0.05
+    assert differing.mean() < 0.03
+
+
+def test_frame_paths():
+    from curved_reflections.operators.render_image import frame_filepath
+
+    assert frame_filepath("/out/shot_###.png", 7) == "/out/shot_007.png"
+    assert frame_filepath("/out/a#b_##", 12) == "/out/a#b_12.png"  # the last run of #
+    assert frame_filepath("/out/shot_", 7) == "/out/shot_0007.png"
+    assert frame_filepath("/out/shot_#", 123) == "/out/shot_123.png"
+
+
+def _orbit_camera(scene, frames: int) -> None:
+    camera = scene.camera
+    base = np.array(camera.location)
+    scene.frame_start, scene.frame_end = 1, frames
+    for frame in range(1, frames + 1):
+        angle = np.radians(4.0 * (frame - 1))
+        camera.location = (np.cos(angle) * base[0] - np.sin(angle) * base[1],
+                           np.sin(angle) * base[0] + np.cos(angle) * base[1], base[2])
+        camera.keyframe_insert("location", frame=frame)
+
+
+def test_animation_writes_one_png_per_frame_equal_to_single_renders(fig3, tmp_path, capfd):
+    _orbit_camera(fig3, 3)
+    fig3.frame_set(2)
+    assert bpy.ops.curved_reflections.render_image(filepath=str(tmp_path / "frames" / "f_###"),
+                                                   animation=True) == {'FINISHED'}
+    assert fig3.frame_current == 2  # the frame is restored
+    written = sorted(p.name for p in (tmp_path / "frames").iterdir())
+    assert written == ["f_001.png", "f_002.png", "f_003.png"]
+    assert "Info: Rendered 3 frames with reflections" in capfd.readouterr().out
+    frames = [reference_render.read_png(tmp_path / "frames" / name) for name in written]
+    assert np.abs(frames[0] - frames[2]).max() > 0.1  # the camera moved
+    fig3.frame_set(2)
+    assert bpy.ops.curved_reflections.render_image(filepath=str(tmp_path / "single.png")) == {'FINISHED'}
+    np.testing.assert_array_equal(reference_render.read_png(tmp_path / "single.png"), frames[1])
+
+
+def test_animation_keeps_the_renderer_while_only_the_camera_moves_and_recaptures_moved_objects(fig3):
+    from curved_reflections.operators.render_image import FrameState, render_scene
+
+    _orbit_camera(fig3, 3)
+    cube = bpy.data.objects["Cube"]
+    cube.keyframe_insert("location", frame=2)
+    cube.location.x += 0.3
+    cube.keyframe_insert("location", frame=3)
+    state = FrameState()
+    renderers = []
+    for frame in (1, 2, 3):
+        fig3.frame_set(frame)
+        render_scene(fig3, bpy.context.evaluated_depsgraph_get(), state=state)
+        renderers.append(state.renderer)
+    assert renderers[0] is renderers[1]  # only the camera moved
+    assert renderers[2] is not renderers[1]  # the cube moved: captured and uploaded again
+    assert state.frames == 3 and state.reused == 1

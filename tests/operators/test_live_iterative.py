@@ -1,0 +1,85 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The live view in Auto and Iterative mode (operators/live.py, operators/methods.py):
+star-shaped reflectors are searched on the GPU every frame, with no camera to build."""
+
+import bpy
+import numpy as np
+import pytest
+
+from curved_reflections.addon.view import look_at_view
+from curved_reflections.operators import demo_scenes, live, methods
+
+from test_live import HEIGHT, WIDTH, _camera_view, _draw, _pixels_of, _touched
+
+
+@pytest.fixture
+def fig3(empty_scene, registered, gpu_ready):
+    """sbc_fig3, its mirror ball in the default (Auto) mode."""
+    return demo_scenes.build("sbc_fig3", bpy.context.scene, WIDTH, HEIGHT)
+
+
+def _torus(scene):
+    bpy.ops.mesh.primitive_torus_add(major_radius=0.8, minor_radius=0.3, location=(2.5, 2.5, 0.6))
+    torus = bpy.context.active_object
+    torus.name = "Ring"
+    torus.curved_reflections.is_reflector = True
+    return torus
+
+
+def test_auto_mode_searches_the_mirror_ball_and_builds_no_camera(fig3):
+    assert bpy.data.objects["MirrorSphere"].curved_reflections.mode == 'AUTO'
+    state = live.bake(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
+    [choice] = methods.last_choices(fig3)
+    assert (choice.reflector, choice.method) == ("MirrorSphere", methods.ITERATIVE)
+    assert choice.reason.startswith("star-shaped around")
+    assert state.counts["builds"] == 0 or all(c.sbc is None for c in state.cameras.values())
+
+    drawn, image = _draw(fig3, _camera_view(fig3))
+    assert drawn
+    touched = _touched(image)
+    assert 1000 < touched.sum() < 3000  # the ball's disc only (reflectors only)
+    cube = _pixels_of(image, "Cube", fig3)
+    assert len(cube) >= 15 and touched[cube[:, 0], cube[:, 1]].all()
+    assert sum(len(_pixels_of(image, f"Column{k}", fig3)) > 0 for k in range(1, 8)) >= 3
+
+    # A new view draws at once, with no request, job or camera build.
+    builds, draws = state.counts["builds"], state.counts["draws"]
+    centre = np.array(bpy.data.objects["MirrorSphere"].matrix_world.translation)
+    moved = look_at_view(centre + (3.0, -4.0, 1.5), centre, fov_y_deg=40.0, width=WIDTH, height=HEIGHT)
+    drawn, other = _draw(fig3, moved, key="another region")
+    assert drawn and not state.requests and not state.jobs
+    assert state.counts["builds"] == builds and state.counts["draws"] == draws + 1
+    assert np.abs(other - image).max() > 0.1  # the reflection follows the view
+
+
+def test_a_view_inside_the_searched_reflector_is_reported_and_drawing_resumes_outside(fig3):
+    state = live.bake(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
+    centre = np.array(bpy.data.objects["MirrorSphere"].matrix_world.translation)
+    inside = look_at_view(centre + (0.1, 0.0, 0.1), centre + (3.0, 0.0, 0.0), width=WIDTH, height=HEIGHT)
+    assert not live.draw_safely(fig3, live.CAMERA_KEY, inside)
+    assert state.level == 'ERROR' and state.status.startswith("'MirrorSphere': the view is inside this reflector")
+    assert live.draw_safely(fig3, live.CAMERA_KEY, _camera_view(fig3))
+    assert state.level == 'INFO'
+
+
+def test_a_torus_in_iterative_mode_is_drawn_in_runtime_mode_and_the_panel_says_why(fig3):
+    torus = _torus(fig3)
+    torus.curved_reflections.mode = 'ITERATIVE'
+    state = live.bake(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
+    choices = {c.reflector: c for c in methods.last_choices(fig3)}
+    assert choices["MirrorSphere"].method == methods.ITERATIVE
+    assert choices["Ring"].method == methods.RUNTIME
+    assert choices["Ring"].reason.startswith("'Ring' is not star-shaped")
+    assert choices["Ring"].reason.endswith("drawn in Runtime mode")
+    camera = state.cameras[live.CAMERA_KEY]
+    assert camera.sbc is not None  # built for the torus
+    # The camera's sheets of the searched ball are not projected: the search draws them.
+    assert live.draw_safely(fig3, live.CAMERA_KEY, _camera_view(fig3))
+    assert 0 in state.renderer.iterative.reflector_indices
+
+
+def test_second_order_in_auto_mode_builds_a_camera_for_the_higher_orders(fig3):
+    fig3.curved_reflections.max_order = 2
+    state = live.bake(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
+    assert state.cameras[live.CAMERA_KEY].sbc is not None
+    assert live.draw_safely(fig3, live.CAMERA_KEY, _camera_view(fig3))
