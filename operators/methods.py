@@ -11,9 +11,10 @@ Per reflector, ``obj.curved_reflections.mode``:
   not star-shaped;
 - ``MORPHING`` and ``RUNTIME``: the sample-based camera's modes (SBC paper VI and IV).
 
-The star-shape verdict and the cube map are made once per reflector geometry (kept by
-a hash of its arrays, :data:`CACHED_MAPS` of them): a viewport orbit or an animation
-frame in which the mirror did not change reuses them. The map is baked on the GPU when
+The star-shape verdict and the cube map are made once per reflector shape (compared up to a
+translation with the ones kept, :data:`CACHED_MAPS` of them): a viewport orbit,
+an animation frame in which the mirror did not change, or a mirror moved without
+turning reuses them (the map moves with its centre). The map is baked on the GPU when
 it is initialised (``gpu_shaders/iterative_bake.py``, milliseconds), else traced on the
 CPU. :func:`plan` is what the live view, Render Image and the panel use; its choices
 say per reflector which method and why, and the last ones are kept for the panel.
@@ -25,8 +26,8 @@ them (and for the reflectors it draws) alone.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
-from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -67,17 +68,8 @@ class MethodPlan:
         return next((c.method for c in self.choices if c.reflector == name), None)
 
 
-_maps: OrderedDict = OrderedDict()
+_maps: list = []  # _Entry, most recently used last
 _last_choices: dict = {}
-
-
-def geometry_key(reflector) -> str:
-    """A hash of a reflector's arrays: the same mirror, moved or not, gets the same key
-    only if its world-space geometry is the same."""
-    digest = hashlib.sha1()
-    for array in (reflector.vertices, reflector.triangles, reflector.normals):
-        digest.update(np.ascontiguousarray(array).tobytes())
-    return digest.hexdigest()
 
 
 def _bake(reflector, centre, face_size: int):
@@ -93,14 +85,55 @@ def _bake(reflector, centre, face_size: int):
     return bake_reflector_map(ReflectorSet([reflector]), centre, face_size)
 
 
+#: Vertex positions of two captures of one shape (relative to their first vertex) may
+#: differ by this share of its size: Blender's float32 matrices move the float64 capture.
+SHAPE_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True)
+class _Entry:
+    """One cached verdict and map, with the shape they were made for."""
+
+    topology: str
+    face_size: int
+    offsets: np.ndarray  # vertex positions relative to the first vertex
+    normals: np.ndarray
+    origin: np.ndarray  # the first vertex
+    shape: StarShape
+    reflector_map: object
+
+    def matches(self, reflector, topology: str, face_size: int) -> bool:
+        if (self.topology, self.face_size) != (topology, face_size):
+            return False
+        offsets = reflector.vertices - reflector.vertices[0]
+        tolerance = SHAPE_TOLERANCE * max(float(np.abs(offsets).max()), 1e-300)
+        return bool(np.abs(offsets - self.offsets).max() <= tolerance
+                    and np.abs(reflector.normals - self.normals).max() <= 1e-9)
+
+    def moved_to(self, reflector):
+        """The verdict and map, moved with the reflector's first vertex."""
+        shift = reflector.vertices[0] - self.origin
+        rmap = self.reflector_map
+        return (dataclasses.replace(self.shape, centre=self.shape.centre + shift),
+                None if rmap is None else dataclasses.replace(rmap, centre=rmap.centre + shift))
+
+
+def _topology(reflector) -> str:
+    digest = hashlib.sha1(np.ascontiguousarray(reflector.triangles).tobytes())
+    digest.update(str(len(reflector.vertices)).encode())
+    return digest.hexdigest()
+
+
 def star_map(reflector, face_size: int | None = None):
-    """(StarShape, ReflectorMap or None) of one reflector, cached by its geometry
+    """(StarShape, ReflectorMap or None) of one reflector, cached by its shape: a mirror
+    moved without turning reuses its verdict and its map, moved with it
     (``face_size``: default :data:`FACE_SIZE`)."""
     face_size = FACE_SIZE if face_size is None else int(face_size)
-    key = (geometry_key(reflector), face_size)
-    if key in _maps:
-        _maps.move_to_end(key)
-        return _maps[key]
+    topology = _topology(reflector)
+    for index, entry in enumerate(_maps):
+        if entry.matches(reflector, topology, face_size):
+            _maps.append(_maps.pop(index))
+            return entry.moved_to(reflector)
     shape = check_star_shaped(reflector)
     rmap = None
     if shape.star_shaped:
@@ -112,9 +145,9 @@ def star_map(reflector, face_size: int | None = None):
                               bake.min_cosine)
         else:
             rmap = bake.reflector_map
-    _maps[key] = (shape, rmap)
-    while len(_maps) > CACHED_MAPS:
-        _maps.popitem(last=False)
+    _maps.append(_Entry(topology, face_size, reflector.vertices - reflector.vertices[0], reflector.normals.copy(),
+                        reflector.vertices[0].copy(), shape, rmap))
+    del _maps[:-CACHED_MAPS]
     return shape, rmap
 
 

@@ -31,6 +31,8 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 SCENE_NAMES = ("sbc_fig3", "teapot", "two_spheres", "vase")
 REFERENCE = "cycles"
 OURS = "curved_reflections"
+#: Our renderer also with every reflector in one mode (the plain entry is the default, Auto).
+OUR_MODES = ("RUNTIME", "ITERATIVE")
 
 
 def import_package():
@@ -61,23 +63,29 @@ def renderers(args) -> list[Renderer]:
         scene, path, args.cycles_samples, args.bounces, args.frames))]
     entries += [Renderer(variant, eevee(variant)) for variant in rr.EEVEE_VARIANTS]
     entries.append(Renderer(OURS, lambda scene, reflectors, path: render_ours(scene, path, args)))
+    entries += [Renderer(f"{OURS}_{mode.lower()}", lambda scene, reflectors, path, mode=mode: render_ours(
+        scene, path, args, mode)) for mode in OUR_MODES]
     wanted = set(args.renderers or [e.name for e in entries]) | {REFERENCE}
     return [e for e in entries if e.name in wanted]
 
 
-def render_ours(scene, path, args):
-    """Our reflections (``operators/render_image.py``): capture, sample-based camera and
-    GPU drawing, timed together per frame with the PNG writing, as the other renderers.
+def render_ours(scene, path, args, mode: str | None = None):
+    """Our reflections (``operators/render_image.py``): capture, the method of each
+    reflector (``mode`` for all of them if given, else their own: Auto) and GPU drawing,
+    timed together per frame with the PNG writing, as the other renderers.
 
-    A warm-up frame first (shader compilation), timed separately as the first frame.
-    Settings are the scene's (``scene.curved_reflections``) except the highest order,
-    ``--max-order``. The notes split the last frame's time into its stages.
+    A warm-up frame first (shader compilation, the star-shaped check and cube maps of
+    the iterative search), timed separately as the first frame. Settings are the
+    scene's (``scene.curved_reflections``) except the highest order, ``--max-order``.
+    The notes split the last frame's time into its stages.
     """
     import bpy
     import numpy as np
     from curved_reflections.operators import reference_render as rr, render_image
 
     depsgraph = bpy.context.evaluated_depsgraph_get()  # run_scene builds into the context's scene
+    mirrors = [o for o in scene.objects if o.curved_reflections.is_reflector]
+    saved = [o.curved_reflections.mode for o in mirrors]
 
     def frame():
         start = time.perf_counter()
@@ -86,19 +94,27 @@ def render_ours(scene, path, args):
         rr.write_png(path, result.display)
         return time.perf_counter() - start, result
 
-    first, _ = frame()
-    frames = [frame() for _ in range(max(1, args.frames))]
+    try:
+        for mirror in mirrors:
+            mirror.curved_reflections.mode = mode or mirror.curved_reflections.mode
+        first, _ = frame()
+        frames = [frame() for _ in range(max(1, args.frames))]
+    finally:
+        for mirror, original in zip(mirrors, saved):
+            mirror.curved_reflections.mode = original
     seconds = float(np.median([f[0] for f in frames]))
     result = frames[-1][1]
     settings = scene.curved_reflections
     s, stats = result.seconds, result.stats
-    notes = (f"d = {settings.downsample}, accuracy {settings.accuracy_px:g} px, max order {args.max_order}, "
-             f"{stats['traced_pixels']} px traced{' (edges too)' if args.trace_edges else ''}; "
+    methods = ", ".join(f"{name} {method.lower()}" for name, method in stats["methods"].items())
+    notes = (f"{methods}; d = {settings.downsample}, accuracy {settings.accuracy_px:g} px, max order "
+             f"{args.max_order}, {stats['traced_pixels']} px traced{' (edges too)' if args.trace_edges else ''}; "
              f"last frame: capture {s['capture']:.2f} s, sample-based camera {s['sbc']:.2f} s "
-             f"(ray map {s['trace']:.2f} s), drawing {s['draw']:.2f} s; {stats['n_sheets']} sheet(s), "
+             f"(ray map {s['trace']:.2f} s), drawing {s['draw']:.2f} s; {stats.get('n_sheets', 0)} sheet(s), "
              f"{stats['reflected_triangles']} reflected triangles, {stats.get('mixed_triangles', 0)} mixed "
              f"(subdivided, SBC V-B)")
-    return rr.RenderResult(OURS, rr.read_png(path), seconds, path, first, notes)
+    name = OURS if mode is None else f"{OURS}_{mode.lower()}"
+    return rr.RenderResult(name, rr.read_png(path), seconds, path, first, notes)
 
 
 @dataclass
@@ -284,8 +300,13 @@ def report(rows: list[Row], args) -> str:
         "compilation, faster when Mesa's shader cache is warm), shown below as the first frame. "
         "EEVEE's probe variants capture their sphere probes in every frame. Ours "
         f"(`{OURS}`, `operators/render_image.py`) is timed from capture to PNG: the scene "
-        "capture, the sample-based camera (ray map and trees) and the GPU drawing, on "
-        "Mesa llvmpipe (CPU) here; a warm-up frame first (shader compilation).",
+        "capture, each reflector's method (the iterative search on the GPU, or the "
+        "sample-based camera's ray map and trees) and the GPU drawing, on Mesa llvmpipe (CPU) "
+        "here; a warm-up frame first (shader compilation, star-shaped checks and cube maps). "
+        f"`{OURS}` draws each reflector in its default mode, Auto (Iterative where it is "
+        f"star-shaped, Runtime otherwise; second-order reflections by the sample-based camera); "
+        + ", ".join(f"`{OURS}_{m.lower()}`" for m in OUR_MODES) + " draw every reflector in that mode "
+        "(Iterative falls back to Runtime where a reflector is not star-shaped).",
         details(rows),
         "Images: `<scene>_side_by_side.png`, top row the renders in table order, bottom row "
         "the mask (grey) with the near-contact region (yellow), then per renderer its "

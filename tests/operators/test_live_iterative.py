@@ -83,3 +83,20 @@ def test_second_order_in_auto_mode_builds_a_camera_for_the_higher_orders(fig3):
     state = live.bake(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
     assert state.cameras[live.CAMERA_KEY].sbc is not None
     assert live.draw_safely(fig3, live.CAMERA_KEY, _camera_view(fig3))
+
+
+def test_a_mirror_moved_without_turning_keeps_its_map(fig3, monkeypatch):
+    state = live.bake(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
+    before = state.plan.iterative[0].reflector_map
+
+    def no_second_check(*_args, **_kwargs):
+        raise AssertionError("the moved mirror was checked again")
+
+    monkeypatch.setattr(methods, "check_star_shaped", no_second_check)
+    bpy.data.objects["MirrorSphere"].location.x += 0.5
+    bpy.context.view_layer.update()
+    state = live.bake(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
+    after = state.plan.iterative[0].reflector_map
+    np.testing.assert_allclose(after.centre - before.centre, (0.5, 0.0, 0.0), atol=1e-6)
+    assert after.texels is before.texels
+    assert live.draw_safely(fig3, live.CAMERA_KEY, _camera_view(fig3))
