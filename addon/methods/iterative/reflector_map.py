@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...raytrace import ReflectorSet
-from ...vectors import dot, lengths
+from ...vectors import cross, dot, lengths
 
 #: Texels along a cube face's side (without the border): about 0.35 degree per texel.
 DEFAULT_FACE_SIZE = 256
@@ -162,7 +162,7 @@ def bake_reflector_map(reflector_set: ReflectorSet, centre, face_size: int = DEF
     shape = (6 * (face_size + 2), face_size + 2, 4)
     reflector_map = ReflectorMap(
         centre=centre, face_size=int(face_size), texels=texels.reshape(shape),
-        convex=_is_convex(reflector_set),
+        convex=is_convex(reflector_set.vertices, reflector_set.triangles, centre),
         min_radius=float(radius.min()) if len(radius) else 0.0,
         max_radius=float(radius.max()) if len(radius) else 0.0,
     )
@@ -170,26 +170,39 @@ def bake_reflector_map(reflector_set: ReflectorSet, centre, face_size: int = DEF
                    float(hit.mean()))
 
 
-#: Vertex-face pairs a convexity check may test; a larger mesh counts as not convex
-#: (only a cost: the search then runs its occlusion tests).
-MAX_CONVEXITY_PAIRS = 4e9
-
-
-def _is_convex(reflector_set: ReflectorSet, tolerance: float = 1e-7) -> bool:
-    """Every vertex lies on or behind the plane of every face (faces oriented outward
-    from the vertex mean); checked in blocks, so memory stays bounded."""
-    vertices = np.unique(reflector_set.vertices, axis=0)
-    if float(len(vertices)) * len(reflector_set.face_normals) > MAX_CONVEXITY_PAIRS:
+def is_convex(vertices: np.ndarray, triangles: np.ndarray, centre, tolerance: float = 1e-7) -> bool:
+    """Whether a star-shaped mesh around ``centre`` bounds a convex body: it is closed
+    (every edge of its welded vertices shared by two faces), folds outward at every edge
+    (faces oriented away from the centre: each face's neighbour across an edge lies on
+    or behind its plane) and has no saddle vertex (angles around each vertex sum to at
+    most 2 pi). A closed surface that is locally convex everywhere is convex (Tietze's
+    theorem), so this costs O(faces) where comparing every vertex with every face plane
+    cost O(vertices x faces). An open or degenerate mesh counts as not convex (only a
+    cost: the search then runs its occlusion tests)."""
+    vertices = np.asarray(vertices, dtype=np.float64)
+    triangles = np.asarray(triangles, dtype=np.int64)
+    _, welded = np.unique(vertices, axis=0, return_inverse=True)
+    welded = welded.reshape(-1)[triangles]
+    corners = vertices[triangles]
+    normals = cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    normals /= lengths(normals)[:, None]
+    normals *= np.sign(dot(normals, corners[:, 0] - np.asarray(centre, dtype=np.float64)))[:, None]
+    ends = np.sort(np.stack([welded, np.roll(welded, -1, axis=1)], axis=2), axis=2).reshape(-1, 2)
+    _, edge, count = np.unique(ends, axis=0, return_inverse=True, return_counts=True)
+    if (count != 2).any():
         return False
-    centre = vertices.mean(axis=0)
-    normals = reflector_set.face_normals
-    offsets = dot(normals, reflector_set.v0)
-    flip = np.sign(offsets - normals @ centre)
-    normals, offsets = normals * flip[:, None], offsets * flip
-    slack = tolerance * reflector_set.scale
-    block = max(1, 2_000_000 // max(1, len(vertices)))
-    for start in range(0, len(normals), block):
-        heights = vertices @ normals[start:start + block].T - offsets[start:start + block]
-        if (heights > slack).any():
-            return False
-    return True
+    order = np.argsort(edge.reshape(-1), kind="stable").reshape(-1, 2)  # the two sides of each edge
+    face, opposite = order // 3, triangles[order // 3, (order % 3 + 2) % 3]
+    scale = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
+    heights = np.stack([dot(normals[face[:, k]], vertices[opposite[:, 1 - k]] - corners[face[:, k], 0])
+                        for k in range(2)])
+    if not np.all(heights <= tolerance * scale):
+        return False
+    a, b, c = (corners[:, k] for k in range(3))
+    angles = np.stack([_angle(b - a, c - a), _angle(c - b, a - b), _angle(a - c, b - c)], axis=1)
+    total = np.bincount(welded.reshape(-1), angles.reshape(-1), minlength=int(welded.max()) + 1)
+    return bool(np.all(total <= 2.0 * np.pi + 1e-6))
+
+
+def _angle(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    return np.arctan2(lengths(cross(u, v)), dot(u, v))
