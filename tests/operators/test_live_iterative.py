@@ -100,3 +100,27 @@ def test_a_mirror_moved_without_turning_keeps_its_map(fig3, monkeypatch):
     np.testing.assert_allclose(after.centre - before.centre, (0.5, 0.0, 0.0), atol=1e-6)
     assert after.texels is before.texels
     assert live.draw_safely(fig3, live.CAMERA_KEY, _camera_view(fig3))
+
+
+def test_star_shaped_check_of_blender_primitives(fig3):
+    """Suzanne (ears, eye sockets) and a torus are not star-shaped; a UV sphere and a
+    scaled, subdivided cube (rounded) are."""
+    from curved_reflections.operators.capture import capture_scene
+
+    bpy.ops.mesh.primitive_monkey_add(location=(3.0, -2.0, 1.0))
+    bpy.context.active_object.name = "Suzanne"
+    bpy.ops.mesh.primitive_torus_add(location=(-3.0, 2.0, 1.0))
+    bpy.context.active_object.name = "Ring"
+    bpy.ops.mesh.primitive_cube_add(location=(-3.0, -2.0, 1.0), scale=(1.0, 0.6, 0.4))
+    cube = bpy.context.active_object
+    cube.name = "Rounded"
+    cube.modifiers.new("smooth", 'SUBSURF').levels = 2
+    for name in ("Suzanne", "Ring", "Rounded"):
+        bpy.data.objects[name].curved_reflections.is_reflector = True
+    reflectors = capture_scene(bpy.context.evaluated_depsgraph_get()).reflectors
+    plan = methods.plan(fig3, reflectors)
+    chosen = {c.reflector: c for c in plan.choices}
+    assert chosen["MirrorSphere"].method == chosen["Rounded"].method == methods.ITERATIVE
+    for name in ("Suzanne", "Ring"):
+        assert chosen[name].method == methods.RUNTIME
+        assert chosen[name].reason.startswith(f"{name!r} is not star-shaped")
