@@ -80,17 +80,9 @@ def reflected_shader():
     sample-based camera's reflected meshes)."""
     import gpu
 
-    from .reflection_draw import _shading_source, _source as draw_source
+    from .reflection_draw import reflected_fragment_source, reflected_interface
 
-    interface = gpu.types.GPUStageInterfaceInfo("curved_reflections_iterative_interface")
-    interface.smooth('VEC4', "color_interp")
-    interface.smooth('VEC3', "normal_interp")
-    interface.smooth('VEC3', "eye_interp")
-    interface.smooth('VEC2', "uv_interp")
-    interface.smooth('FLOAT', "distance_interp")
-    interface.flat('FLOAT', "lit_interp")
-    interface.flat('FLOAT', "reflector_interp")
-    interface.smooth('FLOAT', "valid_interp")
+    interface = reflected_interface("curved_reflections_iterative_interface", searched=True)
     info = gpu.types.GPUShaderCreateInfo()
     info.push_constant('MAT4', "view_projection")
     info.push_constant('INT', "result_width")
@@ -109,8 +101,7 @@ def reflected_shader():
     info.vertex_out(interface)
     info.fragment_out(0, 'VEC4', "color_out")
     info.vertex_source(_source("iterative_mesh_vert.glsl", {"FOUND_CODE": FOUND_CODE}))
-    info.fragment_source(f"#define SEARCHED\n#define VALID_THRESHOLD {VALID_THRESHOLD}\n" + _shading_source()
-                         + draw_source("reflection_mesh_frag.glsl"))
+    info.fragment_source(reflected_fragment_source(f"#define SEARCHED\n#define VALID_THRESHOLD {VALID_THRESHOLD}\n"))
     return gpu.shader.create_from_info(info)
 
 

@@ -221,11 +221,12 @@ def _build_project():
     return gpu.shader.create_from_info(info)
 
 
-@functools.cache
-def _build_reflected():
+def reflected_interface(name: str, searched: bool = False):
+    """The varyings of a reflected-mesh vertex stage, read by ``glsl/reflection_mesh_frag.glsl``;
+    ``searched`` adds the iterative search's interpolated validity."""
     import gpu
 
-    interface = gpu.types.GPUStageInterfaceInfo("curved_reflections_reflected_interface")
+    interface = gpu.types.GPUStageInterfaceInfo(name)
     interface.smooth('VEC4', "color_interp")
     interface.smooth('VEC3', "normal_interp")
     interface.smooth('VEC3', "eye_interp")
@@ -233,6 +234,21 @@ def _build_reflected():
     interface.smooth('FLOAT', "distance_interp")
     interface.flat('FLOAT', "lit_interp")
     interface.flat('FLOAT', "reflector_interp")
+    if searched:
+        interface.smooth('FLOAT', "valid_interp")
+    return interface
+
+
+def reflected_fragment_source(defines: str = "") -> str:
+    """``glsl/reflection_mesh_frag.glsl`` behind ``defines`` and the shading functions."""
+    return defines + _shading_source() + _source("reflection_mesh_frag.glsl")
+
+
+@functools.cache
+def _build_reflected():
+    import gpu
+
+    interface = reflected_interface("curved_reflections_reflected_interface")
     info = gpu.types.GPUShaderCreateInfo()
     info.push_constant('MAT4', "view_projection")
     info.push_constant('VEC2', "view_size")
@@ -249,7 +265,7 @@ def _build_reflected():
     info.vertex_out(interface)
     info.fragment_out(0, 'VEC4', "color_out")
     info.vertex_source(_source("reflection_mesh_vert.glsl"))
-    info.fragment_source(_shading_source() + _source("reflection_mesh_frag.glsl"))
+    info.fragment_source(reflected_fragment_source())
     return gpu.shader.create_from_info(info)
 
 

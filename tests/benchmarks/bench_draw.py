@@ -84,6 +84,22 @@ def scaled_meshes(meshes, levels: int):
     return result
 
 
+def built_scene(kind: str, width: int, height: int):
+    """The demo scene ``kind`` built in a fresh file (GPU initialised): (scene, depsgraph,
+    captured scene)."""
+    import bpy
+
+    from curved_reflections.operators import demo_scenes
+    from curved_reflections.operators.capture import capture_scene
+    from curved_reflections.operators.gpu_init import ensure_gpu
+
+    ensure_gpu()
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    scene = demo_scenes.build(kind, bpy.context.scene, width, height)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    return scene, depsgraph, capture_scene(depsgraph)
+
+
 def levels_for(captured, target_vertices: int) -> int:
     """Levels of uniform splitting whose drawn vertex count is nearest the target (log scale)."""
     from curved_reflections.gpu_shaders.reflection_draw import prepare_geometry
@@ -147,23 +163,16 @@ def _plain_shader():
 
 def measure(kind: str, width: int, height: int, target_vertices: int, repeats: int, warmup: int,
             projection_repeats: int) -> dict:
-    import bpy
     import gpu
 
     from curved_reflections.addon.sbc import build_sample_based_camera
     from curved_reflections.addon.scene import scene_bounds
     from curved_reflections.gpu_shaders.projection import SBCTextures
     from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
-    from curved_reflections.operators import demo_scenes
-    from curved_reflections.operators.capture import capture_scene, view_from_camera
-    from curved_reflections.operators.gpu_init import ensure_gpu
+    from curved_reflections.operators.capture import view_from_camera
     from curved_reflections.operators.render_image import BOUNDS_MARGIN, reflector_appearance, world_color
 
-    ensure_gpu()
-    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-    scene = demo_scenes.build(kind, bpy.context.scene, width, height)
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    captured = capture_scene(depsgraph)
+    scene, depsgraph, captured = built_scene(kind, width, height)
     view = view_from_camera(scene.camera, scene, depsgraph)
 
     levels = levels_for(captured, target_vertices)

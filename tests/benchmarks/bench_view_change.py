@@ -201,21 +201,15 @@ def _orbit(view, degrees: float, frames: int) -> list:
 def measure_iterative(kind: str, width: int, height: int, target_vertices: int, frames: int,
                       orbit_degrees: float) -> dict:
     """Per frame of an orbit: the viewport's draw and the iterative pass against a plain draw."""
-    import bpy
     import gpu
     from mathutils import Matrix
 
     from curved_reflections.gpu_shaders.reflection_draw import ITERATIVE_ORDER_RANGE, ReflectionRenderer
-    from curved_reflections.operators import demo_scenes, methods
-    from curved_reflections.operators.capture import capture_scene, view_from_camera
-    from curved_reflections.operators.gpu_init import ensure_gpu
+    from curved_reflections.operators import methods
+    from curved_reflections.operators.capture import view_from_camera
     from curved_reflections.operators.render_image import reflector_properties, world_color
 
-    ensure_gpu()
-    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-    scene = demo_scenes.build(kind, bpy.context.scene, width, height)
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    captured = capture_scene(depsgraph)
+    scene, depsgraph, captured = bench_draw.built_scene(kind, width, height)
     start = time.perf_counter()
     plan = methods.plan(scene, captured.reflectors)
     plan_seconds = time.perf_counter() - start
