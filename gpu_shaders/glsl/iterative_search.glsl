@@ -13,8 +13,9 @@
  *      the guess where a start fails;
  *   3. stop when a step moves P by less than `stop_per_w` times the view's clip w at P
  *      (a share of the accuracy in pixels, section 3.2);
- *   4. checks: P faces the eye and the vertex, the residual vanishes, and on a
- *      non-convex mirror nothing of it lies between P and either.
+ *   4. checks: P faces the eye and the vertex (by the interpolated normal and by the map
+ *      surface's own), the residual vanishes, and on a non-convex mirror nothing of it
+ *      lies between P and either.
  * Everything runs relative to O. Output texel: (P relative to the renderer's shift,
  * (status + 8) + 16 * steps), status as the numpy twin's (FOUND = 1). */
 
@@ -163,7 +164,7 @@ bool segment_blocked(vec3 p, vec3 direction, float length_)
   return false;
 }
 
-int check(vec3 p, vec3 n, vec3 h)
+int check(vec3 p, vec3 n, vec3 h, vec3 face)
 {
   vec3 e = to_eye(p);
   vec3 v = normalize(vertex - p);
@@ -171,7 +172,7 @@ int check(vec3 p, vec3 n, vec3 h)
   if (sine >= RESIDUAL_TOLERANCE) {
     return NOT_CONVERGED;
   }
-  if (!(dot(n, e) > 0.0 && dot(n, v) > 0.0)) {
+  if (!(dot(n, e) > 0.0 && dot(n, v) > 0.0 && dot(face, e) > 0.0 && dot(face, v) > 0.0)) {
     return FACES_AWAY;
   }
   if (convex == 0) {
@@ -188,15 +189,19 @@ int check(vec3 p, vec3 n, vec3 h)
 int newton(vec2 x, inout int steps, out vec3 p)
 {
   vec2 f;
-  vec3 n, h;
+  vec3 n, h, face;
   if (!evaluate(x, f, p, n, h)) {
     return NO_SURFACE;
   }
   for (int step = 0; step < MAX_ITERATIONS; step++) {
     vec2 fu, fv, ft;
-    vec3 pt, nt, ht;
-    evaluate(x + vec2(DERIVATIVE_STEP, 0.0), fu, pt, nt, ht);
-    evaluate(x + vec2(0.0, DERIVATIVE_STEP), fv, pt, nt, ht);
+    vec3 pt, nt, ht, pu, pv;
+    evaluate(x + vec2(DERIVATIVE_STEP, 0.0), fu, pu, nt, ht);
+    evaluate(x + vec2(0.0, DERIVATIVE_STEP), fv, pv, nt, ht);
+    /* The map surface's own normal: the ray from the eye must meet its front and the
+     * reflected ray leave it (as addon/exact.py asks of the facet). */
+    vec3 facet = cross(pu - p, pv - p);
+    face = dot(facet, p) < 0.0 ? -facet : facet;
     vec2 ju = (fu - f) / DERIVATIVE_STEP;
     vec2 jv = (fv - f) / DERIVATIVE_STEP;
     float det = ju.x * jv.y - jv.x * ju.y;
@@ -227,7 +232,7 @@ int newton(vec2 x, inout int steps, out vec3 p)
       return NO_SURFACE;
     }
     if (length(p - previous) < pixel_tolerance(p)) {
-      return check(p, n, h);
+      return check(p, n, h, face);
     }
   }
   return NOT_CONVERGED;

@@ -28,7 +28,9 @@ direction d from O, and the search runs in two dimensions:
    :data:`STOP_FRACTION` of the accuracy in pixels, measured in the view at P; Newton
    steps shrink quadratically, so the answer is then far closer than the step. No
    convergence leaves the point unanswered and counted, never drawn at a wrong place.
-4. **Validity**: P must face both E and V (n . e > 0, n . v > 0), the residual must
+4. **Validity**: P must face both E and V (n . e > 0, n . v > 0, with the interpolated
+   normal n and with the map surface's own normal, as the exact solver asks of the
+   interpolated normal and of the facet's), the residual must
    vanish (the sine of the angle between n and h below :data:`RESIDUAL_TOLERANCE`),
    V and the eye must lie outside the surface, and on a non-convex mirror nothing of
    the mirror may lie between P and the eye or between P and V (samples of both
@@ -178,10 +180,12 @@ def _solve_2x2(jacobian: np.ndarray, rhs: np.ndarray) -> np.ndarray:
 def _newton(chart: _Chart, view: View, rows: np.ndarray, start, accuracy_px: float):
     """Damped Newton from chart point ``start`` (2,) for the points ``rows``: converged
     (K,) bool, left (K,) bool (off the map or the chart), position, normal, half vector
-    (K, 3) of the last sample and the steps taken (K,)."""
+    (K, 3) of the last sample, the map surface's outward normal there (from the last
+    Jacobian's samples, not unit) and the steps taken (K,)."""
     k = len(rows)
     x = np.broadcast_to(np.asarray(start, dtype=np.float64), (k, 2)).copy()
     f, position, normal, half, ok = chart.evaluate(rows, x)
+    face = np.zeros((k, 3))
     converged = np.zeros(k, dtype=bool)
     left = ~ok
     steps = np.zeros(k, np.int16)
@@ -190,8 +194,12 @@ def _newton(chart: _Chart, view: View, rows: np.ndarray, start, accuracy_px: flo
         if len(live) == 0:
             break
         r, xl, fl = rows[live], x[live], f[live]
-        fu = chart.evaluate(r, xl + (DERIVATIVE_STEP, 0.0))[0]
-        fv = chart.evaluate(r, xl + (0.0, DERIVATIVE_STEP))[0]
+        fu, pu = chart.evaluate(r, xl + (DERIVATIVE_STEP, 0.0))[:2]
+        fv, pv = chart.evaluate(r, xl + (0.0, DERIVATIVE_STEP))[:2]
+        # The map surface's own normal (its facets', smoothed over a texel): the ray
+        # from the eye must meet its front and the reflected ray leave it (as exact.py).
+        facet = cross(pu - position[live], pv - position[live])
+        face[live] = facet * np.sign(dot(facet, position[live] - chart.rmap.centre))[:, None]
         jacobian = np.stack([fu - fl, fv - fl], axis=2) / DERIVATIVE_STEP
         delta = -_solve_2x2(jacobian, fl)
         delta *= np.minimum(1.0, TRUST_RADIUS / np.maximum(lengths(delta), 1e-300))[:, None]
@@ -219,7 +227,7 @@ def _newton(chart: _Chart, view: View, rows: np.ndarray, start, accuracy_px: flo
         left[live[lost]] = True
         converged[live[finished]] = True
         live = live[~(lost | finished)]
-    return converged, left, position, normal, half, steps
+    return converged, left, position, normal, half, face, steps
 
 
 def search_reflections(rmap: ReflectorMap, view: View, points, accuracy_px: float = 1.0,
@@ -248,12 +256,12 @@ def search_reflections(rmap: ReflectorMap, view: View, points, accuracy_px: floa
         resumed = pending[np.isfinite(previous[pending]).all(axis=1)]
         axis = np.zeros((n, 3))
         axis[resumed] = _unit(previous[resumed] - rmap.centre)
-        converged, left, position, normal, half, steps = _newton(
+        converged, left, position, normal, half, face, steps = _newton(
             _Chart(rmap, camera, perspective, points, axis), view, resumed, (0.0, 0.0), accuracy_px)
         iterations[resumed] += steps
         verdict = np.full(len(resumed), NOT_CONVERGED, np.int8)
         verdict[converged] = _check(rmap, camera, perspective, points[resumed[converged]], position[converged],
-                                    normal[converged], half[converged])
+                                    normal[converged], half[converged], face[converged])
         status[resumed[verdict == FOUND]] = FOUND
         answer[resumed[verdict == FOUND]] = position[verdict == FOUND]
         pending = np.setdiff1d(pending, resumed[verdict == FOUND])
@@ -264,11 +272,11 @@ def search_reflections(rmap: ReflectorMap, view: View, points, accuracy_px: floa
     for attempt, start in enumerate(RESTARTS[:1] if rmap.convex else RESTARTS):
         if len(pending) == 0:
             break
-        converged, left, position, normal, half, steps = _newton(chart, view, pending, start, accuracy_px)
+        converged, left, position, normal, half, face, steps = _newton(chart, view, pending, start, accuracy_px)
         iterations[pending] += steps
         verdict = np.where(left, NO_SURFACE, NOT_CONVERGED).astype(np.int8)
         verdict[converged] = _check(rmap, camera, perspective, points[pending[converged]], position[converged],
-                                    normal[converged], half[converged])
+                                    normal[converged], half[converged], face[converged])
         # A later start keeps its verdict only where it found the answer.
         keep = (verdict == FOUND) | (attempt == 0)
         status[pending[keep]] = verdict[keep]
@@ -277,13 +285,14 @@ def search_reflections(rmap: ReflectorMap, view: View, points, accuracy_px: floa
     return SearchResult(answer, status, iterations)
 
 
-def _check(rmap: ReflectorMap, camera, perspective: bool, points, position, normal, half) -> np.ndarray:
+def _check(rmap: ReflectorMap, camera, perspective: bool, points, position, normal, half, face) -> np.ndarray:
     """FOUND where a converged sample is an answer, else why not: FACES_AWAY, OCCLUDED,
     or NOT_CONVERGED for a stationary point of |F| that is no root."""
     to_eye = _to_eye(camera, perspective, position)
     to_point = _unit(points - position)
     sine = lengths(cross(normal, half)) / np.maximum(lengths(half), 1e-300)
-    facing = (dot(normal, to_eye) > 0) & (dot(normal, to_point) > 0)
+    facing = ((dot(normal, to_eye) > 0) & (dot(normal, to_point) > 0)
+              & (dot(face, to_eye) > 0) & (dot(face, to_point) > 0))
     verdict = np.where(sine < RESIDUAL_TOLERANCE, np.where(facing, FOUND, FACES_AWAY), NOT_CONVERGED).astype(np.int8)
     if not rmap.convex:
         check = np.flatnonzero(verdict == FOUND)
