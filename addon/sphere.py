@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .scene import Reflector
+from .scene import Reflector, vertex_normals
 
 _ICOSAHEDRON_PHI = (1 + 5 ** 0.5) / 2
 
@@ -35,6 +35,28 @@ def icosphere(center, radius: float, subdivisions: int, name: str = "Sphere") ->
         vertices, faces = _split_faces(vertices, faces)
     center = np.asarray(center, dtype=np.float64)
     return Reflector(name, center + radius * vertices, faces, vertices.copy())
+
+
+def bumpy_icosphere(center, radius: float, subdivisions: int, amplitude: float, lobes=(5, 4),
+                    name: str = "Bumpy") -> Reflector:
+    """A geodesic sphere with bumps: radius (1 + a sin(m phi) sin(n theta)) along each
+    vertex direction, normals from the faces (``scene.vertex_normals``). Star-shaped
+    around its centre but not convex: a held-out surface for the iterative search."""
+    sphere = icosphere(center, 1.0, subdivisions)
+    d = sphere.normals
+    theta, phi = np.arccos(np.clip(d[:, 2], -1.0, 1.0)), np.arctan2(d[:, 1], d[:, 0])
+    scale = radius * (1.0 + amplitude * np.sin(lobes[0] * phi) * np.sin(lobes[1] * theta))
+    vertices = np.asarray(center, dtype=np.float64) + d * scale[:, None]
+    return Reflector(name, vertices, sphere.triangles, vertex_normals(vertices, sphere.triangles))
+
+
+def ellipsoid(center, radii, subdivisions: int, name: str = "Ellipsoid") -> Reflector:
+    """A geodesic sphere scaled by ``radii`` along the axes, with the ellipsoid's exact
+    normals (x / a^2, y / b^2, z / c^2)."""
+    sphere = icosphere((0.0, 0.0, 0.0), 1.0, subdivisions)
+    radii = np.asarray(radii, dtype=np.float64)
+    return Reflector(name, np.asarray(center, dtype=np.float64) + sphere.vertices * radii, sphere.triangles,
+                     sphere.vertices / radii)
 
 
 def _split_faces(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

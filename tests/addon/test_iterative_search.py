@@ -11,25 +11,19 @@ from curved_reflections.addon.methods.iterative import (IterativeReflector, chec
 from curved_reflections.addon.methods.iterative import search as search_module
 from curved_reflections.addon.methods.iterative.reflector_map import face_coordinates, is_convex, texel_directions
 from curved_reflections.addon.raytrace import ReflectorSet
-from curved_reflections.addon.scene import Reflector, vertex_normals
-from curved_reflections.addon.sphere import icosphere
+from curved_reflections.addon.scene import Reflector
+from curved_reflections.addon.sphere import bumpy_icosphere, ellipsoid, icosphere
 from curved_reflections.addon.view import View, look_at_view
 
 CENTRE = np.array([0.3, -0.2, 0.1])
 
 
 def _bumpy(amplitude=0.05, subdivisions=4):
-    base = icosphere(CENTRE, 1.0, subdivisions)
-    d = base.normals
-    theta, phi = np.arccos(np.clip(d[:, 2], -1, 1)), np.arctan2(d[:, 1], d[:, 0])
-    vertices = CENTRE + d * (1 + amplitude * np.sin(5 * phi) * np.sin(4 * theta))[:, None]
-    return Reflector("Bumpy", vertices, base.triangles, vertex_normals(vertices, base.triangles))
+    return bumpy_icosphere(CENTRE, 1.0, subdivisions, amplitude)
 
 
 def _ellipsoid(subdivisions=4):
-    base = icosphere((0.0, 0.0, 0.0), 1.0, subdivisions)
-    radii = np.array([1.2, 0.7, 0.5])
-    return Reflector("Egg", base.vertices * radii, base.triangles, base.vertices / radii ** 2)
+    return ellipsoid((0.0, 0.0, 0.0), (1.2, 0.7, 0.5), subdivisions, name="Egg")
 
 
 def _torus(major=1.0, minor=0.35, segments=48, rings=24):

@@ -7,25 +7,19 @@ import pytest
 
 from curved_reflections.addon.methods.iterative import IterativeReflector, prepare_iterative, search_reflections
 from curved_reflections.addon.methods.iterative import search as search_module
-from curved_reflections.addon.scene import DiffuseMesh, Reflector, vertex_normals
-from curved_reflections.addon.sphere import icosphere
+from curved_reflections.addon.scene import DiffuseMesh
+from curved_reflections.addon.sphere import bumpy_icosphere, ellipsoid, icosphere
 from curved_reflections.addon.view import View, look_at_view
 
 FACE_SIZE = 32
 
 
 def _bumpy(amplitude=0.05):
-    base = icosphere((0.3, -0.2, 0.1), 1.0, 4)
-    d = base.normals
-    theta, phi = np.arccos(np.clip(d[:, 2], -1, 1)), np.arctan2(d[:, 1], d[:, 0])
-    vertices = (0.3, -0.2, 0.1) + d * (1 + amplitude * np.sin(5 * phi) * np.sin(4 * theta))[:, None]
-    return Reflector("Bumpy", vertices, base.triangles, vertex_normals(vertices, base.triangles))
+    return bumpy_icosphere((0.3, -0.2, 0.1), 1.0, 4, amplitude)
 
 
 def _ellipsoid():
-    base = icosphere((0.0, 0.0, 0.0), 1.0, 4)
-    radii = np.array([1.2, 0.7, 0.5])
-    return Reflector("Ellipsoid", base.vertices * radii, base.triangles, base.vertices / radii ** 2)
+    return ellipsoid((0.0, 0.0, 0.0), (1.2, 0.7, 0.5), 4)
 
 
 def _orthographic(eye, target, width=320, height=240, half_height=2.5):
