@@ -27,12 +27,13 @@ ray from O meets nothing (an open mirror's hole).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 
 from ...raytrace import ReflectorSet
-from ...vectors import cross, dot, lengths
+from ...vectors import cross, dot, lengths, normalized
 
 #: Texels along a cube face's side (without the border): about 0.35 degree per texel.
 DEFAULT_FACE_SIZE = 256
@@ -55,7 +56,7 @@ class ReflectorMap:
     min_radius: float
     max_radius: float
 
-    @property
+    @functools.cached_property
     def mean_radius(self) -> float:
         r = self.texels[..., 0]
         return float(r[r > 0].mean())
@@ -71,15 +72,13 @@ class ReflectorMap:
         corners = self.texels[rows, columns].astype(np.float64)  # (K, 4, 4)
         values = np.einsum("kc,kcv->kv", weights, corners)
         valid = (corners[..., 0] > 0).all(axis=1)
-        normal = values[:, 1:]
-        normal = normal / np.maximum(lengths(normal), 1e-300)[:, None]
-        return np.where(valid, values[:, 0], 0.0), normal, valid
+        return np.where(valid, values[:, 0], 0.0), normalized(values[:, 1:]), valid
 
     def inside(self, points: np.ndarray) -> np.ndarray:
         """(K,) bool: the point lies strictly inside the surface (closer to O than r)."""
         offset = np.asarray(points, dtype=np.float64) - self.centre
         distance = lengths(offset)
-        radius, _, valid = self.surface(offset / np.maximum(distance, 1e-300)[:, None])
+        radius, _, valid = self.surface(normalized(offset))
         return valid & (distance < radius)
 
 

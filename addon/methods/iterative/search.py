@@ -49,7 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...projection import NOT_PROJECTED, SEARCH_ANSWER, Projection
-from ...vectors import cross, dot, lengths
+from ...vectors import cross, dot, lengths, normalized
 from ...view import View
 from .reflector_map import ReflectorMap
 
@@ -84,7 +84,7 @@ class SearchResult:
 
     reflector_points: np.ndarray  # (P, 3), NaN where not found
     status: np.ndarray  # (P,) int8: FOUND, NOT_CONVERGED, NO_SURFACE, FACES_AWAY, OCCLUDED, INSIDE
-    iterations: np.ndarray  # (P,) int16 secant steps taken
+    iterations: np.ndarray  # (P,) int16 Newton steps taken, every start counted
 
     @property
     def found(self) -> np.ndarray:
@@ -99,12 +99,7 @@ def _camera(view: View) -> tuple[np.ndarray, bool]:
 def _to_eye(camera: np.ndarray, perspective: bool, positions: np.ndarray) -> np.ndarray:
     if not perspective:
         return np.broadcast_to(camera, positions.shape)
-    offset = camera - positions
-    return offset / np.maximum(lengths(offset), 1e-300)[:, None]
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.maximum(lengths(v), 1e-300)[:, None]
+    return normalized(camera - positions)
 
 
 def _perpendicular(d: np.ndarray) -> np.ndarray:
@@ -114,7 +109,7 @@ def _perpendicular(d: np.ndarray) -> np.ndarray:
                     np.where(magnitude[:, 1] <= magnitude[:, 2], 1, 2))
     helper = np.zeros_like(d)
     helper[np.arange(len(d)), axis] = 1.0
-    return _unit(cross(d, helper))
+    return normalized(cross(d, helper))
 
 
 def sphere_guess(centre, camera, perspective: bool, points: np.ndarray, radius: float) -> np.ndarray:
@@ -123,7 +118,7 @@ def sphere_guess(centre, camera, perspective: bool, points: np.ndarray, radius: 
     the arc from the direction toward the eye to the direction toward the point."""
     offset = points - centre
     distance = lengths(offset)
-    b = offset / np.maximum(distance, 1e-300)[:, None]
+    b = normalized(offset)
     if perspective:
         eye_offset = camera - centre
         a = np.broadcast_to(eye_offset / np.linalg.norm(eye_offset), b.shape)
@@ -134,14 +129,14 @@ def sphere_guess(centre, camera, perspective: bool, points: np.ndarray, radius: 
     theta = np.arccos(cosine)
     c = b - cosine[:, None] * a
     across = lengths(c)
-    c = np.where((across > 1e-9)[:, None], c / np.maximum(across, 1e-300)[:, None], _perpendicular(a))
+    c = np.where((across > 1e-9)[:, None], normalized(c), _perpendicular(a))
     sphere = np.minimum(radius, 0.999 * reach)
     lo, hi = np.zeros(len(b)), theta
     for _ in range(GUESS_BISECTIONS):
         mid = 0.5 * (lo + hi)
         u = np.cos(mid)[:, None] * a + np.sin(mid)[:, None] * c
         p = centre + sphere[:, None] * u
-        balance = dot(_to_eye(camera, perspective, p), u) - dot(_unit(points - p), u)
+        balance = dot(_to_eye(camera, perspective, p), u) - dot(normalized(points - p), u)
         lo, hi = np.where(balance > 0, mid, lo), np.where(balance > 0, hi, mid)
     phi = 0.5 * (lo + hi)
     return np.cos(phi)[:, None] * a + np.sin(phi)[:, None] * c
@@ -159,10 +154,10 @@ class _Chart:
     def evaluate(self, rows: np.ndarray, x: np.ndarray):
         """Residual (K, 2), position (K, 3), normal (K, 3), half vector (K, 3) and
         validity (K,) at chart points ``x`` (K, 2) of the points ``rows``."""
-        d = _unit(self.axis[rows] + x[:, :1] * self.t1[rows] + x[:, 1:] * self.t2[rows])
+        d = normalized(self.axis[rows] + x[:, :1] * self.t1[rows] + x[:, 1:] * self.t2[rows])
         radius, normal, valid = self.rmap.surface(d)
         position = self.rmap.centre + radius[:, None] * d
-        half = _to_eye(self.camera, self.perspective, position) + _unit(self.points[rows] - position)
+        half = _to_eye(self.camera, self.perspective, position) + normalized(self.points[rows] - position)
         tangent = half - dot(half, normal)[:, None] * normal
         residual = np.stack([dot(tangent, self.t1[rows]), dot(tangent, self.t2[rows])], axis=1)
         return residual, position, normal, half, valid
@@ -255,7 +250,7 @@ def search_reflections(rmap: ReflectorMap, view: View, points, accuracy_px: floa
     if previous is not None:
         resumed = pending[np.isfinite(previous[pending]).all(axis=1)]
         axis = np.zeros((n, 3))
-        axis[resumed] = _unit(previous[resumed] - rmap.centre)
+        axis[resumed] = normalized(previous[resumed] - rmap.centre)
         converged, left, position, normal, half, face, steps = _newton(
             _Chart(rmap, camera, perspective, points, axis), view, resumed, (0.0, 0.0), accuracy_px)
         iterations[resumed] += steps
@@ -289,7 +284,7 @@ def _check(rmap: ReflectorMap, camera, perspective: bool, points, position, norm
     """FOUND where a converged sample is an answer, else why not: FACES_AWAY, OCCLUDED,
     or NOT_CONVERGED for a stationary point of |F| that is no root."""
     to_eye = _to_eye(camera, perspective, position)
-    to_point = _unit(points - position)
+    to_point = normalized(points - position)
     sine = lengths(cross(normal, half)) / np.maximum(lengths(half), 1e-300)
     facing = ((dot(normal, to_eye) > 0) & (dot(normal, to_point) > 0)
               & (dot(face, to_eye) > 0) & (dot(face, to_point) > 0))
@@ -317,7 +312,7 @@ def _occluded(rmap: ReflectorMap, camera, perspective: bool, positions: np.ndarr
     to_point = points - positions
     segments = ((_to_eye(camera, perspective, positions),
                  (lengths(camera - positions) if perspective else np.full(len(positions), np.inf))),
-                (_unit(to_point), lengths(to_point)))
+                (normalized(to_point), lengths(to_point)))
     # Denser next to P, where a neighbouring bump hides a grazing answer.
     fractions = ((np.arange(OCCLUSION_SAMPLES) + 1.0) / OCCLUSION_SAMPLES) ** 2
     for direction, length in segments:
