@@ -74,14 +74,11 @@ _last_choices: dict = {}
 
 def _bake(reflector, centre, face_size: int):
     """The full-resolution map: on the GPU when it is ready, else traced on the CPU."""
-    try:
-        from ..gpu_shaders.iterative_bake import bake_reflector_map_gpu
-        from .gpu_init import gpu_ready
+    from ..gpu_shaders.iterative_bake import bake_reflector_map_gpu
+    from .gpu_init import gpu_ready
 
-        if gpu_ready():
-            return bake_reflector_map_gpu(reflector, centre, face_size)
-    except ImportError:
-        pass
+    if gpu_ready():
+        return bake_reflector_map_gpu(reflector, centre, face_size)
     return bake_reflector_map(ReflectorSet([reflector]), centre, face_size)
 
 
