@@ -164,7 +164,7 @@ def plan(scene, reflectors, accuracy_px: float | None = None, baked=frozenset())
             shape, rmap = star_map(reflector)
             if rmap is not None:
                 result.iterative.append(IterativeReflector(index, reflector.name, rmap, accuracy))
-                centre = ", ".join(f"{c:.2f}" for c in shape.centre)
+                centre = ", ".join(f"{round(float(c), 2) + 0.0:.2f}" for c in shape.centre)  # no "-0.00"
                 result.choices.append(MethodChoice(reflector.name, ITERATIVE,
                                                    f"star-shaped around ({centre}): iterative search on the GPU"))
                 continue

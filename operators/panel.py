@@ -7,6 +7,8 @@ a status line, :mod:`.live`), then the scene checks and the offscreen render. Se
 that do not apply are greyed, not hidden, so the layout does not jump.
 """
 
+import textwrap
+
 import bpy
 
 from . import live, methods, morph_bake
@@ -30,6 +32,8 @@ def _reflector_settings(layout, obj) -> None:
     details.prop(settings, "mode")
 
 
+#: Characters per line of a reflector's reason in the panel.
+REASON_WIDTH = 52
 _METHOD_ICONS = {methods.ITERATIVE: 'SHADERFX', methods.MORPHING: 'LIGHTPROBE_VOLUME', methods.RUNTIME: 'CAMERA_DATA'}
 
 
@@ -43,7 +47,8 @@ def _reflector_methods(box, scene, reflectors) -> None:
                       icon='MOD_MIRROR')
             continue
         box.label(text=f"{reflector.name}: {choice.method.title()}", icon=_METHOD_ICONS[choice.method])
-        box.label(text=choice.reason)
+        for line in textwrap.wrap(choice.reason, REASON_WIDTH):  # labels do not wrap by themselves
+            box.label(text=line)
 
 
 def _live_section(layout, scene) -> None:

@@ -7,9 +7,10 @@ Background mode draws no UI, so the panel's own ``draw`` (``operators/panel.py``
 with a layout that records what it shows (labels, properties with their current values,
 operator buttons, boxes, greyed rows), and the record is drawn with Blender's font
 module (``blf``) into an offscreen image. The picture shows the panel's real content
-and order on the mirror-ball demo scene, baked, with the mirror in Morphing mode (not
-baked yet, so the live view draws it in runtime mode and the panel says so); the
-widgets' look is a sketch, not Blender's theme.
+and order on the mirror-ball demo scene with a torus mirror added, baked, both in the
+default Auto mode: the ball is star-shaped and searched on the GPU (Iterative), the
+torus is not and is drawn in Runtime mode, each line saying why, and the morphing box
+offers to bake a grid for the torus; the widgets' look is a sketch, not Blender's theme.
 """
 
 from __future__ import annotations
@@ -177,10 +178,13 @@ def main(argv=None) -> int:
     try:
         bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
         scene = demo_scenes.build("sbc_fig3", bpy.context.scene, 320, 240)
+        bpy.ops.mesh.primitive_torus_add(major_radius=0.5, minor_radius=0.18, location=(2.2, -1.6, 0.4))
+        ring = bpy.context.active_object
+        ring.name = "Ring"
+        ring.curved_reflections.is_reflector = True
         mirror = bpy.data.objects["MirrorSphere"]
         bpy.context.view_layer.objects.active = mirror
         bpy.ops.curved_reflections.bake()
-        mirror.curved_reflections.mode = 'MORPHING'
         image = draw_rows(record_panel(scene, mirror))
     finally:
         package.unregister()
