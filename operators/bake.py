@@ -37,10 +37,15 @@ def viewport_views(context) -> dict:
 
 def _summary(state) -> str:
     stats = state.stats
+    searched = ", ".join(m.name for m in state.plan.iterative)
+    searched = f"{searched} searched on the GPU every frame" if searched else ""
     if "rays" not in stats:
-        return "building in the background"
-    return (f"{stats['rays']:,} rays, {stats['leaves']:,} leaves, built in {stats['build_ms']:.0f} ms, "
-            f"{stats['memory_mb']:.1f} MB")
+        return searched or "building in the background"
+    if not stats["rays"] and searched:
+        return searched
+    camera = (f"{stats['rays']:,} rays, {stats['leaves']:,} leaves, built in {stats['build_ms']:.0f} ms, "
+              f"{stats['memory_mb']:.1f} MB")
+    return f"{camera}; {searched}" if searched else camera
 
 
 class _LiveOperator:

@@ -26,9 +26,11 @@ def _torus(scene):
     return torus
 
 
-def test_auto_mode_searches_the_mirror_ball_and_builds_no_camera(fig3):
+def test_auto_mode_searches_the_mirror_ball_and_builds_no_camera(fig3, capfd):
     assert bpy.data.objects["MirrorSphere"].curved_reflections.mode == 'AUTO'
-    state = live.bake(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
+    assert bpy.ops.curved_reflections.bake() == {'FINISHED'}
+    assert "Info: Baked reflections: MirrorSphere searched on the GPU every frame" in capfd.readouterr().out
+    state = live.state_of(fig3)
     [choice] = methods.last_choices(fig3)
     assert (choice.reflector, choice.method) == ("MirrorSphere", methods.ITERATIVE)
     assert choice.reason.startswith("star-shaped around")
