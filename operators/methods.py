@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..addon.methods.iterative import IterativeReflector, StarShape, check_star_shaped
+from ..addon.methods.iterative.star import verdict
 from ..addon.methods.iterative.reflector_map import bake_reflector_map
 from ..addon.raytrace import ReflectorSet
 
@@ -133,15 +134,10 @@ def star_map(reflector, face_size: int | None = None):
             return entry.moved_to(reflector)
     shape = check_star_shaped(reflector)
     rmap = None
-    if shape.star_shaped:
+    if shape.star_shaped:  # the full-resolution rays are checked again (a thin fold, a small hole)
         bake = _bake(reflector, shape.centre, face_size)
-        if bake.crossings:
-            shape = StarShape(shape.name, False, shape.centre,
-                              f"{reflector.name!r} is not star-shaped: from its best centre, some rays meet its "
-                              "surface more than once (a thin fold)", bake.crossings, shape.hidden_share,
-                              bake.min_cosine)
-        else:
-            rmap = bake.reflector_map
+        shape = verdict(reflector.name, shape.centre, bake, shape.hidden_share)
+        rmap = bake.reflector_map if shape.star_shaped else None
     _maps.append(_Entry(topology, face_size, reflector.vertices - reflector.vertices[0], reflector.normals.copy(),
                         reflector.vertices[0].copy(), shape, rmap))
     del _maps[:-CACHED_MAPS]

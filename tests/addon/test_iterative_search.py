@@ -144,3 +144,21 @@ def test_degenerate_points_and_views():
     orthographic = View(look_at_view(CENTRE + (0, 3, 0.2), CENTRE).view_matrix, projection, 64, 48)
     result = search_reflections(rmap, orthographic, _outside_points(sphere, 200, 3))
     assert result.found.mean() > 0.5 and np.isfinite(result.reflector_points[result.found]).all()
+
+
+def test_an_open_mirror_is_not_star_shaped():
+    """The Chen-Arvo vase, open at both ends: seen whole from its axis, but its inner side
+    shows through the openings and has no place in a map of one radius per direction."""
+    from curved_reflections.addon import shapes
+
+    vase = shapes.vase(48, 32)
+    shape = check_star_shaped(Reflector("Vase", vase.vertices, vase.triangles, vase.normals))
+    assert not shape.star_shaped and shape.reason.startswith("'Vase' is")
+    # Seen from its axis, where nothing of it is hidden, it is open.
+    from curved_reflections.addon.methods.iterative.reflector_map import bake_reflector_map
+    from curved_reflections.addon.methods.iterative.star import verdict
+
+    vase = Reflector("Vase", vase.vertices, vase.triangles, vase.normals)
+    bake = bake_reflector_map(ReflectorSet([vase]), (0.0, 0.0, 1.6), 16)
+    assert bake.crossings == 0 and bake.coverage < 1
+    assert verdict("Vase", (0.0, 0.0, 1.6), bake, 0.0).reason.startswith("'Vase' is open:")
