@@ -6,12 +6,12 @@ strategy (compute the reflected positions in one pass, draw them in another), wh
 the paper could not use for want of render-to-vertex-buffer, is the one here: a compute
 shader (``glsl/iterative_search.glsl``, the twin of ``addon/methods/iterative/search.py``)
 writes each vertex's reflection point into a float texture, one texel per vertex, and
-the reflected meshes' vertex stage (``glsl/iterative_mesh_vert.glsl``) reads it back
-where each corner of a triangle is drawn. What is uploaded once: the diffuse vertices
-(a texture) with their triangles' corners and shading data (a vertex buffer), and each
-star-shaped reflector's cube map (:class:`MapTexture`, re-uploaded alone when that
-reflector changes). What runs per frame: one dispatch and one draw per reflector, with
-the view in push constants.
+the reflected meshes' vertex stage (``glsl/iterative_mesh_vert.glsl``) reads its
+vertex's texel. What is uploaded once: the diffuse vertices
+(a texture) with their shading data (a vertex buffer), and every star-shaped
+reflector's cube map (:class:`MapAtlas`: a search reads its own map and the others',
+which may block its reflected segments). What runs per frame: one dispatch and one
+draw per reflector, with the view in push constants.
 """
 
 from __future__ import annotations
@@ -58,16 +58,16 @@ def search_shader():
 
     info = gpu.types.GPUShaderCreateInfo()
     info.push_constant('VEC4', "camera")
-    info.push_constant('VEC4', "centre")
     info.push_constant('VEC4', "w_row")
-    info.push_constant('VEC2', "limits")
-    info.push_constant('INT', "face_size")
+    info.push_constant('FLOAT', "stop_per_w")
     info.push_constant('INT', "n_vertices")
     info.push_constant('INT', "positions_width")
-    info.push_constant('INT', "convex")
     info.push_constant('INT', "warm")
+    info.push_constant('INT', "self_map")
+    info.push_constant('INT', "n_maps")
     info.sampler(0, 'FLOAT_2D', "vertex_positions")
-    info.sampler(1, 'FLOAT_2D', "reflector_map")
+    info.sampler(1, 'FLOAT_2D', "reflector_maps")
+    info.sampler(2, 'FLOAT_2D', "map_params")
     info.image(0, 'RGBA32F', 'FLOAT_2D', "result", qualifiers={'READ', 'WRITE'})
     info.local_group_size(LOCAL_SIZE, 1)
     info.compute_source(_source("iterative_search.glsl", search_defines()))
@@ -115,20 +115,26 @@ def _texture(texels: np.ndarray, width: int):
     return gpu.types.GPUTexture((width, height), format='RGBA32F', data=data)
 
 
-class MapTexture:
-    """One reflector's cube map on the GPU, with what the search needs to know of it."""
+class MapAtlas:
+    """Every star-shaped reflector's cube map in one texture, one below another, and two
+    texels of parameters per map (``glsl/iterative_search.glsl``'s ``use_map``): each
+    search reads its own map and the others', which may block its reflected segments."""
 
-    def __init__(self, method):
+    def __init__(self, methods, shift):
         import gpu
 
-        rmap = method.reflector_map
-        texels = np.ascontiguousarray(rmap.texels, dtype=np.float32)
-        height, width = texels.shape[:2]
+        maps = [m.reflector_map for m in methods]
+        width = max(rmap.texels.shape[1] for rmap in maps)
+        rows = np.cumsum([0] + [rmap.texels.shape[0] for rmap in maps])
+        texels = np.zeros((rows[-1], width, 4), np.float32)
+        params = np.zeros((2 * len(maps), 4), np.float32)
+        for k, rmap in enumerate(maps):
+            texels[rows[k]:rows[k + 1], :rmap.texels.shape[1]] = rmap.texels
+            params[2 * k] = (*(np.asarray(rmap.centre) - shift), rmap.max_radius)
+            params[2 * k + 1] = (rows[k], rmap.face_size, float(bool(rmap.convex)), rmap.mean_radius)
         data = gpu.types.Buffer('FLOAT', texels.size, texels.reshape(-1))
-        self.texture = gpu.types.GPUTexture((width, height), format='RGBA32F', data=data)
-        self.method = method
-        self.centre = np.asarray(rmap.centre, dtype=np.float64)
-        self.mean_radius = rmap.mean_radius
+        self.texture = gpu.types.GPUTexture((width, rows[-1]), format='RGBA32F', data=data)
+        self.params = _texture(params, len(params))
 
 
 class IterativePass:
@@ -144,7 +150,7 @@ class IterativePass:
         self.height = max(1, -(-self.n_vertices // self.width))
         self._positions = None
         self._batch = None
-        self._maps: dict = {}
+        self._atlas = None
         self._results: dict = {}
         self.counts = {"searches": 0}
 
@@ -153,9 +159,10 @@ class IterativePass:
         return [m.index for m in self.methods]
 
     def replace(self, method) -> None:
-        """Use ``method`` for its reflector from now on (a re-baked map: only it is uploaded)."""
+        """Use ``method`` for its reflector from now on (a re-baked map; the maps are
+        uploaded again, the meshes are not)."""
         self.methods = [method if m.index == method.index else m for m in self.methods]
-        self._maps.pop(method.index, None)
+        self._atlas = None
 
     def _ensure(self) -> None:
         import gpu
@@ -172,9 +179,9 @@ class IterativePass:
             if len(g.triangles):
                 self._batch = gpu.types.GPUBatch(type='TRIS', buf=_vertex_buffer(attributes), elem=gpu.types.GPUIndexBuf(
                     type='TRIS', seq=np.asarray(g.triangles, dtype=np.int32)))
+        if self._atlas is None:
+            self._atlas = MapAtlas(self.methods, self.geometry.shift)
         for method in self.methods:
-            if method.index not in self._maps:
-                self._maps[method.index] = MapTexture(method)
             if method.index not in self._results:
                 self._results[method.index] = gpu.types.GPUTexture((self.width, self.height), format='RGBA32F')
 
@@ -204,17 +211,14 @@ class IterativePass:
         shader.uniform_int("n_vertices", self.n_vertices)
         shader.uniform_int("positions_width", self.width)
         shader.uniform_int("warm", int(bool(warm)))
+        shader.uniform_int("n_maps", len(self.methods))
         shader.uniform_sampler("vertex_positions", self._positions)
+        shader.uniform_sampler("reflector_maps", self._atlas.texture)
+        shader.uniform_sampler("map_params", self._atlas.params)
         groups = (-(-self.width // LOCAL_SIZE), self.height, 1)
-        for method in self.methods:
-            gpu_map = self._maps[method.index]
-            rmap = method.reflector_map
-            stop = search_module.STOP_FRACTION * method.accuracy_px * pixel_scale
-            shader.uniform_float("centre", (*(gpu_map.centre - shift), gpu_map.mean_radius))
-            shader.uniform_float("limits", (stop, float(rmap.max_radius)))
-            shader.uniform_int("face_size", int(rmap.face_size))
-            shader.uniform_int("convex", int(bool(rmap.convex)))
-            shader.uniform_sampler("reflector_map", gpu_map.texture)
+        for k, method in enumerate(self.methods):
+            shader.uniform_float("stop_per_w", search_module.STOP_FRACTION * method.accuracy_px * pixel_scale)
+            shader.uniform_int("self_map", k)
             shader.image("result", self._results[method.index])
             gpu.compute.dispatch(shader, *groups)
         self.counts["searches"] += 1

@@ -176,6 +176,8 @@ def plan(scene, reflectors, accuracy_px: float | None = None, baked=frozenset())
                                                else "Morphing mode without a baked grid: Runtime"))
         else:
             result.choices.append(MethodChoice(reflector.name, RUNTIME, "Runtime mode: a camera per view"))
+    for method in result.iterative:  # the other searched mirrors may block its reflected segments
+        method.occluders = tuple(other.reflector_map for other in result.iterative if other is not method)
     _last_choices[scene.name] = result.choices
     return result
 

@@ -27,14 +27,36 @@
 #define INSIDE -4
 
 /* Push constants: camera (eye relative to the shift, w 1; or the unit direction toward
- * the viewer, w 0), centre (O relative to the shift, w the map's mean radius), w_row
- * (the view-projection's last row, for clip w), limits (stop_per_w, max_radius),
- * face_size, n_vertices, positions_width, convex, warm (start from the answer of the
- * last search, still in `result`, where it had one). */
+ * the viewer, w 0), w_row (the view-projection's last row, for clip w), stop_per_w,
+ * n_vertices, positions_width, warm (start from the answer of the last search, still in
+ * `result`, where it had one), self_map (the searched reflector's map) and n_maps.
+ * `reflector_maps` holds every star-shaped reflector's cube map, one below another;
+ * `map_params` two texels per map: (O relative to the shift, largest radius) and (first
+ * row, face size, convex, mean radius). */
+
+/* The map in use (use_map): its centre, radii, rows and size. */
+vec3 centre;
+float max_radius;
+float mean_radius;
+int map_row;
+int face_size;
+int convex;
+
+void use_map(int map)
+{
+  vec4 a = texelFetch(map_params, ivec2(2 * map, 0), 0);
+  vec4 b = texelFetch(map_params, ivec2(2 * map + 1, 0), 0);
+  centre = a.xyz;
+  max_radius = a.w;
+  map_row = int(b.x);
+  face_size = int(b.y);
+  convex = int(b.z);
+  mean_radius = b.w;
+}
 
 vec3 to_eye(vec3 p)
 {
-  return camera.w > 0.5 ? normalize(camera.xyz - centre.xyz - p) : camera.xyz;
+  return camera.w > 0.5 ? normalize(camera.xyz - centre - p) : camera.xyz;
 }
 
 /* Bilinear radius and normal of the map along unit direction d; false on a hole. */
@@ -54,11 +76,11 @@ bool map_surface(vec3 d, out float radius, out vec3 normal)
   float j = clamp(floor(fy), 0.0, size);
   float tx = fx - i;
   float ty = fy - j;
-  ivec2 base = ivec2(int(i), face * (face_size + 2) + int(j));
-  vec4 a = texelFetch(reflector_map, base, 0);
-  vec4 b = texelFetch(reflector_map, base + ivec2(1, 0), 0);
-  vec4 c = texelFetch(reflector_map, base + ivec2(0, 1), 0);
-  vec4 e = texelFetch(reflector_map, base + ivec2(1, 1), 0);
+  ivec2 base = ivec2(int(i), map_row + face * (face_size + 2) + int(j));
+  vec4 a = texelFetch(reflector_maps, base, 0);
+  vec4 b = texelFetch(reflector_maps, base + ivec2(1, 0), 0);
+  vec4 c = texelFetch(reflector_maps, base + ivec2(0, 1), 0);
+  vec4 e = texelFetch(reflector_maps, base + ivec2(1, 1), 0);
   vec4 value = (1.0 - tx) * (1.0 - ty) * a + tx * (1.0 - ty) * b + (1.0 - tx) * ty * c + tx * ty * e;
   bool valid = min(min(a.x, b.x), min(c.x, e.x)) > 0.0;
   radius = valid ? value.x : 0.0;
@@ -90,7 +112,7 @@ vec3 sphere_guess(vec3 point)
   vec3 a;
   float reach;
   if (camera.w > 0.5) {
-    vec3 eye = camera.xyz - centre.xyz;
+    vec3 eye = camera.xyz - centre;
     a = normalize(eye);
     reach = min(distance, length(eye));
   }
@@ -103,7 +125,7 @@ vec3 sphere_guess(vec3 point)
   vec3 c = b - cosine * a;
   float across = length(c);
   c = across > 1e-9 ? c / across : perpendicular(a);
-  float sphere = min(centre.w, 0.999 * reach);
+  float sphere = min(mean_radius, 0.999 * reach);
   float lo = 0.0;
   float hi = theta;
   for (int k = 0; k < GUESS_BISECTIONS; k++) {
@@ -142,22 +164,29 @@ bool evaluate(vec2 x, out vec2 f, out vec3 p, out vec3 n, out vec3 h)
 
 float pixel_tolerance(vec3 p)
 {
-  return limits.x * abs(dot(w_row, vec4(p + centre.xyz, 1.0)));
+  return stop_per_w * abs(dot(w_row, vec4(p + centre, 1.0)));
 }
 
-float segment_exit(vec3 start, vec3 direction, float radius)
+/* Whether one of OCCLUSION_SAMPLES samples of the segment from `start` (relative to the
+ * map in use) along unit `direction`, where it runs inside the map's bounding sphere,
+ * lies inside its surface; samples denser next to the start where `dense_near_start`. */
+bool segment_blocked(vec3 start, vec3 direction, float length_, bool dense_near_start)
 {
   float b = dot(start, direction);
-  float c = dot(start, start) - radius * radius;
-  return max(-b + sqrt(max(b * b - c, 0.0)), 0.0);
-}
-
-bool segment_blocked(vec3 p, vec3 direction, float length_)
-{
-  float reach = min(length_, segment_exit(p, direction, limits.y));
+  float disc = b * b - (dot(start, start) - max_radius * max_radius);
+  if (disc <= 0.0) {
+    return false;
+  }
+  float root = sqrt(disc);
+  float t0 = max(-b - root, 0.0);
+  float t1 = min(-b + root, length_);
+  if (t1 <= t0) {
+    return false;
+  }
   for (int k = 0; k < OCCLUSION_SAMPLES; k++) {
-    float fraction = float(k + 1) / float(OCCLUSION_SAMPLES);
-    if (inside_surface(p + reach * fraction * fraction * direction)) {
+    float fraction = dense_near_start ? pow(float(k + 1) / float(OCCLUSION_SAMPLES), 2.0) :
+                                        (float(k) + 0.5) / float(OCCLUSION_SAMPLES);
+    if (inside_surface(start + (t0 + (t1 - t0) * fraction) * direction)) {
       return true;
     }
   }
@@ -176,8 +205,8 @@ int check(vec3 p, vec3 n, vec3 h, vec3 face)
     return FACES_AWAY;
   }
   if (convex == 0) {
-    float eye_length = camera.w > 0.5 ? length(camera.xyz - centre.xyz - p) : 1e30;
-    if (segment_blocked(p, e, eye_length) || segment_blocked(p, v, length(vertex - p))) {
+    float eye_length = camera.w > 0.5 ? length(camera.xyz - centre - p) : 1e30;
+    if (segment_blocked(p, e, eye_length, true) || segment_blocked(p, v, length(vertex - p), true)) {
       return OCCLUDED;
     }
   }
@@ -248,14 +277,15 @@ void main()
   if (texel.x >= positions_width || index >= n_vertices) {
     return;
   }
-  vertex = texelFetch(vertex_positions, texel, 0).xyz - centre.xyz;
+  use_map(self_map);
+  vertex = texelFetch(vertex_positions, texel, 0).xyz - centre;
   vec4 last = imageLoad(result, texel);
   bool resume = warm != 0 && int(last.w) % 16 == FOUND + 8;
   int status = NO_SURFACE;
   int steps = 0;
   vec3 p = vec3(0.0);
-  bool eye_inside = camera.w > 0.5 && inside_surface(camera.xyz - centre.xyz);
-  if (eye_inside || length(vertex) <= 1e-9 * max(limits.y, 1e-30) || inside_surface(vertex)) {
+  bool eye_inside = camera.w > 0.5 && inside_surface(camera.xyz - centre);
+  if (eye_inside || length(vertex) <= 1e-9 * max(max_radius, 1e-30) || inside_surface(vertex)) {
     status = INSIDE;
   }
   else {
@@ -263,7 +293,7 @@ void main()
      * sphere guess. */
     bool found = false;
     if (resume) {
-      chart_axis = normalize(last.xyz - centre.xyz);
+      chart_axis = normalize(last.xyz - centre);
       chart_t1 = perpendicular(chart_axis);
       chart_t2 = cross(chart_axis, chart_t1);
       vec3 answer;
@@ -292,5 +322,18 @@ void main()
       }
     }
   }
-  imageStore(result, texel, vec4(p + centre.xyz, float(status + 8) + 16.0 * float(steps)));
+  /* The other star-shaped mirrors may block the reflected segment: there this point's
+   * reflection is of another mirror (a higher order). */
+  vec3 answer = p + centre;
+  vec3 target = vertex + centre;
+  for (int map = 0; map < n_maps && status == FOUND; map++) {
+    if (map != self_map) {
+      use_map(map);
+      vec3 to_point = target - answer;
+      if (segment_blocked(answer - centre, normalize(to_point), length(to_point), false)) {
+        status = OCCLUDED;
+      }
+    }
+  }
+  imageStore(result, texel, vec4(answer, float(status + 8) + 16.0 * float(steps)));
 }

@@ -151,3 +151,30 @@ def test_warm_start_from_the_last_answers_agrees_with_the_twin(gpu_ready):
     assert np.mean(np.linalg.norm(px[0] - px[1], axis=1) <= 0.05) >= 0.995
     assert np.percentile(np.linalg.norm(px[0] - px[2], axis=1), 99) <= 0.1  # the stop tolerance
     assert warm.iterations[both].mean() < 0.6 * cold.iterations[both].mean()
+
+
+def test_another_searched_mirror_blocks_reflected_segments(gpu_ready):
+    """Two facing spheres: a point behind the second one, seen in the first, is hidden
+    by the second (there the first shows the second, a higher order). GPU and numpy
+    agree on which points are blocked."""
+    from curved_reflections.gpu_shaders.iterative_draw import IterativePass
+
+    first, second = icosphere((0.0, 0.0, 0.0), 1.0, 3, "First"), icosphere((2.6, 0.0, 0.0), 0.8, 3, "Second")
+    bakes = [prepare_iterative(r, FACE_SIZE)[1].reflector_map for r in (first, second)]
+    methods = [IterativeReflector(0, "First", bakes[0], 1.0, occluders=(bakes[1],)),
+               IterativeReflector(1, "Second", bakes[1], 1.0, occluders=(bakes[0],))]
+    points = np.random.default_rng(4).uniform((3.6, -1.5, -1.5), (6.0, 1.5, 1.5), (3000, 3))
+    triangles = np.arange(len(points)).reshape(-1, 3)
+    from curved_reflections.gpu_shaders.reflection_draw import prepare_geometry
+
+    geometry = prepare_geometry([first, second], [DiffuseMesh("behind", points, triangles, np.ones((3000, 4)))],
+                                edge_fraction=None)
+    view = look_at_view((0.5, -4.0, 0.5), (1.0, 0.0, 0.0), width=640, height=480)
+    gpu_pass = IterativePass(geometry, methods)
+    gpu_pass.search(view)
+    gpu = gpu_pass.read(0)
+    twin = methods[0].search(view, geometry.vertices)
+    alone = search_reflections(bakes[0], view, geometry.vertices)
+    blocked = alone.found & (twin.status == search_module.OCCLUDED)
+    assert blocked.sum() > 200  # many points behind the second sphere are hidden in the first
+    assert (gpu.status == twin.status).mean() >= 0.995

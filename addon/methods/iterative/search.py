@@ -36,7 +36,9 @@ direction d from O, and the search runs in two dimensions:
    the mirror may lie between P and the eye or between P and V (samples of both
    segments inside the map's bounding sphere must all be outside the surface; section
    3.3.6 does this with a depth texture of back faces). A start whose root fails these
-   tests lets the next start look for another root.
+   tests lets the next start look for another root. Other star-shaped mirrors block the
+   segment from P to V the same way (their maps, sampled where it crosses their bounding
+   spheres): there the point's reflection is of the other mirror, a higher order.
 
 ``glsl/iterative_search.glsl`` is this module step by step in float32; the tests hold
 them to each other.
@@ -226,10 +228,12 @@ def _newton(chart: _Chart, view: View, rows: np.ndarray, start, accuracy_px: flo
 
 
 def search_reflections(rmap: ReflectorMap, view: View, points, accuracy_px: float = 1.0,
-                       previous: np.ndarray | None = None) -> SearchResult:
+                       previous: np.ndarray | None = None, occluders=()) -> SearchResult:
     """The reflection point of every point (P, 3) on the mapped reflector, seen from
     ``view``'s eye (or, orthographic, its direction). ``previous`` (P, 3), NaN where
-    none: last frame's answers, tried first (a view that moved a little)."""
+    none: last frame's answers, tried first (a view that moved a little). ``occluders``:
+    the maps of the other star-shaped reflectors, which may block a reflected segment
+    (its reflection there is another mirror's: a higher order)."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     n = len(points)
     status = np.full(n, NO_SURFACE, np.int8)
@@ -277,6 +281,11 @@ def search_reflections(rmap: ReflectorMap, view: View, points, accuracy_px: floa
         status[pending[keep]] = verdict[keep]
         answer[pending[verdict == FOUND]] = position[verdict == FOUND]
         pending = pending[verdict != FOUND]
+    found = np.flatnonzero(status == FOUND)
+    for occluder in occluders:
+        blocked = found[_segment_blocked(occluder, answer[found], points[found], dense_near_start=False)]
+        status[blocked] = OCCLUDED
+        answer[blocked] = np.nan
     return SearchResult(answer, status, iterations)
 
 
@@ -295,31 +304,45 @@ def _check(rmap: ReflectorMap, camera, perspective: bool, points, position, norm
     return verdict
 
 
-def _segment_exit(start: np.ndarray, direction: np.ndarray, centre, radius: float) -> np.ndarray:
-    """Distance along unit ``direction`` from ``start`` to where it leaves the sphere."""
+def _sphere_chord(start: np.ndarray, direction: np.ndarray, length: np.ndarray, centre, radius: float):
+    """Where a segment (unit ``direction``, ``length``) runs inside a sphere: distances
+    (t0, t1) along it, t1 <= t0 where it misses."""
     offset = start - centre
     b = dot(offset, direction)
-    c = dot(offset, offset) - radius * radius
-    return np.maximum(-b + np.sqrt(np.maximum(b * b - c, 0.0)), 0.0)
+    disc = b * b - (dot(offset, offset) - radius * radius)
+    root = np.sqrt(np.maximum(disc, 0.0))
+    return np.maximum(-b - root, 0.0), np.where(disc > 0, np.minimum(-b + root, length), -1.0)
+
+
+def _segment_blocked(rmap: ReflectorMap, starts: np.ndarray, ends: np.ndarray, dense_near_start: bool,
+                     towards: np.ndarray | None = None) -> np.ndarray:
+    """(K,) bool: one of :data:`OCCLUSION_SAMPLES` samples of each segment, where it runs
+    inside the map's bounding sphere, lies inside the surface. ``dense_near_start``:
+    samples quadratically denser next to the start (a neighbouring bump hiding a grazing
+    answer of the mirror itself), else uniform over the chord. ``towards``: unit
+    directions of segments of infinite length instead of ``ends``."""
+    if len(starts) == 0:
+        return np.zeros(0, dtype=bool)
+    if towards is None:
+        direction, length = normalized(ends - starts), lengths(ends - starts)
+    else:
+        direction, length = towards, np.full(len(starts), np.inf)
+    t0, t1 = _sphere_chord(starts, direction, length, rmap.centre, rmap.max_radius)
+    k = np.arange(OCCLUSION_SAMPLES)
+    fractions = ((k + 1.0) / OCCLUSION_SAMPLES) ** 2 if dense_near_start else (k + 0.5) / OCCLUSION_SAMPLES
+    t = t0[:, None] + (t1 - t0)[:, None] * fractions
+    samples = starts[:, None] + t[:, :, None] * direction[:, None]
+    inside = rmap.inside(samples.reshape(-1, 3)).reshape(len(starts), -1)
+    return (inside & (t1 > t0)[:, None]).any(axis=1)
 
 
 def _occluded(rmap: ReflectorMap, camera, perspective: bool, positions: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """(K,) bool: a sample of the segment from P toward the eye, or from P to V, inside
-    the map's bounding sphere, lies inside the surface."""
-    if len(positions) == 0:
-        return np.zeros(0, dtype=bool)
-    blocked = np.zeros(len(positions), dtype=bool)
-    to_point = points - positions
-    segments = ((_to_eye(camera, perspective, positions),
-                 (lengths(camera - positions) if perspective else np.full(len(positions), np.inf))),
-                (normalized(to_point), lengths(to_point)))
-    # Denser next to P, where a neighbouring bump hides a grazing answer.
-    fractions = ((np.arange(OCCLUSION_SAMPLES) + 1.0) / OCCLUSION_SAMPLES) ** 2
-    for direction, length in segments:
-        reach = np.minimum(length, _segment_exit(positions, direction, rmap.centre, rmap.max_radius))
-        samples = positions[:, None] + (reach[:, None] * fractions)[:, :, None] * direction[:, None]
-        blocked |= rmap.inside(samples.reshape(-1, 3)).reshape(len(positions), -1).any(axis=1)
-    return blocked
+    """(K,) bool: the mirror itself lies between P and the eye, or between P and V."""
+    if perspective:
+        toward_eye = _segment_blocked(rmap, positions, np.broadcast_to(camera, positions.shape), True)
+    else:
+        toward_eye = _segment_blocked(rmap, positions, None, True, towards=np.broadcast_to(camera, positions.shape))
+    return toward_eye | _segment_blocked(rmap, positions, points, True)
 
 
 @dataclass
@@ -332,13 +355,15 @@ class IterativeReflector:
     name: str
     reflector_map: ReflectorMap
     accuracy_px: float = 1.0
+    #: The other star-shaped reflectors' maps: they may block a reflected segment.
+    occluders: tuple = ()
 
     @property
     def groups(self) -> list:
         return [(self.index,)]
 
     def search(self, view: View, points) -> SearchResult:
-        return search_reflections(self.reflector_map, view, points, self.accuracy_px)
+        return search_reflections(self.reflector_map, view, points, self.accuracy_px, occluders=self.occluders)
 
     def project(self, view: View, points) -> Projection:
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
