@@ -28,6 +28,7 @@ from mathutils import Vector
 
 from ..addon import shapes
 from ..addon.metrics import srgb_to_linear
+from ..addon.sphere import bumpy_icosphere
 
 #: Display-sRGB label colours, channels in {0, 0.5, 1} with at least one 1 and not white:
 #: any two differ by >= 0.5 in some channel and all lie >= 1 away from black. Ordered so
@@ -49,6 +50,7 @@ SCENES = (
     ("teapot", "Teapot", "Teapot-shaped mirror with objects close to it"),
     ("two_spheres", "Two Spheres", "Two mirror spheres close together (second-order reflections)"),
     ("vase", "Chen-Arvo Vase", "The cubic vase of Chen & Arvo 2000 with objects near it"),
+    ("bumpy_ball", "Bumpy Ball", "A bumpy mirror ball (star-shaped, not convex) among columns, a cube close by"),
 )
 
 
@@ -221,11 +223,25 @@ def build_vase(scene):
     _camera(scene, (0.0, -5.2, 1.45), (0.0, 0.0, 0.95), 50.0)
 
 
+def build_bumpy_ball(scene):
+    """A mirror ball with bumps (radius 1 + 0.06 sin 5 phi sin 4 theta: star-shaped, not
+    convex, several images of some points) among columns, a cube close to it."""
+    colours = iter(DIFFUSE_COLOURS)
+    _checker_floor(scene)
+    ball = bumpy_icosphere((0.0, 0.0, 0.0), 1.0, 5, 0.06)
+    _reflector(scene, "MirrorBumpy", shapes.Shape(ball.vertices, ball.normals, tris=ball.triangles), (0.0, 0.0, 1.1))
+    for k, (x, y) in enumerate(((-1.4, -1.0), (1.5, -0.8), (-2.3, 1.0), (2.2, 1.3), (0.2, 2.6))):
+        _diffuse(scene, f"Column{k + 1}", shapes.cylinder(0.15, 2.4, 24), next(colours), (x, y, 0.0))
+    _diffuse(scene, "Cube", shapes.box((0.4, 0.4, 0.4)), next(colours), (0.95, -1.05, 0.2), 0.6)
+    _camera(scene, (1.2, -6.2, 2.4), (0.0, 0.0, 1.0), 45.0)
+
+
 BUILDERS = {
     "sbc_fig3": build_sbc_fig3,
     "teapot": build_teapot,
     "two_spheres": build_two_spheres,
     "vase": build_vase,
+    "bumpy_ball": build_bumpy_ball,
 }
 
 

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-SCENE_NAMES = ("sbc_fig3", "teapot", "two_spheres", "vase")
+SCENE_NAMES = ("sbc_fig3", "teapot", "two_spheres", "vase", "bumpy_ball")
 REFERENCE = "cycles"
 OURS = "curved_reflections"
 #: Our renderer also with every reflector in one mode (the plain entry is the default, Auto).
