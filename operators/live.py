@@ -161,6 +161,10 @@ def _capture(state: LiveScene, scene, depsgraph, reflectors: bool) -> None:
         state.grids = _load_grids(scene, captured.reflectors)
         state.plan = methods.plan(scene, captured.reflectors, state.settings[2],
                                   baked={grid.reflector_name for grid, _ in state.grids})
+        state.generation += 1
+        state.counts["bakes"] += 1
+    else:
+        state.counts["remeshes"] += 1
     # A new renderer has no projection: the next draw projects with the view's camera
     # once (SBC V-A), and later draws reuse it until a camera lands or the meshes change.
     # Interpolated answers only: polishing them on the true rays (the headless render
@@ -173,10 +177,6 @@ def _capture(state: LiveScene, scene, depsgraph, reflectors: bool) -> None:
     state.world = world_color(scene)
     state.bounds = (lo, hi)
     state.drawing = True
-    if reflectors:
-        state.counts["bakes"] += 1
-    else:
-        state.counts["remeshes"] += 1
 
 
 def _load_grids(scene, reflectors) -> list:

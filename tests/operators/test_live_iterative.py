@@ -126,3 +126,14 @@ def test_star_shaped_check_of_blender_primitives(fig3):
     for name in ("Suzanne", "Ring"):
         assert chosen[name].method == methods.RUNTIME
         assert chosen[name].reason.startswith(f"{name!r} is not star-shaped")
+
+
+def test_a_new_capture_of_the_reflectors_makes_older_cameras_stale(fig3):
+    state = live.bake(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
+    generation, bakes, remeshes = state.generation, state.counts["bakes"], state.counts["remeshes"]
+    state.dirty_meshes = True  # a diffuse object changed: the cameras stay
+    live.process(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
+    assert (state.generation, state.counts["remeshes"]) == (generation, remeshes + 1)
+    state.dirty_reflectors = True  # a mirror changed: every camera is built again
+    live.process(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
+    assert (state.generation, state.counts["bakes"]) == (generation + 1, bakes + 1)
