@@ -144,7 +144,8 @@ def star_map(reflector, face_size: int | None = None):
     return shape, rmap
 
 
-def _mode_of(scene, name: str) -> str:
+def mode_of(scene, name: str) -> str:
+    """A captured reflector's mode (Auto for an instance, which has no object of its own)."""
     obj = scene.objects.get(name)
     return 'AUTO' if obj is None else obj.curved_reflections.mode
 
@@ -155,7 +156,7 @@ def plan(scene, reflectors, accuracy_px: float | None = None, baked=frozenset())
     accuracy = float(scene.curved_reflections.accuracy_px if accuracy_px is None else accuracy_px)
     result = MethodPlan()
     for index, reflector in enumerate(reflectors):
-        mode = _mode_of(scene, reflector.name)
+        mode = mode_of(scene, reflector.name)
         if mode in ('AUTO', ITERATIVE):
             shape, rmap = star_map(reflector)
             if rmap is not None:
@@ -185,7 +186,7 @@ def plan(scene, reflectors, accuracy_px: float | None = None, baked=frozenset())
 def wants_grid(scene, reflector) -> bool:
     """Whether a morphing grid is baked and loaded for this reflector: Morphing mode, or
     Auto mode where it is not star-shaped."""
-    mode = _mode_of(scene, reflector.name)
+    mode = mode_of(scene, reflector.name)
     return mode == MORPHING or (mode == 'AUTO' and star_map(reflector)[1] is None)
 
 

@@ -120,8 +120,9 @@ def reflector_appearance(reflectors, scene) -> tuple[np.ndarray, np.ndarray]:
 
 
 def captured_key(captured) -> tuple:
-    """(reflectors, meshes) hashes: a frame whose key matches the last one's reuses its
-    renderer (meshes uploaded and subdivided once) and its method plan."""
+    """(reflectors, meshes) hashes of a capture: a frame whose capture, modes, accuracy
+    and mirror looks match the last one's reuses its renderer (meshes uploaded and
+    subdivided once) and its method plan."""
     def digest(items, fields) -> str:
         hasher = hashlib.sha1()
         for item in items:
@@ -177,13 +178,17 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
     captured = capture_scene(depsgraph)
     ensure_gpu()
     captured_at = time.perf_counter()
-    key = captured_key(captured)
-    if state.plan is None or key[0] != state.key[0]:
+    properties = reflector_properties(captured.reflectors, scene)
+    # Modes, accuracy and the mirrors' looks may be animated too: they are part of the key.
+    looks = hashlib.sha1(b"".join(np.ascontiguousarray(v).tobytes() for v in properties.values())).hexdigest()
+    modes = tuple(methods.mode_of(scene, r.name) for r in captured.reflectors)
+    key = captured_key(captured) + (modes, float(accuracy_px), looks)
+    if state.plan is None or key[0] != state.key[0] or key[2:4] != state.key[2:4]:
         state.plan = methods.plan(scene, captured.reflectors, accuracy_px)
         state.renderer = None
     if state.renderer is None or key != state.key:
         state.renderer = ReflectionRenderer(captured.reflectors, captured.meshes, iterative=state.plan.iterative,
-                                            **reflector_properties(captured.reflectors, scene))
+                                            **properties)
     else:
         state.reused += 1
     state.key = key
