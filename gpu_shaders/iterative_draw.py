@@ -105,23 +105,13 @@ def reflected_shader():
     return gpu.shader.create_from_info(info)
 
 
-def _texture(texels: np.ndarray, width: int):
-    import gpu
-
-    height = max(1, -(-len(texels) // width))
-    padded = np.zeros((width * height, 4), np.float32)
-    padded[:len(texels), :texels.shape[1]] = texels
-    data = gpu.types.Buffer('FLOAT', padded.size, padded.reshape(-1))
-    return gpu.types.GPUTexture((width, height), format='RGBA32F', data=data)
-
-
 class MapAtlas:
     """Every star-shaped reflector's cube map in one texture, one below another, and two
     texels of parameters per map (``glsl/iterative_search.glsl``'s ``use_map``): each
     search reads its own map and the others', which may block its reflected segments."""
 
     def __init__(self, methods, shift):
-        import gpu
+        from .reflection_draw import _data_texture
 
         maps = [m.reflector_map for m in methods]
         width = max(rmap.texels.shape[1] for rmap in maps)
@@ -132,9 +122,8 @@ class MapAtlas:
             texels[rows[k]:rows[k + 1], :rmap.texels.shape[1]] = rmap.texels
             params[2 * k] = (*(np.asarray(rmap.centre) - shift), rmap.max_radius)
             params[2 * k + 1] = (rows[k], rmap.face_size, float(bool(rmap.convex)), rmap.mean_radius)
-        data = gpu.types.Buffer('FLOAT', texels.size, texels.reshape(-1))
-        self.texture = gpu.types.GPUTexture((width, rows[-1]), format='RGBA32F', data=data)
-        self.params = _texture(params, len(params))
+        self.texture = _data_texture(texels)
+        self.params = _data_texture(params, len(params))
 
 
 class IterativePass:
@@ -167,11 +156,11 @@ class IterativePass:
     def _ensure(self) -> None:
         import gpu
 
-        from .reflection_draw import _vertex_buffer
+        from .reflection_draw import _data_texture, _vertex_buffer
 
         if self._positions is None:
             g = self.geometry
-            self._positions = _texture((g.vertices - g.shift).astype(np.float32), self.width)
+            self._positions = _data_texture((g.vertices - g.shift).astype(np.float32), self.width)
             attributes = {"vertex_index": (np.arange(self.n_vertices, dtype=np.int32), 'I32', 'INT'),
                           "color": (g.colors, 'F32', 'FLOAT'),
                           "normal_lit": (np.c_[g.normals, g.lit].astype(np.float32), 'F32', 'FLOAT'),
