@@ -761,6 +761,9 @@ class ReflectionRenderer:
     needs the camera itself, not only its textures). ``polish``: the GPU's ray-list and
     fold-cell answers are polished on the true rays on the CPU (needs the camera too;
     exact, but the numpy BVH makes it seconds per camera: the live viewport turns it off).
+    ``iterative``: the star-shaped reflectors the iterative search draws every frame
+    (:mod:`.iterative_draw`); a camera's sheets of their first-order reflections are not
+    projected, and with no other reflector the renderer draws with no camera at all.
     """
 
     def __init__(self, reflectors, meshes, reflector_colors=None, reflectivity=None,

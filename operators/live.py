@@ -30,6 +30,10 @@ projection runs per draw on the GPU):
   reflector or a higher order still needs one, leaves that reflector's first-order
   sheets out. A view outside the grid (or orthographic) draws the reflector in runtime
   mode, and the panel says so.
+- **iterative search** (Auto and Iterative mode, ``operators/methods.py``): star-shaped
+  reflectors get their cube maps with the reflectors' capture and are searched on the
+  GPU on every redraw for the region's own view (Roger & Holzschuch 2006): no camera is
+  built for them, and none at all when they are all the reflectors and the order is 1.
 - **draw** (``SpaceView3D`` POST_VIEW handler, every redraw): the reflections of the
   region's view over the reflectors (``reflectors_only``), with the last camera built
   for that region: the cached reflected triangles placed by the current view's
