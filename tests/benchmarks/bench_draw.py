@@ -260,13 +260,13 @@ def _projection_times(renderer, textures, view, sbc, framebuffer, repeats: int) 
         spent = [0.0]
         original = renderer._project_pass
 
-        def timed(*args, **kwargs):
+        def counted(*args, **kwargs):
             start = time.perf_counter()
             value = original(*args, **kwargs)
             spent[0] += time.perf_counter() - start
             return value
 
-        renderer._project_pass = timed
+        renderer._project_pass = counted
         try:
             for _ in range(repeats):
                 renderer.invalidate()
