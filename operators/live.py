@@ -80,6 +80,8 @@ POLL_SECONDS = 0.05
 SHADING_TYPES = frozenset({'SOLID', 'MATERIAL'})
 #: Cameras kept per scene (one per 3D view region); the least recently drawn goes first.
 MAX_VIEWS = 8
+#: Seconds between read-backs of the iterative search's unanswered vertices (panel stats).
+COUNT_SECONDS = 2.0
 #: Views whose matrices differ by less than this are the same view (no rebuild).
 VIEW_TOLERANCE = 1e-6
 #: Key of the view a Bake or Refresh uses when there is no 3D view (background mode).
@@ -493,6 +495,12 @@ def _draw_with(state: LiveScene, view: View, source, sbc) -> bool:
         state.stats["projection_ms"] = 1000.0 * state.renderer.stats.get("projection_seconds", 0.0)
     state.stats["draw_ms"] = 1000.0 * (time.perf_counter() - start)
     state.counts["draws"] += 1
+    if state.plan.iterative and time.monotonic() - state.stats.get("counted_at", -COUNT_SECONDS) >= COUNT_SECONDS:
+        # The vertices the search left unanswered, read back now and then (not every frame).
+        counts = state.renderer.iterative.status_counts()
+        state.stats["unanswered"] = sum(c["unanswered"] for c in counts.values())
+        state.stats["searched"] = sum(c["found"] + c["unanswered"] for c in counts.values())
+        state.stats["counted_at"] = time.monotonic()
     return True
 
 

@@ -73,6 +73,9 @@ def _live_section(layout, scene) -> None:
         ):
             grid.label(text=label)
             grid.label(text=text)
+    if "unanswered" in stats:
+        layout.label(text=f"Searched on the GPU: {stats['searched'] - stats['unanswered']:,} of "
+                          f"{stats['searched']:,} vertex reflections found", icon='SHADERFX')
     if state.jobs or state.requests:
         layout.label(text="Updating...", icon='SORTTIME')
     if state.status:

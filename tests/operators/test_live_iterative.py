@@ -38,6 +38,8 @@ def test_auto_mode_searches_the_mirror_ball_and_builds_no_camera(fig3, capfd):
 
     drawn, image = _draw(fig3, _camera_view(fig3))
     assert drawn
+    # The vertices the search left unanswered are counted (they are never drawn).
+    assert 0 < state.stats["unanswered"] < state.stats["searched"] == len(state.renderer.geometry.vertices)
     touched = _touched(image)
     assert 1000 < touched.sum() < 3000  # the ball's disc only (reflectors only)
     cube = _pixels_of(image, "Cube", fig3)
