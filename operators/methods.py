@@ -65,9 +65,6 @@ class MethodPlan:
     def iterative_indices(self) -> frozenset:
         return frozenset(m.index for m in self.iterative)
 
-    def method_of(self, name: str) -> str | None:
-        return next((c.method for c in self.choices if c.reflector == name), None)
-
 
 _maps: list = []  # _Entry, most recently used last
 _last_choices: dict = {}
