@@ -59,6 +59,36 @@ def ellipsoid(center, radii, subdivisions: int, name: str = "Ellipsoid") -> Refl
                      sphere.vertices / radii)
 
 
+def superellipsoid(center, radii, exponent: float, subdivisions: int, name: str = "Superellipsoid") -> Reflector:
+    """The superellipsoid |x / a|^p + |y / b|^p + |z / c|^p = 1 (p = ``exponent``: 2 an
+    ellipsoid, larger a rounder box), its vertices where the geodesic sphere's rays from
+    the centre meet it, with the exact normals (the gradient, sign(x) |x / a|^(p - 1) / a
+    per axis). Star-shaped around its centre for any p > 0, convex for p >= 1."""
+    d = icosphere((0.0, 0.0, 0.0), 1.0, subdivisions).vertices
+    radii, p = np.asarray(radii, dtype=np.float64), float(exponent)
+    local = d * ((np.abs(d / radii) ** p).sum(axis=1) ** (-1.0 / p))[:, None]
+    normals = np.sign(local) * np.abs(local / radii) ** (p - 1.0) / radii
+    return Reflector(name, np.asarray(center, dtype=np.float64) + local,
+                     icosphere((0.0, 0.0, 0.0), 1.0, subdivisions).triangles, normals)
+
+
+def torus(center, major: float, minor: float, segments: int, rings: int, name: str = "Torus") -> Reflector:
+    """A closed torus about the +Z axis through ``center``: ``segments`` around the axis,
+    ``rings`` around the tube of radius ``minor`` whose centre line has radius ``major``,
+    exact (outward) normals, faces wound outward. Not star-shaped (no point sees all of
+    it through the hole): the iterative search must refuse it."""
+    u, v = np.meshgrid(2 * np.pi * np.arange(segments) / segments, 2 * np.pi * np.arange(rings) / rings,
+                       indexing="ij")
+    normals = np.stack([np.cos(u) * np.cos(v), np.sin(u) * np.cos(v), np.sin(v)], axis=-1).reshape(-1, 3)
+    centre_line = major * np.stack([np.cos(u), np.sin(u), np.zeros_like(u)], axis=-1).reshape(-1, 3)
+    a = np.arange(segments * rings).reshape(segments, rings)
+    b, c = np.roll(a, -1, axis=0), np.roll(a, -1, axis=1)
+    d = np.roll(b, -1, axis=1)
+    triangles = np.concatenate([np.stack([a, b, d], axis=-1).reshape(-1, 3),
+                                np.stack([a, d, c], axis=-1).reshape(-1, 3)])
+    return Reflector(name, np.asarray(center, dtype=np.float64) + centre_line + minor * normals, triangles, normals)
+
+
 def _split_faces(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Split every triangle into four, new vertices at edge midpoints pushed onto the sphere."""
     edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
