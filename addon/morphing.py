@@ -506,6 +506,15 @@ class MorphingGrid:
         images = np.concatenate(parts, axis=0).transpose(1, 0, 2)
         return _compact(images, self._duplicate_tolerance(node, images))
 
+    def node_slots(self, node: int, points: np.ndarray, slots: int) -> np.ndarray:
+        """(P, 2 slots, 3): the first ``slots`` distinct images of each point (frame
+        coordinates) at one node, then the first ``slots`` of its widened charts (remedy
+        2), NaN padded. What the GPU blend keeps per node (``gpu_shaders/morph_pass.py``):
+        everything :meth:`_matched_images` reads of a node, for every point at once, so
+        that it serves every tetrahedron the node belongs to."""
+        parts = [self._node_images(node, points), self._extended_images(node, points)]
+        return np.concatenate([_pad(part[:, :slots], slots) for part in parts], axis=1)
+
     def _duplicate_tolerance(self, node: int, images: np.ndarray) -> np.ndarray:
         """(P, M): one image seen in two overlapping faces differs by up to about the
         faces' accuracy; DUPLICATE_PIXELS face pixels at its distance, at least
@@ -669,6 +678,9 @@ MIN_SURFACE_NODES = 3
 SURFACE_ITERATIONS = 8
 #: The refined point may lie this far (in units of the nodes' images' spread) from the blend.
 SURFACE_REACH = 2.0
+#: A node's image joins the surface fit where its normal is within about 78 degrees of
+#: the nodes' weighted normal (cosine above this).
+SURFACE_NORMAL_MIN = 0.2
 
 
 def refine_on_local_surface(images, present, eyes, points, eye, weights):
@@ -699,7 +711,7 @@ def refine_on_local_surface(images, present, eyes, points, eye, weights):
     normals = _unit(to_eye + to_point)
     normal = _unit(np.einsum("qn,qnd->qd", weights, normals))
     nz = np.einsum("qnd,qd->qn", normals, normal)
-    usable = present & (nz > 0.2)
+    usable = present & (nz > SURFACE_NORMAL_MIN)
     x, ok, fitted_normal = origin.copy(), np.zeros(q, bool), normal.copy()
     # Only rows with enough usable nodes are fitted (a point's empty image slots and
     # images seen by too few nodes are most rows of a drawn mesh's projection).

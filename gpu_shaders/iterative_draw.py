@@ -7,8 +7,8 @@ the paper could not use for want of render-to-vertex-buffer, is the one here: a 
 shader (``glsl/iterative_search.glsl``, the twin of ``addon/methods/iterative/search.py``)
 writes each vertex's reflection point into a float texture, one texel per vertex, and
 the reflected meshes' vertex stage (``glsl/iterative_mesh_vert.glsl``) reads its
-vertex's texel. What is uploaded once: the diffuse vertices
-(a texture) with their shading data (a vertex buffer), and every star-shaped
+vertex's texel (``reflected_meshes.py``, shared with morphing). What is uploaded once:
+the diffuse vertices (a texture) with their shading data (a vertex buffer), and every star-shaped
 reflector's cube map (:class:`MapAtlas`: a search reads its own map and the others',
 which may block its reflected segments). What runs per frame: one dispatch and one
 draw per reflector, with the view in push constants.
@@ -17,23 +17,14 @@ draw per reflector, with the view in push constants.
 from __future__ import annotations
 
 import functools
-from pathlib import Path
 
 import numpy as np
 
 from ..addon.methods.iterative import search as search_module
+from .reflected_meshes import ReflectedMeshes, glsl_source
 
-_GLSL = Path(__file__).resolve().parent / "glsl"
-#: Texels per row of the vertex and result textures.
-TEXTURE_WIDTH = 4096
 #: Invocations per work group of the search (along x).
 LOCAL_SIZE = 64
-#: A reflected fragment is kept only where the interpolated validity of its triangle's
-#: corners reaches this: 1 inside triangles whose corners all have an answer, below it
-#: everywhere else but within 1e-4 of an edge's length from a valid corner.
-VALID_THRESHOLD = 0.9999
-#: The result texel's code for a found answer: (FOUND + 8) + 16 steps, modulo 16.
-FOUND_CODE = search_module.FOUND + 8
 
 
 def search_defines() -> dict:
@@ -44,11 +35,6 @@ def search_defines() -> dict:
             "HALVINGS": s.HALVINGS, "MAX_CHART": f"{s.MAX_CHART:.9e}",
             "RESIDUAL_TOLERANCE": f"{s.RESIDUAL_TOLERANCE:.9e}", "OCCLUSION_SAMPLES": s.OCCLUSION_SAMPLES,
             "RESTART_OFFSET": f"{s.RESTARTS[1][0]:.9e}"}
-
-
-def _source(name: str, defines: dict) -> str:
-    lines = [f"#define {key} {value}" for key, value in defines.items()]
-    return "\n".join(lines) + "\n" + (_GLSL / name).read_text(encoding="utf-8")
 
 
 @functools.cache
@@ -70,38 +56,7 @@ def search_shader():
     info.sampler(2, 'FLOAT_2D', "map_params")
     info.image(0, 'RGBA32F', 'FLOAT_2D', "result", qualifiers={'READ', 'WRITE'})
     info.local_group_size(LOCAL_SIZE, 1)
-    info.compute_source(_source("iterative_search.glsl", search_defines()))
-    return gpu.shader.create_from_info(info)
-
-
-@functools.cache
-def reflected_shader():
-    """The reflected meshes' shader, built on first use (fragment stage shared with the
-    sample-based camera's reflected meshes)."""
-    import gpu
-
-    from .reflection_draw import reflected_fragment_source, reflected_interface
-
-    interface = reflected_interface("curved_reflections_iterative_interface", searched=True)
-    info = gpu.types.GPUShaderCreateInfo()
-    info.push_constant('MAT4', "view_projection")
-    info.push_constant('INT', "result_width")
-    info.push_constant('FLOAT', "inverse_diameter")
-    info.push_constant('FLOAT', "order_range")
-    info.push_constant('FLOAT', "reflector_id")
-    info.push_constant('INT', "use_image")
-    info.sampler(0, 'FLOAT_2D', "search_result")
-    info.sampler(1, 'FLOAT_2D', "vertex_positions")
-    info.sampler(2, 'FLOAT_2D', "prepass_labels")
-    info.sampler(3, 'FLOAT_2D', "image")
-    info.vertex_in(0, 'INT', "vertex_index")
-    info.vertex_in(1, 'VEC4', "color")
-    info.vertex_in(2, 'VEC4', "normal_lit")
-    info.vertex_in(3, 'VEC2', "uv")
-    info.vertex_out(interface)
-    info.fragment_out(0, 'VEC4', "color_out")
-    info.vertex_source(_source("iterative_mesh_vert.glsl", {"FOUND_CODE": FOUND_CODE}))
-    info.fragment_source(reflected_fragment_source(f"#define SEARCHED\n#define VALID_THRESHOLD {VALID_THRESHOLD}\n"))
+    info.compute_source(glsl_source("iterative_search.glsl", search_defines()))
     return gpu.shader.create_from_info(info)
 
 
@@ -128,17 +83,15 @@ class MapAtlas:
 
 class IterativePass:
     """The iterative method's GPU side for one renderer's reflected geometry (a
-    ``reflection_draw.DrawGeometry``) and its star-shaped reflectors
-    (``addon.methods.iterative.IterativeReflector`` each)."""
+    ``reflection_draw.DrawGeometry``, on the GPU as ``meshes``, a
+    :class:`.reflected_meshes.ReflectedMeshes`, made here when not given) and its
+    star-shaped reflectors (``addon.methods.iterative.IterativeReflector`` each)."""
 
-    def __init__(self, geometry, methods):
+    def __init__(self, geometry, methods, meshes: ReflectedMeshes | None = None):
         self.geometry = geometry
         self.methods = list(methods)
-        self.n_vertices = len(geometry.vertices)
-        self.width = max(1, min(self.n_vertices, TEXTURE_WIDTH))
-        self.height = max(1, -(-self.n_vertices // self.width))
-        self._positions = None
-        self._batch = None
+        self.meshes = meshes if meshes is not None else ReflectedMeshes(geometry)
+        self.n_vertices = self.meshes.n_vertices
         self._atlas = None
         self._results: dict = {}
         self.counts = {"searches": 0}
@@ -154,25 +107,11 @@ class IterativePass:
         self._atlas = None
 
     def _ensure(self) -> None:
-        import gpu
-
-        from .reflection_draw import _data_texture, _vertex_buffer
-
-        if self._positions is None:
-            g = self.geometry
-            self._positions = _data_texture((g.vertices - g.shift).astype(np.float32), self.width)
-            attributes = {"vertex_index": (np.arange(self.n_vertices, dtype=np.int32), 'I32', 'INT'),
-                          "color": (g.colors, 'F32', 'FLOAT'),
-                          "normal_lit": (np.c_[g.normals, g.lit].astype(np.float32), 'F32', 'FLOAT'),
-                          "uv": (g.uvs, 'F32', 'FLOAT')}
-            if len(g.triangles):
-                self._batch = gpu.types.GPUBatch(type='TRIS', buf=_vertex_buffer(attributes), elem=gpu.types.GPUIndexBuf(
-                    type='TRIS', seq=np.asarray(g.triangles, dtype=np.int32)))
         if self._atlas is None:
             self._atlas = MapAtlas(self.methods, self.geometry.shift)
         for method in self.methods:
             if method.index not in self._results:
-                self._results[method.index] = gpu.types.GPUTexture((self.width, self.height), format='RGBA32F')
+                self._results[method.index] = self.meshes.answer_texture()
 
     def search(self, view, warm: bool = False) -> None:
         """This frame's search: one dispatch per reflector, into its result texture.
@@ -198,51 +137,27 @@ class IterativePass:
         shader.uniform_float("camera", tuple(float(c) for c in camera))
         shader.uniform_float("w_row", tuple(float(c) for c in w_row))
         shader.uniform_int("n_vertices", self.n_vertices)
-        shader.uniform_int("positions_width", self.width)
+        shader.uniform_int("positions_width", self.meshes.width)
         shader.uniform_int("warm", int(bool(warm)))
         shader.uniform_int("n_maps", len(self.methods))
-        shader.uniform_sampler("vertex_positions", self._positions)
+        shader.uniform_sampler("vertex_positions", self.meshes.positions)
         shader.uniform_sampler("reflector_maps", self._atlas.texture)
         shader.uniform_sampler("map_params", self._atlas.params)
-        groups = (-(-self.width // LOCAL_SIZE), self.height, 1)
         for k, method in enumerate(self.methods):
             shader.uniform_float("stop_per_w", search_module.STOP_FRACTION * method.accuracy_px * pixel_scale)
             shader.uniform_int("self_map", k)
             shader.image("result", self._results[method.index])
-            gpu.compute.dispatch(shader, *groups)
+            gpu.compute.dispatch(shader, *self.meshes.work_groups(LOCAL_SIZE))
         self.counts["searches"] += 1
 
-    def draw(self, view_projection, prepass_labels, setup: dict, image_of) -> None:
-        """The reflected meshes of every reflector into the bound framebuffer (depth
-        test on), placed by ``view_projection`` (a ``mathutils.Matrix`` relative to
-        the shift); ``image_of(k)`` is the texture of image ``k`` (-1: none)."""
-        if self._batch is None or not self.methods:
-            return
-        shader = reflected_shader()
-        shader.bind()
-        shader.uniform_float("view_projection", view_projection)
-        shader.uniform_int("result_width", self.width)
-        shader.uniform_float("inverse_diameter", setup["inverse_diameter"])
-        shader.uniform_float("order_range", setup["order_range"])
-        shader.uniform_sampler("vertex_positions", self._positions)
-        shader.uniform_sampler("prepass_labels", prepass_labels)
-        for method in self.methods:
-            shader.uniform_sampler("search_result", self._results[method.index])
-            shader.uniform_float("reflector_id", float(method.index + 1))
-            for image, first, count in self.geometry.ranges:
-                shader.uniform_int("use_image", int(image >= 0))
-                shader.uniform_sampler("image", image_of(image))
-                self._batch.draw_range(shader, elem_start=3 * first, elem_count=3 * count)
+    def answers(self) -> list:
+        """(reflector index, answer texture) of the last search, for ``ReflectedMeshes.draw``."""
+        return [(m.index, self._results[m.index]) for m in self.methods if m.index in self._results]
 
     def read(self, reflector_index: int) -> search_module.SearchResult:
         """The last search of one reflector, read back (tests, the status counts)."""
-        from .reflection_draw import _read_texture
-
-        texels = _read_texture(self._results[reflector_index], self.width, self.height).reshape(-1, 4)
-        texels = texels[:self.n_vertices].astype(np.float64)
-        code = texels[:, 3].astype(np.int64)
+        positions, code = self.meshes.read(self._results[reflector_index])
         status = (code % 16 - 8).astype(np.int8)
-        positions = np.where((status == search_module.FOUND)[:, None], texels[:, :3] + self.geometry.shift, np.nan)
         return search_module.SearchResult(positions, status, (code // 16).astype(np.int16))
 
     def status_counts(self) -> dict:

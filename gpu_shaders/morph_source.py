@@ -23,11 +23,11 @@ from collections import OrderedDict
 import numpy as np
 
 from . import projection
+from .morph_pass import SLOTS
 from .reflection_draw import reflected_depth
 
-#: Images of one point in one reflector drawn at most (sheets per grid). A convex
-#: mirror has one; a concave one can show a point two or three times.
-MAX_IMAGES = 3
+#: Images of one point in one reflector drawn at most (sheets per grid), as on the GPU.
+MAX_IMAGES = SLOTS
 #: Face cameras kept packed in GPU textures (a tetrahedron uses four nodes of six faces).
 PACKED_FACES = 48
 #: Largest sub-grid of a mixed triangle (SBC V-B) drawn from a grid: every sub-vertex is

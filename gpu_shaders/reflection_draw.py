@@ -108,6 +108,8 @@ import numpy as np
 from ..addon import band_trace, sheet_bounds, subdivision
 from . import projection
 from .iterative_draw import IterativePass
+from .morph_pass import DEFAULT_BUDGET_MB, MorphPass
+from .reflected_meshes import ReflectedMeshes
 
 _GLSL = Path(__file__).resolve().parent / "glsl"
 
@@ -719,6 +721,9 @@ class CachedProjection:
     mixed_triangles: int
     stats: dict = field(default_factory=dict)
     camera: object = None  # the SampleBasedCamera, when :meth:`ReflectionRenderer.render` was given it
+    #: Reflectors whose first-order sheets it leaves to the passes run every frame (the
+    #: iterative search; the morphing grids covering ``camera_view``).
+    per_frame: frozenset = frozenset()
 
 
 @functools.cache
@@ -764,17 +769,25 @@ class ReflectionRenderer:
     ``iterative``: the star-shaped reflectors the iterative search draws every frame
     (:mod:`.iterative_draw`); a camera's sheets of their first-order reflections are not
     projected, and with no other reflector the renderer draws with no camera at all.
+    ``morph``: (``MorphingGrid``, object matrix) of the reflectors drawn from their baked
+    grids every frame where the view is inside the grid (:mod:`.morph_pass`, node images
+    kept on the GPU within ``morph_budget_mb``); likewise left out of a camera's
+    projection made for a view inside the grid.
     """
 
     def __init__(self, reflectors, meshes, reflector_colors=None, reflectivity=None,
                  edge_fraction: float | None = subdivision.EDGE_FRACTION, *, fresnel_f0=None,
                  attenuation_distance=None, mixed_subdivisions: int = MIXED_SUBDIVISIONS, cull: bool = True,
-                 polish: bool = True, iterative=()):
+                 polish: bool = True, iterative=(), morph=(), morph_budget_mb: float = DEFAULT_BUDGET_MB):
         self.geometry = prepare_geometry(reflectors, meshes, reflector_colors, reflectivity, edge_fraction,
                                          fresnel_f0, attenuation_distance)
+        #: The diffuse meshes on the GPU, placed by the per-frame passes' answers.
+        self.meshes = ReflectedMeshes(self.geometry)
         #: The star-shaped reflectors drawn by the iterative search every frame
         #: (``addon.methods.iterative.IterativeReflector`` each); the others by ``textures``.
-        self.iterative = IterativePass(self.geometry, iterative)
+        self.iterative = IterativePass(self.geometry, iterative, self.meshes)
+        #: The reflectors drawn from their morphing grids every frame (views inside a grid).
+        self.morph = MorphPass(self.geometry, morph, self.meshes, morph_budget_mb)
         self.mixed_subdivisions = int(mixed_subdivisions)
         self.cull = bool(cull)
         self.polish = bool(polish)
@@ -826,6 +839,12 @@ class ReflectionRenderer:
         if self._targets is None or not self._targets.fits(width, height):
             self._targets = FrameTargets(width, height)
         return self._targets
+
+    def per_frame_reflectors(self, view) -> frozenset:
+        """The reflectors whose first-order reflections of ``view`` the per-frame passes
+        draw: the searched ones, and those whose grid covers the view."""
+        return frozenset(self.iterative.reflector_indices) | frozenset(
+            self.morph.grids[k][0].reflector_index for k, _ in self.morph.covering(view))
 
     def invalidate(self) -> None:
         """Forget the cached projections: the next draw projects again."""
@@ -901,15 +920,19 @@ class ReflectionRenderer:
                         shader.uniform_sampler("image", self._image(image))
                         batch.draw(shader)
             self.iterative.search(view, warm)
+            # A grid's reflector is blended here unless the camera's projection draws it.
+            self.morph.blend(view, skip=set() if cached is None else
+                             set(self.morph.reflector_indices) - cached.per_frame)
+            answers = self.iterative.answers() + self.morph.answers()
             with targets.reflection.bind():
                 gpu.state.viewport_set(0, 0, width, height)
                 targets.reflection.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
-                if self.iterative.methods:
+                if answers:
                     gpu.state.depth_test_set('LESS')
                     gpu.state.depth_mask_set(True)
-                    self.iterative.draw(view_projection, targets.prepass_labels,
-                                        {"inverse_diameter": 1.0 / g.diameter, "order_range": ITERATIVE_ORDER_RANGE},
-                                        self._image)
+                    self.meshes.draw(view_projection, targets.prepass_labels,
+                                     {"inverse_diameter": 1.0 / g.diameter, "order_range": ITERATIVE_ORDER_RANGE},
+                                     self._image, answers)
                 if cached is not None and cached.batch is not None:
                     gpu.state.depth_test_set('LESS')
                     gpu.state.depth_mask_set(True)
@@ -1052,7 +1075,8 @@ class ReflectionRenderer:
         n_vertices = len(g.vertices)
         if n_vertices == 0 or not histories or "points" not in self._batches:
             return CachedProjection(textures, camera_view, None, (), 0, 0, {
-                "projection_seconds": 0.0, "projected_vertices": 0, "unculled_vertices": 0, "mixed_sub_triangles": 0})
+                "projection_seconds": 0.0, "projected_vertices": 0, "unculled_vertices": 0, "mixed_sub_triangles": 0},
+                per_frame=self.per_frame_reflectors(camera_view))
         world_to_clip = np.asarray(camera_view.projection_matrix) @ np.asarray(camera_view.view_matrix)
         setup = {"inverse_view_projection": Matrix(np.linalg.inv(world_to_clip).tolist()),
                  "view_size": (float(camera_view.width), float(camera_view.height)),
@@ -1061,11 +1085,11 @@ class ReflectionRenderer:
         stitch_px = STITCH_CELLS * textures.downsample
         kdops = _culling(textures, camera, g.diameter) if self.cull else None
         pieces, mixed_blocks, projected = [], [], 0
-        searched = self.iterative.reflector_indices
+        per_frame = self.per_frame_reflectors(camera_view)
         for sheets in _sheet_chunks(histories, max(1, MAX_PROJECTED_TEXELS // n_vertices)):
             history = histories[sheets[0]]
-            if len(history) == 1 and history[0] in searched:
-                continue  # the iterative search draws these first-order reflections every frame
+            if len(history) == 1 and history[0] in per_frame:
+                continue  # the iterative search or a grid draws these first-order reflections every frame
             draws = []
             for layer, sheet in enumerate(sheets):
                 for first, count in self._vertex_runs(kdops, sheet):
@@ -1088,7 +1112,7 @@ class ReflectionRenderer:
         pieces = [p for p in pieces if len(p[1]["world_depth"])]
         if not pieces:
             stats["projection_seconds"] = time.perf_counter() - start
-            return CachedProjection(textures, camera_view, None, (), 0, n_mixed, stats)
+            return CachedProjection(textures, camera_view, None, (), 0, n_mixed, stats, per_frame=per_frame)
         runs, first = [], 0
         for image, arrays in pieces:
             count = len(arrays["world_depth"])
@@ -1102,7 +1126,8 @@ class ReflectionRenderer:
                                         'FLOAT') for name in names})
         batch = gpu.types.GPUBatch(type='TRIS', buf=buffer)
         stats["projection_seconds"] = time.perf_counter() - start
-        return CachedProjection(textures, camera_view, batch, tuple(runs), first // 3, n_mixed, stats)
+        return CachedProjection(textures, camera_view, batch, tuple(runs), first // 3, n_mixed, stats,
+                                per_frame=per_frame)
 
     def _project_pass(self, textures, batch, draws: list, n_texels: int, setup: dict):
         """Project the points of ``batch`` with ``textures``: per (group, order, texel

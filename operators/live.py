@@ -23,13 +23,13 @@ projection runs per draw on the GPU):
   (``ReflectionRenderer.projection``). Made on the first draw after a camera landed
   or the meshes changed, not on every redraw.
 - **morphing** (reflectors in Morphing mode with a baked grid, SBC paper VI): their
-  grids are loaded with the capture of the reflectors. A view inside a grid needs no
-  camera build for that reflector: its first-order reflections are blended from the
-  four nodes around the eye (``gpu_shaders/morph_source.py``, node projections on the
-  GPU) when the view's projection is made, and the runtime camera, when another
-  reflector or a higher order still needs one, leaves that reflector's first-order
-  sheets out. A view outside the grid (or orthographic) draws the reflector in runtime
-  mode, and the panel says so.
+  grids are loaded with the capture of the reflectors and drawn by the renderer on
+  every redraw whose view is inside the grid (``gpu_shaders/morph_pass.py``): the four
+  nodes around the eye are blended on the GPU from their images of the vertices, which
+  stay on the GPU once projected, so a view change builds nothing for that reflector.
+  The runtime camera, when another reflector or a higher order still needs one, leaves
+  that reflector's first-order sheets out. A view outside the grid (or orthographic)
+  draws the reflector in runtime mode, and the panel says so.
 - **iterative search** (Auto and Iterative mode, ``operators/methods.py``): star-shaped
   reflectors get their cube maps with the reflectors' capture and are searched on the
   GPU on every redraw for the region's own view (Roger & Holzschuch 2006): no camera is
@@ -164,7 +164,9 @@ def _capture(state: LiveScene, scene, depsgraph, reflectors: bool) -> None:
     if reflectors or state.reflector_set is None:
         state.reflector_set = ReflectorSet(list(captured.reflectors))
         state.reflector_names = _marked_reflectors(scene)
-        state.grids = _load_grids(scene, captured.reflectors)
+        from .morph_bake import load_grids
+
+        state.grids = load_grids(scene, captured.reflectors)
         state.plan = methods.plan(scene, captured.reflectors, state.settings[2],
                                   baked={grid.reflector_name for grid, _ in state.grids})
         state.generation += 1
@@ -177,32 +179,13 @@ def _capture(state: LiveScene, scene, depsgraph, reflectors: bool) -> None:
     # does) costs seconds per camera with the numpy BVH, on the main thread. Star-shaped
     # reflectors are searched on the GPU every frame (their maps come from the plan).
     state.renderer = ReflectionRenderer(captured.reflectors, captured.meshes, polish=False,
-                                        iterative=state.plan.iterative,
+                                        iterative=state.plan.iterative, morph=state.grids,
+                                        morph_budget_mb=scene.curved_reflections.morph_gpu_budget_mb,
                                         **reflector_properties(captured.reflectors, scene))
     state.captured = captured
     state.world = world_color(scene)
     state.bounds = (lo, hi)
     state.drawing = True
-
-
-def _load_grids(scene, reflectors) -> list:
-    """(grid, object matrix) of each reflector in Morphing mode whose baked grid matches
-    it; the others are drawn in runtime mode (``load_morphing`` records why)."""
-    from ..gpu_shaders.morph_source import GPUFaceImages
-    from .morph_bake import load_morphing
-
-    faces = GPUFaceImages()
-    grids = []
-    for index, reflector in enumerate(reflectors):
-        obj = scene.objects.get(reflector.name)
-        if obj is None or not methods.wants_grid(scene, reflector):
-            continue
-        matrix = np.array(obj.matrix_world, dtype=np.float64)
-        grid = load_morphing(reflector, matrix, scene, index)
-        if grid is not None:
-            grid.face_images = faces
-            grids.append((grid, matrix))
-    return grids
 
 
 def _covering_grids(state: LiveScene, view: View) -> list:
@@ -462,8 +445,10 @@ def draw(scene, key, view: View) -> bool:
     failed = state.failed.get(key)
     if failed is not None and _same_view(failed, view):
         return False  # the status line says why; a new view or a Refresh tries again
-    if not _needs_camera(state, [], state.settings):
-        # Every reflector is searched on the GPU: nothing to build when the view changes.
+    covering = _covering_grids(state, view)
+    if not _needs_camera(state, covering, state.settings):
+        # Every reflector is searched or blended on the GPU: nothing to build when the view changes.
+        state.stats["morphing"] = ", ".join(grid.reflector_name for grid, _ in covering)
         inside = _reflector_around(state, view)
         if inside is not None:
             state.report('ERROR', f"{inside!r}: the view is inside this reflector; move the view outside it")
@@ -478,11 +463,10 @@ def draw(scene, key, view: View) -> bool:
             request_view(state, key, view)
     if camera is None:
         return False
-    if camera.source is None and (camera.sbc is not None or camera.morph):
-        camera.source = _projection_source(camera)
+    if camera.source is None and camera.sbc is not None:
+        camera.source = SBCTextures(camera.sbc)
     camera.last_drawn = time.monotonic()
-    plain = isinstance(camera.source, SBCTextures)
-    return _draw_with(state, view, camera.source, camera.sbc if plain else None)
+    return _draw_with(state, view, camera.source, camera.sbc)
 
 
 def _draw_with(state: LiveScene, view: View, source, sbc) -> bool:
@@ -511,25 +495,6 @@ def _reflector_around(state: LiveScene, view: View) -> str | None:
         return None
     eye = view.eye[None]
     return next((m.name for m in state.plan.iterative if m.reflector_map.inside(eye)[0]), None)
-
-
-def _projection_source(camera: ViewCamera):
-    """What the renderer projects ``camera``'s view with: the camera's textures, or its
-    sheets of the reflectors not drawn from a grid plus the grids (``SheetSources``)."""
-    from ..gpu_shaders.morph_source import MorphSource
-    from ..gpu_shaders.projection import SBCTextures
-    from ..gpu_shaders.reflection_draw import SheetSources
-
-    if not camera.morph:
-        return SBCTextures(camera.sbc)
-    morphed = {grid.reflector_index for grid, _ in camera.morph}
-    parts = []
-    if camera.sbc is not None:
-        kept = [k for k, history in enumerate(camera.sbc.groups) if not (len(history) == 1 and history[0] in morphed)]
-        parts.append((SBCTextures(camera.sbc), kept, camera.sbc))
-    source = MorphSource(camera.morph, camera.view)
-    parts.append((source, range(len(source.groups)), None))
-    return SheetSources(parts, camera.view)
 
 
 def _same_view(a: View, b: View) -> bool:

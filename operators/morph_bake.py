@@ -92,6 +92,26 @@ def load_morphing(reflector, matrix, scene, reflector_index: int = 0):
     return grid
 
 
+def load_grids(scene, reflectors) -> list:
+    """(grid, object matrix) of each reflector in Morphing mode (or Auto, where it is not
+    star-shaped) whose baked grid matches it; the others are drawn in runtime mode
+    (:func:`load_morphing` records why). The grids' nodes project on the GPU."""
+    from ..gpu_shaders.morph_source import GPUFaceImages
+
+    faces = GPUFaceImages()
+    grids = []
+    for index, reflector in enumerate(reflectors):
+        obj = scene.objects.get(reflector.name)
+        if obj is None or not methods.wants_grid(scene, reflector):
+            continue
+        matrix = np.array(obj.matrix_world, dtype=np.float64)
+        grid = load_morphing(reflector, matrix, scene, index)
+        if grid is not None:
+            grid.face_images = faces
+            grids.append((grid, matrix))
+    return grids
+
+
 def note_runtime_fallback(error) -> None:
     """Record a ViewOutsideGrid (the view left the grid) for the status line: runtime mode is drawn."""
     _REFLECTOR_STATUS[error.reflector_name] = f"runtime mode: {error.reason}"

@@ -89,6 +89,11 @@ def _morphing_section(layout, scene) -> None:
     bake_line = morph_bake.morph_status(scene, per_reflector=False)
     if bake_line:
         layout.label(text=bake_line, icon='INFO')
+    state = live.state_of(scene)
+    if state is not None and state.renderer is not None and state.renderer.morph.grids:
+        nodes = state.renderer.morph.nodes
+        layout.label(text=f"Nodes on the GPU: {len(nodes)} ({nodes.nbytes / 2 ** 20:.0f} of "
+                          f"{nodes.budget_bytes / 2 ** 20:.0f} MB)", icon='MEMORY')
     for name, mode in morph_bake.reflector_modes(scene):
         layout.label(text=f"{name}: {mode}", icon='LIGHTPROBE_VOLUME' if mode.startswith("morphing") else 'INFO')
 
@@ -130,6 +135,7 @@ class VIEW3D_PT_curved_reflections(bpy.types.Panel):
         morph.active = morphing
         morph.prop(scene_settings, "morph_grid")
         morph.prop(scene_settings, "morph_margin")
+        morph.prop(scene_settings, "morph_gpu_budget_mb")
         if morphing:
             _morphing_section(layout.box(), scene)
 

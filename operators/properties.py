@@ -100,6 +100,12 @@ class CurvedReflectionsSceneSettings(bpy.types.PropertyGroup):
         description="How far the morphing grid reaches beyond the reflector, in reflector sizes",
         default=1.0, min=0.05, soft_max=10.0,
     )
+    morph_gpu_budget_mb: FloatProperty(
+        name="Node Memory (MB)",
+        description="GPU memory for the morphing nodes' images of the scene's vertices; the least "
+                    "recently used nodes are dropped beyond it and projected again when needed",
+        default=256.0, min=8.0, soft_max=4096.0,
+    )
 
 
 classes = (

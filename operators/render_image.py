@@ -139,12 +139,14 @@ def captured_key(captured) -> tuple:
 
 @dataclass
 class FrameState:
-    """What frames of one render keep between them: the capture's key, the method plan
-    and the renderer (shaders, uploaded meshes, reflector maps). Only what changed is
-    made again: moved reflectors are planned again, moved meshes get a new renderer."""
+    """What frames of one render keep between them: the capture's key, the method plan,
+    the loaded morphing grids and the renderer (shaders, uploaded meshes, reflector maps,
+    the grids' node images). Only what changed is made again: moved reflectors are
+    planned again, moved meshes get a new renderer."""
 
     key: tuple = ()
     plan: object = None
+    grids: list = field(default_factory=list)
     renderer: object = None
     frames: int = 0
     reused: int = 0
@@ -156,9 +158,10 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
     """Render ``scene.camera`` at the render resolution with reflections (offscreen).
 
     Each reflector is drawn by the method its mode chooses (:mod:`.methods`): the
-    iterative search on the GPU where it is star-shaped (Auto, Iterative), a sample-based
-    camera of this view otherwise (built only when some reflector or a higher order
-    needs one). Settings not given come from ``scene.curved_reflections``. The band
+    iterative search on the GPU where it is star-shaped (Auto, Iterative), its baked
+    morphing grid where the camera is inside it (Morphing; blended on the GPU), a
+    sample-based camera of this view otherwise (built only when some reflector or a
+    higher order needs one). Settings not given come from ``scene.curved_reflections``. The band
     along each sample-based reflector's visible edge, which its camera cannot reach, is
     ray traced; ``trace_edges`` also traces the mirror pixels next to a drawn reflection
     that got none (see ``gpu_shaders/reflection_draw.py``). ``state`` keeps the
@@ -184,19 +187,24 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
     modes = tuple(methods.mode_of(scene, r.name) for r in captured.reflectors)
     key = captured_key(captured) + (modes, float(accuracy_px), looks)
     if state.plan is None or key[0] != state.key[0] or key[2:4] != state.key[2:4]:
-        state.plan = methods.plan(scene, captured.reflectors, accuracy_px)
+        from .morph_bake import load_grids
+
+        state.grids = load_grids(scene, captured.reflectors)
+        state.plan = methods.plan(scene, captured.reflectors, accuracy_px,
+                                  baked={grid.reflector_name for grid, _ in state.grids})
         state.renderer = None
     if state.renderer is None or key != state.key:
         state.renderer = ReflectionRenderer(captured.reflectors, captured.meshes, iterative=state.plan.iterative,
-                                            **properties)
+                                            morph=state.grids, **properties)
     else:
         state.reused += 1
     state.key = key
     planned_at = time.perf_counter()
     sbc = None
-    if state.plan.iterative:
+    per_frame = state.renderer.per_frame_reflectors(view)
+    if per_frame:
         check_view_outside_reflectors(ReflectorSet(list(captured.reflectors)), view)
-    if len(state.plan.iterative) < len(captured.reflectors) or max_order > 1:
+    if len(per_frame) < len(captured.reflectors) or max_order > 1:
         lo, hi = scene_bounds(captured.reflectors, captured.meshes)
         bounds = scene_bounds(captured.reflectors, captured.meshes, BOUNDS_MARGIN * float(np.linalg.norm(hi - lo)))
         sbc = build_sample_based_camera(captured.reflectors, view, bounds, max_order=max_order,

@@ -23,6 +23,14 @@ does after the view changed (``operators/live.py``):
 Medians over the path's views. On this project's machines the GPU is Mesa llvmpipe
 (the CPU): compare the ratios measured in this one run, not absolute times.
 
+**Morphing rows on the GPU** (``gpu_shaders/morph_pass.py``, what the live view draws
+now): the sbc_fig3 meshes split to about ``--vertices`` drawn vertices, the eye moving
+``--orbit-degrees`` a frame along an arc inside the ball's grid, every node the path
+uses projected once before the clock runs (as the prefetch does), each frame timed as
+the viewport draws it and, apart, the morph pass alone (blend and reflected meshes) and
+the blend alone, against the plain draw; the frames that enter a new tetrahedron are
+counted.
+
 **Iterative rows** (Roger & Holzschuch 2006, ``gpu_shaders/iterative_draw.py``): the
 star-shaped demo scenes with their meshes split to about ``--vertices`` drawn vertices,
 the view orbiting by ``--orbit-degrees`` every frame, each frame timed as the viewport
@@ -233,7 +241,7 @@ def measure_iterative(kind: str, width: int, height: int, target_vertices: int, 
         renderer.iterative.search(view, warm=True)
         gpu.state.depth_test_set('LESS')
         gpu.state.depth_mask_set(True)
-        renderer.iterative.draw(matrix(view), targets.prepass_labels, setup, renderer._image)
+        renderer.meshes.draw(matrix(view), targets.prepass_labels, setup, renderer._image, renderer.iterative.answers())
         gpu.state.depth_test_set('NONE')
         gpu.state.depth_mask_set(False)
 
@@ -301,6 +309,109 @@ def measure_animation(kind: str, frames: int, orbit_degrees: float) -> dict:
     return {"scene": kind, "frames": frames, "ours": ours / frames, "workbench": workbench / frames}
 
 
+def measure_morph_frames(width: int, height: int, target_vertices: int, frames: int, orbit_degrees: float) -> dict:
+    """Per frame of an arc inside the grid: the viewport's draw and the morph pass against a plain draw."""
+    import bpy
+    import gpu
+    from mathutils import Matrix
+
+    from curved_reflections.addon import look_at_view, morphing
+    from curved_reflections.gpu_shaders.morph_source import GPUFaceImages
+    from curved_reflections.gpu_shaders.reflection_draw import ITERATIVE_ORDER_RANGE, ReflectionRenderer
+    from curved_reflections.operators.render_image import reflector_properties, world_color
+
+    scene, _, captured = bench_draw.built_scene("sbc_fig3", width, height)
+    mirror = captured.reflectors[0]
+    matrix = np.array(bpy.data.objects[mirror.name].matrix_world, dtype=np.float64)
+    grid = morphing.grid_on_demand(morphing.reflector_in_frame(mirror, morphing.rigid_frame(matrix)),
+                                   morphing.MorphSettings())
+    grid.face_images = GPUFaceImages()
+    meshes = bench_draw.scaled_meshes(captured.meshes, bench_draw.levels_for(captured, target_vertices))
+    renderer = ReflectionRenderer(captured.reflectors, meshes, polish=False, morph=[(grid, matrix)],
+                                  **reflector_properties(captured.reflectors, scene))
+    g = renderer.geometry
+    world = world_color(scene)
+    centre = mirror.vertices.mean(axis=0)
+    radius = float(np.max(np.linalg.norm(mirror.vertices - centre, axis=1)))
+    eyes = [centre + radius * np.array([2.3 * np.cos(a), 2.3 * np.sin(a), 0.7])
+            for a in np.radians(-100.0 + orbit_degrees * np.arange(frames))]
+    views = [look_at_view(eye, centre, fov_y_deg=45.0, width=width, height=height) for eye in eyes]
+    tetrahedra = [grid.check_view(view, matrix)[0] for view in views]
+    plain = bench_draw.PlainDraw(g)
+    setup = {"inverse_diameter": 1.0 / g.diameter, "order_range": ITERATIVE_ORDER_RANGE}
+    translate = np.eye(4)
+    translate[:3, 3] = g.shift
+
+    def morph_pass(view):
+        renderer.morph.blend(view)
+        gpu.state.depth_test_set('LESS')
+        gpu.state.depth_mask_set(True)
+        view_projection = Matrix((np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix)
+                                  @ translate).tolist())
+        renderer.meshes.draw(view_projection, targets.prepass_labels, setup, renderer._image,
+                             renderer.morph.answers())
+        gpu.state.depth_test_set('NONE')
+        gpu.state.depth_mask_set(False)
+
+    times = {"frame": [], "morph pass": [], "blend": [], "plain": []}
+    offscreen = gpu.types.GPUOffScreen(width, height, format='RGBA16F')
+    try:
+        with offscreen.bind():
+            framebuffer = gpu.state.active_framebuffer_get()
+            targets = renderer.targets(width, height)
+            start = time.perf_counter()
+            for view in views:  # every node of the path projected once (shaders built, nodes on the GPU)
+                renderer.draw(view, None, world, reflectors_only=True)
+            node_seconds = time.perf_counter() - start
+            for view in views:
+                framebuffer.clear(color=(0.0, 0.0, 0.0, 1.0), depth=1.0)
+                times["frame"].append(bench_draw.timed(lambda: renderer.draw(view, None, world, reflectors_only=True),
+                                                       framebuffer))
+                times["morph pass"].append(bench_draw.timed(lambda: morph_pass(view), framebuffer))
+                times["blend"].append(bench_draw.timed(lambda: renderer.morph.blend(view), framebuffer))
+                times["plain"].append(bench_draw.timed(lambda: plain.draw(view), framebuffer))
+        drawn = np.isfinite(renderer.morph.read(0)[..., 0]).any(axis=0).sum()
+    finally:
+        offscreen.free()
+    ms = {name: 1000.0 * statistics.median(values) for name, values in times.items()}
+    return {"width": width, "height": height, "vertices": int(len(g.vertices)), "triangles": int(len(g.triangles)),
+            "frames": frames, "entered": int(sum(a != b for a, b in zip(tetrahedra[1:], tetrahedra[:-1]))),
+            "ms": ms, "nodes": renderer.morph.counts["node_projections"], "node_seconds": node_seconds,
+            "node_mb": renderer.morph.nodes.nbytes / 2 ** 20, "answered": int(drawn)}
+
+
+MORPH_HEADING = "## Morphing mode on the GPU (blend every frame)"
+
+
+def morph_report(r: dict, command: str) -> list:
+    ms = r["ms"]
+    return [
+        MORPH_HEADING, "",
+        f"Generated {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC by `{command}` on "
+        f"{bench_draw._machine()}.", "",
+        f"sbc_fig3, its meshes split to {r['vertices']:,} drawn vertices ({r['triangles']:,} triangles), "
+        f"{r['width']}x{r['height']}, the eye moving along an arc inside the default 9x9x5 grid for "
+        f"{r['frames']} frames, {r['entered']} of which enter a new tetrahedron (their nodes already on the "
+        f"GPU, as the prefetch leaves them). The {r['nodes']} nodes of the path were projected once before "
+        f"the clock ran ({r['node_seconds']:.1f} s with the node cameras' builds, {r['node_mb']:.0f} MB on "
+        "the GPU). Milliseconds, medians over the frames; *frame* is what the viewport draws (pre-pass, "
+        "blend, reflected meshes, composite), *morph pass* the blend and the reflected meshes alone:", "",
+        "| frame ms | morph pass ms | of which blend ms | plain ms | pass / plain | blend / plain | "
+        "frame / plain | vertices with an image |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|",
+        f"| {ms['frame']:.1f} | {ms['morph pass']:.1f} | {ms['blend']:.1f} | {ms['plain']:.1f} | "
+        f"**{ms['morph pass'] / ms['plain']:.2f}x** | {ms['blend'] / ms['plain']:.2f}x | "
+        f"{ms['frame'] / ms['plain']:.2f}x | {r['answered']:,} |", ""]
+
+
+def replace_section(text: str, heading: str, section: list) -> str:
+    """``text`` with the section under ``heading`` (up to the next ``## `` heading)
+    replaced by ``section``, or appended."""
+    before, found, after = text.partition(heading)
+    rest = after[after.find("\n## "):] if found and "\n## " in after else ""
+    return before.rstrip() + "\n\n" + "\n".join(section).rstrip() + "\n" + rest
+
+
 ITERATIVE_HEADING = "## Iterative mode (GPU search every frame)"
 
 
@@ -345,6 +456,7 @@ def parse_args(argv):
     parser.add_argument("--frames", type=int, default=24, help="frames of the Iterative rows and the animation")
     parser.add_argument("--orbit-degrees", type=float, default=2.0, help="view turn per frame (Iterative rows)")
     parser.add_argument("--iterative-only", action="store_true", help="only the Iterative rows and the animation")
+    parser.add_argument("--morph-only", action="store_true", help="only the Morphing rows on the GPU")
     parser.add_argument("--quick", action="store_true", help="small: 160x120, 2 arcs of 3 views")
     args = parser.parse_args(argv)
     if args.quick:
@@ -358,21 +470,30 @@ def main(argv=None) -> int:
     args = parse_args(argv)
     bench_sbc.import_package()
     command = " ".join([".venv/bin/python", "tests/benchmarks/bench_view_change.py"] + [shlex.quote(a) for a in argv])
+    previous = args.out.read_text(encoding="utf-8") if args.out.exists() else "# Cost of a view change\n"
+    morph = morph_report(measure_morph_frames(args.width, args.height, args.vertices, args.frames,
+                                              args.orbit_degrees), command)
+    if args.morph_only:
+        return _write(args.out, replace_section(previous, MORPH_HEADING, morph))
     rows = [measure_iterative(kind, args.width, args.height, args.vertices, args.frames, args.orbit_degrees)
             for kind in ITERATIVE_SCENES]
     animations = [measure_animation(kind, args.frames, args.orbit_degrees) for kind in ITERATIVE_SCENES]
     if args.iterative_only:
         # The Iterative section of the report in ``--out`` is replaced, the rest kept.
         generated = f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M}"
-        previous = args.out.read_text(encoding="utf-8") if args.out.exists() else "# Cost of a view change\n"
-        text = previous.split(ITERATIVE_HEADING)[0].rstrip() + "\n\n" + "\n".join(
-            [ITERATIVE_HEADING, "", f"Generated {generated} UTC by `{command}` on {bench_draw._machine()}.", ""]
+        text = replace_section(previous, ITERATIVE_HEADING, [
+            ITERATIVE_HEADING, "", f"Generated {generated} UTC by `{command}` on {bench_draw._machine()}.", ""]
             + iterative_report(rows, animations)[1:])
     else:
         result = measure(args.width, args.height, args.steps, args.jumps)
-        text = report(result, command, bench_draw._machine()) + "\n" + "\n".join(iterative_report(rows, animations))
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text, encoding="utf-8")
+        text = (report(result, command, bench_draw._machine()) + "\n" + "\n".join(morph) + "\n"
+                + "\n".join(iterative_report(rows, animations)))
+    return _write(args.out, text)
+
+
+def _write(path: Path, text: str) -> int:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text, encoding="utf-8")
     print(text)
     return 0
 

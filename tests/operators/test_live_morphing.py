@@ -83,3 +83,37 @@ def test_morphing_draws_inside_its_grid_and_runtime_outside(fig3_morphing):
     assert state.grids == [] and state.cameras["near"].sbc is not None
     assert morph_bake.reflector_modes(scene) == []
     np.testing.assert_allclose(_draw(scene, near, "near")[1], runtime, atol=1e-6)
+
+
+def test_render_image_draws_from_the_grid_on_the_gpu(fig3_morphing):
+    """Render Image in Morphing mode, the scene camera inside the grid: no camera is built,
+    the grid is blended on the GPU, and the image is the Runtime mode's but for a few
+    per cent of its pixels; a second frame keeps the renderer and the nodes' images."""
+    from mathutils import Vector
+
+    from curved_reflections.operators.render_image import FrameState, render_scene
+
+    scene = fig3_morphing
+    scene.curved_reflections.max_order = 1  # a second order would need a camera
+    mirror, near, _ = _views()
+    camera = scene.camera
+    camera.location = Vector(near.eye)
+    camera.rotation_euler = (Vector(mirror.matrix_world.translation) - camera.location).to_track_quat(
+        '-Z', 'Y').to_euler()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    runtime = render_scene(scene, depsgraph)
+    assert runtime.stats["n_rays"] > 100
+
+    mirror.curved_reflections.mode = 'MORPHING'
+    state = FrameState()
+    morphed = render_scene(scene, bpy.context.evaluated_depsgraph_get(), state=state)
+    assert morphed.stats["methods"] == {"MirrorSphere": "MORPHING"}
+    assert "n_rays" not in morphed.stats  # no camera built (the on-demand grid builds its nodes meanwhile)
+    assert state.renderer.morph.counts == {"blends": 1, "node_projections": 4}
+    # The test grid is coarse (48-pixel faces, 7 x 7 x 5 nodes): measured, 4.7 % of the
+    # image (the ball fills about half of it) differs from the runtime camera's.
+    differing = np.abs(morphed.image[..., :3] - runtime.image[..., :3]).max(axis=2) > 0.05
+    assert differing.mean() < 0.06
+    camera.location.x += 0.01
+    render_scene(scene, bpy.context.evaluated_depsgraph_get(), state=state)
+    assert state.reused == 1 and state.renderer.morph.counts["blends"] == 2

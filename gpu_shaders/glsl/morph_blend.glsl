@@ -1,0 +1,307 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later */
+/* Reflection morphing on the GPU, compute stage (gpu_shaders/morph_pass.py): the float32
+ * twin of MorphingGrid._matched_images and MorphingGrid._blend (addon/morphing.py), one
+ * invocation per diffuse vertex, every frame.
+ *
+ * SBC paper (Popescu, Sacks, Mei 2006) section VI: the four nodes of the tetrahedron
+ * holding the eye have each projected the vertex once (their first reflector points,
+ * `node0` .. `node3`, kept while the diffuse geometry stays: SLOTS regular images, then
+ * SLOTS images of the widened leaf charts, in the grid's rigid frame). Per frame:
+ *   1. the reference images are those of the heaviest node that has any; every node's
+ *      image nearest to each reference image within `match_distance` is its match, from
+ *      its widened charts where its regular images have none (remedy 2);
+ *   2. the matches are blended with the eye's barycentric weights (`weights`), the
+ *      weights of missing nodes left out where the others weigh PARTIAL_WEIGHT or more;
+ *   3. our refinement: a quadratic height field fitted to the nodes' reflector points and
+ *      the normals the law of reflection gives them (refine_on_local_surface), and
+ *      Newton's method for the point of it whose normal bisects the directions to the
+ *      eye and to the vertex; the Jacobian is analytic here (float32 has no room for the
+ *      numpy twin's finite differences);
+ *   4. the answer faces the eye and the vertex, and lies between the view's near and far
+ *      planes.
+ * Output: one texel per vertex and image slot, (reflector point relative to the
+ * renderer's shift, FOUND_CODE or 0), read by iterative_mesh_vert.glsl. */
+
+/* Push constants: n_vertices, positions_width and slot_rows (rows of one slot in a node
+ * texture). The view's parameters, 18 texels of `frame_params` (push constants stay
+ * within 128 bytes): the columns of frame_from_shifted and shifted_from_frame (the grid's
+ * rigid frame and the renderer's shift), of view_projection (of shifted points) and of
+ * node_eyes (the four nodes' positions in the frame); weights; the eye in the frame and
+ * match_distance. */
+mat4 frame_from_shifted;
+mat4 shifted_from_frame;
+mat4 view_projection;
+mat4 node_eyes;
+vec4 weights;
+vec3 eye;
+float match_distance;
+
+mat4 param_matrix(int first)
+{
+  return mat4(texelFetch(frame_params, ivec2(first, 0), 0), texelFetch(frame_params, ivec2(first + 1, 0), 0),
+              texelFetch(frame_params, ivec2(first + 2, 0), 0), texelFetch(frame_params, ivec2(first + 3, 0), 0));
+}
+
+void load_params()
+{
+  frame_from_shifted = param_matrix(0);
+  shifted_from_frame = param_matrix(4);
+  view_projection = param_matrix(8);
+  node_eyes = param_matrix(12);
+  weights = texelFetch(frame_params, ivec2(16, 0), 0);
+  vec4 e = texelFetch(frame_params, ivec2(17, 0), 0);
+  eye = e.xyz;
+  match_distance = e.w;
+}
+
+vec4 node_image(int n, int slot, ivec2 texel)
+{
+  ivec2 at = ivec2(texel.x, texel.y + slot * slot_rows);
+  if (n == 0) {
+    return texelFetch(node0, at, 0);
+  }
+  if (n == 1) {
+    return texelFetch(node1, at, 0);
+  }
+  if (n == 2) {
+    return texelFetch(node2, at, 0);
+  }
+  return texelFetch(node3, at, 0);
+}
+
+vec3 unit(vec3 v)
+{
+  return v / max(length(v), 1e-30);
+}
+
+/* The nearest present image of slots [first, first + SLOTS) of `images` to `reference`
+ * within match_distance; w 0 where none. */
+vec4 nearest(vec4 images[2 * SLOTS], int first, vec3 reference)
+{
+  float best = 1e30;
+  vec4 chosen = vec4(0.0);
+  for (int j = first; j < first + SLOTS; j++) {
+    float d = distance(images[j].xyz, reference);
+    if (images[j].w > 0.5 && d < best) {
+      best = d;
+      chosen = images[j];
+    }
+  }
+  return best <= match_distance ? chosen : vec4(0.0);
+}
+
+/* Solves the 6x6 normal equations m x = b in place (m symmetric positive definite: a sum
+ * of row outer products plus a small diagonal) by Cholesky factorisation; every loop has
+ * constant bounds, so the compiler can keep the arrays in registers. */
+void solve6(inout float m[36], inout float b[6])
+{
+  for (int j = 0; j < 6; j++) {
+    float d = m[j * 6 + j];
+    for (int k = 0; k < j; k++) {
+      d -= m[j * 6 + k] * m[j * 6 + k];
+    }
+    d = sqrt(max(d, 1e-30));
+    m[j * 6 + j] = d;
+    for (int i = j + 1; i < 6; i++) {
+      float s = m[i * 6 + j];
+      for (int k = 0; k < j; k++) {
+        s -= m[i * 6 + k] * m[j * 6 + k];
+      }
+      m[i * 6 + j] = s / d;
+    }
+  }
+  for (int i = 0; i < 6; i++) {
+    float s = b[i];
+    for (int k = 0; k < i; k++) {
+      s -= m[i * 6 + k] * b[k];
+    }
+    b[i] = s / m[i * 6 + i];
+  }
+  for (int i = 5; i >= 0; i--) {
+    float s = b[i];
+    for (int k = i + 1; k < 6; k++) {
+      s -= m[k * 6 + i] * b[k];
+    }
+    b[i] = s / m[i * 6 + i];
+  }
+}
+
+/* Adds the equation row . c = value to the normal equations m c = b. */
+void add_row(inout float m[36], inout float b[6], float row[6], float value)
+{
+  for (int i = 0; i < 6; i++) {
+    for (int j = 0; j < 6; j++) {
+      m[i * 6 + j] += row[i] * row[j];
+    }
+    b[i] += row[i] * value;
+  }
+}
+
+/* The surface point for chart (u, v): position, and the unnormalised tangents. */
+vec3 surface_point(float c[6], vec3 origin, float spread, vec3 t1, vec3 t2, vec3 n, vec2 uv)
+{
+  float h = c[0] + c[1] * uv.x + c[2] * uv.y + 0.5 * c[3] * uv.x * uv.x + c[4] * uv.x * uv.y
+            + 0.5 * c[5] * uv.y * uv.y;
+  return origin + spread * (uv.x * t1 + uv.y * t2 + h * n);
+}
+
+/* (I - d d^T) v / length, the derivative of unit(target - x) along -v, for the two
+ * directions of the bisector. */
+vec3 bisector_derivative(vec3 to_eye, float eye_length, vec3 to_point, float point_length, vec3 v)
+{
+  return (v - to_eye * dot(to_eye, v)) / eye_length + (v - to_point * dot(to_point, v)) / point_length;
+}
+
+void main()
+{
+  int index = int(gl_GlobalInvocationID.y) * positions_width + int(gl_GlobalInvocationID.x);
+  if (int(gl_GlobalInvocationID.x) >= positions_width || index >= n_vertices) {
+    return;
+  }
+  ivec2 texel = ivec2(gl_GlobalInvocationID.xy);
+  load_params();
+  vec3 p = (frame_from_shifted * vec4(texelFetch(vertex_positions, texel, 0).xyz, 1.0)).xyz;
+
+  vec4 images[4][2 * SLOTS];
+  int reference = -1;
+  float heaviest = -1.0;
+  for (int n = 0; n < 4; n++) {
+    bool has = false;
+    for (int s = 0; s < 2 * SLOTS; s++) {
+      images[n][s] = node_image(n, s, texel);
+      has = has || (s < SLOTS && images[n][s].w > 0.5);
+    }
+    if (has && weights[n] > heaviest) {
+      heaviest = weights[n];
+      reference = n;
+    }
+  }
+
+  for (int k = 0; k < SLOTS; k++) {
+    vec4 answer = vec4(0.0);
+    vec4 own = reference >= 0 ? images[reference][k] : vec4(0.0);
+    if (own.w > 0.5) {
+      vec3 matched[4];
+      float w[4];
+      bool present[4];
+      bool all_present = true;
+      float total = 0.0;
+      vec3 blended = vec3(0.0);
+      for (int n = 0; n < 4; n++) {
+        vec4 found = nearest(images[n], 0, own.xyz);
+        if (found.w < 0.5) {
+          found = nearest(images[n], SLOTS, own.xyz);
+        }
+        matched[n] = found.xyz;
+        present[n] = found.w > 0.5;
+        w[n] = present[n] ? weights[n] : 0.0;
+        all_present = all_present && found.w > 0.5;
+        total += w[n];
+        blended += w[n] * found.xyz;
+      }
+      bool usable = all_present || total >= PARTIAL_WEIGHT;
+      blended /= max(total, 1e-30);
+
+      /* refine_on_local_surface */
+      vec3 origin = blended;
+      vec3 normals[4];
+      vec3 normal = vec3(0.0);
+      for (int n = 0; n < 4; n++) {
+        normals[n] = unit(unit(node_eyes[n].xyz - matched[n]) + unit(p - matched[n]));
+        normal += w[n] * normals[n];
+      }
+      normal = unit(normal);
+      int n_usable = 0;
+      bool use[4];
+      for (int n = 0; n < 4; n++) {
+        use[n] = present[n] && dot(normals[n], normal) > SURFACE_NORMAL_MIN;
+        n_usable += use[n] ? 1 : 0;
+      }
+      bool ok = false;
+      vec3 fitted_normal = normal;
+      if (n_usable >= MIN_SURFACE_NODES) {
+        vec3 helper = abs(normal.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0);
+        vec3 t1 = unit(cross(normal, helper));
+        vec3 t2 = cross(normal, t1);
+        float spread = 0.0;
+        for (int n = 0; n < 4; n++) {
+          vec3 o = matched[n] - origin;
+          if (present[n]) {
+            spread = max(spread, dot(o, t1) * dot(o, t1) + dot(o, t2) * dot(o, t2));
+          }
+        }
+        spread = max(sqrt(spread), 1e-12);
+        float m[36];
+        float c[6];
+        for (int i = 0; i < 36; i++) {
+          m[i] = i % 7 == 0 ? 1e-10 : 0.0;
+        }
+        for (int i = 0; i < 6; i++) {
+          c[i] = 0.0;
+        }
+        for (int n = 0; n < 4; n++) {
+          if (!use[n]) {
+            continue;
+          }
+          vec3 o = (matched[n] - origin) / spread;
+          float a = dot(o, t1), b = dot(o, t2), nz = dot(normals[n], normal);
+          add_row(m, c, float[6](1.0, a, b, 0.5 * a * a, a * b, 0.5 * b * b), dot(o, normal));
+          add_row(m, c, float[6](0.0, 1.0, 0.0, a, b, 0.0), -dot(normals[n], t1) / nz);
+          add_row(m, c, float[6](0.0, 0.0, 1.0, 0.0, a, b), -dot(normals[n], t2) / nz);
+        }
+        solve6(m, c);
+
+        vec2 uv = vec2(0.0);
+        vec2 residual = vec2(0.0);
+        for (int iteration = 0; iteration <= SURFACE_ITERATIONS; iteration++) {
+          vec3 x = surface_point(c, origin, spread, t1, t2, normal, uv);
+          vec3 ta = t1 + (c[1] + c[3] * uv.x + c[4] * uv.y) * normal;
+          vec3 tb = t2 + (c[2] + c[4] * uv.x + c[5] * uv.y) * normal;
+          vec3 to_eye = eye - x, to_point = p - x;
+          float le = max(length(to_eye), 1e-30), lp = max(length(to_point), 1e-30);
+          to_eye /= le;
+          to_point /= lp;
+          vec3 bisector = to_eye + to_point;
+          residual = vec2(dot(bisector, ta), dot(bisector, tb));
+          if (iteration == SURFACE_ITERATIONS) {
+            fitted_normal = unit(cross(ta, tb));
+            x = surface_point(c, origin, spread, t1, t2, normal, uv);
+            ok = max(abs(residual.x), abs(residual.y)) < SURFACE_RESIDUAL && dot(uv, uv) <= SURFACE_REACH * SURFACE_REACH
+                 && !any(isnan(x)) && !any(isinf(x));
+            if (ok) {
+              blended = x;
+            }
+            break;
+          }
+          vec3 d_bu = -spread * bisector_derivative(to_eye, le, to_point, lp, ta);
+          vec3 d_bv = -spread * bisector_derivative(to_eye, le, to_point, lp, tb);
+          float bn = dot(bisector, normal);
+          mat2 jacobian = mat2(dot(d_bu, ta) + bn * c[3], dot(d_bu, tb) + bn * c[4],
+                               dot(d_bv, ta) + bn * c[4], dot(d_bv, tb) + bn * c[5]);
+          float det = determinant(jacobian);
+          if (abs(det) < 1e-30) {
+            break;
+          }
+          uv = clamp(uv - inverse(jacobian) * residual, vec2(-4.0), vec2(4.0));
+        }
+        fitted_normal *= dot(fitted_normal, normal) < 0.0 ? -1.0 : 1.0;
+      }
+      usable = usable && (all_present || ok);
+      vec3 facing = ok ? fitted_normal : normal;
+      usable = usable && dot(facing, eye - blended) > 0.0 && dot(facing, p - blended) > 0.0;
+      vec3 world = (shifted_from_frame * vec4(blended, 1.0)).xyz;
+      vec4 clip = view_projection * vec4(world, 1.0);
+      usable = usable && clip.w > 0.0 && abs(clip.z) <= clip.w && !any(isnan(world));
+      answer = usable ? vec4(world, float(FOUND_CODE)) : vec4(0.0);
+    }
+    if (k == 0) {
+      imageStore(result0, texel, answer);
+    }
+    else if (k == 1) {
+      imageStore(result1, texel, answer);
+    }
+    else {
+      imageStore(result2, texel, answer);
+    }
+  }
+}

@@ -1,0 +1,267 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Reflection morphing every frame on the GPU (SBC paper VI).
+
+Popescu, Sacks, Mei (2006), section VI: the projections of the scene's (static) vertices
+by the panoramic sample-based cameras at the grid's nodes are computed once, and each
+frame blends those of the four nodes of the tetrahedron holding the eye. Here that split
+is literal:
+
+- **once per node** (while the diffuse geometry and the reflector's rigid frame stay): a
+  node's images of every vertex, its first :data:`SLOTS` regular ones and as many from
+  its widened leaf charts (``MorphingGrid.node_slots``; the cube faces project on the
+  GPU, ``morph_source.GPUFaceImages``), kept on the GPU as one texture per node
+  (:class:`NodeTextures`, least recently used first out beyond a budget in MB);
+- **every frame**: where the eye is (``MorphingGrid.check_view``: a lookup in the grid),
+  then one compute dispatch per grid (``glsl/morph_blend.glsl``, the float32 twin of
+  ``MorphingGrid._matched_images`` and ``_blend``) matches and blends the four nodes'
+  images and refines them on the local surface, into one answer texture per image slot,
+  and the reflected meshes are drawn from those (``reflected_meshes.ReflectedMeshes``,
+  as the iterative search's). Entering a tetrahedron whose nodes are on the GPU costs
+  the CPU nothing but the uniforms; a missing node is projected when first needed, and
+  :meth:`MorphPass.prefetch` projects those around the eye ahead of time.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections import OrderedDict
+
+import numpy as np
+
+from ..addon import morphing
+from .reflected_meshes import FOUND_CODE, ReflectedMeshes, glsl_source
+
+#: Image slots per vertex and grid: a convex mirror shows a point once, a concave one
+#: two or three times.
+SLOTS = 3
+#: Invocations per work group of the blend (along x).
+LOCAL_SIZE = 64
+#: GPU memory for node images, by default (the scene's ``morph_gpu_budget_mb``).
+DEFAULT_BUDGET_MB = 256.0
+#: The float32 blend's bound on the reflection law's residual on the fitted surface (the
+#: numpy twin asks 1e-8 of float64 Newton steps; float32 reaches about 1e-7).
+SURFACE_RESIDUAL = 1e-5
+#: Texels of the per-frame parameters (``glsl/morph_blend.glsl``'s ``frame_params``).
+PARAM_TEXELS = 18
+
+
+def blend_defines() -> dict:
+    """The engine's constants, as the blend shader's ``#define`` s."""
+    m = morphing
+    return {"SLOTS": SLOTS, "PARTIAL_WEIGHT": f"{m.PARTIAL_WEIGHT:.9e}",
+            "SURFACE_NORMAL_MIN": f"{m.SURFACE_NORMAL_MIN:.9e}", "MIN_SURFACE_NODES": m.MIN_SURFACE_NODES,
+            "SURFACE_ITERATIONS": m.SURFACE_ITERATIONS, "SURFACE_REACH": f"{m.SURFACE_REACH:.9e}",
+            "SURFACE_RESIDUAL": f"{SURFACE_RESIDUAL:.9e}", "FOUND_CODE": FOUND_CODE}
+
+
+@functools.cache
+def blend_shader():
+    """The compute shader of the blend, built on first use."""
+    import gpu
+
+    info = gpu.types.GPUShaderCreateInfo()
+    info.push_constant('INT', "n_vertices")
+    info.push_constant('INT', "positions_width")
+    info.push_constant('INT', "slot_rows")
+    info.sampler(0, 'FLOAT_2D', "vertex_positions")
+    info.sampler(1, 'FLOAT_2D', "frame_params")
+    for n in range(4):
+        info.sampler(2 + n, 'FLOAT_2D', f"node{n}")
+    for k in range(SLOTS):
+        info.image(k, 'RGBA32F', 'FLOAT_2D', f"result{k}", qualifiers={'WRITE'})
+    info.local_group_size(LOCAL_SIZE, 1)
+    info.compute_source(glsl_source("morph_blend.glsl", blend_defines()))
+    return gpu.shader.create_from_info(info)
+
+
+def _translation(offset) -> np.ndarray:
+    matrix = np.eye(4)
+    matrix[:3, 3] = offset
+    return matrix
+
+
+def node_texels(slots: np.ndarray, width: int, rows: int) -> np.ndarray:
+    """(2 SLOTS rows, width, 4) float32 image of a node's (P, 2 SLOTS, 3) images: slot s
+    in rows s * rows .. (s + 1) * rows - 1, texel (x, y, z, 1) where the image exists."""
+    n_points, n_slots = slots.shape[:2]
+    texels = np.zeros((n_slots, rows * width, 4), np.float32)
+    present = np.isfinite(slots[..., 0]).T  # (slots, P)
+    texels[:, :n_points, :3] = np.nan_to_num(slots.transpose(1, 0, 2))
+    texels[:, :n_points, 3] = present
+    return texels.reshape(n_slots * rows, width, 4)
+
+
+class NodeTextures:
+    """Node images of one renderer's vertices on the GPU, for every grid of a
+    :class:`MorphPass`: key (grid, node) -> texture, the least recently used dropped
+    first once they pass ``budget_mb``."""
+
+    def __init__(self, budget_mb: float = DEFAULT_BUDGET_MB):
+        self.budget_bytes = int(budget_mb * 2 ** 20)
+        self._textures: OrderedDict = OrderedDict()  # key -> (texture, bytes)
+        self.nbytes = 0
+        self.evictions = 0
+
+    def __contains__(self, key) -> bool:
+        return key in self._textures
+
+    def __len__(self) -> int:
+        return len(self._textures)
+
+    def get(self, key):
+        texture, size = self._textures.pop(key)
+        self._textures[key] = (texture, size)  # most recently used last
+        return texture
+
+    def put(self, key, texels: np.ndarray, keep=()) -> None:
+        """Upload ``texels`` under ``key``; drop the least recently used (but ``keep``)
+        while over the budget."""
+        from .reflection_draw import _data_texture
+
+        self._textures[key] = (_data_texture(texels), texels.nbytes)
+        self.nbytes += texels.nbytes
+        for old in list(self._textures):
+            if self.nbytes <= self.budget_bytes:
+                break
+            if old == key or old in keep:
+                continue
+            self.nbytes -= self._textures.pop(old)[1]
+            self.evictions += 1
+
+    def drop(self, grid_index: int) -> None:
+        """Forget one grid's nodes (its reflector moved: its images are stale)."""
+        for key in [k for k in self._textures if k[0] == grid_index]:
+            self.nbytes -= self._textures.pop(key)[1]
+
+
+class MorphPass:
+    """The morphing grids' GPU side for one renderer's reflected geometry: ``grids`` are
+    (``MorphingGrid``, the reflector's object matrix) pairs, ``meshes`` the renderer's
+    :class:`.reflected_meshes.ReflectedMeshes` (made here when not given)."""
+
+    def __init__(self, geometry, grids, meshes: ReflectedMeshes | None = None,
+                 budget_mb: float = DEFAULT_BUDGET_MB):
+        self.geometry = geometry
+        self.grids = list(grids)
+        self.meshes = meshes if meshes is not None else ReflectedMeshes(geometry)
+        self.nodes = NodeTextures(budget_mb)
+        self._frames = [None] * len(self.grids)  # the rigid frame each grid's node images were made in
+        self._results: dict = {}  # grid index -> [answer texture per slot]
+        self._drawn: list = []  # grid indices blended by the last blend()
+        self.counts = {"blends": 0, "node_projections": 0}
+
+    @property
+    def reflector_indices(self) -> list:
+        return [grid.reflector_index for grid, _ in self.grids]
+
+    def covering(self, view) -> list:
+        """(grid index, (tetrahedron, nodes, weights, frame)) of each grid whose
+        reflector ``view`` can be drawn from (``MorphingGrid.check_view``)."""
+        found = []
+        for k, (grid, matrix) in enumerate(self.grids):
+            try:
+                found.append((k, grid.check_view(view, matrix)))
+            except morphing.ViewOutsideGrid:
+                continue
+        return found
+
+    def _points_in_frame(self, frame: np.ndarray) -> np.ndarray:
+        return morphing.to_frame(frame, self.geometry.vertices)
+
+    def _node_texture(self, k: int, node: int, frame: np.ndarray, keep=()):
+        """Grid ``k``'s node ``node`` images on the GPU, projected now when missing."""
+        if self._frames[k] is None or not np.array_equal(self._frames[k], frame):
+            self.nodes.drop(k)
+            self._frames[k] = frame
+        key = (k, int(node))
+        if key not in self.nodes:
+            grid = self.grids[k][0]
+            slots = grid.node_slots(int(node), self._points_in_frame(frame), SLOTS)
+            self.nodes.put(key, node_texels(slots, self.meshes.width, self.meshes.height), keep)
+            self.counts["node_projections"] += 1
+        return self.nodes.get(key)
+
+    def blend(self, view, skip=frozenset()) -> list:
+        """This frame's blend for every grid covering ``view`` (one dispatch each) but
+        those of the reflectors in ``skip``; returns the reflector indices drawn from a
+        grid in this view."""
+        import gpu
+
+        from .reflection_draw import _data_texture
+
+        self._drawn = []
+        if self.meshes.n_vertices == 0 or not self.grids:
+            return []
+        shift = self.geometry.shift
+        view_projection = (np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix)
+                           @ _translation(shift))
+        shader = blend_shader()
+        for k, (_, nodes, weights, frame) in self.covering(view):
+            grid = self.grids[k][0]
+            if grid.reflector_index in skip:
+                continue
+            keep = {(k, int(n)) for n in nodes}
+            textures = [self._node_texture(k, n, frame, keep) for n in nodes]
+            if k not in self._results:
+                self._results[k] = [self.meshes.answer_texture() for _ in range(SLOTS)]
+            frame_inverse = np.linalg.inv(frame)
+            eyes = np.eye(4)
+            eyes[:3, :] = grid.grid.node_positions()[np.asarray(nodes)].T
+            eye = morphing.to_frame(frame, view.eye[None])[0]
+            params = [frame_inverse @ _translation(shift), _translation(-shift) @ frame, view_projection, eyes]
+            texels = np.concatenate([m.T for m in params] + [np.asarray(weights, np.float64)[None],
+                                     np.r_[eye, morphing.MATCH_FRACTION * grid.reflector_size][None]])
+            frame_params = _data_texture(texels, PARAM_TEXELS)
+            shader.bind()
+            shader.uniform_int("n_vertices", self.meshes.n_vertices)
+            shader.uniform_int("positions_width", self.meshes.width)
+            shader.uniform_int("slot_rows", self.meshes.height)
+            shader.uniform_sampler("vertex_positions", self.meshes.positions)
+            shader.uniform_sampler("frame_params", frame_params)
+            for n, texture in enumerate(textures):
+                shader.uniform_sampler(f"node{n}", texture)
+            for slot, texture in enumerate(self._results[k]):
+                shader.image(f"result{slot}", texture)
+            gpu.compute.dispatch(shader, *self.meshes.work_groups(LOCAL_SIZE))
+            self._drawn.append(k)
+        self.counts["blends"] += 1
+        return [self.grids[k][0].reflector_index for k in self._drawn]
+
+    def prefetch(self, view, max_nodes: int = 1) -> int:
+        """Project up to ``max_nodes`` nodes not yet on the GPU around each covering
+        grid's eye (the 4 x 4 x 4 nodes of its cell and the cells beside it, nearest
+        first), so that moving on rarely waits; returns how many were projected."""
+        done = 0
+        for k, (_, nodes, _, frame) in self.covering(view):
+            grid = self.grids[k][0].grid
+            positions = grid.node_positions()
+            eye = morphing.to_frame(frame, view.eye[None])[0]
+            cell = np.clip(np.floor((eye - grid.lo) / grid.spacing).astype(np.int64), 0, np.asarray(grid.shape) - 2)
+            offsets = np.stack(np.meshgrid(*[np.arange(-1, 3)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+            around = np.unique(grid.node_index(np.clip(cell + offsets, 0, np.asarray(grid.shape) - 1)))
+            around = around[np.argsort(np.linalg.norm(positions[around] - eye, axis=1), kind="stable")]
+            status = self.grids[k][0].node_status
+            keep = {(k, int(n)) for n in nodes}
+            for node in around:
+                if done >= max_nodes:
+                    return done
+                if (k, int(node)) in self.nodes or status[node] != morphing.NODE_OK:
+                    continue
+                if len(self.nodes) and self.nodes.nbytes + self._node_bytes() > self.nodes.budget_bytes:
+                    return done  # a prefetch never evicts
+                self._node_texture(k, int(node), frame, keep)
+                done += 1
+        return done
+
+    def _node_bytes(self) -> int:
+        return 2 * SLOTS * self.meshes.width * self.meshes.height * 16
+
+    def answers(self) -> list:
+        """(reflector index, answer texture) per image slot of the last blend."""
+        return [(self.grids[k][0].reflector_index, texture) for k in self._drawn for texture in self._results[k]]
+
+    def read(self, reflector_index: int) -> np.ndarray:
+        """(SLOTS, N, 3) world points of the last blend of a reflector's grid, NaN where
+        a vertex has no image in a slot (tests, benchmarks)."""
+        k = next(k for k in self._drawn if self.grids[k][0].reflector_index == reflector_index)
+        return np.stack([self.meshes.read(texture)[0] for texture in self._results[k]])

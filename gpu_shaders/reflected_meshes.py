@@ -1,0 +1,152 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Reflected meshes placed from per-vertex answers computed on the GPU every frame.
+
+The methods that answer on the GPU each frame (the iterative search,
+``iterative_draw.py``; reflection morphing, ``morph_pass.py``) write one *answer texel*
+per diffuse vertex and reflector: (the vertex's first reflector point relative to the
+renderer's shift, a code whose value modulo 16 is :data:`FOUND_CODE` where there is an
+answer). :class:`ReflectedMeshes` holds what they share, uploaded once per geometry: the
+vertices as a float texture (what the compute stages read) and the indexed reflected
+meshes with their shading data; :meth:`ReflectedMeshes.draw` draws the meshes of each
+answer texture with ``glsl/iterative_mesh_vert.glsl`` (a vertex at its answer, a triangle
+with an unanswered corner discarded) and the sample-based camera's fragment stage.
+"""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+
+import numpy as np
+
+from ..addon.methods.iterative import search as search_module
+
+_GLSL = Path(__file__).resolve().parent / "glsl"
+#: Texels per row of the vertex and answer textures.
+TEXTURE_WIDTH = 4096
+#: A reflected fragment is kept only where the interpolated validity of its triangle's
+#: corners reaches this: 1 inside triangles whose corners all have an answer, below it
+#: everywhere else but within 1e-4 of an edge's length from a valid corner.
+VALID_THRESHOLD = 0.9999
+#: An answer texel's code for a found answer: (FOUND + 8) + 16 steps, modulo 16 (the
+#: iterative search's status and step count; morphing writes FOUND_CODE itself).
+FOUND_CODE = search_module.FOUND + 8
+
+
+def glsl_source(name: str, defines: dict) -> str:
+    """``glsl/<name>`` behind ``#define`` lines of ``defines``."""
+    lines = [f"#define {key} {value}" for key, value in defines.items()]
+    return "\n".join(lines) + "\n" + (_GLSL / name).read_text(encoding="utf-8")
+
+
+@functools.cache
+def reflected_shader():
+    """The reflected meshes' shader, built on first use (fragment stage shared with the
+    sample-based camera's reflected meshes)."""
+    import gpu
+
+    from .reflection_draw import reflected_fragment_source, reflected_interface
+
+    interface = reflected_interface("curved_reflections_iterative_interface", searched=True)
+    info = gpu.types.GPUShaderCreateInfo()
+    info.push_constant('MAT4', "view_projection")
+    info.push_constant('INT', "result_width")
+    info.push_constant('FLOAT', "inverse_diameter")
+    info.push_constant('FLOAT', "order_range")
+    info.push_constant('FLOAT', "reflector_id")
+    info.push_constant('INT', "use_image")
+    info.sampler(0, 'FLOAT_2D', "search_result")
+    info.sampler(1, 'FLOAT_2D', "vertex_positions")
+    info.sampler(2, 'FLOAT_2D', "prepass_labels")
+    info.sampler(3, 'FLOAT_2D', "image")
+    info.vertex_in(0, 'INT', "vertex_index")
+    info.vertex_in(1, 'VEC4', "color")
+    info.vertex_in(2, 'VEC4', "normal_lit")
+    info.vertex_in(3, 'VEC2', "uv")
+    info.vertex_out(interface)
+    info.fragment_out(0, 'VEC4', "color_out")
+    info.vertex_source(glsl_source("iterative_mesh_vert.glsl", {"FOUND_CODE": FOUND_CODE}))
+    info.fragment_source(reflected_fragment_source(f"#define SEARCHED\n#define VALID_THRESHOLD {VALID_THRESHOLD}\n"))
+    return gpu.shader.create_from_info(info)
+
+
+class ReflectedMeshes:
+    """One renderer's diffuse vertices (a texture) and reflected meshes (an indexed batch)
+    on the GPU, uploaded on first use, and the draw of answer textures."""
+
+    def __init__(self, geometry):
+        self.geometry = geometry
+        self.n_vertices = len(geometry.vertices)
+        self.width = max(1, min(self.n_vertices, TEXTURE_WIDTH))
+        self.height = max(1, -(-self.n_vertices // self.width))
+        self._positions = None
+        self._batch = None
+
+    @property
+    def positions(self):
+        """The vertices relative to the shift, one RGBA32F texel each (rows of ``width``)."""
+        self._ensure()
+        return self._positions
+
+    def _ensure(self) -> None:
+        import gpu
+
+        from .reflection_draw import _data_texture, _vertex_buffer
+
+        if self._positions is not None:
+            return
+        g = self.geometry
+        self._positions = _data_texture((g.vertices - g.shift).astype(np.float32), self.width)
+        attributes = {"vertex_index": (np.arange(self.n_vertices, dtype=np.int32), 'I32', 'INT'),
+                      "color": (g.colors, 'F32', 'FLOAT'),
+                      "normal_lit": (np.c_[g.normals, g.lit].astype(np.float32), 'F32', 'FLOAT'),
+                      "uv": (g.uvs, 'F32', 'FLOAT')}
+        if len(g.triangles):
+            self._batch = gpu.types.GPUBatch(type='TRIS', buf=_vertex_buffer(attributes), elem=gpu.types.GPUIndexBuf(
+                type='TRIS', seq=np.asarray(g.triangles, dtype=np.int32)))
+
+    def answer_texture(self):
+        """A new answer texture, one RGBA32F texel per vertex."""
+        import gpu
+
+        return gpu.types.GPUTexture((self.width, self.height), format='RGBA32F')
+
+    def work_groups(self, local_size: int) -> tuple:
+        """The work groups of a compute stage with one invocation per vertex texel."""
+        return -(-self.width // local_size), self.height, 1
+
+    def draw(self, view_projection, prepass_labels, setup: dict, image_of, answers) -> None:
+        """The reflected meshes of each (reflector index, answer texture) of ``answers``
+        into the bound framebuffer (depth test on), placed by ``view_projection`` (a
+        ``mathutils.Matrix`` relative to the shift); ``image_of(k)`` is the texture of
+        image ``k`` (-1: none)."""
+        answers = list(answers)
+        self._ensure()
+        if self._batch is None or not answers:
+            return
+        shader = reflected_shader()
+        shader.bind()
+        shader.uniform_float("view_projection", view_projection)
+        shader.uniform_int("result_width", self.width)
+        shader.uniform_float("inverse_diameter", setup["inverse_diameter"])
+        shader.uniform_float("order_range", setup["order_range"])
+        shader.uniform_sampler("vertex_positions", self._positions)
+        shader.uniform_sampler("prepass_labels", prepass_labels)
+        for reflector_index, texture in answers:
+            shader.uniform_sampler("search_result", texture)
+            shader.uniform_float("reflector_id", float(reflector_index + 1))
+            for image, first, count in self.geometry.ranges:
+                shader.uniform_int("use_image", int(image >= 0))
+                shader.uniform_sampler("image", image_of(image))
+                self._batch.draw_range(shader, elem_start=3 * first, elem_count=3 * count)
+
+    def read(self, texture) -> tuple[np.ndarray, np.ndarray]:
+        """An answer texture read back: (N, 3) world points (NaN where no answer) and the
+        (N,) int64 codes."""
+        from .reflection_draw import _read_texture
+
+        texels = _read_texture(texture, self.width, self.height).reshape(-1, 4)[:self.n_vertices]
+        texels = texels.astype(np.float64)
+        code = texels[:, 3].astype(np.int64)
+        found = code % 16 == FOUND_CODE
+        return np.where(found[:, None], texels[:, :3] + self.geometry.shift, np.nan), code
