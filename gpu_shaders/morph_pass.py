@@ -41,8 +41,21 @@ DEFAULT_BUDGET_MB = 256.0
 #: The float32 blend's bound on the reflection law's residual on the fitted surface (the
 #: numpy twin asks 1e-8 of float64 Newton steps; float32 reaches about 1e-7).
 SURFACE_RESIDUAL = 1e-5
-#: Texels of the per-frame parameters (``glsl/morph_blend.glsl``'s ``frame_params``).
-PARAM_TEXELS = 18
+#: The per-frame parameters (``glsl/morph_blend.glsl``'s uniform block ``frame``), std140.
+FRAME_STRUCT = """
+struct MorphFrame {
+  mat4 frame_from_shifted;
+  mat4 shifted_from_frame;
+  mat4 view_projection;
+  mat4 node_eyes;
+  vec4 weights;
+  vec4 eye_match;
+  vec4 regular_slots;
+  vec4 widened_slots;
+};
+"""
+#: Floats of one MorphFrame.
+FRAME_FLOATS = 4 * 16 + 4 * 4
 
 
 def blend_defines() -> dict:
@@ -63,10 +76,12 @@ def blend_shader():
     info.push_constant('INT', "n_vertices")
     info.push_constant('INT', "positions_width")
     info.push_constant('INT', "slot_rows")
+    info.push_constant('INT', "active_slots")
+    info.typedef_source(FRAME_STRUCT)
+    info.uniform_buf(0, "MorphFrame", "frame")
     info.sampler(0, 'FLOAT_2D', "vertex_positions")
-    info.sampler(1, 'FLOAT_2D', "frame_params")
     for n in range(4):
-        info.sampler(2 + n, 'FLOAT_2D', f"node{n}")
+        info.sampler(1 + n, 'FLOAT_2D', f"node{n}")
     for k in range(SLOTS):
         info.image(k, 'RGBA32F', 'FLOAT_2D', f"result{k}", qualifiers={'WRITE'})
     info.local_group_size(LOCAL_SIZE, 1)
@@ -98,7 +113,7 @@ class NodeTextures:
 
     def __init__(self, budget_mb: float = DEFAULT_BUDGET_MB):
         self.budget_bytes = int(budget_mb * 2 ** 20)
-        self._textures: OrderedDict = OrderedDict()  # key -> (texture, bytes)
+        self._textures: OrderedDict = OrderedDict()  # key -> (texture, bytes, (regular, widened) slots used)
         self.nbytes = 0
         self.evictions = 0
 
@@ -108,17 +123,21 @@ class NodeTextures:
     def __len__(self) -> int:
         return len(self._textures)
 
-    def get(self, key):
-        texture, size = self._textures.pop(key)
-        self._textures[key] = (texture, size)  # most recently used last
-        return texture
+    def get(self, key) -> tuple:
+        """(texture, (regular, widened) slots that hold any image) of ``key``."""
+        entry = self._textures.pop(key)
+        self._textures[key] = entry  # most recently used last
+        return entry[0], entry[2]
 
-    def put(self, key, texels: np.ndarray, keep=()) -> None:
-        """Upload ``texels`` under ``key``; drop the least recently used (but ``keep``)
-        while over the budget."""
+    def put(self, key, slots: np.ndarray, width: int, rows: int, keep=()) -> None:
+        """Upload a node's (P, 2 SLOTS, 3) images under ``key`` (:func:`node_texels`);
+        drop the least recently used (but ``keep``) while over the budget."""
         from .reflection_draw import _data_texture
 
-        self._textures[key] = (_data_texture(texels), texels.nbytes)
+        texels = node_texels(slots, width, rows)
+        used = np.isfinite(slots[..., 0]).any(axis=0)
+        counts = tuple(int(np.max(np.flatnonzero(part), initial=-1)) + 1 for part in (used[:SLOTS], used[SLOTS:]))
+        self._textures[key] = (_data_texture(texels), texels.nbytes, counts)
         self.nbytes += texels.nbytes
         for old in list(self._textures):
             if self.nbytes <= self.budget_bytes:
@@ -147,6 +166,8 @@ class MorphPass:
         self.nodes = NodeTextures(budget_mb)
         self._frames = [None] * len(self.grids)  # the rigid frame each grid's node images were made in
         self._results: dict = {}  # grid index -> [answer texture per slot]
+        self._frame = None  # the uniform buffer of the blend's per-frame parameters
+        self._active: dict = {}  # grid index -> slots written by its last blend (the rest are empty)
         self._drawn: list = []  # grid indices blended by the last blend()
         self.counts = {"blends": 0, "node_projections": 0}
 
@@ -169,7 +190,8 @@ class MorphPass:
         return morphing.to_frame(frame, self.geometry.vertices)
 
     def _node_texture(self, k: int, node: int, frame: np.ndarray, keep=()):
-        """Grid ``k``'s node ``node`` images on the GPU, projected now when missing."""
+        """Grid ``k``'s node ``node`` images on the GPU, projected now when missing:
+        (texture, (regular, widened) slots used)."""
         if self._frames[k] is None or not np.array_equal(self._frames[k], frame):
             self.nodes.drop(k)
             self._frames[k] = frame
@@ -177,7 +199,7 @@ class MorphPass:
         if key not in self.nodes:
             grid = self.grids[k][0]
             slots = grid.node_slots(int(node), self._points_in_frame(frame), SLOTS)
-            self.nodes.put(key, node_texels(slots, self.meshes.width, self.meshes.height), keep)
+            self.nodes.put(key, slots, self.meshes.width, self.meshes.height, keep)
             self.counts["node_projections"] += 1
         return self.nodes.get(key)
 
@@ -187,11 +209,11 @@ class MorphPass:
         grid in this view."""
         import gpu
 
-        from .reflection_draw import _data_texture
-
         self._drawn = []
         if self.meshes.n_vertices == 0 or not self.grids:
             return []
+        if self._frame is None:
+            self._frame = gpu.types.GPUUniformBuf(gpu.types.Buffer('FLOAT', FRAME_FLOATS))
         shift = self.geometry.shift
         view_projection = (np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix)
                            @ _translation(shift))
@@ -201,23 +223,25 @@ class MorphPass:
             if grid.reflector_index in skip:
                 continue
             keep = {(k, int(n)) for n in nodes}
-            textures = [self._node_texture(k, n, frame, keep) for n in nodes]
+            textures, used = zip(*[self._node_texture(k, n, frame, keep) for n in nodes])
             if k not in self._results:
                 self._results[k] = [self.meshes.answer_texture() for _ in range(SLOTS)]
-            frame_inverse = np.linalg.inv(frame)
             eyes = np.eye(4)
             eyes[:3, :] = grid.grid.node_positions()[np.asarray(nodes)].T
             eye = morphing.to_frame(frame, view.eye[None])[0]
-            params = [frame_inverse @ _translation(shift), _translation(-shift) @ frame, view_projection, eyes]
-            texels = np.concatenate([m.T for m in params] + [np.asarray(weights, np.float64)[None],
-                                     np.r_[eye, morphing.MATCH_FRACTION * grid.reflector_size][None]])
-            frame_params = _data_texture(texels, PARAM_TEXELS)
+            matrices = [np.linalg.inv(frame) @ _translation(shift), _translation(-shift) @ frame, view_projection, eyes]
+            values = np.concatenate([m.T.reshape(-1) for m in matrices] + [
+                np.asarray(weights, np.float64), np.r_[eye, morphing.MATCH_FRACTION * grid.reflector_size],
+                [u[0] for u in used], [u[1] for u in used]]).astype(np.float32)
+            self._frame.update(gpu.types.Buffer('FLOAT', FRAME_FLOATS, values))
             shader.bind()
+            shader.uniform_block("frame", self._frame)
             shader.uniform_int("n_vertices", self.meshes.n_vertices)
             shader.uniform_int("positions_width", self.meshes.width)
             shader.uniform_int("slot_rows", self.meshes.height)
+            self._active[k] = max(u[0] for u in used)
+            shader.uniform_int("active_slots", self._active[k])
             shader.uniform_sampler("vertex_positions", self.meshes.positions)
-            shader.uniform_sampler("frame_params", frame_params)
             for n, texture in enumerate(textures):
                 shader.uniform_sampler(f"node{n}", texture)
             for slot, texture in enumerate(self._results[k]):
@@ -258,10 +282,14 @@ class MorphPass:
 
     def answers(self) -> list:
         """(reflector index, answer texture) per image slot of the last blend."""
-        return [(self.grids[k][0].reflector_index, texture) for k in self._drawn for texture in self._results[k]]
+        return [(self.grids[k][0].reflector_index, texture) for k in self._drawn
+                for texture in self._results[k][:self._active[k]]]
 
     def read(self, reflector_index: int) -> np.ndarray:
         """(SLOTS, N, 3) world points of the last blend of a reflector's grid, NaN where
         a vertex has no image in a slot (tests, benchmarks)."""
         k = next(k for k in self._drawn if self.grids[k][0].reflector_index == reflector_index)
-        return np.stack([self.meshes.read(texture)[0] for texture in self._results[k]])
+        found = np.full((SLOTS, self.meshes.n_vertices, 3), np.nan)
+        for slot, texture in enumerate(self._results[k][:self._active[k]]):
+            found[slot] = self.meshes.read(texture)[0]
+        return found

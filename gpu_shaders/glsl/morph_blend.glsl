@@ -22,38 +22,14 @@
  * Output: one texel per vertex and image slot, (reflector point relative to the
  * renderer's shift, FOUND_CODE or 0), read by iterative_mesh_vert.glsl. */
 
-/* Push constants: n_vertices, positions_width and slot_rows (rows of one slot in a node
- * texture). The view's parameters, 18 texels of `frame_params` (push constants stay
- * within 128 bytes): the columns of frame_from_shifted and shifted_from_frame (the grid's
- * rigid frame and the renderer's shift), of view_projection (of shifted points) and of
- * node_eyes (the four nodes' positions in the frame); weights; the eye in the frame and
- * match_distance. */
-mat4 frame_from_shifted;
-mat4 shifted_from_frame;
-mat4 view_projection;
-mat4 node_eyes;
-vec4 weights;
-vec3 eye;
-float match_distance;
-
-mat4 param_matrix(int first)
-{
-  return mat4(texelFetch(frame_params, ivec2(first, 0), 0), texelFetch(frame_params, ivec2(first + 1, 0), 0),
-              texelFetch(frame_params, ivec2(first + 2, 0), 0), texelFetch(frame_params, ivec2(first + 3, 0), 0));
-}
-
-void load_params()
-{
-  frame_from_shifted = param_matrix(0);
-  shifted_from_frame = param_matrix(4);
-  view_projection = param_matrix(8);
-  node_eyes = param_matrix(12);
-  weights = texelFetch(frame_params, ivec2(16, 0), 0);
-  vec4 e = texelFetch(frame_params, ivec2(17, 0), 0);
-  eye = e.xyz;
-  match_distance = e.w;
-}
-
+/* Push constants: n_vertices, positions_width, slot_rows (rows of one slot in a node
+ * texture) and active_slots (the most regular images any of the four nodes has of any
+ * vertex: the slots past it are empty this frame, neither written nor drawn). The view's parameters, in the uniform block `frame` (struct MorphFrame,
+ * gpu_shaders/morph_pass.py): frame_from_shifted and shifted_from_frame (the grid's rigid
+ * frame and the renderer's shift), view_projection (of shifted points), node_eyes (columns:
+ * the four nodes' positions in the frame), weights, the eye in the frame and
+ * match_distance, and per node how many regular and widened-chart slots hold any image
+ * (the others are not read). */
 vec4 node_image(int n, int slot, ivec2 texel)
 {
   ivec2 at = ivec2(texel.x, texel.y + slot * slot_rows);
@@ -87,7 +63,7 @@ vec4 nearest(vec4 images[2 * SLOTS], int first, vec3 reference)
       chosen = images[j];
     }
   }
-  return best <= match_distance ? chosen : vec4(0.0);
+  return best <= frame.eye_match.w ? chosen : vec4(0.0);
 }
 
 /* Solves the 6x6 normal equations m x = b in place (m symmetric positive definite: a sum
@@ -159,7 +135,9 @@ void main()
     return;
   }
   ivec2 texel = ivec2(gl_GlobalInvocationID.xy);
-  load_params();
+  mat4 frame_from_shifted = frame.frame_from_shifted;
+  vec4 weights = frame.weights;
+  vec3 eye = frame.eye_match.xyz;
   vec3 p = (frame_from_shifted * vec4(texelFetch(vertex_positions, texel, 0).xyz, 1.0)).xyz;
 
   vec4 images[4][2 * SLOTS];
@@ -167,9 +145,11 @@ void main()
   float heaviest = -1.0;
   for (int n = 0; n < 4; n++) {
     bool has = false;
-    for (int s = 0; s < 2 * SLOTS; s++) {
-      images[n][s] = node_image(n, s, texel);
-      has = has || (s < SLOTS && images[n][s].w > 0.5);
+    int regular = int(frame.regular_slots[n]), widened = int(frame.widened_slots[n]);
+    for (int s = 0; s < SLOTS; s++) {
+      images[n][s] = s < regular ? node_image(n, s, texel) : vec4(0.0);
+      images[n][SLOTS + s] = s < widened ? node_image(n, SLOTS + s, texel) : vec4(0.0);
+      has = has || images[n][s].w > 0.5;
     }
     if (has && weights[n] > heaviest) {
       heaviest = weights[n];
@@ -177,7 +157,7 @@ void main()
     }
   }
 
-  for (int k = 0; k < SLOTS; k++) {
+  for (int k = 0; k < active_slots; k++) {
     vec4 answer = vec4(0.0);
     vec4 own = reference >= 0 ? images[reference][k] : vec4(0.0);
     if (own.w > 0.5) {
@@ -207,7 +187,7 @@ void main()
       vec3 normals[4];
       vec3 normal = vec3(0.0);
       for (int n = 0; n < 4; n++) {
-        normals[n] = unit(unit(node_eyes[n].xyz - matched[n]) + unit(p - matched[n]));
+        normals[n] = unit(unit(frame.node_eyes[n].xyz - matched[n]) + unit(p - matched[n]));
         normal += w[n] * normals[n];
       }
       normal = unit(normal);
@@ -289,8 +269,8 @@ void main()
       usable = usable && (all_present || ok);
       vec3 facing = ok ? fitted_normal : normal;
       usable = usable && dot(facing, eye - blended) > 0.0 && dot(facing, p - blended) > 0.0;
-      vec3 world = (shifted_from_frame * vec4(blended, 1.0)).xyz;
-      vec4 clip = view_projection * vec4(world, 1.0);
+      vec3 world = (frame.shifted_from_frame * vec4(blended, 1.0)).xyz;
+      vec4 clip = frame.view_projection * vec4(world, 1.0);
       usable = usable && clip.w > 0.0 && abs(clip.z) <= clip.w && !any(isnan(world));
       answer = usable ? vec4(world, float(FOUND_CODE)) : vec4(0.0);
     }
