@@ -1,14 +1,21 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Baking a morphing grid on every core, with progress and cancellation.
+"""Baking a morphing grid on every core, in ranges a render farm can split, with
+progress and cancellation.
 
 SBC paper VI builds the grid's SBCs as a preprocess. Each node's panoramic camera is
 independent numpy work, which threads would serialise on the GIL between numpy calls,
 so nodes are built in worker *processes* (``multiprocessing``, ``fork`` context). Each
-worker writes the node it built to the partial cache folder itself (compression happens
-on every core, and no camera is pickled to the parent); the parent reports progress
-after each node and checks the cancel flag between nodes: a cancelled (or failed) bake
-stops the workers and removes its partial folder, so the previous cache stays exactly
-as it was.
+worker writes the node it built into the grid's cache folder itself, atomically
+(compression happens on every core, and no camera is pickled to the parent); the parent
+reports progress after each node and checks the cancel flag between nodes.
+
+A bake may be given a range of nodes (``nodes``): several processes, on one machine or
+on many sharing the cache folder (a render farm's array job), then bake one grid
+together. A node whose file is already there (whole, and of this grid's key) is not
+baked again, so a bake that was cancelled, or whose machine died, resumes where it
+stopped, and a damaged node file is replaced. The result does not depend on how the
+nodes were split: a node's camera depends on its position alone. When a bake finds
+every node of the grid present, it removes the reflector's grids of other keys.
 
 Inside Blender the extension is the package ``bl_ext.<repo>.curved_reflections``. A
 forked worker inherits the parent's modules, so the worker function (this module's
@@ -24,7 +31,6 @@ from __future__ import annotations
 
 import math
 import multiprocessing
-import shutil
 import sys
 import time
 from dataclasses import dataclass
@@ -46,13 +52,15 @@ _WORK: dict = {}
 
 @dataclass(frozen=True)
 class BakeResult:
-    """What a bake did; ``directory`` is None when it was cancelled."""
+    """What a bake did; ``directory`` is the grid's folder once every node is baked
+    (by this bake or others), else None (cancelled, or other ranges still to bake)."""
 
     cancelled: bool
     key: str
     directory: object
-    n_nodes: int
-    n_built: int
+    n_nodes: int  # nodes of the grid
+    n_built: int  # nodes this bake built
+    n_skipped: int  # nodes of its range already baked
     seconds: float
     node_seconds: np.ndarray  # (N,) worker wall time per node (0 for nodes not built)
     node_cpu_seconds: np.ndarray  # (N,) worker CPU time per node
@@ -73,8 +81,8 @@ def _bake_node(node: int):
     """
     work = _WORK
     camera = build_node(work["reflector_set"], work["positions"][node], work["bounds"], work["settings"])
-    if camera.status == NODE_OK:
-        bake_cache.write_node(work["partial"], node, bake_cache.node_arrays(camera))
+    arrays = bake_cache.node_arrays(camera) if camera.status == NODE_OK else None
+    bake_cache.write_node(work["directory"], node, work["key"], arrays)
     return node, camera.status, (camera.seconds, camera.cpu_seconds), camera.nbytes
 
 
@@ -87,13 +95,33 @@ def _peak_rss_mb() -> float:
     return max(own, children) / 2**20
 
 
-def bake_grid(reflector: Reflector, matrix, settings: MorphSettings, cache_dir, processes: int | None = None,
-              progress=None, cancel=None, reflector_index: int = 0) -> BakeResult:
-    """Bake the morphing grid of one world-space reflector whose object matrix is ``matrix``.
+def parse_node_range(text: str, n_nodes: int) -> range:
+    """``"first-last"`` (inclusive), ``"first-"``, ``"node"`` or ``""`` (every node) as a
+    range of the grid's ``n_nodes`` nodes; a clear ValueError otherwise."""
+    text = text.strip()
+    if not text:
+        return range(n_nodes)
+    first, dash, last = text.partition("-")
+    try:
+        start = int(first)
+        stop = (int(last) + 1 if last.strip() else n_nodes) if dash else start + 1
+    except ValueError:
+        raise ValueError(f"node range {text!r}: write first-last (e.g. 0-99), first- or one node") from None
+    if not 0 <= start < stop <= n_nodes:
+        raise ValueError(f"node range {text!r}: the grid has nodes 0 to {n_nodes - 1}")
+    return range(start, stop)
 
-    ``progress(done, total)`` is called after every node; ``cancel`` is anything with
-    ``is_set()`` (a ``threading.Event``), checked between nodes. ``processes`` defaults
-    to every core; 1 builds in this process.
+
+def bake_grid(reflector: Reflector, matrix, settings: MorphSettings, cache_dir, processes: int | None = None,
+              progress=None, cancel=None, reflector_index: int = 0, nodes: range | None = None) -> BakeResult:
+    """Bake the morphing grid of one world-space reflector whose object matrix is ``matrix``:
+    the nodes of ``nodes`` (default: all) that are not baked yet.
+
+    ``progress(done, total)`` is called after every node of the range (already baked
+    ones count at once); ``cancel`` is anything with ``is_set()`` (a
+    ``threading.Event``), checked between nodes: the nodes built so far stay, and the
+    next bake goes on from there. ``processes`` defaults to every core; 1 builds in this
+    process.
     """
     start = time.perf_counter()
     frame = rigid_frame(matrix)
@@ -102,48 +130,49 @@ def bake_grid(reflector: Reflector, matrix, settings: MorphSettings, cache_dir, 
     reflector_set, grid, bounds = bake_reflector(local, settings)
     positions = grid.node_positions()
     total = grid.n_nodes
+    nodes = range(total) if nodes is None else nodes
+    directory = bake_cache.grid_directory(cache_dir, reflector.name, key)
+    directory.mkdir(parents=True, exist_ok=True)
+    bake_cache.write_manifest(directory, key, local, grid, settings)
+    todo = [n for n in nodes if not bake_cache.node_is_baked(directory, n, key)]
+    skipped = len(nodes) - len(todo)
     processes = default_processes() if processes is None else max(1, int(processes))
     if "fork" not in multiprocessing.get_all_start_methods():
         processes = 1
-    partial = bake_cache.partial_directory(cache_dir, reflector.name, key)
-    status = np.zeros(total, dtype=np.int8)
     node_seconds, node_cpu = np.zeros(total), np.zeros(total)
-    nbytes, done, cancelled = 0, 0, False
-    _WORK.update(reflector_set=reflector_set, positions=positions, bounds=bounds, settings=settings, partial=partial)
+    nbytes, done, cancelled = 0, skipped, False
+    if progress is not None and skipped:
+        progress(done, len(nodes))
+    _WORK.update(reflector_set=reflector_set, positions=positions, bounds=bounds, settings=settings,
+                 directory=directory, key=key)
     try:
-        if processes == 1:
-            results = map(_bake_node, range(total))
+        if processes == 1 or len(todo) <= 1:
+            results = map(_bake_node, todo)
             pool = None
         else:
-            pool = multiprocessing.get_context("fork").Pool(processes)
-            results = pool.imap_unordered(_bake_node, range(total), chunksize=1)
+            pool = multiprocessing.get_context("fork").Pool(min(processes, len(todo)))
+            results = pool.imap_unordered(_bake_node, todo, chunksize=1)
         try:
-            for node, node_status, seconds, size in results:
-                status[node], (node_seconds[node], node_cpu[node]) = node_status, seconds
+            for node, _, seconds, size in results:
+                node_seconds[node], node_cpu[node] = seconds
                 nbytes += size
                 done += 1
                 if progress is not None:
-                    progress(done, total)
-                if cancel is not None and cancel.is_set() and done < total:
+                    progress(done, len(nodes))
+                if cancel is not None and cancel.is_set() and done < len(nodes):
                     cancelled = True
                     break
         finally:
             if pool is not None:
                 pool.terminate()
                 pool.join()
-        if cancelled:
-            shutil.rmtree(partial, ignore_errors=True)
-            return BakeResult(True, key, None, total, done, time.perf_counter() - start, node_seconds, node_cpu, nbytes,
-                              processes, _peak_rss_mb())
-        bake_cache.write_manifest(partial, key, local, grid, settings, status, node_seconds)
-        directory = bake_cache.commit_directory(partial, cache_dir, reflector.name, key)
-    except BaseException:
-        shutil.rmtree(partial, ignore_errors=True)
-        raise
     finally:
         _WORK.clear()
-    return BakeResult(False, key, directory, total, done, time.perf_counter() - start, node_seconds, node_cpu, nbytes,
-                      processes, _peak_rss_mb())
+    complete = not cancelled and bake_cache.baked_nodes(directory, total)[0].all()
+    if complete:
+        bake_cache.remove_stale(cache_dir, reflector.name, key)
+    return BakeResult(cancelled, key, directory if complete else None, total, done - skipped, skipped,
+                      time.perf_counter() - start, node_seconds, node_cpu, nbytes, processes, _peak_rss_mb())
 
 
 def load_for(reflector: Reflector, matrix, settings: MorphSettings, cache_dir, reflector_index: int = 0):

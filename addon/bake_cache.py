@@ -1,20 +1,31 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """The on-disk cache of baked morphing grids (SBC paper VI: the grid is a preprocess).
 
-Layout under the cache directory (the Blender layer passes
-``bpy.utils.extension_path_user(__package__, path="morphing", create=True)``)::
+Layout under the cache directory (the Blender layer passes one folder per .blend file,
+``operators/morph_bake.cache_directory``, so files never share or delete each other's
+grids)::
 
-    <reflector name>-<key[:16]>/grid.npz          manifest: key, box, node status, settings
-    <reflector name>-<key[:16]>/node_00012.npz    one panoramic camera (six faces' SBC arrays)
+    <reflector name>-<key[:16]>/grid.npz            manifest: key, box, settings, geometry
+    <reflector name>-<key[:16]>/node_00012.npz      one panoramic camera (six faces' SBC arrays)
+    <reflector name>-<key[:16]>/node_00013.inside   a node inside the mirror (no camera)
 
-Every file is plain arrays (``np.savez``; node files compressed) and is read with
-``allow_pickle=False``. The folder's key is a SHA-256 of the reflector's topology, the
-grid settings and the engine (its version and the bytes of the modules a bake runs);
-the manifest also holds the geometry in the reflector's rigid frame, compared with the
-current one to 1e-6 of its size at load. So a rigidly moved reflector keeps its cache,
-any change of shape, scale or settings makes it stale, and a cache baked for other
-geometry or settings is never loaded. Missing, stale and corrupt caches raise
-:class:`CacheError` with a message for the user, never a traceback.
+Every file is plain arrays (``np.savez``; node files compressed), read with
+``allow_pickle=False``, and written atomically (a temporary name, then ``os.replace``),
+so that several processes, on one machine or on a render farm's, can bake ranges of
+one grid's nodes into the same folder at once: the manifest is the same bytes whoever
+writes it, a node is either absent or whole, and a node already baked (its file present
+and of this key) is not baked again. A grid is usable once every node has its file.
+
+The folder's key is a SHA-256 of the reflector's topology, the grid settings and the
+engine (its version and the bytes of the modules a bake runs); every node file carries
+the key too (a node file copied from another grid is refused); the manifest also holds
+the geometry in the reflector's rigid frame, compared with the current one to 1e-6 of
+its size at load. So a rigidly moved reflector keeps its cache, any change of shape,
+scale or settings makes it stale, and a cache baked for other geometry or settings is
+never loaded. Missing, stale, incomplete and corrupt caches raise :class:`CacheError`
+with a message for the user, never a traceback. A node file found damaged when it is
+read is renamed ``*.damaged``: the grid then reads as incomplete, and the next bake
+builds that node again.
 
 Nodes are read lazily (the four of the current tetrahedron, a few kept), as the paper
 keeps only two layers of its grid in memory.
@@ -34,11 +45,15 @@ from pathlib import Path
 import numpy as np
 
 from .errors import SceneInputError
-from .morphing import ENGINE_VERSION, NODE_OK, MorphingGrid, MorphSettings, NodeCamera, TetrahedralGrid
+from .morphing import ENGINE_VERSION, NODE_INSIDE, MorphingGrid, MorphSettings, NodeCamera, TetrahedralGrid
 from .scene import Reflector
 from .sbc_arrays import sbc_from_arrays, sbc_to_arrays
 
 MANIFEST = "grid.npz"
+#: Suffix of a node inside the mirror (no camera: its file holds only the key).
+INSIDE_SUFFIX = ".inside"
+#: Suffix a damaged node file is renamed to when it is read.
+DAMAGED_SUFFIX = ".damaged"
 #: Nodes kept in memory by a loaded grid (a tetrahedron needs four; neighbours come next).
 NODES_IN_MEMORY = 16
 #: Largest difference (in reflector sizes; unit normals: absolute) between the baked and
@@ -47,7 +62,8 @@ GEOMETRY_TOLERANCE = 1e-6
 
 
 class CacheError(SceneInputError):
-    """A morphing cache that cannot be used; ``reason`` is 'missing', 'stale' or 'corrupt'."""
+    """A morphing cache that cannot be used; ``reason`` is 'missing', 'stale',
+    'incomplete' or 'corrupt'."""
 
     def __init__(self, object_name: str, reason: str, problem: str):
         self.reason = reason
@@ -88,12 +104,13 @@ def same_geometry(local_reflector: Reflector, vertices: np.ndarray, normals: np.
             and float(np.max(np.abs(normals - local_reflector.normals), initial=0.0)) <= GEOMETRY_TOLERANCE)
 
 
-def _safe(name: str) -> str:
+def safe_name(name: str) -> str:
+    """``name`` as a folder name: letters, digits, ``_.-`` (others ``_``), 60 at most."""
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", name)[:60] or "reflector"
 
 
 def grid_directory(cache_dir, reflector_name: str, key: str) -> Path:
-    return Path(cache_dir) / f"{_safe(reflector_name)}-{key[:16]}"
+    return Path(cache_dir) / f"{safe_name(reflector_name)}-{key[:16]}"
 
 
 def _siblings(cache_dir, reflector_name: str) -> list[Path]:
@@ -101,7 +118,7 @@ def _siblings(cache_dir, reflector_name: str) -> list[Path]:
     root = Path(cache_dir)
     if not root.is_dir():
         return []
-    pattern = re.compile(re.escape(_safe(reflector_name)) + r"-[0-9a-f]{16}$")
+    pattern = re.compile(re.escape(safe_name(reflector_name)) + r"-[0-9a-f]{16}$")
     return [p for p in root.iterdir() if p.is_dir() and pattern.match(p.name)]
 
 
@@ -109,8 +126,71 @@ def node_file(directory: Path, node: int) -> Path:
     return Path(directory) / f"node_{node:05d}.npz"
 
 
-def write_node(directory: Path, node: int, arrays: dict) -> None:
-    np.savez_compressed(node_file(directory, node), **arrays)
+def inside_file(directory: Path, node: int) -> Path:
+    return Path(directory) / f"node_{node:05d}{INSIDE_SUFFIX}"
+
+
+def _atomic(path: Path, write) -> None:
+    """``write(temporary path)``, then the temporary file renamed to ``path`` (atomic)."""
+    path = Path(path)
+    temporary = path.with_name(f".{path.name}.{os.getpid()}-{os.urandom(4).hex()}.tmp")
+    try:
+        write(temporary)
+        os.replace(temporary, path)
+    finally:
+        if temporary.exists():
+            temporary.unlink()
+
+
+def write_node(directory: Path, node: int, key: str, arrays: dict | None) -> None:
+    """One node's file, atomically: its camera's arrays, or (``arrays`` None) the marker
+    of a node inside the mirror. Both carry the grid's key."""
+    if arrays is None:
+        _atomic(inside_file(directory, node), lambda path: path.write_text(key, encoding="ascii"))
+    else:
+        def write(path):
+            with open(path, "wb") as stream:
+                np.savez_compressed(stream, key=np.array(key), **arrays)
+
+        _atomic(node_file(directory, node), write)
+
+
+def node_is_baked(directory: Path, node: int, key: str) -> bool:
+    """Whether ``node`` has a whole file of this key: the marker of a node inside the
+    mirror, or a node file whose zip directory reads and whose key matches (the camera's
+    arrays are not decompressed). A damaged or foreign file counts as not baked."""
+    inside = inside_file(directory, node)
+    if inside.is_file():
+        try:
+            return inside.read_text(encoding="ascii") == key
+        except (OSError, UnicodeDecodeError):
+            return False
+    path = node_file(directory, node)
+    if not path.is_file():
+        return False
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return str(data["key"]) == key
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+        return False
+
+
+def baked_nodes(directory: Path, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
+    """(N,) bool: nodes with a file (camera or inside marker) and (N,) int8 status, from
+    the folder's listing alone."""
+    present, status = np.zeros(n_nodes, bool), np.zeros(n_nodes, np.int8)
+    directory = Path(directory)
+    if not directory.is_dir():
+        return present, status
+    pattern = re.compile(r"node_(\d{5})(\.npz|" + re.escape(INSIDE_SUFFIX) + r")$")
+    for path in directory.iterdir():
+        match = pattern.match(path.name)
+        if match and int(match.group(1)) < n_nodes:
+            node = int(match.group(1))
+            present[node] = True
+            if match.group(2) == INSIDE_SUFFIX:
+                status[node] = NODE_INSIDE
+    return present, status
 
 
 def node_arrays(camera: NodeCamera) -> dict:
@@ -130,17 +210,22 @@ def node_from_arrays(data) -> NodeCamera:
 
 
 def write_manifest(directory: Path, key: str, local_reflector: Reflector, grid: TetrahedralGrid,
-                   settings: MorphSettings, node_status: np.ndarray, node_seconds: np.ndarray) -> None:
+                   settings: MorphSettings) -> None:
+    """The grid's manifest, atomically (the same bytes from every process baking it)."""
     lo, hi = local_reflector.bounds
     reflector_name, reflector_size = local_reflector.name, float(np.max(hi - lo))
-    np.savez(Path(directory) / MANIFEST, key=np.array(key), engine=np.array(ENGINE_VERSION),
-             vertices=local_reflector.vertices, normals=local_reflector.normals,
-             name=np.array(reflector_name), lo=grid.lo, hi=grid.hi, shape=np.array(grid.shape),
-             settings=np.array(repr(settings.as_tuple())), margin=np.array(settings.margin),
-             face_resolution=np.array(settings.face_resolution), downsample=np.array(settings.downsample),
-             accuracy_px=np.array(settings.accuracy_px), overlap_cells=np.array(settings.overlap_cells),
-             extension=np.array(settings.extension), node_status=node_status,
-             reflector_size=np.array(reflector_size), node_seconds=node_seconds)
+
+    def write(path):
+        with open(path, "wb") as stream:
+            np.savez(stream, key=np.array(key), engine=np.array(ENGINE_VERSION),
+                     vertices=local_reflector.vertices, normals=local_reflector.normals,
+                     name=np.array(reflector_name), lo=grid.lo, hi=grid.hi, shape=np.array(grid.shape),
+                     settings=np.array(repr(settings.as_tuple())), margin=np.array(settings.margin),
+                     face_resolution=np.array(settings.face_resolution), downsample=np.array(settings.downsample),
+                     accuracy_px=np.array(settings.accuracy_px), overlap_cells=np.array(settings.overlap_cells),
+                     extension=np.array(settings.extension), reflector_size=np.array(reflector_size))
+
+    _atomic(Path(directory) / MANIFEST, write)
 
 
 def _read(path: Path, object_name: str):
@@ -154,10 +239,12 @@ def _read(path: Path, object_name: str):
 
 
 class _LazyNodes:
-    """Node cameras read from their files on first use; the last few kept."""
+    """Node cameras read from their files on first use; the last few kept. A file that
+    cannot be read, or that belongs to another grid, is renamed ``*.damaged`` (the next
+    bake builds the node again) and raises :class:`CacheError` naming it."""
 
-    def __init__(self, directory: Path, object_name: str):
-        self.directory, self.object_name = directory, object_name
+    def __init__(self, directory: Path, object_name: str, key: str):
+        self.directory, self.object_name, self.key = directory, object_name, key
         self._cache: OrderedDict = OrderedDict()
 
     def __getitem__(self, node: int) -> NodeCamera:
@@ -165,12 +252,20 @@ class _LazyNodes:
         if node in self._cache:
             self._cache.move_to_end(node)
             return self._cache[node]
-        data = _read(node_file(self.directory, node), self.object_name)
+        path = node_file(self.directory, node)
         try:
+            data = _read(path, self.object_name)
+            if str(data.get("key", "")) != self.key:
+                raise CacheError(self.object_name, "corrupt", f"the morphing cache file {path.name} belongs to "
+                                 "another grid")
             camera = node_from_arrays(data)
-        except (KeyError, ValueError, IndexError) as error:
-            raise CacheError(self.object_name, "corrupt", f"the morphing cache file of node {node} is incomplete "
-                             f"({type(error).__name__}: {error}); clear it and bake again") from None
+        except (KeyError, ValueError, IndexError, CacheError) as error:
+            if path.is_file():
+                os.replace(path, path.with_name(path.name + DAMAGED_SUFFIX))
+            problem = error.problem if isinstance(error, CacheError) else (
+                f"the morphing cache file {path.name} is incomplete ({type(error).__name__}: {error})")
+            raise CacheError(self.object_name, "corrupt", f"{problem} (in {self.directory}); runtime mode until "
+                             "Bake Morphing Grid builds the node again") from None
         self._cache[node] = camera
         while len(self._cache) > NODES_IN_MEMORY:
             self._cache.popitem(last=False)
@@ -196,7 +291,6 @@ def load_grid(cache_dir, local_reflector: Reflector, key: str, reflector_index: 
                                  downsample=int(manifest["downsample"]), accuracy_px=float(manifest["accuracy_px"]),
                                  overlap_cells=int(manifest["overlap_cells"]), extension=float(manifest["extension"]))
         grid = TetrahedralGrid(np.asarray(manifest["lo"], float), np.asarray(manifest["hi"], float), shape)
-        status = np.asarray(manifest["node_status"], dtype=np.int8)
         size = float(manifest["reflector_size"])
         geometry = same_geometry(local_reflector, np.asarray(manifest["vertices"], float),
                                  np.asarray(manifest["normals"], float))
@@ -206,19 +300,18 @@ def load_grid(cache_dir, local_reflector: Reflector, key: str, reflector_index: 
     if stored_key != key or str(manifest.get("engine", "")) != ENGINE_VERSION or not geometry:
         raise CacheError(reflector_name, "stale", "the morphing cache was baked for other geometry or settings; "
                          "bake again (runtime mode until then)")
-    if status.shape != (grid.n_nodes,):
-        raise CacheError(reflector_name, "corrupt", "the morphing cache manifest has the wrong number of nodes; "
-                         "clear it and bake again")
-    absent = [n for n in np.flatnonzero(status == NODE_OK) if not node_file(directory, int(n)).is_file()]
-    if absent:
-        raise CacheError(reflector_name, "corrupt", f"the morphing cache lacks {len(absent)} node files "
-                         f"(first: node {absent[0]}); clear it and bake again")
+    present, status = baked_nodes(directory, grid.n_nodes)
+    if not present.all():
+        raise CacheError(reflector_name, "incomplete", f"the morphing cache has {int(present.sum())} of "
+                         f"{grid.n_nodes} nodes (first missing: node {int(np.argmin(present))}); bake again to "
+                         "finish it (runtime mode until then)")
     return MorphingGrid(reflector_name, reflector_index, grid, settings, status,
-                        _LazyNodes(directory, reflector_name), size)
+                        _LazyNodes(directory, reflector_name, key), size)
 
 
 def cache_state(cache_dir, local_reflector: Reflector, key: str) -> str:
-    """'ready', 'stale' or 'missing' from the manifest alone (no node file is read)."""
+    """'ready', 'stale', 'incomplete' or 'missing' from the manifest and the folder's
+    listing (no node file is read)."""
     try:
         load_grid(cache_dir, local_reflector, key)
     except CacheError as error:
@@ -235,32 +328,17 @@ def clear_cache(cache_dir, reflector_name: str | None = None) -> int:
         folders = [p for p in root.iterdir() if p.is_dir()]
     else:
         folders = _siblings(cache_dir, reflector_name) + [
-            p for p in root.iterdir() if p.is_dir() and p.name.startswith(_safe(reflector_name) + "-")
+            p for p in root.iterdir() if p.is_dir() and p.name.startswith(safe_name(reflector_name) + "-")
             and ".partial-" in p.name]
     for folder in folders:
         shutil.rmtree(folder, ignore_errors=True)
     return len(folders)
 
 
-def partial_directory(cache_dir, reflector_name: str, key: str) -> Path:
-    """A fresh folder a bake writes into before it replaces the finished one."""
+def remove_stale(cache_dir, reflector_name: str, key: str) -> int:
+    """Remove this reflector's grids of other keys (a finished bake replaced them)."""
     final = grid_directory(cache_dir, reflector_name, key)
-    partial = final.with_name(f"{final.name}.partial-{os.getpid()}-{os.urandom(4).hex()}")
-    partial.mkdir(parents=True)
-    return partial
-
-
-def commit_directory(partial: Path, cache_dir, reflector_name: str, key: str) -> Path:
-    """Swap the finished bake in and remove this reflector's stale grids."""
-    final = grid_directory(cache_dir, reflector_name, key)
-    for old in _siblings(cache_dir, reflector_name):
-        if old != final:
-            shutil.rmtree(old, ignore_errors=True)
-    if final.exists():
-        retired = final.with_name(f"{final.name}.partial-old-{os.urandom(4).hex()}")
-        os.replace(final, retired)
-        os.replace(partial, final)
-        shutil.rmtree(retired, ignore_errors=True)
-    else:
-        os.replace(partial, final)
-    return final
+    stale = [old for old in _siblings(cache_dir, reflector_name) if old != final]
+    for old in stale:
+        shutil.rmtree(old, ignore_errors=True)
+    return len(stale)

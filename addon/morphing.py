@@ -53,7 +53,7 @@ from .vectors import cross
 from .view import View, look_at_view
 
 #: Version of everything that shapes a baked grid; part of the cache key.
-ENGINE_VERSION = "morphing-1"
+ENGINE_VERSION = "morphing-2"
 #: Cube faces: forward and up axes (+X, -X, +Y, -Y, +Z, -Z).
 CUBE_FACES = (
     ((1, 0, 0), (0, 0, 1)), ((-1, 0, 0), (0, 0, 1)), ((0, 1, 0), (0, 0, 1)),
@@ -442,6 +442,9 @@ class MorphingGrid:
     #: reflector points, NaN where not projected. ``None``: ``sbc.project`` in numpy;
     #: the viewport passes the GPU's (``gpu_shaders/morph_source.GPUFaceImages``).
     face_images: object = field(default=None, repr=False, compare=False)
+    #: The cache fault (``bake_cache.CacheError``) met reading one of its nodes: the grid
+    #: is not used again (its reflector is drawn in runtime mode) until loaded anew.
+    failure: object = field(default=None, repr=False, compare=False)
     _static: dict = field(default_factory=dict, repr=False)
 
     def __post_init__(self):

@@ -29,6 +29,7 @@ from collections import OrderedDict
 import numpy as np
 
 from ..addon import morphing
+from ..addon.bake_cache import CacheError
 from .reflected_meshes import FOUND_CODE, ReflectedMeshes, glsl_source
 
 #: Image slots per vertex and grid: a convex mirror shows a point once, a concave one
@@ -177,13 +178,25 @@ class MorphPass:
 
     def covering(self, view) -> list:
         """(grid index, (tetrahedron, nodes, weights, frame)) of each grid whose
-        reflector ``view`` can be drawn from (``MorphingGrid.check_view``)."""
+        reflector ``view`` can be drawn from (``MorphingGrid.check_view``), its four
+        nodes' images on the GPU (projected now where missing). A grid whose cache turns
+        out damaged records the fault (``MorphingGrid.failure``) and is left out from
+        then on: its reflector is drawn in runtime mode."""
         found = []
         for k, (grid, matrix) in enumerate(self.grids):
+            if grid.failure is not None:
+                continue
             try:
-                found.append((k, grid.check_view(view, matrix)))
+                located = grid.check_view(view, matrix)
+                keep = {(k, int(n)) for n in located[1]}
+                for node in located[1]:
+                    self._node_texture(k, int(node), located[3], keep)
             except morphing.ViewOutsideGrid:
                 continue
+            except CacheError as error:
+                grid.failure = error
+                continue
+            found.append((k, located))
         return found
 
     def _points_in_frame(self, frame: np.ndarray) -> np.ndarray:
@@ -273,7 +286,11 @@ class MorphPass:
                     continue
                 if len(self.nodes) and self.nodes.nbytes + self._node_bytes() > self.nodes.budget_bytes:
                     return done  # a prefetch never evicts
-                self._node_texture(k, int(node), frame, keep)
+                try:
+                    self._node_texture(k, int(node), frame, keep)
+                except CacheError as error:
+                    self.grids[k][0].failure = error
+                    break
                 done += 1
         return done
 

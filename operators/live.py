@@ -67,7 +67,7 @@ from ..addon.raytrace import ReflectorSet
 from ..addon.sbc import build_sample_based_camera
 from ..addon.scene import scene_bounds
 from ..addon.view import View
-from . import methods
+from . import methods, morph_bake
 from .capture import capture_scene, view_from_camera, view_from_region
 from .render_image import BOUNDS_MARGIN, reflector_properties, world_color
 
@@ -190,11 +190,15 @@ def _capture(state: LiveScene, scene, depsgraph, reflectors: bool) -> None:
 
 def _covering_grids(state: LiveScene, view: View) -> list:
     """The grids whose reflector ``view`` can be drawn from in morphing mode; each
-    reflector's panel line says which mode draws it and why."""
-    from .morph_bake import note_morphing_active, note_runtime_fallback
+    reflector's panel line says which mode draws it and why. A grid whose cache was
+    found damaged is not used (its line names the file; a bake repairs it)."""
+    from .morph_bake import note_cache_fault, note_morphing_active, note_runtime_fallback
 
     covering = []
     for grid, matrix in state.grids:
+        if grid.failure is not None:
+            note_cache_fault(grid.reflector_name, grid.failure)
+            continue
         try:
             grid.check_view(view, matrix)
         except ViewOutsideGrid as error:
@@ -455,7 +459,11 @@ def draw(scene, key, view: View) -> bool:
             return False
         if state.level == 'ERROR' and "the view is inside" in state.status:
             state.report('INFO', "Reflections up to date")
-        return _draw_with(state, view, None, None)
+        drawn = _draw_with(state, view, None, None)
+        if any(grid.failure is not None for grid, _ in covering):
+            _covering_grids(state, view)  # the panel names the damaged file
+            request_view(state, key, view)  # its reflector needs a camera now
+        return drawn
     camera = state.cameras.get(key)
     current = camera is not None and camera.generation == state.generation and camera.settings == state.settings
     if (camera is None or not current or not _same_view(camera.view, view)) and key not in state.jobs:
@@ -657,6 +665,8 @@ _APP_HANDLERS = (
     ("depsgraph_update_post", on_depsgraph_update),
     ("load_pre", on_load_pre),
     ("load_post", on_load_post),
+    ("save_pre", morph_bake.on_save_pre),
+    ("save_post", morph_bake.on_save_post),
 )
 
 

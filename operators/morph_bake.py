@@ -15,11 +15,14 @@ used), so a missing, stale or corrupt cache never stops drawing.
 
 from __future__ import annotations
 
+import hashlib
+import shutil
 import threading
 from pathlib import Path
 
 import bpy
 import numpy as np
+from bpy.app.handlers import persistent
 
 from ..addon import bake, bake_cache
 from ..addon.errors import SceneInputError
@@ -33,14 +36,69 @@ _STATE: dict = {}
 _REFLECTOR_STATUS: dict = {}
 
 
-def cache_directory() -> Path:
-    """Where baked grids live: the extension's user folder (``extension_path_user``)."""
+def cache_root(scene) -> Path:
+    """The folder holding every file's grids: the scene's *Cache Folder* when set (a
+    folder a render farm shares; ``//`` is the .blend's folder), else the extension's
+    user folder (``extension_path_user``)."""
+    chosen = scene.curved_reflections.morph_cache_dir.strip()
+    if chosen:
+        return Path(bpy.path.abspath(chosen))
     package = __package__.rpartition(".")[0]
     try:
         path = bpy.utils.extension_path_user(package, path="morphing", create=True)
     except ValueError:  # not installed as an extension (tests, scripts importing the repository)
         path = bpy.utils.user_resource('CONFIG', path="curved_reflections_morphing", create=True)
     return Path(path)
+
+
+def file_token(filepath: str, shared: bool) -> str:
+    """This .blend file's sub-folder of the cache root: its name and a hash of its full
+    path (``shared``, a chosen cache folder: its name alone, so that farm machines that
+    mount the file elsewhere find one cache); "unsaved" for a file never saved."""
+    if not filepath:
+        return "unsaved"
+    path = Path(filepath)
+    stem = bake_cache.safe_name(path.stem)
+    if shared:
+        return stem
+    return f"{stem}-{hashlib.sha256(str(path.resolve()).encode()).hexdigest()[:12]}"
+
+
+def cache_directory(scene) -> Path:
+    """Where this file's baked grids live: one folder per .blend file under
+    :func:`cache_root`, so that two files never load, replace or clear each other's
+    grids, even of objects with the same name."""
+    shared = bool(scene.curved_reflections.morph_cache_dir.strip())
+    return cache_root(scene) / file_token(bpy.data.filepath, shared)
+
+
+_SAVED_FROM: dict = {}
+
+
+@persistent
+def on_save_pre(*_args) -> None:
+    """Remember each scene's cache folder before the file is saved (maybe under a new name)."""
+    _SAVED_FROM.clear()
+    _SAVED_FROM.update({scene.name: cache_directory(scene) for scene in bpy.data.scenes})
+
+
+@persistent
+def on_save_post(*_args) -> None:
+    """A file saved under a new name takes its grids along: an unsaved file's are moved,
+    another file's copied (that file keeps its own)."""
+    for scene in bpy.data.scenes:
+        old, new = _SAVED_FROM.get(scene.name), cache_directory(scene)
+        if old is None or old == new or not old.is_dir() or new.exists():
+            continue
+        try:
+            if old.name == "unsaved":
+                shutil.move(str(old), str(new))
+            else:
+                shutil.copytree(old, new)
+        except OSError as error:
+            _STATE[scene.name] = {"running": False, "done": 0, "total": 0, "reflector": "",
+                                  "message": f"The morphing grids were not carried to {new}: {error}"}
+    _SAVED_FROM.clear()
 
 
 #: Cube-face resolution of the baked cameras (MorphSettings' default); tests lower it.
@@ -84,7 +142,7 @@ def morphing_reflectors(context):
 def load_morphing(reflector, matrix, scene, reflector_index: int = 0):
     """The baked grid for this reflector as it is now, or None (runtime mode) with the reason recorded."""
     try:
-        grid = bake.load_for(reflector, matrix, morph_settings(scene), cache_directory(), reflector_index)
+        grid = bake.load_for(reflector, matrix, morph_settings(scene), cache_directory(scene), reflector_index)
     except SceneInputError as error:
         _REFLECTOR_STATUS[reflector.name] = f"{error.problem}"
         return None
@@ -110,6 +168,11 @@ def load_grids(scene, reflectors) -> list:
             grid.face_images = faces
             grids.append((grid, matrix))
     return grids
+
+
+def note_cache_fault(reflector_name: str, error) -> None:
+    """Record a damaged cache met while drawing: runtime mode, and which file."""
+    _REFLECTOR_STATUS[reflector_name] = f"runtime mode: {error.problem}"
 
 
 def note_runtime_fallback(error) -> None:
@@ -146,7 +209,7 @@ def _refresh_live(context) -> None:
 
 
 class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
-    """Bake the morphing grids of the reflectors in Morphing mode (Esc cancels)"""
+    """Bake the morphing grids of the reflectors in Morphing mode (Esc cancels; the nodes baked so far are kept)"""
 
     bl_idname = "curved_reflections.bake_morphing"
     bl_label = "Bake Morphing Grid"
@@ -154,6 +217,11 @@ class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
 
     processes: bpy.props.IntProperty(name="Processes", description="Worker processes (0: every core)",
                                      default=0, min=0, max=256)
+    object_name: bpy.props.StringProperty(
+        name="Object", description="Bake only this reflector (empty: every reflector in Morphing mode)", default="")
+    nodes: bpy.props.StringProperty(
+        name="Nodes", description="Bake only these grid nodes, 'first-last' (e.g. 0-99) or 'first-': one range of a "
+        "render farm's job; nodes already baked are skipped (empty: every node)", default="")
 
     _thread = None
     _timer = None
@@ -171,6 +239,11 @@ class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
         except SceneInputError as error:
             self.report({'ERROR'}, str(error))
             return None
+        if self.object_name:
+            jobs = [job for job in jobs if job[0].name == self.object_name]
+            if not jobs:
+                self.report({'ERROR'}, f"{self.object_name!r}: not a visible reflector in Morphing mode")
+                return None
         if not jobs:
             self.report({'ERROR'}, "No visible reflector is in Morphing mode (set Mode in the Reflections tab)")
             return None
@@ -187,16 +260,25 @@ class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
                 def progress(done, total, state=state):
                     state.update(done=done, total=total)
 
-                result = bake.bake_grid(reflector, matrix, settings, directory,
-                                        processes=self.processes or None, progress=progress, cancel=cancel)
+                result = bake.bake_grid(reflector, matrix, settings, directory, processes=self.processes or None,
+                                        progress=progress, cancel=cancel,
+                                        nodes=bake.parse_node_range(self.nodes, int(np.prod(settings.grid))))
                 if result.cancelled:
-                    _REFLECTOR_STATUS[reflector.name] = "bake cancelled; the previous cache (if any) is kept"
+                    _REFLECTOR_STATUS[reflector.name] = ("bake cancelled; the nodes baked are kept, the next bake "
+                                                         "goes on from there")
                     outcome.append(f"{reflector.name}: cancelled")
                     break
-                _REFLECTOR_STATUS[reflector.name] = (f"baked {result.n_nodes} nodes in {result.seconds:.1f} s "
-                                                     f"({result.nbytes / 2**20:.1f} MB)")
-                outcome.append(f"{reflector.name}: baked in {result.seconds:.1f} s")
-        except (SceneInputError, OSError) as error:
+                done = f"baked {result.n_built} nodes in {result.seconds:.1f} s ({result.nbytes / 2**20:.1f} MB)"
+                if result.n_skipped:
+                    done += f", {result.n_skipped} were baked already"
+                if result.directory is None:
+                    present = int(bake_cache.baked_nodes(bake_cache.grid_directory(directory, reflector.name,
+                                                                                   result.key),
+                                                         result.n_nodes)[0].sum())
+                    done += f"; {present} of {result.n_nodes} nodes baked, the other ranges still to bake"
+                _REFLECTOR_STATUS[reflector.name] = done
+                outcome.append(f"{reflector.name}: {done}")
+        except (SceneInputError, OSError, ValueError) as error:
             outcome.append(f"bake failed: {error}")
         except Exception as error:  # the bake thread's boundary: report, never leave "running" behind
             outcome.append(f"bake failed: {type(error).__name__}: {error}")
@@ -210,12 +292,13 @@ class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
             return None
         try:
             settings = morph_settings(context.scene)
-        except SceneInputError as error:
+            bake.parse_node_range(self.nodes, int(np.prod(settings.grid)))
+        except (SceneInputError, ValueError) as error:
             self.report({'ERROR'}, str(error))
             return None
         _STATE[context.scene.name] = {"running": True, "done": 0, "total": 0, "reflector": jobs[0][0].name,
                                       "message": ""}
-        return jobs, settings, cache_directory()
+        return jobs, settings, cache_directory(context.scene)
 
     def execute(self, context):
         started = self._start(context)
@@ -275,7 +358,7 @@ class CURVED_REFLECTIONS_OT_clear_morphing(bpy.types.Operator):
             self.report({'ERROR'}, "A bake is running: cancel it first (Esc)")
             return {'CANCELLED'}
         names = [obj.name for obj in context.scene.objects if obj.curved_reflections.is_reflector]
-        removed = sum(bake_cache.clear_cache(cache_directory(), name) for name in names)
+        removed = sum(bake_cache.clear_cache(cache_directory(context.scene), name) for name in names)
         for name in names:
             _REFLECTOR_STATUS[name] = "no morphing cache (cleared); runtime mode"
         self.report({'INFO'}, f"Removed {removed} baked grid(s)")

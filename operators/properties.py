@@ -2,7 +2,8 @@
 """Settings stored in the .blend: per object and per scene PropertyGroups."""
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, IntVectorProperty, PointerProperty
+from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, IntVectorProperty, PointerProperty,
+                       StringProperty)
 
 
 def _reflector_toggled(self, context):
@@ -99,6 +100,12 @@ class CurvedReflectionsSceneSettings(bpy.types.PropertyGroup):
         name="Morph Margin",
         description="How far the morphing grid reaches beyond the reflector, in reflector sizes",
         default=1.0, min=0.05, soft_max=10.0,
+    )
+    morph_cache_dir: StringProperty(
+        name="Cache Folder",
+        description="Folder for baked morphing grids (empty: the extension's user folder). Set a folder every "
+                    "machine of a render farm can write to, to bake ranges of nodes in parallel into one cache",
+        default="", subtype='DIR_PATH',
     )
     morph_gpu_budget_mb: FloatProperty(
         name="Node Memory (MB)",

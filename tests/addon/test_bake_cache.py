@@ -59,7 +59,7 @@ def test_bake_writes_every_node_and_reports_progress(baked):
     assert result.processes == 2 and result.peak_rss_mb > 0 and result.nbytes > 0
     files = sorted(p.name for p in result.directory.iterdir())
     assert "grid.npz" in files and len([f for f in files if f.startswith("node_")]) == 18
-    assert not [p for p in folder.iterdir() if ".partial-" in p.name]
+    assert not [f for f in files if f.endswith(".tmp")]  # every write finished by its rename
 
 
 def test_loaded_grid_projects_and_is_pickle_free(sphere, baked):
@@ -108,7 +108,7 @@ def test_nodes_are_built_and_written_in_worker_processes(sphere, tmp_path, monke
     assert workers and os.getpid() not in workers
     # The workers compress and write their own nodes; the parent only reports progress.
     assert {int(p.name) for p in writers.iterdir()} <= workers
-    assert len(list(result.directory.glob("node_*.npz"))) == result.n_built == 8
+    assert len(list(result.directory.glob("node_*"))) == result.n_built == 8
 
 
 def test_stale_missing_and_corrupt_caches_give_clear_errors(sphere, baked, tmp_path):
@@ -159,7 +159,7 @@ def test_corrupt_files_raise_cache_errors_not_tracebacks(sphere, baked, tmp_path
         bake.load_for(sphere, np.eye(4), SETTINGS, copy)
 
 
-def test_cancel_half_way_keeps_the_previous_cache(sphere, baked, tmp_path):
+def test_cancel_half_way_keeps_the_previous_cache_and_the_next_bake_resumes(sphere, baked, tmp_path):
     import shutil
 
     folder, result, _ = baked
@@ -182,11 +182,106 @@ def test_cancel_half_way_keeps_the_previous_cache(sphere, baked, tmp_path):
     assert max(seen) < 27
     after = sorted((p.name, p.stat().st_size) for p in old_folder.iterdir())
     assert after == before
-    assert [p.name for p in copy.iterdir()] == [old_folder.name]
     assert bake.load_for(sphere, np.eye(4), SETTINGS, copy).grid.shape == (3, 3, 2)
-    with pytest.raises(bake_cache.CacheError) as error:
+    with pytest.raises(bake_cache.CacheError, match=r"has \d+ of 27 nodes") as error:
         bake.load_for(sphere, np.eye(4), other, copy)
-    assert error.value.reason == "stale"
+    assert error.value.reason == "incomplete"
+    # The next bake builds only the nodes still missing, then retires the old grid.
+    built = bake_cache.baked_nodes(bake_cache.grid_directory(copy, sphere.name, outcome.key), 27)[0].sum()
+    assert built >= outcome.n_built
+    finished = bake.bake_grid(sphere, np.eye(4), other, copy, processes=2)
+    assert finished.n_skipped == built and finished.n_built == 27 - built and finished.directory is not None
+    assert [p.name for p in copy.iterdir()] == [finished.directory.name]
+    assert bake.load_for(sphere, np.eye(4), other, copy).grid.shape == (3, 3, 3)
+
+
+def test_damaged_or_foreign_node_files_are_refused_and_baked_again(sphere, baked, tmp_path):
+    import shutil
+
+    folder, result, _ = baked
+    copy = tmp_path / "copy"
+    shutil.copytree(folder, copy)
+    directory = bake_cache.grid_directory(copy, sphere.name, result.key)
+    ok = np.flatnonzero(bake.load_for(sphere, np.eye(4), SETTINGS, copy).node_status == M.NODE_OK)
+    damaged, foreign = int(ok[0]), int(ok[1])
+    path = bake_cache.node_file(directory, damaged)
+    path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])  # truncated
+    other = dict(np.load(bake_cache.node_file(directory, foreign)))
+    other["key"] = np.array("0" * 64)
+    np.savez_compressed(bake_cache.node_file(directory, foreign), **other)
+    grid = bake.load_for(sphere, np.eye(4), SETTINGS, copy)
+    with pytest.raises(bake_cache.CacheError, match=f"node_{damaged:05d}.npz is unreadable") as error:
+        grid.nodes[damaged]
+    assert "Bake Morphing Grid builds the node again" in str(error.value)
+    with pytest.raises(bake_cache.CacheError, match=f"node_{foreign:05d}.npz belongs to another grid"):
+        grid.nodes[foreign]
+    assert sorted(p.name for p in directory.glob("*.damaged")) == [f"node_{n:05d}.npz.damaged"
+                                                                  for n in sorted((damaged, foreign))]
+    with pytest.raises(bake_cache.CacheError) as incomplete:
+        bake.load_for(sphere, np.eye(4), SETTINGS, copy)
+    assert incomplete.value.reason == "incomplete"
+    repaired = bake.bake_grid(sphere, np.eye(4), SETTINGS, copy, processes=1)
+    assert repaired.n_built == 2 and repaired.n_skipped == 16 and repaired.directory == directory
+    repaired_grid = bake.load_for(sphere, np.eye(4), SETTINGS, copy)
+    assert repaired_grid.nodes[damaged].status == M.NODE_OK and repaired_grid.nodes[foreign].status == M.NODE_OK
+
+
+_RANGE_BAKE = """
+import sys
+import numpy as np
+sys.path.insert(0, {scripts!r})
+import package_link
+package_link.import_as_package({root!r})
+from curved_reflections.addon import bake
+from curved_reflections.addon import morphing as M
+from curved_reflections.addon.sphere import icosphere
+settings = M.MorphSettings(grid=(3, 3, 2), margin=0.8, face_resolution=32)
+sphere = icosphere(np.array([0.0, 0.0, 1.0]), 1.0, 3, "Mirror Ball")
+nodes = bake.parse_node_range(sys.argv[2], 18)
+result = bake.bake_grid(sphere, np.eye(4), settings, sys.argv[1], processes=1, nodes=nodes)
+print("built", result.n_built, "complete", result.directory is not None)
+"""
+
+
+def test_two_processes_baking_ranges_side_by_side_give_the_single_process_grid(baked, tmp_path, repo_root):
+    """What a render farm does: two processes, started together, each bake a range of one
+    grid's nodes into the same folder; the grid is whole and equals the one-process bake."""
+    import subprocess
+    import sys
+
+    folder, result, _ = baked
+    script = tmp_path / "range_bake.py"
+    script.write_text(_RANGE_BAKE.format(scripts=str(repo_root / "scripts"), root=str(repo_root)))
+    shared = tmp_path / "shared"
+    runs = [subprocess.Popen([sys.executable, str(script), str(shared), nodes], stdout=subprocess.PIPE, text=True)
+            for nodes in ("0-8", "9-")]
+    outputs = [run.communicate(timeout=300)[0] for run in runs]
+    assert all(run.returncode == 0 for run in runs), outputs
+    assert sorted(int(o.split()[1]) for o in outputs) == [9, 9]
+    directory = bake_cache.grid_directory(shared, "Mirror Ball", result.key)
+    assert bake_cache.baked_nodes(directory, 18)[0].all()
+    for node in range(18):
+        ours, theirs = bake_cache.node_file(directory, node), bake_cache.node_file(result.directory, node)
+        assert ours.is_file() == theirs.is_file()
+        if ours.is_file():
+            with np.load(ours) as a, np.load(theirs) as b:
+                assert set(a.files) == set(b.files)
+                for k in a.files:
+                    if k != "seconds" and "stats" not in k:
+                        assert np.array_equal(a[k], b[k]), (node, k)
+    again = subprocess.run([sys.executable, str(script), str(shared), "0-17"], capture_output=True, text=True,
+                           timeout=300)
+    assert again.stdout.split()[:4] == ["built", "0", "complete", "True"]  # a finished range is not redone
+
+
+def test_node_ranges_parse_or_say_what_is_wrong():
+    assert bake.parse_node_range("", 18) == range(18)
+    assert bake.parse_node_range("3-7", 18) == range(3, 8)
+    assert bake.parse_node_range("9-", 18) == range(9, 18)
+    assert bake.parse_node_range(" 4 ", 18) == range(4, 5)
+    for text, problem in (("7-3", "nodes 0 to 17"), ("0-18", "nodes 0 to 17"), ("a-b", "write first-last")):
+        with pytest.raises(ValueError, match=problem):
+            bake.parse_node_range(text, 18)
 
 
 def test_clear_removes_only_that_reflectors_grids(sphere, baked, tmp_path):

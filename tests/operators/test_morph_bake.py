@@ -79,7 +79,7 @@ def test_bake_load_stale_and_clear(empty_scene, morph_ops):
     assert bpy.ops.curved_reflections.clear_morphing() == {'FINISHED'}
     assert morph_ops.load_morphing(reflector, matrix, empty_scene) is None
     assert "Ball: no morphing cache yet" in morph_ops.morph_status(empty_scene)
-    assert not any(morph_ops.cache_directory().iterdir())
+    assert not any(morph_ops.cache_directory(empty_scene).iterdir())
 
 
 def test_bake_without_a_morphing_reflector_reports_an_error(empty_scene, morph_ops):
@@ -98,3 +98,102 @@ def test_classes_tuple_and_status_while_running(morph_ops, empty_scene):
     assert not bpy.ops.curved_reflections.bake_morphing.poll()
     morph_ops._STATE.clear()
     assert np.prod(tuple(empty_scene.curved_reflections.morph_grid)) == 405
+
+
+def _baked_node_files(morph_ops, scene):
+    return sorted(p.name for p in morph_ops.cache_directory(scene).rglob("node_*"))
+
+
+def test_two_files_with_one_object_name_keep_their_own_grids(empty_scene, morph_ops, tmp_path):
+    """A.blend and B.blend both have a "Ball": each file's grids live in its own folder,
+    a bake or Clear in one never touches the other's; Save As takes the grids along."""
+    ball = _mirror_scene(empty_scene)
+    first, second = tmp_path / "A.blend", tmp_path / "B.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(first))
+    assert bpy.ops.curved_reflections.bake_morphing(processes=1) == {'FINISHED'}
+    a_folder = morph_ops.cache_directory(bpy.context.scene)
+    assert a_folder.name.startswith("A-") and len(_baked_node_files(morph_ops, bpy.context.scene)) == 8
+
+    bpy.ops.wm.save_as_mainfile(filepath=str(second))  # the copy has the grid too
+    scene = bpy.context.scene
+    b_folder = morph_ops.cache_directory(scene)
+    assert b_folder != a_folder and b_folder.name.startswith("B-")
+    reflector, matrix = _captured(bpy.context, morph_ops)
+    assert morph_ops.load_morphing(reflector, matrix, scene) is not None
+    ball = bpy.data.objects["Ball"]
+    ball.scale = (1.3, 1.0, 1.0)  # B's Ball changes: its new bake replaces only B's grid
+    bpy.context.view_layer.update()
+    assert bpy.ops.curved_reflections.bake_morphing(processes=1) == {'FINISHED'}
+    assert bpy.ops.curved_reflections.clear_morphing() == {'FINISHED'}
+    assert not list(b_folder.iterdir())
+
+    bpy.ops.wm.open_mainfile(filepath=str(first))
+    scene = bpy.context.scene
+    assert morph_ops.cache_directory(scene) == a_folder
+    reflector, matrix = _captured(bpy.context, morph_ops)
+    assert morph_ops.load_morphing(reflector, matrix, scene) is not None  # A's grid survived
+
+
+def test_a_range_of_nodes_bakes_only_those_and_reports_what_is_left(empty_scene, morph_ops):
+    _mirror_scene(empty_scene)
+    assert bpy.ops.curved_reflections.bake_morphing(processes=1, object_name="Ball", nodes="0-2") == {'FINISHED'}
+    assert len(_baked_node_files(morph_ops, empty_scene)) == 3
+    assert "3 of 8 nodes baked, the other ranges still to bake" in morph_ops.morph_status(empty_scene)
+    reflector, matrix = _captured(bpy.context, morph_ops)
+    assert morph_ops.load_morphing(reflector, matrix, empty_scene) is None
+    assert "the morphing cache has 3 of 8 nodes" in morph_ops.morph_status(empty_scene)
+    assert bpy.ops.curved_reflections.bake_morphing(processes=1, nodes="3-") == {'FINISHED'}
+    assert "baked 5 nodes" in morph_ops.morph_status(empty_scene)
+    assert morph_ops.load_morphing(reflector, matrix, empty_scene) is not None
+    for bad, message in (("5-2", "nodes 0 to 7"), ("x", "write first-last")):
+        with pytest.raises(RuntimeError, match=message):
+            bpy.ops.curved_reflections.bake_morphing(nodes=bad)
+    with pytest.raises(RuntimeError, match="'Cube': not a visible reflector in Morphing mode"):
+        bpy.ops.curved_reflections.bake_morphing(object_name="Cube")
+
+
+def test_a_damaged_node_costs_only_its_reflector_and_a_bake_repairs_it(empty_scene, morph_ops, gpu_ready):
+    """The live view: a damaged node file met while drawing turns its reflector to runtime
+    mode with a line naming the file; another reflector keeps drawing; Bake repairs it."""
+    from curved_reflections.addon import bake_cache, look_at_view
+    from curved_reflections.operators import live
+
+    from test_live import _draw, _touched
+
+    ball = _mirror_scene(empty_scene)
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.6, location=(-2.2, 0.5, 1.0), segments=24, ring_count=12)
+    other = bpy.context.active_object
+    other.name = "Other"
+    other.curved_reflections.is_reflector = True
+    other.curved_reflections.mode = 'ITERATIVE'
+    bpy.ops.mesh.primitive_cube_add(size=0.5, location=(0.5, -2.0, 1.0))
+    empty_scene.curved_reflections.max_order = 1
+    assert bpy.ops.curved_reflections.bake_morphing(processes=1) == {'FINISHED'}
+    view = look_at_view([0.9, -1.6, 1.3], [0.0, 0.0, 1.0], fov_y_deg=70.0, width=96, height=72)
+    state = live.bake(empty_scene, bpy.context.evaluated_depsgraph_get(), views={"v": view}, wait=True)
+    assert [grid.reflector_name for grid, _ in state.grids] == ["Ball"]
+    drawn, before = _draw(empty_scene, view, "v")
+    assert drawn and state.renderer.morph.counts["blends"] == 1
+
+    directory = next(morph_ops.cache_directory(empty_scene).glob("Ball-*"))
+    for path in directory.glob("node_*.npz"):
+        path.write_bytes(b"damaged")
+    state = live.refresh(empty_scene, bpy.context.evaluated_depsgraph_get(), views={"v": view}, wait=True)
+    drawn, after = _draw(empty_scene, view, "v")  # the fault is met here, the others draw on
+    assert drawn and state.drawing
+    grid = state.grids[0][0]
+    assert grid.failure is not None and ".npz is unreadable" in str(grid.failure)
+    line = dict(morph_ops.reflector_modes(empty_scene))["Ball"]
+    assert line.startswith("runtime mode: the morphing cache file node_") and "Bake Morphing Grid" in line
+    live.process(empty_scene, bpy.context.evaluated_depsgraph_get(), wait=True)  # the camera it asked for
+    drawn, runtime = _draw(empty_scene, view, "v")
+    assert drawn and state.cameras["v"].sbc is not None
+    assert _touched(runtime).sum() > 0.8 * _touched(before).sum()
+
+    damaged = len(list(directory.glob("node_*.npz*")))  # overwritten, some renamed *.damaged when read
+    assert bpy.ops.curved_reflections.bake_morphing(processes=1) == {'FINISHED'}
+    assert f"Ball: baked {damaged} nodes" in morph_ops.morph_status(empty_scene)
+    assert bake_cache.baked_nodes(directory, 8)[0].all()
+    state = live.refresh(empty_scene, bpy.context.evaluated_depsgraph_get(), views={"v": view}, wait=True)
+    drawn, repaired = _draw(empty_scene, view, "v")
+    assert drawn and state.grids[0][0].failure is None and state.renderer.morph.counts["blends"] == 1

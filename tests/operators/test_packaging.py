@@ -77,3 +77,38 @@ def test_installs_enables_works_and_disables(extension_zip, tmp_path):
     assert result["poll"] is True
     assert result["check_scene"] == ["FINISHED"]
     assert not any(result["disabled"].values()), result["disabled"]
+
+
+def test_a_farm_bakes_node_ranges_side_by_side_into_one_cache(extension_zip, tmp_path):
+    """The user guide's farm task (``bpy`` module form): two processes started together
+    each bake half the nodes of one grid into the scene's shared cache folder; the grid
+    is whole and equals the one a single process bakes, file by file."""
+    import numpy as np
+
+    probe = str(Path(__file__).with_name("farm_probe.py"))
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "user"))
+    blend, shared, single = tmp_path / "scene.blend", tmp_path / "shared", tmp_path / "single"
+
+    def run(*args):
+        return subprocess.Popen([sys.executable, probe, *map(str, args)], env=env, stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT, text=True)
+
+    installing = run("install", extension_zip, blend, shared)
+    assert installing.wait(timeout=120) == 0, installing.stdout.read()
+    halves = [run("bake", blend, nodes) for nodes in ("0-3", "4-")]
+    outputs = [half.communicate(timeout=600)[0] for half in halves]
+    assert all(half.returncode == 0 for half in halves), outputs
+    assert all("RESULT ['FINISHED']" in out and "Ball: baked 4 nodes" in out for out in outputs), outputs
+    alone = run("bake", blend, "", single)
+    assert alone.wait(timeout=600) == 0, alone.stdout.read()
+
+    (ours,), (theirs,) = list(shared.glob("scene/Ball-*")), list(single.glob("scene/Ball-*"))
+    assert ours.name == theirs.name
+    names = sorted(p.name for p in ours.iterdir())
+    assert names == sorted(p.name for p in theirs.iterdir()) and len(names) == 9  # manifest and 8 nodes
+    for name in names:
+        with np.load(ours / name) as a, np.load(theirs / name) as b:
+            assert set(a.files) == set(b.files)
+            for k in a.files:
+                if k != "seconds" and "stats" not in k:  # timings differ
+                    assert np.array_equal(a[k], b[k]), (name, k)
