@@ -496,26 +496,29 @@ class MorphingGrid:
 
     # images at the four nodes, matched to one another
 
-    def _node_images(self, node: int, points: np.ndarray):
-        """(P, K, 3) distinct first reflector points of each point at one node, NaN padded."""
+    def _node_images(self, node: int, points: np.ndarray, face_images=None):
+        """(P, K, 3) distinct first reflector points of each point at one node, NaN padded;
+        ``face_images`` projects a face (default: the grid's own, numpy where it has none)."""
         camera = self.nodes[node]
+        face_images = face_images or self.face_images or project_face
         parts = []
         for sbc in camera.faces:
             if sbc is None:
                 continue
-            parts.append(project_face(sbc, points) if self.face_images is None else self.face_images(sbc, points))
+            parts.append(face_images(sbc, points))
         if not parts:
             return np.full((len(points), 0, 3), np.nan)
         images = np.concatenate(parts, axis=0).transpose(1, 0, 2)
         return _compact(images, self._duplicate_tolerance(node, images))
 
-    def node_slots(self, node: int, points: np.ndarray, slots: int) -> np.ndarray:
+    def node_slots(self, node: int, points: np.ndarray, slots: int, face_images=None) -> np.ndarray:
         """(P, 2 slots, 3): the first ``slots`` distinct images of each point (frame
         coordinates) at one node, then the first ``slots`` of its widened charts (remedy
         2), NaN padded. What the GPU blend keeps per node (``gpu_shaders/morph_pass.py``):
         everything :meth:`_matched_images` reads of a node, for every point at once, so
-        that it serves every tetrahedron the node belongs to."""
-        parts = [self._node_images(node, points), self._extended_images(node, points)]
+        that it serves every tetrahedron the node belongs to. ``face_images`` as for
+        :meth:`_node_images` (``project_face``: numpy, for a thread without the GPU)."""
+        parts = [self._node_images(node, points, face_images), self._extended_images(node, points)]
         return np.concatenate([_pad(part[:, :slots], slots) for part in parts], axis=1)
 
     def _duplicate_tolerance(self, node: int, images: np.ndarray) -> np.ndarray:

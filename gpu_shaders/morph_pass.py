@@ -10,15 +10,17 @@ is literal:
   node's images of every vertex, its first :data:`SLOTS` regular ones and as many from
   its widened leaf charts (``MorphingGrid.node_slots``; the cube faces project on the
   GPU, ``morph_source.GPUFaceImages``), kept on the GPU as one texture per node
-  (:class:`NodeTextures`, least recently used first out beyond a budget in MB);
+  (:class:`NodeTextures`, least recently used first out beyond a budget in MB); the
+  nodes around the eye are projected ahead on a worker thread (:meth:`MorphPass.prefetch`,
+  numpy) and uploaded when done (:meth:`MorphPass.collect`);
 - **every frame**: where the eye is (``MorphingGrid.check_view``: a lookup in the grid),
   then one compute dispatch per grid (``glsl/morph_blend.glsl``, the float32 twin of
   ``MorphingGrid._matched_images`` and ``_blend``) matches and blends the four nodes'
   images and refines them on the local surface, into one answer texture per image slot,
   and the reflected meshes are drawn from those (``reflected_meshes.ReflectedMeshes``,
   as the iterative search's). Entering a tetrahedron whose nodes are on the GPU costs
-  the CPU nothing but the uniforms; a missing node is projected when first needed, and
-  :meth:`MorphPass.prefetch` projects those around the eye ahead of time.
+  the CPU nothing but the uniforms; a node neither on the GPU nor prefetched is projected
+  when first needed.
 """
 
 from __future__ import annotations
@@ -169,6 +171,7 @@ class MorphPass:
         self._results: dict = {}  # grid index -> [answer texture per slot]
         self._frame = None  # the uniform buffer of the blend's per-frame parameters
         self._active: dict = {}  # grid index -> slots written by its last blend (the rest are empty)
+        self._pending: dict = {}  # (grid index, node) -> (frame, Future of its node_slots), prefetching
         self._drawn: list = []  # grid indices blended by the last blend()
         self.counts = {"blends": 0, "node_projections": 0}
 
@@ -210,8 +213,11 @@ class MorphPass:
             self._frames[k] = frame
         key = (k, int(node))
         if key not in self.nodes:
-            grid = self.grids[k][0]
-            slots = grid.node_slots(int(node), self._points_in_frame(frame), SLOTS)
+            pending = self._pending.pop(key, None)
+            if pending is not None and np.array_equal(pending[0], frame):
+                slots = pending[1].result()  # being prefetched: wait for it rather than start again
+            else:
+                slots = self.grids[k][0].node_slots(int(node), self._points_in_frame(frame), SLOTS)
             self.nodes.put(key, slots, self.meshes.width, self.meshes.height, keep)
             self.counts["node_projections"] += 1
         return self.nodes.get(key)
@@ -264,35 +270,64 @@ class MorphPass:
         self.counts["blends"] += 1
         return [self.grids[k][0].reflector_index for k in self._drawn]
 
-    def prefetch(self, view, max_nodes: int = 1) -> int:
-        """Project up to ``max_nodes`` nodes not yet on the GPU around each covering
-        grid's eye (the 4 x 4 x 4 nodes of its cell and the cells beside it, nearest
-        first), so that moving on rarely waits; returns how many were projected."""
-        done = 0
-        for k, (_, nodes, _, frame) in self.covering(view):
-            grid = self.grids[k][0].grid
-            positions = grid.node_positions()
+    def prefetch(self, view, submit, max_pending: int = 1) -> int:
+        """Start projecting nodes not yet on the GPU around each covering grid's eye (the
+        4 x 4 x 4 nodes of its cell and the cells beside it, nearest first), so that
+        moving on rarely waits: ``submit(function, *args)`` runs the projection (in numpy,
+        no GPU: on a worker thread) and returns a ``Future``; at most ``max_pending`` run
+        at once, and a prefetch never evicts. :meth:`collect` uploads the finished ones.
+        Returns how many were started."""
+        started = 0
+        for k, (_, _, _, frame) in self.covering(view):
+            grid = self.grids[k][0]
             eye = morphing.to_frame(frame, view.eye[None])[0]
-            cell = np.clip(np.floor((eye - grid.lo) / grid.spacing).astype(np.int64), 0, np.asarray(grid.shape) - 2)
+            lattice = grid.grid
+            shape = np.asarray(lattice.shape)
+            cell = np.clip(np.floor((eye - lattice.lo) / lattice.spacing).astype(np.int64), 0, shape - 2)
             offsets = np.stack(np.meshgrid(*[np.arange(-1, 3)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
-            around = np.unique(grid.node_index(np.clip(cell + offsets, 0, np.asarray(grid.shape) - 1)))
-            around = around[np.argsort(np.linalg.norm(positions[around] - eye, axis=1), kind="stable")]
-            status = self.grids[k][0].node_status
-            keep = {(k, int(n)) for n in nodes}
+            around = np.unique(lattice.node_index(np.clip(cell + offsets, 0, shape - 1)))
+            around = around[np.argsort(np.linalg.norm(lattice.node_positions()[around] - eye, axis=1), kind="stable")]
             for node in around:
-                if done >= max_nodes:
-                    return done
-                if (k, int(node)) in self.nodes or status[node] != morphing.NODE_OK:
+                key = (k, int(node))
+                if len(self._pending) >= max_pending:
+                    return started
+                if key in self.nodes or key in self._pending or grid.node_status[node] != morphing.NODE_OK:
                     continue
-                if len(self.nodes) and self.nodes.nbytes + self._node_bytes() > self.nodes.budget_bytes:
-                    return done  # a prefetch never evicts
-                try:
-                    self._node_texture(k, int(node), frame, keep)
-                except CacheError as error:
-                    self.grids[k][0].failure = error
-                    break
-                done += 1
-        return done
+                if self.nodes.nbytes + (len(self._pending) + 1) * self._node_bytes() > self.nodes.budget_bytes:
+                    return started
+                self._pending[key] = (frame, submit(grid.node_slots, int(node), self._points_in_frame(frame), SLOTS,
+                                                    morphing.project_face))
+                started += 1
+        return started
+
+    @property
+    def prefetching(self) -> int:
+        """Node projections started by :meth:`prefetch` and not yet collected."""
+        return len(self._pending)
+
+    @property
+    def prefetched(self) -> bool:
+        """Whether a prefetched node is ready for :meth:`collect`."""
+        return any(future.done() for _, future in self._pending.values())
+
+    def collect(self) -> int:
+        """Upload the prefetched nodes that have finished (main thread); returns how many."""
+        uploaded = 0
+        for key, (frame, future) in list(self._pending.items()):
+            if not future.done():
+                continue
+            del self._pending[key]
+            k = key[0]
+            try:
+                slots = future.result()
+            except CacheError as error:
+                self.grids[k][0].failure = error
+                continue
+            if self._frames[k] is not None and np.array_equal(self._frames[k], frame) and key not in self.nodes:
+                self.nodes.put(key, slots, self.meshes.width, self.meshes.height)
+                self.counts["node_projections"] += 1
+                uploaded += 1
+        return uploaded
 
     def _node_bytes(self) -> int:
         return 2 * SLOTS * self.meshes.width * self.meshes.height * 16

@@ -137,6 +137,8 @@ class LiveScene:
 
 _states: dict[int, LiveScene] = {}
 _executor: ThreadPoolExecutor | None = None
+#: Projects morphing nodes around the eye ahead of time (numpy, no GPU).
+_prefetcher: ThreadPoolExecutor | None = None
 _draw_handle = None
 
 
@@ -239,6 +241,13 @@ def _camera_bounds(state: LiveScene) -> tuple:
     lo, hi = state.bounds
     margin = BOUNDS_MARGIN * float(np.linalg.norm(hi - lo))
     return lo - margin, hi + margin
+
+
+def _prefetcher_get() -> ThreadPoolExecutor:
+    global _prefetcher
+    if _prefetcher is None:
+        _prefetcher = ThreadPoolExecutor(max_workers=1, thread_name_prefix="curved_reflections_prefetch")
+    return _prefetcher
 
 
 def _executor_get() -> ThreadPoolExecutor:
@@ -425,9 +434,11 @@ def process(scene, depsgraph, wait: bool = False, now: float | None = None) -> b
                 _start(state, key, view, wait)
     except SceneInputError as error:
         state.report('ERROR', str(error))
-    if _collect(state):
+    morph = None if state.renderer is None else state.renderer.morph
+    if _collect(state) or (morph is not None and morph.prefetched):
         tag_redraw()
-    return bool(state.jobs or state.requests or state.dirty_meshes or state.dirty_reflectors)
+    return bool(state.jobs or state.requests or state.dirty_meshes or state.dirty_reflectors
+                or (morph is not None and morph.prefetching))
 
 
 def draw(scene, key, view: View) -> bool:
@@ -478,10 +489,16 @@ def draw(scene, key, view: View) -> bool:
 
 
 def _draw_with(state: LiveScene, view: View, source, sbc) -> bool:
-    """One draw of ``view`` with a projection source (``None``: the iterative search alone)."""
+    """One draw of ``view`` with a projection source (``None``: the per-frame passes
+    alone); then the morphing nodes around the eye are prefetched."""
     start = time.perf_counter()
     projections = state.renderer.counts["projections"]
     state.renderer.draw(view, source, state.world, reflectors_only=True, camera=sbc)
+    morph = state.renderer.morph
+    if morph.grids:
+        morph.collect()
+        if morph.prefetch(view, _prefetcher_get().submit):
+            _ensure_timer()  # it redraws when a node is ready, which uploads it and starts the next
     if state.renderer.counts["projections"] != projections:
         state.counts["projections"] += 1
         state.stats["projection_ms"] = 1000.0 * state.renderer.stats.get("projection_seconds", 0.0)
@@ -692,7 +709,7 @@ def register() -> None:
 
 def unregister() -> None:
     """Remove the draw handler, the app handlers and the timer; drop all state."""
-    global _draw_handle, _executor
+    global _draw_handle, _executor, _prefetcher
     if _draw_handle is not None:
         bpy.types.SpaceView3D.draw_handler_remove(_draw_handle, 'WINDOW')
         _draw_handle = None
@@ -710,3 +727,6 @@ def unregister() -> None:
     if _executor is not None:
         _executor.shutdown(wait=False, cancel_futures=True)
         _executor = None
+    if _prefetcher is not None:
+        _prefetcher.shutdown(wait=False, cancel_futures=True)
+        _prefetcher = None

@@ -35,6 +35,15 @@ def mirror(gpu_ready):
     return sphere, grid
 
 
+def _run_now(function, *args):
+    """An executor's ``submit`` that runs the function at once."""
+    from concurrent.futures import Future
+
+    future = Future()
+    future.set_result(function(*args))
+    return future
+
+
 def _view(eye, size=(320, 240)):
     return look_at_view(eye, (0.0, 0.0, 0.0), fov_y_deg=50.0, width=size[0], height=size[1])
 
@@ -78,9 +87,14 @@ def test_nodes_are_projected_once_and_kept(mirror):
     assert morph.counts["node_projections"] == 4 and len(morph.nodes) == 4
     morph.blend(_view((0.41, -2.29, 0.31)))
     assert morph.counts["node_projections"] == 4
-    assert morph.prefetch(first, max_nodes=2) == 2 and morph.counts["node_projections"] == 6
-    prefetched = morph.prefetch(first, max_nodes=64)  # the rest of the 4 x 4 x 4 nodes around the eye
-    assert 20 <= prefetched <= 58 and morph.prefetch(first) == 0
+    # Prefetching: the numpy projection of the nodes around the eye, handed to `submit`
+    # (here run at once), uploaded by collect().
+    assert morph.prefetch(first, _run_now, max_pending=2) == 2 and morph.prefetching == 2
+    assert morph.prefetched and morph.collect() == 2 and morph.counts["node_projections"] == 6
+    prefetched = 0
+    while morph.prefetch(first, _run_now, max_pending=8):  # the rest of the 4 x 4 x 4 nodes around the eye
+        prefetched += morph.collect()
+    assert 20 <= prefetched <= 58 and morph.prefetching == 0
     grid = mirror[1]
     tet = grid.check_view(first)[0]
     step = grid.grid.spacing * np.array([0.6, 0.0, 0.0])

@@ -117,3 +117,21 @@ def test_render_image_draws_from_the_grid_on_the_gpu(fig3_morphing):
     camera.location.x += 0.01
     render_scene(scene, bpy.context.evaluated_depsgraph_get(), state=state)
     assert state.reused == 1 and state.renderer.morph.counts["blends"] == 2
+
+
+def test_live_view_prefetches_the_nodes_around_the_eye(fig3_morphing):
+    """After a draw from the grid, the next node around the eye is projected on a worker
+    thread; the timer's pass sees it ready, the next draw uploads it and starts another."""
+    scene = fig3_morphing
+    scene.curved_reflections.max_order = 1
+    mirror, near, _ = _views()
+    mirror.curved_reflections.mode = 'MORPHING'
+    state = live.bake(scene, bpy.context.evaluated_depsgraph_get(), views={"near": near}, wait=True)
+    assert _draw(scene, near, "near")[0]
+    morph = state.renderer.morph
+    assert morph.counts["node_projections"] == 4 and morph.prefetching == 1
+    (_, future), = morph._pending.values()
+    future.result(timeout=120)
+    assert live.process(scene, bpy.context.evaluated_depsgraph_get())  # still work: a node to upload
+    assert _draw(scene, near, "near")[0]
+    assert morph.counts["node_projections"] == 5 and morph.prefetching == 1 and len(morph.nodes) == 5
