@@ -179,6 +179,11 @@ class MorphPass:
     def reflector_indices(self) -> list:
         return [grid.reflector_index for grid, _ in self.grids]
 
+    @property
+    def drawn_reflectors(self) -> list:
+        """The reflectors the last :meth:`blend` drew from their grids."""
+        return [self.grids[k][0].reflector_index for k in self._drawn]
+
     def covering(self, view) -> list:
         """(grid index, (tetrahedron, nodes, weights, frame)) of each grid whose
         reflector ``view`` can be drawn from (``MorphingGrid.check_view``), its four

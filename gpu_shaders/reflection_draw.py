@@ -998,7 +998,7 @@ class ReflectionRenderer:
             self._batches["screen"].draw(shader)
 
     def trace_band(self, view, targets: FrameTargets, max_order: int, world_color, radius: int,
-                   edges_of_drawn: bool = False, ray_map=None, camera=None) -> int:
+                   edges_of_drawn: bool = False, ray_map=None, camera=None, holes_of=()) -> int:
         """Trace the reflector pixels along each footprint's edge that got no reflection
         (:mod:`.band_trace`): reads the pre-pass ids and the reflection coverage back,
         traces those pixels on the CPU and uploads their colours for the composite. With
@@ -1007,6 +1007,10 @@ class ReflectionRenderer:
         a footprint). With the ``camera`` itself, also the pixels without a drawn
         reflection in cells where its projection is unreliable
         (:func:`band_trace.unreliable_cells`: ray-list leaves, fold and mixed cells).
+        ``holes_of``: reflector indices (drawn from morphing grids) every pixel of which
+        without a drawn reflection is traced: where the blend has no answer (the parts of
+        the mirror not all four nodes see, and triangles with such a corner), but also
+        where the mirror shows the world, so it costs many rays.
         Returns how many pixels were traced."""
         import gpu
 
@@ -1024,6 +1028,9 @@ class ReflectionRenderer:
                 band_trace.unreliable_cells(camera.ray_map, camera.trees, camera.mixed, camera.folds),
                 camera.ray_map.downsample, targets.width, targets.height)
             boundary = unreliable if boundary is None else boundary | unreliable
+        if len(holes_of):
+            holes = np.isin(np.rint(labels) - 1, list(holes_of))
+            boundary = holes if boundary is None else boundary | holes
         pixels = band_trace.band_pixels(labels, drawn, radius, edges_of_drawn, boundary)
         traced = np.zeros((targets.height, targets.width, 4), np.float32)
         if len(pixels):
@@ -1368,14 +1375,17 @@ class ReflectionRenderer:
         return pieces
 
     def render(self, view, sbc_or_textures, world_color=(0.0, 0.0, 0.0, 1.0), trace: bool = True,
-               fill_radius: int | None = None, trace_edges: bool = False) -> np.ndarray:
+               fill_radius: int | None = None, trace_edges: bool = False, trace_gaps: bool = False) -> np.ndarray:
         """Draw ``view`` offscreen and read it back: (H, W, 4) float32 linear RGBA, rows bottom to top.
 
         ``sbc_or_textures``: a ``SampleBasedCamera`` built for this view, its
         ``projection.SBCTextures``, another projection source of this view
         (:class:`SheetSources`, :class:`.morph_source.MorphSource`), or ``None`` when
-        the iterative search draws every reflector. With ``trace`` the band along each footprint's edge
-        that the camera cannot reach (d pixels wide) is ray traced (:meth:`trace_band`);
+        the per-frame passes (iterative search, morphing grids) draw every reflector.
+        With ``trace`` the band along each footprint's edge that the camera cannot reach
+        (d pixels wide) is ray traced (:meth:`trace_band`), and with ``trace_gaps`` every
+        pixel of a mirror drawn from its grid that the blend left without a reflection
+        (exact there, but tens of thousands of rays a frame: the sky's pixels too);
         without, it gets the composite's fill (``fill_radius``, ``None``: d). With
         ``trace_edges`` also the reflector pixels within d of a drawn reflection that got
         none: seams and creases; exact there, but no longer a purely feed-forward image
@@ -1398,10 +1408,11 @@ class ReflectionRenderer:
             self._projection.camera = camera
         drawn = time.perf_counter()
         traced = 0
-        if trace and textures is not None and textures.groups:
-            max_order = max(len(h) for h in textures.groups)
+        morphed = self.morph.drawn_reflectors if trace_gaps else []
+        if trace and ((textures is not None and textures.groups) or morphed):
+            max_order = max((len(h) for h in textures.groups), default=1) if textures is not None else 1
             traced = self.trace_band(view, targets, max_order, world_color, downsample, trace_edges,
-                                     getattr(sbc_or_textures, "ray_map", None), camera)
+                                     getattr(sbc_or_textures, "ray_map", None), camera, holes_of=morphed)
             fill_radius = 0
         elif fill_radius is None:
             fill_radius = downsample

@@ -150,10 +150,12 @@ def load_morphing(reflector, matrix, scene, reflector_index: int = 0):
     return grid
 
 
-def load_grids(scene, reflectors) -> list:
+def load_grids(scene, reflectors, bake_missing: bool = False) -> list:
     """(grid, object matrix) of each reflector in Morphing mode (or Auto, where it is not
     star-shaped) whose baked grid matches it; the others are drawn in runtime mode
-    (:func:`load_morphing` records why). The grids' nodes project on the GPU."""
+    (:func:`load_morphing` records why). With ``bake_missing`` (Render Image) a reflector
+    set to Morphing mode whose grid is missing, stale or unfinished is baked first, in
+    this process, on every core. The grids' nodes project on the GPU."""
     from ..gpu_shaders.morph_source import GPUFaceImages
 
     faces = GPUFaceImages()
@@ -163,11 +165,28 @@ def load_grids(scene, reflectors) -> list:
         if obj is None or not methods.wants_grid(scene, reflector):
             continue
         matrix = np.array(obj.matrix_world, dtype=np.float64)
+        if bake_missing and obj.curved_reflections.mode == methods.MORPHING:
+            _bake_if_missing(reflector, matrix, scene)
         grid = load_morphing(reflector, matrix, scene, index)
         if grid is not None:
             grid.face_images = faces
             grids.append((grid, matrix))
     return grids
+
+
+def _bake_if_missing(reflector, matrix, scene) -> None:
+    """Bake this reflector's grid where none matching it is whole (the nodes already baked
+    are kept); a damaged node file is found and rebuilt when it is read."""
+    settings, directory = morph_settings(scene), cache_directory(scene)
+    try:
+        bake.load_for(reflector, matrix, settings, directory)
+    except SceneInputError as error:
+        if getattr(error, "reason", "") == "corrupt":
+            return
+        reason = {"missing": "none baked yet", "stale": "it was baked for other geometry or settings",
+                  "incomplete": "its bake is unfinished"}.get(getattr(error, "reason", ""), error.problem)
+        print(f"Curved Reflections: baking the morphing grid of {reflector.name!r} first: {reason}")
+        bake.bake_grid(reflector, matrix, settings, directory)
 
 
 def note_cache_fault(reflector_name: str, error) -> None:

@@ -153,18 +153,21 @@ class FrameState:
 
 
 def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: int | None = None,
-                 accuracy_px: float | None = None, trace_edges: bool = False,
+                 accuracy_px: float | None = None, trace_edges: bool = False, trace_gaps: bool = False,
                  state: FrameState | None = None) -> ReflectionRender:
     """Render ``scene.camera`` at the render resolution with reflections (offscreen).
 
     Each reflector is drawn by the method its mode chooses (:mod:`.methods`): the
     iterative search on the GPU where it is star-shaped (Auto, Iterative), its baked
-    morphing grid where the camera is inside it (Morphing; blended on the GPU), a
+    morphing grid where the camera is inside it (Morphing, baked first if it has none
+    that matches; blended on the GPU), a
     sample-based camera of this view otherwise (built only when some reflector or a
     higher order needs one). Settings not given come from ``scene.curved_reflections``. The band
     along each sample-based reflector's visible edge, which its camera cannot reach, is
     ray traced; ``trace_edges`` also traces the mirror pixels next to a drawn reflection
-    that got none (see ``gpu_shaders/reflection_draw.py``). ``state`` keeps the
+    that got none (see ``gpu_shaders/reflection_draw.py``), ``trace_gaps`` every pixel of a
+    mirror drawn from its morphing grid that the blend left without a reflection (exact,
+    and several times slower: see docs/benchmarks/morph_animation.md). ``state`` keeps the
     renderer and the plan between the frames of an animation. Bad input (no camera, no
     reflector, a reflector without faces, the camera inside a reflector) raises
     :class:`SceneInputError` naming the object; the GPU is initialised if needed.
@@ -189,7 +192,7 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
     if state.plan is None or key[0] != state.key[0] or key[2:4] != state.key[2:4]:
         from .morph_bake import load_grids
 
-        state.grids = load_grids(scene, captured.reflectors)
+        state.grids = load_grids(scene, captured.reflectors, bake_missing=True)
         state.plan = methods.plan(scene, captured.reflectors, accuracy_px,
                                   baked={grid.reflector_name for grid, _ in state.grids})
         state.renderer = None
@@ -210,7 +213,7 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
         sbc = build_sample_based_camera(captured.reflectors, view, bounds, max_order=max_order,
                                         downsample=downsample, accuracy_px=accuracy_px)
     built_at = time.perf_counter()
-    image = state.renderer.render(view, sbc, world_color(scene), trace_edges=trace_edges)
+    image = state.renderer.render(view, sbc, world_color(scene), trace_edges=trace_edges, trace_gaps=trace_gaps)
     end = time.perf_counter()
     state.frames += 1
     seconds = {"capture": captured_at - start, "plan": planned_at - captured_at, "sbc": built_at - planned_at,
@@ -250,6 +253,9 @@ class CURVED_REFLECTIONS_OT_render_image(bpy.types.Operator):
     filter_glob: StringProperty(default="*.png", options={'HIDDEN'})
     animation: BoolProperty(name="Animation", description="Render every frame from the scene's start to its end "
                             "frame, one PNG each", default=False)
+    trace_gaps: BoolProperty(name="Trace Morphing Gaps", description="Ray trace the pixels of mirrors drawn from "
+                             "their morphing grid that the grid leaves without a reflection (exact there, several "
+                             "times slower)", default=False)
     #: Set by invoke: an animation started from the UI runs modally (progress, Esc cancels).
     interactive: BoolProperty(default=False, options={'HIDDEN', 'SKIP_SAVE'})
 
@@ -267,7 +273,8 @@ class CURVED_REFLECTIONS_OT_render_image(bpy.types.Operator):
     def _render(self, context, path: Path) -> ReflectionRender | None:
         """One frame to ``path``; reports and returns None on bad input or a write error."""
         try:
-            result = render_scene(context.scene, context.evaluated_depsgraph_get(), state=self._state)
+            result = render_scene(context.scene, context.evaluated_depsgraph_get(), trace_gaps=self.trace_gaps,
+                                  state=self._state)
         except (SceneInputError, RuntimeError) as error:  # RuntimeError: the GPU could not be initialised
             self.report({'ERROR'}, str(error))
             return None

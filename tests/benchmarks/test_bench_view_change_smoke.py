@@ -22,5 +22,10 @@ def test_quick_benchmark_times_both_modes_on_every_view(run_quick, tmp_path):
                            report, flags=re.MULTILINE)
     assert [row[0] for row in iterative] == ["sbc_fig3", "two_spheres"]
     assert all(float(value) > 0 for row in iterative for value in row[1].strip(" |").split(" | "))
+    # The Morphing rows on the GPU: the frame, the pass and the blend against the plain draw.
+    morph = re.search(r"^\| ([\d.]+) \| ([\d.]+) \| ([\d.]+) \| ([\d.]+) \| \*\*([\d.]+)x\*\* \| [\d.]+x \| [\d.]+x \| "
+                      r"([\d,]+) \|$", report, flags=re.MULTILINE)
+    assert morph is not None and all(float(value) > 0 for value in morph.groups()[:5])
+    assert int(morph.group(6).replace(",", "")) > 100
     animations = re.findall(r"^\| (sbc_fig3|two_spheres) \| 4 \| ([\d.]+) \| ([\d.]+) \|", report, flags=re.MULTILINE)
     assert len(animations) == 2 and all(float(ours) > 0 and float(workbench) > 0 for _, ours, workbench in animations)

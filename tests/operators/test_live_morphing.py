@@ -88,7 +88,8 @@ def test_morphing_draws_inside_its_grid_and_runtime_outside(fig3_morphing):
 def test_render_image_draws_from_the_grid_on_the_gpu(fig3_morphing):
     """Render Image in Morphing mode, the scene camera inside the grid: no camera is built,
     the grid is blended on the GPU, and the image is the Runtime mode's but for a few
-    per cent of its pixels; a second frame keeps the renderer and the nodes' images."""
+    per cent of its pixels (half as many with its gaps ray traced); later frames keep the
+    renderer and the nodes' images."""
     from mathutils import Vector
 
     from curved_reflections.operators.render_image import FrameState, render_scene
@@ -114,9 +115,14 @@ def test_render_image_draws_from_the_grid_on_the_gpu(fig3_morphing):
     # image (the ball fills about half of it) differs from the runtime camera's.
     differing = np.abs(morphed.image[..., :3] - runtime.image[..., :3]).max(axis=2) > 0.05
     assert differing.mean() < 0.06
+    assert morphed.stats["traced_pixels"] == 0  # the gaps are traced on request only
+    traced = render_scene(scene, bpy.context.evaluated_depsgraph_get(), trace_gaps=True, state=state)
+    assert traced.stats["traced_pixels"] > 100
+    closer = np.abs(traced.image[..., :3] - runtime.image[..., :3]).max(axis=2) > 0.05
+    assert closer.mean() < 0.5 * differing.mean()  # the traced gaps are what the runtime camera draws
     camera.location.x += 0.01
     render_scene(scene, bpy.context.evaluated_depsgraph_get(), state=state)
-    assert state.reused == 1 and state.renderer.morph.counts["blends"] == 2
+    assert state.reused == 2 and state.renderer.morph.counts["blends"] == 3
 
 
 def test_live_view_prefetches_the_nodes_around_the_eye(fig3_morphing):

@@ -197,3 +197,25 @@ def test_a_damaged_node_costs_only_its_reflector_and_a_bake_repairs_it(empty_sce
     state = live.refresh(empty_scene, bpy.context.evaluated_depsgraph_get(), views={"v": view}, wait=True)
     drawn, repaired = _draw(empty_scene, view, "v")
     assert drawn and state.grids[0][0].failure is None and state.renderer.morph.counts["blends"] == 1
+
+
+def test_render_image_in_morphing_mode_bakes_a_missing_grid_first(empty_scene, morph_ops, gpu_ready, capfd):
+    """No grid yet: Render Image bakes it (every node) and draws the mirror from it; the
+    next render finds it and bakes nothing."""
+    from curved_reflections.operators.render_image import render_scene
+
+    _mirror_scene(empty_scene)
+    empty_scene.curved_reflections.max_order = 1
+    bpy.ops.object.camera_add(location=(0.9, -1.5, 1.4))
+    camera = bpy.context.active_object
+    camera.rotation_euler = (np.radians(70.0), 0.0, np.radians(15.0))
+    empty_scene.camera = camera
+    empty_scene.render.resolution_x, empty_scene.render.resolution_y = 64, 48
+    assert _baked_node_files(morph_ops, empty_scene) == []
+    result = render_scene(empty_scene, bpy.context.evaluated_depsgraph_get())
+    assert len(_baked_node_files(morph_ops, empty_scene)) == 8
+    assert "baking the morphing grid of 'Ball' first: none baked yet" in capfd.readouterr().out
+    assert result.stats["methods"] == {"Ball": "MORPHING"} and "n_rays" not in result.stats
+    files = {p: p.stat().st_mtime_ns for p in morph_ops.cache_directory(empty_scene).rglob("node_*")}
+    render_scene(empty_scene, bpy.context.evaluated_depsgraph_get())
+    assert {p: p.stat().st_mtime_ns for p in morph_ops.cache_directory(empty_scene).rglob("node_*")} == files

@@ -1,0 +1,202 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Render Image's animations in Morphing mode (issue 17): time per frame against
+Workbench's, and label disagreement against Cycles on sampled frames, in one run.
+
+    .venv/bin/python tests/benchmarks/bench_morph_animation.py      # docs/benchmarks/morph_animation.md
+    .venv/bin/python tests/benchmarks/bench_morph_animation.py --quick --out /tmp/morph_animation.md
+
+The sbc_fig3 demo (its flat emission palette: every pixel's colour names an object) at
+``--width`` x ``--height``, its mirror ball in Morphing mode, the grid (``--grid``, the
+default 9x9x5) baked first into a temporary cache folder (the scene's *Cache Folder*;
+the bake is timed and reported apart). The camera circles the ball at 2.3 radii, inside
+the grid, turning ``--orbit-degrees`` a frame and tracking the ball. Then:
+
+- ``render_image(animation=True)`` against Workbench's ``render.render(animation=True)``
+  over the same frames (seconds per frame, both writing PNGs);
+- on ``--sampled`` frames spread over the animation, Cycles (16 samples, the demo's
+  reference) and our frame in Morphing mode (also with its gaps ray traced,
+  ``trace_gaps``) and in Runtime mode, each timed; label disagreement on the mirror's
+  pixels (Workbench mask), as ``make demo`` measures it. ``--images`` writes each sampled
+  frame side by side: Cycles, Morphing, Morphing with gaps traced, Runtime.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import shlex
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import bench_draw  # noqa: E402  (same folder: machine facts with the GPU)
+import bench_sbc  # noqa: E402  (same folder: package import)
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+DEFAULT_OUT = REPO_ROOT / "docs" / "benchmarks" / "morph_animation.md"
+MIRROR = "MirrorSphere"
+
+
+def _orbit_inside_grid(scene, frames: int, degrees: float) -> None:
+    """The scene camera on a circle of 2.3 ball radii around the ball, tracking it."""
+    import bpy
+
+    ball = bpy.data.objects[MIRROR]
+    centre = np.array(ball.matrix_world.translation)
+    radius = 0.5 * float(max(ball.dimensions))
+    camera = scene.camera
+    camera.data.angle = np.radians(70.0)  # near the ball: a wide lens keeps its surroundings in view
+    camera.constraints.clear()
+    track = camera.constraints.new('TRACK_TO')
+    track.target = ball
+    scene.frame_start, scene.frame_end = 1, frames
+    for frame in range(1, frames + 1):
+        angle = np.radians(-100.0 + degrees * (frame - 1))
+        camera.location = centre + radius * np.array([2.3 * np.cos(angle), 2.3 * np.sin(angle), 0.7])
+        camera.keyframe_insert("location", frame=frame)
+
+
+def measure(width: int, height: int, grid: tuple, frames: int, degrees: float, sampled: int, samples: int,
+            images: Path | None = None) -> dict:
+    import bpy
+
+    from curved_reflections.addon import metrics
+    from curved_reflections.operators import demo_scenes, reference_render as rr
+    from curved_reflections.operators.gpu_init import ensure_gpu
+    from curved_reflections.operators.render_image import render_scene
+
+    ensure_gpu()
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    scene = demo_scenes.build("sbc_fig3", bpy.context.scene, width, height)
+    scene.curved_reflections.max_order = 1
+    scene.curved_reflections.morph_grid = grid
+    _orbit_inside_grid(scene, frames, degrees)
+    mirror = bpy.data.objects[MIRROR]
+    palette = demo_scenes.palette(scene)
+    reflectors = demo_scenes.reflectors(scene)
+    result = {"width": width, "height": height, "grid": grid, "frames": frames, "degrees": degrees, "samples": samples}
+    with tempfile.TemporaryDirectory() as folder:
+        folder = Path(folder)
+        scene.curved_reflections.morph_cache_dir = str(folder / "cache")
+        mirror.curved_reflections.mode = 'MORPHING'
+        start = time.perf_counter()
+        assert bpy.ops.curved_reflections.bake_morphing() == {'FINISHED'}
+        result["bake_seconds"] = time.perf_counter() - start
+
+        scene.frame_set(1)
+        check = render_scene(scene, bpy.context.evaluated_depsgraph_get())
+        assert check.stats["methods"] == {MIRROR: "MORPHING"} and "n_rays" not in check.stats, check.stats
+        start = time.perf_counter()
+        assert bpy.ops.curved_reflections.render_image(filepath=str(folder / "ours_###"), animation=True) == {
+            'FINISHED'}
+        result["ours"] = (time.perf_counter() - start) / frames
+        engine = scene.render.engine
+        scene.render.engine = 'BLENDER_WORKBENCH'
+        scene.render.filepath = str(folder / "workbench_")
+        start = time.perf_counter()
+        bpy.ops.render.render(animation=True)
+        result["workbench"] = (time.perf_counter() - start) / frames
+        scene.render.engine = engine
+
+        rows = []
+        for frame in np.linspace(1, frames, sampled).round().astype(int):
+            scene.frame_set(int(frame))
+            depsgraph = bpy.context.evaluated_depsgraph_get()
+            mask, _ = rr.render_mask(scene, folder / f"mask_{frame}.png", reflectors)
+            cycles = rr.render_cycles(scene, folder / f"cycles_{frame}.png", samples=samples)
+            row = {"frame": int(frame), "mirror_px": int(mask.sum())}
+            for name, mode, gaps in (("MORPHING", 'MORPHING', False), ("GAPS", 'MORPHING', True),
+                                     ("RUNTIME", 'RUNTIME', False)):
+                mirror.curved_reflections.mode = mode
+                start = time.perf_counter()
+                ours = render_scene(scene, depsgraph, trace_gaps=gaps)
+                row[f"{name}_seconds"] = time.perf_counter() - start
+                path = rr.write_png(folder / f"{name}_{frame}.png", ours.display)
+                row[name] = metrics.label_disagreement(rr.read_png(path), cycles.image, mask, palette)
+                assert ours.stats["methods"][MIRROR] == mode
+            mirror.curved_reflections.mode = 'MORPHING'
+            rows.append(row)
+            if images is not None:
+                strip = np.concatenate([rr.read_png(folder / f"{name}_{frame}.png")[..., :3]
+                                        for name in ("cycles", "MORPHING", "GAPS", "RUNTIME")], axis=1)
+                rr.write_png(Path(images) / f"morph_animation_frame_{frame}.png", strip)
+        result["rows"] = rows
+    return result
+
+
+def report(result: dict, command: str) -> str:
+    rows = result["rows"]
+    ratio = result["ours"] / result["workbench"]
+    morph = statistics.mean(r["MORPHING"] for r in rows)
+    lines = [
+        "# Render Image in Morphing mode: animations against Workbench, frames against Cycles",
+        "",
+        f"Generated {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC by `{command}` on "
+        f"{bench_draw._machine()}.",
+        "",
+        f"sbc_fig3 at {result['width']}x{result['height']}, the mirror ball in Morphing mode, its "
+        f"{'x'.join(map(str, result['grid']))} grid baked first in {result['bake_seconds']:.1f} s (not in the "
+        f"times below); the camera circles the ball at 2.3 radii inside the grid, {result['degrees']:g} degrees a "
+        f"frame, {result['frames']} frames.",
+        "",
+        "| ours s/frame | Workbench s/frame | ratio |",
+        "|---:|---:|---:|",
+        f"| {result['ours']:.3f} | {result['workbench']:.3f} | **{ratio:.2f}x** |",
+        "",
+        f"Label disagreement with Cycles ({result['samples']} samples) on the mirror's pixels, sampled frames:",
+        "",
+        "| frame | mirror px | Morphing | s | Morphing, gaps traced | s | Runtime | s |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in rows:
+        lines.append(f"| {r['frame']} | {r['mirror_px']:,} | {100 * r['MORPHING']:.1f} % | {r['MORPHING_seconds']:.2f} | "
+                     f"{100 * r['GAPS']:.1f} % | {r['GAPS_seconds']:.2f} | {100 * r['RUNTIME']:.1f} % | "
+                     f"{r['RUNTIME_seconds']:.2f} |")
+    gaps = statistics.mean(r["GAPS"] for r in rows)
+    lines += ["", f"Morphing: **{ratio:.2f}x** Workbench's time per frame (target <= 2x), **{100 * morph:.1f} %** "
+              f"label disagreement on the sampled frames (target <= 2 %); with its gaps ray traced "
+              f"(`render_image(trace_gaps=True)`) {100 * gaps:.1f} %, at the single-frame times above.", ""]
+    return "\n".join(lines)
+
+
+def parse_args(argv):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="markdown file to write")
+    parser.add_argument("--width", type=int, default=480)
+    parser.add_argument("--height", type=int, default=320)
+    parser.add_argument("--grid", type=int, nargs=3, default=(9, 9, 5), help="morphing grid nodes")
+    parser.add_argument("--frames", type=int, default=24)
+    parser.add_argument("--orbit-degrees", type=float, default=2.0, help="camera turn per frame")
+    parser.add_argument("--sampled", type=int, default=3, help="frames compared with Cycles")
+    parser.add_argument("--samples", type=int, default=16, help="Cycles samples")
+    parser.add_argument("--images", type=Path, default=None,
+                        help="folder for the sampled frames side by side (Cycles, Morphing, Runtime)")
+    parser.add_argument("--quick", action="store_true", help="small: 160x120, a 3x3x2 grid, 3 frames, 1 sampled")
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.width, args.height, args.grid, args.frames, args.sampled, args.samples = 160, 120, (3, 3, 2), 3, 1, 4
+    return args
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    args = parse_args(argv)
+    bench_sbc.import_package()
+    command = " ".join([".venv/bin/python", "tests/benchmarks/bench_morph_animation.py"]
+                       + [shlex.quote(a) for a in argv])
+    result = measure(args.width, args.height, tuple(args.grid), args.frames, args.orbit_degrees, args.sampled,
+                     args.samples, args.images)
+    text = report(result, command)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(text, encoding="utf-8")
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
