@@ -1,19 +1,22 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Morphing grids as a projection source of the reflection renderer (SBC paper VI).
+"""Morphing grids' node projections on the GPU, and the numpy blend as a projection source.
 
 In reflection-morphing mode (Popescu, Sacks, Mei 2006, section VI) a reflector's
 reflections come from the panoramic sample-based cameras baked at the nodes of a
 tetrahedral grid around it: the four nodes of the tetrahedron holding the eye project
 each vertex, and their first reflector points are blended (:mod:`..addon.morphing`).
-:class:`MorphSource` hands those blended points to
-:class:`.reflection_draw.ReflectionRenderer` in the layout of its GPU projection pass
-(``glsl/reflection_project_vert.glsl``), so the renderer draws morphed reflections
-exactly as it draws a runtime camera's: whole and mixed triangles, depth order, lit
-shading, Fresnel and fade. :class:`GPUFaceImages` runs the nodes' projections, the
-expensive part, on the GPU with the GLSL twin of ``SampleBasedCamera.project``; the
-matching of images across nodes and the blend stay in numpy (a few array operations
-per vertex). The renderer's own vertices are *static points*: their four node images
-are kept while the eye stays in one tetrahedron, and only the blend runs per view.
+:class:`GPUFaceImages` runs the nodes' projections, the expensive part, on the GPU with
+the GLSL twin of ``SampleBasedCamera.project``; the live view and Render Image project
+their nodes with it once per node and blend on the GPU every frame
+(:mod:`.morph_pass`).
+
+:class:`MorphSource` is the earlier path, kept as the numpy reference the benchmarks
+compare with (``tests/benchmarks/bench_view_change.py``): it hands the blended points
+of one view to :class:`.reflection_draw.ReflectionRenderer` in the layout of its GPU
+projection pass (``glsl/reflection_project_vert.glsl``), so the renderer draws them as
+it draws a runtime camera's (whole and mixed triangles); the matching of images across
+nodes and the blend run in numpy, and the renderer's own vertices are *static points*
+whose four node images are kept while the eye stays in one tetrahedron.
 """
 
 from __future__ import annotations

@@ -165,28 +165,32 @@ def load_grids(scene, reflectors, bake_missing: bool = False) -> list:
         if obj is None or not methods.wants_grid(scene, reflector):
             continue
         matrix = np.array(obj.matrix_world, dtype=np.float64)
-        if bake_missing and obj.curved_reflections.mode == methods.MORPHING:
-            _bake_if_missing(reflector, matrix, scene)
         grid = load_morphing(reflector, matrix, scene, index)
+        if grid is None and bake_missing and obj.curved_reflections.mode == methods.MORPHING \
+                and _bake_if_missing(reflector, matrix, scene):
+            grid = load_morphing(reflector, matrix, scene, index)
         if grid is not None:
             grid.face_images = faces
             grids.append((grid, matrix))
     return grids
 
 
-def _bake_if_missing(reflector, matrix, scene) -> None:
+def _bake_if_missing(reflector, matrix, scene) -> bool:
     """Bake this reflector's grid where none matching it is whole (the nodes already baked
-    are kept); a damaged node file is found and rebuilt when it is read."""
+    are kept); returns whether it baked. A damaged node file is found, and rebuilt by the
+    next bake, when it is read."""
     settings, directory = morph_settings(scene), cache_directory(scene)
     try:
         bake.load_for(reflector, matrix, settings, directory)
     except SceneInputError as error:
         if getattr(error, "reason", "") == "corrupt":
-            return
+            return False
         reason = {"missing": "none baked yet", "stale": "it was baked for other geometry or settings",
                   "incomplete": "its bake is unfinished"}.get(getattr(error, "reason", ""), error.problem)
         print(f"Curved Reflections: baking the morphing grid of {reflector.name!r} first: {reason}")
         bake.bake_grid(reflector, matrix, settings, directory)
+        return True
+    return False
 
 
 def note_cache_fault(reflector_name: str, error) -> None:

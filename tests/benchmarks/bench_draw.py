@@ -311,6 +311,21 @@ def _looking_away(view):
     return View(turn @ np.asarray(view.view_matrix), view.projection_matrix, view.width, view.height, name="away")
 
 
+def command_line(script: str, argv) -> str:
+    """The command that ran benchmark ``script`` with ``argv``, as a report quotes it."""
+    import shlex
+
+    return " ".join([".venv/bin/python", f"tests/benchmarks/{script}"] + [shlex.quote(a) for a in argv])
+
+
+def write_report(path: Path, text: str) -> int:
+    """Write a benchmark's markdown report (folders made) and print it; 0 for main()."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text, encoding="utf-8")
+    print(text)
+    return 0
+
+
 def _machine() -> str:
     """bench_sbc's machine facts, with the GPU the drawing ran on."""
     facts = bench_sbc._machine()

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import shlex
 import statistics
 import sys
 import tempfile
@@ -187,15 +186,11 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     args = parse_args(argv)
     bench_sbc.import_package()
-    command = " ".join([".venv/bin/python", "tests/benchmarks/bench_morph_animation.py"]
-                       + [shlex.quote(a) for a in argv])
+    command = bench_draw.command_line("bench_morph_animation.py", argv)
     result = measure(args.width, args.height, tuple(args.grid), args.frames, args.orbit_degrees, args.sampled,
                      args.samples, args.images)
     text = report(result, command)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text, encoding="utf-8")
-    print(text)
-    return 0
+    return bench_draw.write_report(args.out, text)
 
 
 if __name__ == "__main__":

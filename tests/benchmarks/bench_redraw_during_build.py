@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import shlex
 import statistics
 import sys
 import time
@@ -149,13 +148,9 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     args = parse_args(argv)
     bench_sbc.import_package()
-    command = " ".join([".venv/bin/python", "tests/benchmarks/bench_redraw_during_build.py"]
-                       + [shlex.quote(a) for a in argv])
+    command = bench_draw.command_line("bench_redraw_during_build.py", argv)
     text = report(measure(args.width, args.height, args.builds, args.degrees, args.idle_repeats), command)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text, encoding="utf-8")
-    print(text)
-    return 0
+    return bench_draw.write_report(args.out, text)
 
 
 if __name__ == "__main__":

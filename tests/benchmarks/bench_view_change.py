@@ -46,7 +46,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import shlex
 import statistics
 import sys
 import time
@@ -469,12 +468,12 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     args = parse_args(argv)
     bench_sbc.import_package()
-    command = " ".join([".venv/bin/python", "tests/benchmarks/bench_view_change.py"] + [shlex.quote(a) for a in argv])
+    command = bench_draw.command_line("bench_view_change.py", argv)
     previous = args.out.read_text(encoding="utf-8") if args.out.exists() else "# Cost of a view change\n"
     morph = morph_report(measure_morph_frames(args.width, args.height, args.vertices, args.frames,
                                               args.orbit_degrees), command)
     if args.morph_only:
-        return _write(args.out, replace_section(previous, MORPH_HEADING, morph))
+        return bench_draw.write_report(args.out, replace_section(previous, MORPH_HEADING, morph))
     rows = [measure_iterative(kind, args.width, args.height, args.vertices, args.frames, args.orbit_degrees)
             for kind in ITERATIVE_SCENES]
     animations = [measure_animation(kind, args.frames, args.orbit_degrees) for kind in ITERATIVE_SCENES]
@@ -488,14 +487,8 @@ def main(argv=None) -> int:
         result = measure(args.width, args.height, args.steps, args.jumps)
         text = (report(result, command, bench_draw._machine()) + "\n" + "\n".join(morph) + "\n"
                 + "\n".join(iterative_report(rows, animations)))
-    return _write(args.out, text)
+    return bench_draw.write_report(args.out, text)
 
-
-def _write(path: Path, text: str) -> int:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(text, encoding="utf-8")
-    print(text)
-    return 0
 
 
 if __name__ == "__main__":

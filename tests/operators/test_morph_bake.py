@@ -12,10 +12,11 @@ import pytest
 
 
 @pytest.fixture
-def morph_ops(registered, monkeypatch):
+def morph_ops(registered, monkeypatch, tmp_path):
     from curved_reflections.operators import morph_bake
 
     monkeypatch.setattr(morph_bake, "FACE_RESOLUTION", 32)  # a fast bake; the figures are the benchmark's
+    monkeypatch.setattr(morph_bake, "cache_root", lambda scene: tmp_path / "morphing")  # no test sees another's
 
     added = [cls for cls in morph_bake.classes if not cls.is_registered]
     for cls in added:
@@ -160,7 +161,7 @@ def test_a_damaged_node_costs_only_its_reflector_and_a_bake_repairs_it(empty_sce
 
     from test_live import _draw, _touched
 
-    ball = _mirror_scene(empty_scene)
+    _mirror_scene(empty_scene)
     bpy.ops.mesh.primitive_uv_sphere_add(radius=0.6, location=(-2.2, 0.5, 1.0), segments=24, ring_count=12)
     other = bpy.context.active_object
     other.name = "Other"
@@ -175,6 +176,8 @@ def test_a_damaged_node_costs_only_its_reflector_and_a_bake_repairs_it(empty_sce
     drawn, before = _draw(empty_scene, view, "v")
     assert drawn and state.renderer.morph.counts["blends"] == 1
 
+    for _, future in state.renderer.morph._pending.values():
+        future.result(timeout=120)  # the prefetch started by the draw reads node files too
     directory = next(morph_ops.cache_directory(empty_scene).glob("Ball-*"))
     for path in directory.glob("node_*.npz"):
         path.write_bytes(b"damaged")
