@@ -21,7 +21,7 @@ import numpy as np
 from mathutils import Matrix
 
 from ..addon.errors import SceneInputError
-from ..addon.scene import DiffuseMesh, Reflector
+from ..addon.scene import DiffuseMesh, Reflector, vertex_normals
 from ..addon.view import View
 from .material_color import MaterialColor, material_color
 
@@ -193,14 +193,28 @@ def _to_world(mesh, corner_vertex: np.ndarray, first: np.ndarray, matrix: np.nda
     return positions[corner_vertex[first]] @ matrix[:3, :3].T + matrix[:3, 3]
 
 
+def _finite_transform(name: str, matrix: np.ndarray) -> np.ndarray:
+    """The linear part of an object's world matrix; a SceneInputError naming the object
+    where any of it is not a number (a NaN or infinite scale, rotation or location)."""
+    if not np.isfinite(matrix).all():
+        raise SceneInputError(name, "has a location, rotation or scale that is not a number (NaN or infinite); "
+                                    "fix its transform")
+    return matrix[:3, :3]
+
+
+def _squashed(linear: np.ndarray) -> bool:
+    """Whether a (finite) linear transform has zero scale along some axis."""
+    singular = np.linalg.svd(linear, compute_uv=False)
+    return bool(singular[-1] <= singular[0] * MIN_SCALE_RATIO)
+
+
 def _reflector(name: str, mesh, matrix: np.ndarray) -> Reflector:
     if mesh is None or len(mesh.loop_triangles) == 0:
         raise SceneInputError(
             name, "has no faces once its modifiers are applied (a mirror needs at least one triangle)"
         )
-    linear = matrix[:3, :3]
-    singular = np.linalg.svd(linear, compute_uv=False)
-    if not np.isfinite(singular).all() or singular[-1] <= singular[0] * MIN_SCALE_RATIO:
+    linear = _finite_transform(name, matrix)
+    if _squashed(linear):
         raise SceneInputError(
             name, "has zero scale along an axis, so its mirror normals are undefined "
             "(fix the object's scale)"
@@ -237,9 +251,14 @@ def _diffuse_mesh(name: str, obj, mesh, matrix: np.ndarray) -> DiffuseMesh | Non
     else:
         image = None
     first, triangles = _weld(corner_vertex, *values)
+    linear = _finite_transform(name, matrix)
     vertices = _to_world(mesh, corner_vertex, first, matrix)
-    linear = matrix[:3, :3]
-    world_normals = normals[first].astype(np.float64) @ np.linalg.inv(linear)
+    if _squashed(linear):
+        # Squashed flat (zero scale along an axis): still seen, as a flat shape whose
+        # transformed normals are undefined; it is shaded with its faces' own normals.
+        world_normals = vertex_normals(vertices, triangles)
+    else:
+        world_normals = normals[first].astype(np.float64) @ np.linalg.inv(linear)
     lengths = np.linalg.norm(world_normals, axis=1, keepdims=True)
     world_normals = np.divide(world_normals, lengths, out=np.zeros_like(world_normals), where=lengths > 0)
     if np.linalg.det(linear) < 0:

@@ -405,6 +405,34 @@ def test_reflector_squashed_flat_has_undefined_normals(empty_scene):
     assert "zero scale" in error.problem
 
 
+def test_diffuse_object_squashed_flat_is_captured_with_face_normals(empty_scene):
+    """A diffuse object scaled to zero on one axis is a flat shape, still seen and
+    reflected: captured (no singular-matrix traceback), its normals across the flat side."""
+    reflector(folded_quads("Mirror"))
+    cube_object("Flat").scale = (1, 1, 0)
+    bpy.context.view_layer.update()
+    meshes = capture()[1]
+    flat = meshes["Flat"]
+    assert np.allclose(flat.vertices[:, 2], 0.0, atol=1e-9)
+    lengths = np.linalg.norm(flat.normals, axis=1)
+    assert np.all((np.abs(lengths - 1.0) < 1e-9) | (lengths == 0.0))
+    assert np.allclose(np.abs(flat.normals[lengths > 0][:, 2]), 1.0)
+
+
+@pytest.mark.parametrize("role", ["reflector", "diffuse"])
+def test_nan_scale_names_the_object(empty_scene, role):
+    mirror = reflector(folded_quads("Mirror"))
+    broken = mirror if role == "reflector" else cube_object("Box")
+    broken.scale = (1.0, float("nan"), 1.0)
+    bpy.context.view_layer.update()
+    error = _capture_error()
+    assert error.object_name == broken.name
+    assert "not a number" in error.problem
+    broken.scale = (1.0, 1.0, 1.0)  # repaired: the next capture works
+    bpy.context.view_layer.update()
+    assert capture()[0].keys() == {"Mirror"}
+
+
 def test_non_surface_object_marked_as_reflector(empty_scene):
     reflector(_link(bpy.data.objects.new("Empty", None)))
     error = _capture_error()
