@@ -58,7 +58,7 @@ def capture_scene(depsgraph, *, require_reflector: bool = True) -> CapturedScene
     reflectors, meshes = [], []
     names = _UniqueNames()
     for instance in depsgraph.object_instances:
-        if not instance.show_self:
+        if not instance.show_self or _own_geometry(instance):
             continue
         obj = instance.object
         # Settings are read from the original: setting a property from Python does not
@@ -134,6 +134,15 @@ class _UniqueNames:
         count = self._seen.get(name, 0) + 1
         self._seen[name] = count
         return name if count == 1 else f"{name} #{count}"
+
+
+def _own_geometry(instance) -> bool:
+    """Whether ``instance`` is an object's own evaluated geometry listed as an instance of
+    itself: Blender lists a curve, text, surface or metaball object once as itself and
+    once so. The object itself is captured; capturing both drew it twice, and a metaball
+    mirror's copy blocked its own reflected rays."""
+    return (instance.is_instance and instance.parent is not None
+            and instance.object.original == instance.parent.original)
 
 
 def _instance_name(instance) -> str:

@@ -174,6 +174,24 @@ def test_hidden_objects_are_not_captured_and_instances_get_unique_names(empty_sc
     assert meshes["Prop (instanced by Instancer1)"].vertices[:, 0].min() == pytest.approx(19)
 
 
+def test_curve_text_and_metaball_objects_are_captured_once(empty_scene):
+    """Blender lists these objects twice (as themselves and as an instance of their own
+    evaluated mesh); each is captured once, a metaball mirror too."""
+    bpy.ops.curve.primitive_bezier_circle_add(location=(3, 0, 0))
+    ring = bpy.context.active_object
+    ring.name, ring.data.bevel_depth = "Ring", 0.2
+    bpy.ops.object.text_add(location=(-3, 0, 0))
+    bpy.context.active_object.name = "Label"
+    bpy.ops.object.metaball_add(type='BALL', location=(0, 3, 0))
+    blob = reflector(bpy.context.active_object)
+    blob.name = "Blob"
+    cube_object("Box")
+    reflectors, meshes = capture()
+    assert list(reflectors) == ["Blob"]
+    assert sorted(meshes) == ["Box", "Label", "Ring"]
+    assert len(meshes["Ring"].triangles) > 100 and len(reflectors["Blob"].triangles) > 100
+
+
 def test_text_object_is_a_diffuse_mesh(empty_scene):
     reflector(folded_quads("Mirror"))
     text = _link(bpy.data.objects.new("Label", bpy.data.curves.new("Label", 'FONT')))
