@@ -68,7 +68,7 @@ def capture_scene(depsgraph, *, require_reflector: bool = True) -> CapturedScene
         if obj.type not in SURFACE_TYPES:
             if is_reflector:
                 raise SceneInputError(
-                    name, f"is marked as a reflector but is a {obj.type.lower()} object, "
+                    name, f"is marked as a reflector but is {_a(obj.type.lower())} object, "
                     "which has no surface"
                 )
             continue
@@ -97,7 +97,7 @@ def view_from_camera(camera_object, scene, depsgraph) -> View:
         raise SceneInputError(scene.name, "has no camera")
     if camera_object.type != 'CAMERA':
         raise SceneInputError(
-            camera_object.name, f"is not a camera (it is a {camera_object.type.lower()} object)"
+            camera_object.name, f"is not a camera (it is {_a(camera_object.type.lower())} object)"
         )
     camera = camera_object.evaluated_get(depsgraph)
     if camera.data.type == 'PANO':
@@ -134,6 +134,11 @@ class _UniqueNames:
         count = self._seen.get(name, 0) + 1
         self._seen[name] = count
         return name if count == 1 else f"{name} #{count}"
+
+
+def _a(word: str) -> str:
+    """``word`` with its indefinite article ("an empty", "a light")."""
+    return f"{'an' if word[:1] in 'aeiou' else 'a'} {word}"
 
 
 def _own_geometry(instance) -> bool:

@@ -121,8 +121,8 @@ def morph_status(scene, per_reflector: bool = True) -> str:
     if not per_reflector:
         return state.get("message", "") if state else ""
     lines = [f"{name}: {text}" for name, text in sorted(_REFLECTOR_STATUS.items())]
-    if state and state.get("message"):
-        lines.insert(0, state["message"])
+    if state and state.get("message") and not set(state["message"].split("; ")) <= set(lines):
+        lines.insert(0, state["message"])  # what the reflectors' lines do not already say
     return "; ".join(lines) if lines else "No morphing grid baked in this session"
 
 

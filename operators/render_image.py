@@ -22,6 +22,7 @@ same shading as their reflections (a headlight Lambert, ``addon/band_trace.shade
 from __future__ import annotations
 
 import hashlib
+import os
 import re
 import time
 from dataclasses import dataclass, field
@@ -224,6 +225,28 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
     return ReflectionRender(image, view, seconds, stats)
 
 
+def output_path(filepath: str) -> Path:
+    """The PNG file ``filepath`` names (``//`` is the .blend file's folder; ``.png`` added
+    where missing), or a ValueError saying what is wrong with it: a folder instead of a
+    file, a folder that is a file, one that cannot be written, or a ``//`` path in a file
+    never saved."""
+    if filepath.startswith("//") and not bpy.data.filepath:
+        raise ValueError(f"{filepath!r} is relative to the .blend file's folder, but the file is not saved yet; "
+                         "save it or give a full path")
+    if filepath.endswith(("/", "\\")) or Path(bpy.path.abspath(filepath)).is_dir():
+        raise ValueError(f"{filepath!r} is a folder; give a file name in it, e.g. {filepath.rstrip('/')}/"
+                         "reflections.png")
+    path = Path(bpy.path.abspath(bpy.path.ensure_ext(filepath, ".png")))
+    folder = path.parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if not folder.is_dir():
+        raise ValueError(f"cannot write {str(path)!r}: {str(folder)!r} is a file, not a folder")
+    if not os.access(folder, os.W_OK):
+        raise ValueError(f"cannot write {str(path)!r}: the folder {str(folder)!r} is not writable")
+    return path
+
+
 def frame_filepath(filepath: str, frame: int) -> str:
     """The PNG path of ``frame``: the last run of ``#`` becomes the zero-padded frame
     number, as in Blender's output path; without ``#`` the number (4 digits) is appended."""
@@ -305,7 +328,11 @@ class CURVED_REFLECTIONS_OT_render_image(bpy.types.Operator):
                 if not self._next_frame(context):
                     return self._finish(context, cancelled=True)
             return self._finish(context)
-        path = Path(bpy.path.abspath(bpy.path.ensure_ext(self.filepath, ".png")))
+        try:
+            path = output_path(self.filepath)
+        except ValueError as error:
+            self.report({'ERROR'}, str(error))
+            return {'CANCELLED'}
         result = self._render(context, path)
         if result is None:
             return {'CANCELLED'}
@@ -317,8 +344,12 @@ class CURVED_REFLECTIONS_OT_render_image(bpy.types.Operator):
 
     def _next_frame(self, context) -> bool:
         frame = self._frames[self._done]
+        try:
+            path = output_path(frame_filepath(self.filepath, frame))
+        except ValueError as error:
+            self.report({'ERROR'}, str(error))
+            return False
         context.scene.frame_set(frame)
-        path = Path(bpy.path.abspath(frame_filepath(self.filepath, frame)))
         result = self._render(context, path)
         if result is None:
             return False

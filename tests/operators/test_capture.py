@@ -455,7 +455,7 @@ def test_non_surface_object_marked_as_reflector(empty_scene):
     reflector(_link(bpy.data.objects.new("Empty", None)))
     error = _capture_error()
     assert error.object_name == "Empty"
-    assert "no surface" in error.problem
+    assert error.problem == "is marked as a reflector but is an empty object, which has no surface"
 
 
 def test_scene_without_reflector(empty_scene):

@@ -54,6 +54,7 @@ def test_bake_load_stale_and_clear(empty_scene, morph_ops):
 
     assert bpy.ops.curved_reflections.bake_morphing(processes=2) == {'FINISHED'}
     assert "Ball: baked 8 nodes" in morph_ops.morph_status(empty_scene)
+    assert morph_ops.morph_status(empty_scene).count("baked 8 nodes") == 1  # said once, not also as the summary
     grid = morph_ops.load_morphing(reflector, matrix, empty_scene)
     assert grid is not None and grid.grid.shape == (2, 2, 2)
     assert "Ball: morphing (baked grid loaded)" in morph_ops.morph_status(empty_scene)

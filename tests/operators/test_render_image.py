@@ -3,6 +3,8 @@
 and clean error reports (``bpy.ops`` raises ``RuntimeError`` with the message, no
 traceback) naming the object at fault."""
 
+from pathlib import Path
+
 import bpy
 import numpy as np
 import pytest
@@ -30,6 +32,36 @@ def test_writes_a_png_of_the_render_size(fig3, tmp_path, capfd):
 def test_adds_the_png_extension(fig3, tmp_path):
     assert bpy.ops.curved_reflections.render_image(filepath=str(tmp_path / "frame")) == {'FINISHED'}
     assert (tmp_path / "frame.png").is_file()
+
+
+@pytest.mark.parametrize("case", ["folder", "trailing_slash", "parent_is_file", "read_only", "unsaved_relative"])
+def test_bad_paths_say_what_is_wrong(fig3, tmp_path, capfd, monkeypatch, case):
+    import os
+
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a folder")
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    # These machines run as root, who may write anywhere: the folder reads as not writable.
+    access = os.access
+    monkeypatch.setattr(os, "access", lambda path, mode: Path(path) != locked and access(path, mode))
+    path, message = {
+        "folder": (str(tmp_path), "is a folder; give a file name in it"),
+        "trailing_slash": (str(tmp_path / "new") + "/", "is a folder; give a file name in it"),
+        "parent_is_file": (str(blocker / "image.png"), "is a file, not a folder"),
+        "read_only": (str(locked / "image.png"), "is not writable"),
+        "unsaved_relative": ("//image.png", "the file is not saved yet"),
+    }[case]
+    with pytest.raises(RuntimeError, match=message):
+        bpy.ops.curved_reflections.render_image(filepath=path)
+    assert "Traceback" not in capfd.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file", "locked"] and not any(locked.iterdir())
+
+
+def test_relative_paths_are_the_blend_files_folder(fig3, tmp_path):
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "scene.blend"))
+    assert bpy.ops.curved_reflections.render_image(filepath="//renders/image") == {'FINISHED'}
+    assert (tmp_path / "renders" / "image.png").is_file()
 
 
 def _error(capfd, tmp_path) -> str:
