@@ -112,3 +112,36 @@ def test_a_farm_bakes_node_ranges_side_by_side_into_one_cache(extension_zip, tmp
             for k in a.files:
                 if k != "seconds" and "stats" not in k:  # timings differ
                     assert np.array_equal(a[k], b[k]), (name, k)
+
+
+def _python_examples(guide: Path) -> list:
+    """The ```python blocks of a markdown file, in order."""
+    import re
+
+    return re.findall(r"^```python\n(.*?)^```", guide.read_text(encoding="utf-8"), flags=re.MULTILINE | re.DOTALL)
+
+
+def test_the_user_guides_python_examples_run_as_written(extension_zip, tmp_path, repo_root):
+    """Every Python example of docs/user_guide.md, run as written in a fresh Python with the
+    zip installed, in a folder holding the files they open: kettle.blend (a mirror ball in
+    Auto mode, two frames) and scene.blend (a ball in Morphing mode, a 50 x 2 x 2 grid, so
+    that its nodes 0-99 exist)."""
+    probe = str(Path(__file__).with_name("farm_probe.py"))
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "user"))
+    for args in (["install", extension_zip, tmp_path / "scene.blend", tmp_path / "cache", "25"],
+                 ["kettle", tmp_path / "kettle.blend"]):
+        done = subprocess.run([sys.executable, probe, *map(str, args)], env=env, capture_output=True, text=True,
+                              timeout=300)
+        assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    examples = _python_examples(repo_root / "docs" / "user_guide.md")
+    assert len(examples) >= 4
+    for k, example in enumerate(examples):
+        script = tmp_path / f"example_{k}.py"
+        script.write_text(example, encoding="utf-8")
+        done = subprocess.run([sys.executable, str(script)], env=env, cwd=tmp_path, capture_output=True, text=True,
+                              timeout=600)
+        output = done.stdout + done.stderr
+        assert done.returncode == 0 and "Traceback" not in output, f"example {k}:\n{example}\n{output[-3000:]}"
+    assert (Path("/tmp") / "kettle_reflections.png").is_file()
+    assert sorted(p.name for p in (Path("/tmp") / "kettle").glob("frame_*.png"))[:2] == ["frame_0001.png",
+                                                                                        "frame_0002.png"]
