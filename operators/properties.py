@@ -6,6 +6,11 @@ from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, I
                        StringProperty)
 
 
+#: The option that declares a path property's "//" (the .blend file's folder) supported;
+#: Blender 4.5 and newer warn about path properties without it (older ones lack it).
+BLEND_RELATIVE = {'PATH_SUPPORTS_BLEND_RELATIVE'} if bpy.app.version >= (4, 5, 0) else set()
+
+
 def _reflector_toggled(self, context):
     from . import live
 
@@ -105,7 +110,7 @@ class CurvedReflectionsSceneSettings(bpy.types.PropertyGroup):
         name="Cache Folder",
         description="Folder for baked morphing grids (empty: the extension's user folder). Set a folder every "
                     "machine of a render farm can write to, to bake ranges of nodes in parallel into one cache",
-        default="", subtype='DIR_PATH',
+        default="", subtype='DIR_PATH', options=BLEND_RELATIVE,
     )
     morph_gpu_budget_mb: FloatProperty(
         name="Node Memory (MB)",

@@ -42,6 +42,7 @@ from . import methods
 from .capture import capture_scene, view_from_camera
 from .gpu_init import ensure_gpu
 from .material_color import material_color
+from .properties import BLEND_RELATIVE
 from .reference_render import write_png
 
 #: Scene box margin (share of its diagonal) where reflected rays end: points on the
@@ -272,7 +273,8 @@ class CURVED_REFLECTIONS_OT_render_image(bpy.types.Operator):
     bl_options = {'REGISTER'}
 
     filepath: StringProperty(name="File Path", description="PNG file to write; for an animation, # characters "
-                             "are the zero-padded frame number (else it is appended)", subtype='FILE_PATH')
+                             "are the zero-padded frame number (else it is appended); // is the .blend file's folder",
+                             subtype='FILE_PATH', options=BLEND_RELATIVE)
     filter_glob: StringProperty(default="*.png", options={'HIDDEN'})
     animation: BoolProperty(name="Animation", description="Render every frame from the scene's start to its end "
                             "frame, one PNG each", default=False)
