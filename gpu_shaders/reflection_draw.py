@@ -144,6 +144,11 @@ MAX_PROJECTED_TEXELS = 1 << 22
 #: A triangle across a seam between sheets joins a corner from another sheet only
 #: within this many ray-map cells (times the down-sampling, in pixels) of its own corner.
 STITCH_CELLS = 8
+#: A render traces the band along the mirrors' edges that no reflection reached; where
+#: that "band" is more than this share of the image (the camera's near plane cutting a
+#: mirror, the eye on its surface), it is filled by the composite instead of traced, so
+#: that no view costs many times an ordinary one (the demo scenes trace 1-9 %).
+MAX_TRACED_FRACTION = 0.25
 
 _COMPOSITE_VERTEX = """
 /* One triangle covering the whole target. */
@@ -1011,6 +1016,9 @@ class ReflectionRenderer:
         without a drawn reflection is traced: where the blend has no answer (the parts of
         the mirror not all four nodes see, and triangles with such a corner), but also
         where the mirror shows the world, so it costs many rays.
+        More than :data:`MAX_TRACED_FRACTION` of the image is not a band: then nothing is
+        traced (``stats["untraced_pixels"]``, and ``targets.traced`` stays None: the
+        composite fills), except for ``holes_of``, which the caller asked for.
         Returns how many pixels were traced."""
         import gpu
 
@@ -1032,6 +1040,13 @@ class ReflectionRenderer:
             holes = np.isin(np.rint(labels) - 1, list(holes_of))
             boundary = holes if boundary is None else boundary | holes
         pixels = band_trace.band_pixels(labels, drawn, radius, edges_of_drawn, boundary)
+        self.stats["untraced_pixels"] = 0
+        if not len(holes_of) and len(pixels) > MAX_TRACED_FRACTION * targets.width * targets.height:
+            # Not a band but most of the mirror (the near plane cutting it, the eye on it):
+            # tracing it would cost many frames' time; the composite fills it instead.
+            self.stats["untraced_pixels"] = int(len(pixels))
+            targets.traced = None
+            return 0
         traced = np.zeros((targets.height, targets.width, 4), np.float32)
         if len(pixels):
             colors = self._tracer.trace(view, pixels + 0.5, max_order, _rgba(world_color))
@@ -1413,7 +1428,7 @@ class ReflectionRenderer:
             max_order = max((len(h) for h in textures.groups), default=1) if textures is not None else 1
             traced = self.trace_band(view, targets, max_order, world_color, downsample, trace_edges,
                                      getattr(sbc_or_textures, "ray_map", None), camera, holes_of=morphed)
-            fill_radius = 0
+            fill_radius = 0 if targets.traced is not None else downsample
         elif fill_radius is None:
             fill_radius = downsample
         band = time.perf_counter()

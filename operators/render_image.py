@@ -342,6 +342,10 @@ class CURVED_REFLECTIONS_OT_render_image(bpy.types.Operator):
         self.report({'INFO'}, f"Rendered {view.width}x{view.height} with reflections to {str(path)!r} in "
                               f"{seconds['total']:.2f} s (camera {seconds['sbc']:.2f} s, "
                               f"drawing {seconds['draw']:.2f} s)")
+        untraced = result.stats.get("untraced_pixels", 0)
+        if untraced:
+            self.report({'WARNING'}, f"{untraced} mirror pixels without a reflection were filled, not ray traced "
+                                     "(most of the mirror: does the camera's clip start cut into it?)")
         return {'FINISHED'}
 
     def _next_frame(self, context) -> bool:

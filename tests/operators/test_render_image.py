@@ -192,3 +192,27 @@ def test_animation_keeps_the_renderer_while_only_the_camera_moves_and_recaptures
     assert renderers[0] is renderers[1]  # only the camera moved
     assert renderers[2] is not renderers[1]  # the cube moved: captured and uploaded again
     assert state.frames == 3 and state.reused == 1
+
+
+def test_a_view_whose_near_plane_cuts_the_mirror_is_filled_not_traced(fig3, tmp_path, capfd):
+    """The camera 5 % of a radius from the ball with its clip start inside it: nearly every
+    mirror pixel has no reflection to draw, which is no band along an edge; the composite
+    fills them instead of tracing tens of thousands of rays, and the report says so."""
+    from curved_reflections.operators.render_image import render_scene
+
+    ball = bpy.data.objects["MirrorSphere"]
+    ball.curved_reflections.mode = 'RUNTIME'
+    fig3.curved_reflections.max_order = 1
+    ordinary = render_scene(fig3, bpy.context.evaluated_depsgraph_get())
+    assert ordinary.stats["untraced_pixels"] == 0 < ordinary.stats["traced_pixels"]
+    centre, radius = np.array(ball.matrix_world.translation), 0.5 * max(ball.dimensions)
+    camera = fig3.camera
+    camera.constraints.clear()
+    camera.location = centre - (0.0, 1.05 * radius, 0.0)
+    camera.rotation_euler = (np.pi / 2, 0.0, 0.0)
+    camera.data.clip_start = 0.1 * radius
+    fig3.render.resolution_x, fig3.render.resolution_y = 48, 36
+    near = render_scene(fig3, bpy.context.evaluated_depsgraph_get())
+    assert near.stats["traced_pixels"] == 0 and near.stats["untraced_pixels"] > 0.25 * 48 * 36
+    assert bpy.ops.curved_reflections.render_image(filepath=str(tmp_path / "near.png")) == {'FINISHED'}
+    assert "mirror pixels without a reflection were filled, not ray traced" in capfd.readouterr().out
