@@ -247,7 +247,7 @@ class TetrahedralGrid:
         f = (points - self.lo) / self.spacing
         tolerance = 1e-9 * shape
         inside = np.all((f >= -tolerance) & (f <= shape - 1 + tolerance), axis=1)
-        cell = np.clip(np.floor(f).astype(np.int64), 0, shape - 2)
+        cell = self._cell(f)
         local = f - cell
         order = np.argsort(-local, axis=1, kind="stable")
         # Permutation index of each axis order (rows of PERMUTATIONS are lexicographic).
@@ -261,6 +261,22 @@ class TetrahedralGrid:
         nodes = self.node_index(corners)
         cells = cell[:, 0] + (shape[0] - 1) * (cell[:, 1] + (shape[1] - 1) * cell[:, 2])
         return cells * 6 + perm, nodes, weights, inside
+
+
+    def _cell(self, f: np.ndarray) -> np.ndarray:
+        """(P, 3) integer cell (lowest corner node) of grid coordinates ``f``, clamped to the grid."""
+        return np.clip(np.floor(f).astype(np.int64), 0, np.asarray(self.shape) - 2)
+
+    def nodes_around(self, point) -> np.ndarray:
+        """The nodes of the cell holding ``point`` and of the cells beside it (up to 4 x
+        4 x 4, fewer at the grid's faces), nearest to ``point`` first: those a view moving
+        on from ``point`` uses next."""
+        point = np.asarray(point, dtype=np.float64)
+        cell = self._cell(((point - self.lo) / self.spacing)[None])[0]
+        offsets = np.stack(np.meshgrid(*[np.arange(-1, 3)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+        around = np.unique(self.node_index(np.clip(cell + offsets, 0, np.asarray(self.shape) - 1)))
+        distance = np.linalg.norm(self.node_positions()[around] - point, axis=1)
+        return around[np.argsort(distance, kind="stable")]
 
 
 def grid_for(reflector: Reflector, settings: MorphSettings) -> TetrahedralGrid:

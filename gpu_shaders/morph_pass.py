@@ -285,14 +285,7 @@ class MorphPass:
         started = 0
         for k, (_, _, _, frame) in self.covering(view):
             grid = self.grids[k][0]
-            eye = morphing.to_frame(frame, view.eye[None])[0]
-            lattice = grid.grid
-            shape = np.asarray(lattice.shape)
-            cell = np.clip(np.floor((eye - lattice.lo) / lattice.spacing).astype(np.int64), 0, shape - 2)
-            offsets = np.stack(np.meshgrid(*[np.arange(-1, 3)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
-            around = np.unique(lattice.node_index(np.clip(cell + offsets, 0, shape - 1)))
-            around = around[np.argsort(np.linalg.norm(lattice.node_positions()[around] - eye, axis=1), kind="stable")]
-            for node in around:
+            for node in grid.grid.nodes_around(morphing.to_frame(frame, view.eye[None])[0]):
                 key = (k, int(node))
                 if len(self._pending) >= max_pending:
                     return started

@@ -232,3 +232,16 @@ def test_ambiguous_points_get_extended_frustums_or_partial_blends(small_grids):
     assert counts["all_nodes"] > 0 and counts["extended_frustum"] > 0
     assert set(np.unique(result.remedy[result.valid])) <= {M.ALL_NODES, M.EXTENDED_FRUSTUM, M.PARTIAL}
     assert (result.remedy[~result.valid] == M.NOT_PROJECTED).all()
+
+
+def test_nodes_around_a_point_are_its_cell_and_the_cells_beside_it_nearest_first():
+    grid = M.TetrahedralGrid(np.zeros(3), np.full(3, 4.0), (5, 5, 5))
+    point = np.array([1.6, 2.2, 1.9])  # in cell (1, 2, 1)
+    around = grid.nodes_around(point)
+    positions = grid.node_positions()[around]
+    assert len(around) == 64 and len(set(around.tolist())) == 64
+    assert np.all(np.diff(np.linalg.norm(positions - point, axis=1)) >= 0)  # nearest first
+    cell_corners = {int(grid.node_index(np.array([1 + i, 2 + j, 1 + k]))) for i in (0, 1) for j in (0, 1) for k in (0, 1)}
+    assert cell_corners <= set(around.tolist()) and int(around[0]) in cell_corners  # the nearest is the cell's
+    assert np.all(np.abs(positions - point).max(axis=1) < 3.0)  # no node past the neighbouring cells
+    assert len(grid.nodes_around(np.array([0.2, 0.1, 3.9]))) == 27  # at a corner of the grid: 3 x 3 x 3
