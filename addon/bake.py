@@ -61,6 +61,7 @@ class BakeResult:
     n_nodes: int  # nodes of the grid
     n_built: int  # nodes this bake built
     n_skipped: int  # nodes of its range already baked
+    n_baked: int  # nodes of the grid in its folder after this bake (all of them once ``directory`` is set)
     seconds: float
     node_seconds: np.ndarray  # (N,) worker wall time per node (0 for nodes not built)
     node_cpu_seconds: np.ndarray  # (N,) worker CPU time per node
@@ -83,7 +84,7 @@ def _bake_node(node: int):
     camera = build_node(work["reflector_set"], work["positions"][node], work["bounds"], work["settings"])
     arrays = bake_cache.node_arrays(camera) if camera.status == NODE_OK else None
     bake_cache.write_node(work["directory"], node, work["key"], arrays)
-    return node, camera.status, (camera.seconds, camera.cpu_seconds), camera.nbytes
+    return node, (camera.seconds, camera.cpu_seconds), camera.nbytes
 
 
 def _peak_rss_mb() -> float:
@@ -153,7 +154,7 @@ def bake_grid(reflector: Reflector, matrix, settings: MorphSettings, cache_dir, 
             pool = multiprocessing.get_context("fork").Pool(min(processes, len(todo)))
             results = pool.imap_unordered(_bake_node, todo, chunksize=1)
         try:
-            for node, _, seconds, size in results:
+            for node, seconds, size in results:
                 node_seconds[node], node_cpu[node] = seconds
                 nbytes += size
                 done += 1
@@ -168,10 +169,11 @@ def bake_grid(reflector: Reflector, matrix, settings: MorphSettings, cache_dir, 
                 pool.join()
     finally:
         _WORK.clear()
-    complete = not cancelled and bake_cache.baked_nodes(directory, total)[0].all()
+    baked = int(bake_cache.baked_nodes(directory, total)[0].sum())
+    complete = not cancelled and baked == total
     if complete:
         bake_cache.remove_stale(cache_dir, reflector.name, key)
-    return BakeResult(cancelled, key, directory if complete else None, total, done - skipped, skipped,
+    return BakeResult(cancelled, key, directory if complete else None, total, done - skipped, skipped, baked,
                       time.perf_counter() - start, node_seconds, node_cpu, nbytes, processes, _peak_rss_mb())
 
 

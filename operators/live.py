@@ -166,9 +166,7 @@ def _capture(state: LiveScene, scene, depsgraph, reflectors: bool) -> None:
     if reflectors or state.reflector_set is None:
         state.reflector_set = ReflectorSet(list(captured.reflectors))
         state.reflector_names = _marked_reflectors(scene)
-        from .morph_bake import load_grids
-
-        state.grids = load_grids(scene, captured.reflectors)
+        state.grids = morph_bake.load_grids(scene, captured.reflectors)
         state.plan = methods.plan(scene, captured.reflectors, state.settings[2],
                                   baked={grid.reflector_name for grid, _ in state.grids})
         state.generation += 1
@@ -194,19 +192,17 @@ def _covering_grids(state: LiveScene, view: View) -> list:
     """The grids whose reflector ``view`` can be drawn from in morphing mode; each
     reflector's panel line says which mode draws it and why. A grid whose cache was
     found damaged is not used (its line names the file; a bake repairs it)."""
-    from .morph_bake import note_cache_fault, note_morphing_active, note_runtime_fallback
-
     covering = []
     for grid, matrix in state.grids:
         if grid.failure is not None:
-            note_cache_fault(grid.reflector_name, grid.failure)
+            morph_bake.note_cache_fault(grid.reflector_name, grid.failure)
             continue
         try:
             grid.check_view(view, matrix)
         except ViewOutsideGrid as error:
-            note_runtime_fallback(error)
+            morph_bake.note_runtime_fallback(error)
             continue
-        note_morphing_active(grid.reflector_name)
+        morph_bake.note_morphing_active(grid.reflector_name)
         covering.append((grid, matrix))
     return covering
 
@@ -471,9 +467,11 @@ def draw(scene, key, view: View) -> bool:
         if state.level == 'ERROR' and "the view is inside" in state.status:
             state.report('INFO', "Reflections up to date")
         drawn = _draw_with(state, view, None, None)
-        if any(grid.failure is not None for grid, _ in covering):
-            _covering_grids(state, view)  # the panel names the damaged file
-            request_view(state, key, view)  # its reflector needs a camera now
+        damaged = [grid for grid, _ in covering if grid.failure is not None]
+        for grid in damaged:
+            morph_bake.note_cache_fault(grid.reflector_name, grid.failure)  # the panel names the file
+        if damaged:
+            request_view(state, key, view)  # their reflectors need a camera now
         return drawn
     camera = state.cameras.get(key)
     current = camera is not None and camera.generation == state.generation and camera.settings == state.settings
@@ -665,10 +663,8 @@ def on_setting_changed(context, reflectors: bool = False, meshes: bool = False) 
 @persistent
 def on_load_pre(*_args) -> None:
     """Loading a file drops every live state and morphing status (no state leaks between files)."""
-    from .morph_bake import forget_statuses
-
     clear_all()
-    forget_statuses()
+    morph_bake.forget_statuses()
     methods.forget()
 
 
@@ -719,10 +715,8 @@ def unregister() -> None:
             handlers.remove(handler)
     if bpy.app.timers.is_registered(_tick):
         bpy.app.timers.unregister(_tick)
-    from .morph_bake import forget_statuses
-
     clear_all()
-    forget_statuses()
+    morph_bake.forget_statuses()
     methods.forget()
     if _executor is not None:
         _executor.shutdown(wait=False, cancel_futures=True)

@@ -295,10 +295,7 @@ class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
                 if result.n_skipped:
                     done += f", {result.n_skipped} were baked already"
                 if result.directory is None:
-                    present = int(bake_cache.baked_nodes(bake_cache.grid_directory(directory, reflector.name,
-                                                                                   result.key),
-                                                         result.n_nodes)[0].sum())
-                    done += f"; {present} of {result.n_nodes} nodes baked, the other ranges still to bake"
+                    done += f"; {result.n_baked} of {result.n_nodes} nodes baked, the other ranges still to bake"
                 _REFLECTOR_STATUS[reflector.name] = done
                 outcome.append(f"{reflector.name}: {done}")
         except (SceneInputError, OSError, ValueError) as error:
