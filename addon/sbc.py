@@ -410,7 +410,7 @@ class SampleBasedCamera:
 
     def polish_answers(self, g: int, pixels, points, kind):
         """What ``project`` does after its interpolated answers, for answers of group ``g``
-        found elsewhere (the GLSL twin, ``gpu_shaders/reflection_draw.py``): desired-view
+        found elsewhere (the GLSL twin, ``gpu_shaders/sbc_triangles.py``): desired-view
         ``pixels`` (P, 2) of ``points`` (P, 3) with their leaf ``kind`` (P,). Returns
         (pixels, first reflector points, ray distances, ok) of the answers polished on
         the true rays (the others as given, reflector points and distances NaN there)."""

@@ -6,7 +6,7 @@ SBC paper (Popescu, Sacks, Mei 2006), section IV-B/V-A: a point projects in a gr
 map, at most ``sbc.MISS_CELLS`` cell spacings off the interpolated ray and not beyond
 its head when the head is on a reflector. So a sheet reflects only the part of space
 its rays sweep. This module bounds that part conservatively and lets the renderer skip,
-per sheet, the diffuse vertices that lie outside it (``gpu_shaders/reflection_draw.py``):
+per sheet, the diffuse vertices that lie outside it (``gpu_shaders/sbc_triangles.py``):
 
 - :func:`sheet_kdops`: per sheet, a k-DOP (:data:`DIRECTIONS`, 13 slab directions) of
   its rays' tails and heads (a ray segment lies in the convex hull of its ends, and the

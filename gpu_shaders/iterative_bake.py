@@ -138,13 +138,13 @@ def _triangle_batch(vertices, triangles, normals, centre, face_normals):
     triangle's plane (geometric normal, offset from O) on its three corners."""
     import gpu
 
-    from .reflection_draw import _vertex_buffer
+    from .gpu_data import vertex_buffer
 
     corners = triangles.reshape(-1)
     relative = vertices[corners] - centre
     offsets = np.einsum("tk,tk->t", face_normals, vertices[triangles[:, 0]] - centre)
     plane = np.repeat(np.c_[face_normals, offsets], 3, axis=0)
-    buffer = _vertex_buffer({
+    buffer = vertex_buffer({
         "position": (relative.astype(np.float32), 'F32', 'FLOAT'),
         "normal": (normals[corners].astype(np.float32), 'F32', 'FLOAT'),
         "plane": (plane.astype(np.float32), 'F32', 'FLOAT'),
@@ -196,7 +196,7 @@ def bake_reflector_map_gpu(reflector, centre, face_size: int) -> MapBake:
     rasterised on the GPU (which must be ready: ``operators.gpu_init.ensure_gpu``)."""
     import gpu
 
-    from .reflection_draw import _read_texture
+    from .gpu_data import read_texture
 
     size = int(face_size)
     side = size + 2
@@ -214,10 +214,10 @@ def bake_reflector_map_gpu(reflector, centre, face_size: int) -> MapBake:
     try:
         uniforms = (size, NEAR_FRACTION * scale, 1.0 / far)
         _draw_faces(framebuffer, shader, batch, uniforms, 'LESS', 1.0)
-        texels = _read_texture(map_target, side, 6 * side).copy()
-        cosine = _read_texture(cosine_target, side, 6 * side)[..., 0].copy()
+        texels = read_texture(map_target, side, 6 * side).copy()
+        cosine = read_texture(cosine_target, side, 6 * side)[..., 0].copy()
         _draw_faces(framebuffer, shader, batch, uniforms, 'GREATER', 0.0)
-        last = _read_texture(map_target, side, 6 * side)[..., 0].copy()
+        last = read_texture(map_target, side, 6 * side)[..., 0].copy()
     finally:
         # No explicit free for textures and framebuffers: dropping the references releases them.
         del framebuffer, map_target, cosine_target, depth_target, batch

@@ -66,7 +66,7 @@ class MapAtlas:
     search reads its own map and the others', which may block its reflected segments."""
 
     def __init__(self, methods, shift):
-        from .reflection_draw import _data_texture
+        from .gpu_data import data_texture
 
         maps = [m.reflector_map for m in methods]
         width = max(rmap.texels.shape[1] for rmap in maps)
@@ -77,13 +77,13 @@ class MapAtlas:
             texels[rows[k]:rows[k + 1], :rmap.texels.shape[1]] = rmap.texels
             params[2 * k] = (*(np.asarray(rmap.centre) - shift), rmap.max_radius)
             params[2 * k + 1] = (rows[k], rmap.face_size, float(bool(rmap.convex)), rmap.mean_radius)
-        self.texture = _data_texture(texels)
-        self.params = _data_texture(params, len(params))
+        self.texture = data_texture(texels)
+        self.params = data_texture(params, len(params))
 
 
 class IterativePass:
     """The iterative method's GPU side for one renderer's reflected geometry (a
-    ``reflection_draw.DrawGeometry``, on the GPU as ``meshes``, a
+    ``draw_geometry.DrawGeometry``, on the GPU as ``meshes``, a
     :class:`.reflected_meshes.ReflectedMeshes`, made here when not given) and its
     star-shaped reflectors (``addon.methods.iterative.IterativeReflector`` each)."""
 

@@ -135,12 +135,12 @@ class NodeTextures:
     def put(self, key, slots: np.ndarray, width: int, rows: int, keep=()) -> None:
         """Upload a node's (P, 2 SLOTS, 3) images under ``key`` (:func:`node_texels`);
         drop the least recently used (but ``keep``) while over the budget."""
-        from .reflection_draw import _data_texture
+        from .gpu_data import data_texture
 
         texels = node_texels(slots, width, rows)
         used = np.isfinite(slots[..., 0]).any(axis=0)
         counts = tuple(int(np.max(np.flatnonzero(part), initial=-1)) + 1 for part in (used[:SLOTS], used[SLOTS:]))
-        self._textures[key] = (_data_texture(texels), texels.nbytes, counts)
+        self._textures[key] = (data_texture(texels), texels.nbytes, counts)
         self.nbytes += texels.nbytes
         for old in list(self._textures):
             if self.nbytes <= self.budget_bytes:

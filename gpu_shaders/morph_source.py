@@ -27,7 +27,7 @@ import numpy as np
 
 from . import projection
 from .morph_pass import SLOTS
-from .reflection_draw import reflected_depth
+from .sbc_triangles import reflected_depth
 
 #: Images of one point in one reflector drawn at most (sheets per grid), as on the GPU.
 MAX_IMAGES = SLOTS
@@ -58,7 +58,7 @@ class MorphSource:
         self.downsample = 1  # a vertex's image is blended on its own, not read from a ray map
         self.sheet_subdivisions = [MIXED_SUBDIVISIONS] * len(self.groups)
 
-    def project(self, renderer, positions, batch, draws: list, n_texels: int, setup: dict, static: bool = False):
+    def project(self, projections, positions, batch, draws: list, n_texels: int, setup: dict, static: bool = False):
         """(n_texels, 4) (pixel, depth, valid) and (eye vector, reflected distance) per
         drawn texel, as the renderer's GPU pass writes them; ``batch`` is not used."""
         points = np.zeros((n_texels, 4), np.float32)
@@ -70,7 +70,7 @@ class MorphSource:
             key = (grid_index, int(first), int(count))
             if key not in blended:
                 grid, matrix = self.grids[grid_index]
-                static_key = (renderer.vertices_token, key[1:]) if static else None
+                static_key = (projections.vertices_token, key[1:]) if static else None
                 blended[key] = grid.project(positions[first:first + count], self.view, matrix,
                                             static_key=static_key)
             result = blended[key]

@@ -45,7 +45,7 @@ def reflected_shader():
     sample-based camera's reflected meshes)."""
     import gpu
 
-    from .reflection_draw import reflected_fragment_source, reflected_interface
+    from .draw_shaders import reflected_fragment_source, reflected_interface
 
     interface = reflected_interface("curved_reflections_iterative_interface", searched=True)
     info = gpu.types.GPUShaderCreateInfo()
@@ -91,18 +91,18 @@ class ReflectedMeshes:
     def _ensure(self) -> None:
         import gpu
 
-        from .reflection_draw import _data_texture, _vertex_buffer
+        from .gpu_data import data_texture, vertex_buffer
 
         if self._positions is not None:
             return
         g = self.geometry
-        self._positions = _data_texture((g.vertices - g.shift).astype(np.float32), self.width)
+        self._positions = data_texture((g.vertices - g.shift).astype(np.float32), self.width)
         attributes = {"vertex_index": (np.arange(self.n_vertices, dtype=np.int32), 'I32', 'INT'),
                       "color": (g.colors, 'F32', 'FLOAT'),
                       "normal_lit": (np.c_[g.normals, g.lit].astype(np.float32), 'F32', 'FLOAT'),
                       "uv": (g.uvs, 'F32', 'FLOAT')}
         if len(g.triangles):
-            self._batch = gpu.types.GPUBatch(type='TRIS', buf=_vertex_buffer(attributes), elem=gpu.types.GPUIndexBuf(
+            self._batch = gpu.types.GPUBatch(type='TRIS', buf=vertex_buffer(attributes), elem=gpu.types.GPUIndexBuf(
                 type='TRIS', seq=np.asarray(g.triangles, dtype=np.int32)))
 
     def answer_texture(self):
@@ -143,9 +143,9 @@ class ReflectedMeshes:
     def read(self, texture) -> tuple[np.ndarray, np.ndarray]:
         """An answer texture read back: (N, 3) world points (NaN where no answer) and the
         (N,) int64 codes."""
-        from .reflection_draw import _read_texture
+        from .gpu_data import read_texture
 
-        texels = _read_texture(texture, self.width, self.height).reshape(-1, 4)[:self.n_vertices]
+        texels = read_texture(texture, self.width, self.height).reshape(-1, 4)[:self.n_vertices]
         texels = texels.astype(np.float64)
         code = texels[:, 3].astype(np.int64)
         found = code % 16 == FOUND_CODE

@@ -102,7 +102,7 @@ def built_scene(kind: str, width: int, height: int):
 
 def levels_for(captured, target_vertices: int) -> int:
     """Levels of uniform splitting whose drawn vertex count is nearest the target (log scale)."""
-    from curved_reflections.gpu_shaders.reflection_draw import prepare_geometry
+    from curved_reflections.gpu_shaders.draw_geometry import prepare_geometry
 
     counts = {}
     for levels in range(0, 6):
@@ -244,8 +244,6 @@ def measure(kind: str, width: int, height: int, target_vertices: int, repeats: i
 #: Degrees the view is turned (about its vertical axis) for the moved-view frame: the
 #: viewport moved and the old camera still draws, as while a new one builds.
 MOVED_DEGREES = 2.0
-#: The projection's steps, timed apart (private methods: a profile only).
-PROJECTION_STEPS = {"_project_pass": "GPU projection + read-back"}
 
 
 def _projection_times(renderer, textures, view, sbc, framebuffer, repeats: int) -> dict:
@@ -255,10 +253,10 @@ def _projection_times(renderer, textures, view, sbc, framebuffer, repeats: int) 
     also how many vertex projections each made."""
     result = {}
     for cull in (True, False):
-        renderer.cull = cull
+        renderer.sbc.cull = cull
         totals, gpu_parts = [], []
         spent = [0.0]
-        original = renderer._project_pass
+        original = renderer.sbc.project_pass
 
         def counted(*args, **kwargs):
             start = time.perf_counter()
@@ -266,7 +264,7 @@ def _projection_times(renderer, textures, view, sbc, framebuffer, repeats: int) 
             spent[0] += time.perf_counter() - start
             return value
 
-        renderer._project_pass = counted
+        renderer.sbc.project_pass = counted
         try:
             for _ in range(repeats):
                 renderer.invalidate()
@@ -274,12 +272,12 @@ def _projection_times(renderer, textures, view, sbc, framebuffer, repeats: int) 
                 totals.append(timed(lambda: renderer.projection(textures, view, sbc), framebuffer))
                 gpu_parts.append(spent[0])
         finally:
-            del renderer._project_pass
+            del renderer.sbc.project_pass
         key = "culled" if cull else "unculled"
         result[key] = 1000.0 * statistics.median(totals)
         result[key + " gpu"] = 1000.0 * statistics.median(gpu_parts)
         result[key + " vertices"] = int(renderer.stats["projected_vertices"])
-    renderer.cull = True
+    renderer.sbc.cull = True
     renderer.invalidate()
     renderer.projection(textures, view, sbc)
     return result

@@ -37,7 +37,7 @@ def _cloud(count: int, seed: int) -> np.ndarray:
 
 
 def _geometry(reflector, points):
-    from curved_reflections.gpu_shaders.reflection_draw import prepare_geometry
+    from curved_reflections.gpu_shaders.draw_geometry import prepare_geometry
 
     triangles = np.arange(len(points) - len(points) % 3).reshape(-1, 3)
     mesh = DiffuseMesh("cloud", points, triangles, np.ones((len(points), 4)))
@@ -165,7 +165,7 @@ def test_another_searched_mirror_blocks_reflected_segments(gpu_ready):
                IterativeReflector(1, "Second", bakes[1], 1.0, occluders=(bakes[0],))]
     points = np.random.default_rng(4).uniform((3.6, -1.5, -1.5), (6.0, 1.5, 1.5), (3000, 3))
     triangles = np.arange(len(points)).reshape(-1, 3)
-    from curved_reflections.gpu_shaders.reflection_draw import prepare_geometry
+    from curved_reflections.gpu_shaders.draw_geometry import prepare_geometry
 
     geometry = prepare_geometry([first, second], [DiffuseMesh("behind", points, triangles, np.ones((3000, 4)))],
                                 edge_fraction=None)

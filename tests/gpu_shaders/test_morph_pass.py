@@ -50,7 +50,7 @@ def _view(eye, size=(320, 240)):
 
 def _pass(mirror, meshes, budget_mb=256.0):
     from curved_reflections.gpu_shaders.morph_pass import MorphPass
-    from curved_reflections.gpu_shaders.reflection_draw import prepare_geometry
+    from curved_reflections.gpu_shaders.draw_geometry import prepare_geometry
 
     sphere, grid = mirror
     geometry = prepare_geometry([sphere], meshes, edge_fraction=None)

@@ -105,7 +105,7 @@ def test_sheet_sources_draw_each_part_as_it_draws_alone(scene):
     and the grid added, as the grid alone (pixel for pixel)."""
     from curved_reflections.gpu_shaders.morph_source import MorphSource
     from curved_reflections.gpu_shaders.projection import SBCTextures
-    from curved_reflections.gpu_shaders.reflection_draw import SheetSources
+    from curved_reflections.gpu_shaders.sbc_triangles import SheetSources
 
     _, _, view, grid, sbc = scene
     textures = SBCTextures(sbc)

@@ -124,9 +124,9 @@ def test_barycentric_grid_tiles_the_triangle():
 
 
 def test_push_constants_stay_small():
-    from curved_reflections.gpu_shaders import reflection_draw
+    from curved_reflections.gpu_shaders import draw_shaders
 
-    assert max(reflection_draw.PUSH_CONSTANT_BYTES.values()) <= 128
+    assert max(draw_shaders.PUSH_CONSTANT_BYTES.values()) <= 128
 
 
 # --- on the GPU ---------------------------------------------------------------------
@@ -314,9 +314,9 @@ def test_draw_into_a_bound_offscreen_as_a_draw_handler_would(gpu_ready):
 
 def _red_pixels(targets):
     """Pixels (x, y) of the reflection target that show the red square."""
-    from curved_reflections.gpu_shaders.reflection_draw import _read_texture
+    from curved_reflections.gpu_shaders.gpu_data import read_texture
 
-    colors = _read_texture(targets.reflection_colors, targets.width, targets.height)
+    colors = read_texture(targets.reflection_colors, targets.width, targets.height)
     red = (colors[..., 3] > 0.5) & (colors[..., 0] > 0.5) & (colors[..., 1] < 0.1) & (colors[..., 2] < 0.1)
     return np.argwhere(red)[:, ::-1]
 

@@ -1,0 +1,181 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""What the renderer draws, as numpy arrays: the pre-pass's meshes (every diffuse mesh
+and reflector, with their colours, labels, normals and image textures) and the
+reflected meshes (the diffuse meshes pre-subdivided where a reflection curves them,
+SBC paper V-B, :mod:`..addon.subdivision`). Built once per scene change, no GPU needed.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..addon import sheet_bounds, subdivision
+
+#: Float targets hold vertex indices exactly below 2^24.
+MAX_VERTICES = 1 << 24
+
+
+@dataclass(frozen=True)
+class DrawGeometry:
+    """What the passes draw, as arrays (no GPU needed to build it).
+
+    Pre-pass: every diffuse mesh, then every reflector, in one indexed triangle list;
+    positions relative to ``shift``; its triangles sorted by image, ``prepass_ranges``
+    the (image index or -1, first triangle, count) runs. Reflected meshes: all diffuse
+    meshes subdivided (:mod:`.subdivision`) and concatenated, world positions, their
+    triangles sorted by image likewise (``ranges``). ``images`` are the meshes' image
+    textures, (H, W, 4) float32 linear, rows bottom to top.
+    """
+
+    shift: np.ndarray  # (3,) float64
+    prepass_positions: np.ndarray  # (P, 3) float32, relative to shift
+    prepass_colors: np.ndarray  # (P, 4) float32 linear RGBA
+    prepass_labels: np.ndarray  # (P, 4) float32 (id, reflectivity, Fresnel F0 or -1, attenuation distance)
+    prepass_normals: np.ndarray  # (P, 4) float32 (normal, lit)
+    prepass_uvs: np.ndarray  # (P, 2) float32
+    prepass_triangles: np.ndarray  # (Tp, 3) int32
+    vertices: np.ndarray  # (V, 3) float64, reflected meshes
+    colors: np.ndarray  # (V, 4) float32
+    triangles: np.ndarray  # (T, 3) int64
+    diameter: float  # bounding-box diagonal of everything: bounds every reflected ray distance
+    normals: np.ndarray = None  # (V, 3) float32 unit (zero where undefined)
+    lit: np.ndarray = None  # (V,) float32: 1 lit, 0 emission (unlit)
+    uvs: np.ndarray = None  # (V, 2) float32
+    images: tuple = ()
+    prepass_ranges: tuple = ()
+    ranges: tuple = ()
+    stats: dict = field(default_factory=dict)
+
+
+def _sorted_by_image(triangles: np.ndarray, image: np.ndarray) -> tuple[np.ndarray, tuple]:
+    """Triangles sorted by image index (stable) and the (image, first, count) runs."""
+    order = np.argsort(image, kind="stable")
+    image = image[order]
+    starts = np.flatnonzero(np.r_[True, image[1:] != image[:-1]]) if len(image) else np.zeros(0, int)
+    counts = np.diff(np.r_[starts, len(image)])
+    return triangles[order], tuple((int(image[k]), int(k), int(c)) for k, c in zip(starts, counts))
+
+
+def _mesh_attributes(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Normals (N, 3) (the mesh's, else smooth ones from its faces), UVs (N, 2) and lit (N,)."""
+    from ..addon.scene import vertex_normals
+
+    normals = mesh.normals if getattr(mesh, "normals", None) is not None else vertex_normals(
+        mesh.vertices, mesh.triangles)
+    uvs = mesh.uvs if mesh.uvs is not None else np.zeros((len(mesh.vertices), 2))
+    lit = np.full(len(mesh.vertices), 0.0 if mesh.emissive else 1.0, np.float32)
+    return np.asarray(normals, np.float64), np.asarray(uvs, np.float64), lit
+
+
+def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=None,
+                     edge_fraction: float = subdivision.EDGE_FRACTION, fresnel_f0=None,
+                     attenuation_distance=None) -> DrawGeometry:
+    """Arrays of one scene for :class:`.reflection_draw.ReflectionRenderer`.
+
+    ``reflector_colors`` (R, 3 or 4) linear, default white; ``reflectivity`` (R,) in
+    [0, 1], default 1 (perfect mirrors); ``fresnel_f0`` (R,) Schlick's reflectance at
+    normal incidence, NaN or negative for no Fresnel (default none); ``attenuation_distance``
+    (R,) the distance over which reflections fade to the world (0 or default: none).
+    SBC paper section V-D. ``edge_fraction`` sets the pre-subdivision
+    (:func:`subdivision.subdivide`); ``None`` draws the meshes as they are.
+    """
+    start = time.perf_counter()
+    reflectors, meshes = list(reflectors), list(meshes)
+    n_reflectors = len(reflectors)
+    colors = np.ones((n_reflectors, 4), np.float32)
+    if reflector_colors is not None:
+        given = np.asarray(reflector_colors, dtype=np.float32).reshape(n_reflectors, -1)
+        colors[:, :given.shape[1]] = given[:, :4]
+    mirror = np.ones(n_reflectors, np.float32) if reflectivity is None else np.clip(
+        np.asarray(reflectivity, dtype=np.float32).reshape(n_reflectors), 0.0, 1.0)
+    f0 = np.full(n_reflectors, -1.0, np.float32) if fresnel_f0 is None else np.asarray(
+        fresnel_f0, dtype=np.float32).reshape(n_reflectors)
+    f0 = np.where(np.isfinite(f0) & (f0 >= 0), np.clip(f0, 0.0, 1.0), -1.0).astype(np.float32)
+    fade = np.zeros(n_reflectors, np.float32) if attenuation_distance is None else np.maximum(
+        np.asarray(attenuation_distance, dtype=np.float32).reshape(n_reflectors), 0.0)
+
+    images, image_of_mesh = [], []
+    for mesh in meshes:
+        image = getattr(mesh, "image", None)
+        image_of_mesh.append(-1 if image is None else len(images))
+        if image is not None:
+            images.append(np.ascontiguousarray(image, dtype=np.float32))
+    attributes = [_mesh_attributes(m) for m in meshes]
+
+    parts = [(m.vertices, m.triangles, m.colors, (0.0, 1.0, -1.0, 0.0), np.c_[n, lit], uv, image)
+             for m, (n, uv, lit), image in zip(meshes, attributes, image_of_mesh)]
+    parts += [(r.vertices, r.triangles, colors[k], (k + 1.0, mirror[k], f0[k], fade[k]), np.c_[r.normals, np.zeros(
+        len(r.vertices))], np.zeros((len(r.vertices), 2)), -1) for k, r in enumerate(reflectors)]
+    everything = np.concatenate([p[0] for p in parts]) if parts else np.zeros((1, 3))
+    lo, hi = everything.min(axis=0), everything.max(axis=0)
+    shift = 0.5 * (lo + hi)
+    positions, vertex_colors, labels, normals, uvs, triangles, tri_image, offset = [], [], [], [], [], [], [], 0
+    for vertices, tris, color, label, normal, uv, image in parts:
+        positions.append((vertices - shift).astype(np.float32))
+        vertex_colors.append(np.broadcast_to(np.asarray(color, np.float32), (len(vertices), 4)))
+        labels.append(np.broadcast_to(np.asarray(label, np.float32), (len(vertices), 4)))
+        normals.append(np.asarray(normal, np.float32))
+        uvs.append(np.asarray(uv, np.float32))
+        triangles.append(np.asarray(tris, dtype=np.int64) + offset)
+        tri_image.append(np.full(len(tris), image))
+        offset += len(vertices)
+    prepass_triangles, prepass_ranges = _sorted_by_image(
+        (np.concatenate(triangles) if triangles else np.zeros((0, 3))).astype(np.int32),
+        np.concatenate(tri_image) if tri_image else np.zeros(0, int))
+
+    centres, radii = subdivision.reflector_spheres(reflectors)
+    vertices, packed, mesh_triangles, mesh_image, offset = [], [], [], [], 0
+    for mesh, (normal, uv, lit), image in zip(meshes, attributes, image_of_mesh):
+        # Colour, normal, UV and lit are interpolated together at new midpoints.
+        v, t, c = mesh.vertices, mesh.triangles, np.c_[mesh.colors, normal, uv, lit].astype(np.float32)
+        if edge_fraction is not None:
+            v, t, c = subdivision.subdivide(v, t, c, centres, radii, edge_fraction)
+        vertices.append(v)
+        packed.append(c)
+        mesh_triangles.append(t + offset)
+        mesh_image.append(np.full(len(t), image))
+        offset += len(v)
+    if offset >= MAX_VERTICES:
+        raise ValueError(f"{offset} reflected vertices: float targets index below 2^24 only")
+    packed = np.concatenate(packed) if packed else np.zeros((0, 10), np.float32)
+    vertices = np.concatenate(vertices) if vertices else np.zeros((0, 3))
+    mesh_triangles = np.concatenate(mesh_triangles) if mesh_triangles else np.zeros((0, 3), np.int64)
+    # Vertices along a Morton curve: runs of them are compact chunks for per-sheet culling.
+    order = sheet_bounds.morton_order(vertices)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    vertices, packed, mesh_triangles = vertices[order], packed[order], rank[mesh_triangles]
+    vertex_normals = packed[:, 4:7]
+    length = np.linalg.norm(vertex_normals, axis=1, keepdims=True)
+    vertex_normals = np.divide(vertex_normals, length, out=np.zeros_like(vertex_normals), where=length > 0)
+    mesh_triangles, ranges = _sorted_by_image(
+        mesh_triangles, np.concatenate(mesh_image) if mesh_image else np.zeros(0, int))
+    geometry = DrawGeometry(
+        shift=shift,
+        prepass_positions=np.concatenate(positions) if positions else np.zeros((0, 3), np.float32),
+        prepass_colors=np.concatenate(vertex_colors) if vertex_colors else np.zeros((0, 4), np.float32),
+        prepass_labels=np.concatenate(labels) if labels else np.zeros((0, 4), np.float32),
+        prepass_normals=np.concatenate(normals) if normals else np.zeros((0, 4), np.float32),
+        prepass_uvs=np.concatenate(uvs) if uvs else np.zeros((0, 2), np.float32),
+        prepass_triangles=prepass_triangles,
+        vertices=vertices,
+        colors=np.ascontiguousarray(packed[:, :4]),
+        triangles=mesh_triangles,
+        diameter=float(max(np.linalg.norm(hi - lo), 1e-9)),
+        normals=vertex_normals.astype(np.float32),
+        lit=np.ascontiguousarray(packed[:, 9]),
+        uvs=np.ascontiguousarray(packed[:, 7:9]),
+        images=tuple(images),
+        prepass_ranges=prepass_ranges,
+        ranges=ranges,
+    )
+    geometry.stats.update({
+        "mesh_triangles": int(sum(len(m.triangles) for m in meshes)),
+        "reflected_triangles": int(len(geometry.triangles)),
+        "reflected_vertices": int(len(geometry.vertices)),
+        "prepare_seconds": time.perf_counter() - start,
+    })
+    return geometry
