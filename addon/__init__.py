@@ -7,7 +7,8 @@ are tested with plain pytest.
 """
 
 from .errors import SceneInputError
-from .sbc import SampleBasedCamera, build_sample_based_camera
+from .sbc import SampleBasedCamera
+from .sbc_build import build_sample_based_camera
 from .scene import DiffuseMesh, Reflector, scene_bounds
 from .view import View, look_at_view
 

@@ -145,7 +145,7 @@ def history_boundary(ray_map, width: int, height: int, max_order: int) -> np.nda
     of one tree's grid). Where those cells end in different histories (inside a
     footprint: the silhouette of another reflector seen in this one, where the rays go
     on to a second order; or a sharp edge of the mirror, where the trees of its two
-    sides end: sbc.surface_sets) no tree has all four rays there, so neither side's
+    sides end: sbc_build.surface_sets) no tree has all four rays there, so neither side's
     reflection reaches the pixel: the same band as along a footprint's edge, inside it
     (SBC section IV).
     """
@@ -201,8 +201,8 @@ def unreliable_cells(ray_map, trees, mixed=None, folds=None) -> np.ndarray:
     sample-based camera itself knows its projection is unreliable: cells of ray-list
     leaves (no plane split the rays, SBC section IV-C) and of banded camera leaves' ray
     lists (their rays focus, ``bsp._depth_bands``), fold cells (the rays cross: a
-    caustic, ``sbc.FoldCells``) and mixed cells (an occluder's silhouette crosses the
-    cell, ``sbc.MixedCells``). Reflections there may be missing although the mirror
+    caustic, ``sbc_cells.FoldCells``) and mixed cells (an occluder's silhouette crosses the
+    cell, ``sbc_cells.MixedCells``). Reflections there may be missing although the mirror
     shows an object (thin, strongly curved parts: a teapot's spout). A ray-list leaf's
     rays (``BSPTree.list_rays``) mark the four cells around each: a leaf one ray wide
     along a sharp edge of the mirror has no complete cell of its own."""

@@ -47,7 +47,8 @@ from .bsp import CAMERA_LEAF
 from .errors import SceneInputError
 from .ray_patch import RayPatches, solve_charts
 from .raytrace import ReflectorSet
-from .sbc import SampleBasedCamera, build_sample_based_camera, check_view_outside_reflectors, descend_tree, in_band
+from .sbc import SampleBasedCamera, descend_tree, in_band
+from .sbc_build import build_sample_based_camera, check_view_outside_reflectors
 from .scene import Reflector
 from .vectors import cross
 from .view import View, look_at_view

@@ -202,3 +202,9 @@ def _number_histories(per_order: list) -> tuple[list, np.ndarray]:
     renumber = np.empty(len(unique), dtype=np.int64)
     renumber[rank] = np.arange(len(unique))
     return [tuple(int(x) for x in unique[k][unique[k] >= 0]) for k in rank], renumber[index.reshape(-1)]
+
+
+def first_pieces(ray_map: RayMap, grid: np.ndarray) -> np.ndarray:
+    """The smooth pieces (ReflectorSet.piece) that the rays of ``grid`` first reflect off."""
+    surfaces = np.unique(ray_map.surface[grid[grid >= 0]])
+    return np.unique([ray_map.surfaces[k][0] for k in surfaces]).astype(np.int64)

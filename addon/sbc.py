@@ -3,7 +3,7 @@
 
 Popescu, Sacks, Mei (2006). The reflected rays of the desired view (ray map, section
 III-B) are split into reflection groups by history, and a group further by the smooth
-pieces of its mirrors (``surface_sets``: across a sharp edge the rays jump); each gets
+pieces of its mirrors (``sbc_build.surface_sets``: across a sharp edge the rays jump); each gets
 a BSP tree of leaf cameras (section IV). A point is projected in every tree: it
 descends to a leaf, the leaf's model gives the ray-map position (u, v) of the ray
 through the point, and the first reflector point is the point on the desired view ray of
@@ -23,24 +23,20 @@ from __future__ import annotations
 
 import functools
 import os
-import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from .bsp import (CAMERA_LEAF, CONE_SIZE, MAX_DUPLICATION, RAY_LIST_LEAF, BSPTree, RaysCrossError, build_bsp,
-                  in_cones, neighbour_spacing)
-from .errors import SceneInputError
+from .bsp import CAMERA_LEAF, CONE_SIZE, RAY_LIST_LEAF, BSPTree, in_cones, neighbour_spacing
 from .pinhole import PinholeLeaves
 from .projection import Projection
-from .ray_patch import RayPatches, RayPatchLeaves, invert_patches
-from .raymap import RayMap, box_exit_distance, trace_ray_map
-from .raytrace import ReflectorSet, reflect, reflection_valid
+from .ray_patch import RayPatchLeaves, invert_patches
+from .raymap import RayMap, first_pieces
+from .raytrace import ReflectorSet
+from .sbc_cells import FOLD_SAMPLES, FoldCells, MixedCells, rays_fold_at
 from .segments import expand_ranges
 from .true_rays import polish_on_true_rays
-from .vectors import cross
-from .view import View
 
 LEAF_MODELS = {"ray_patch": RayPatchLeaves(), "pinhole": PinholeLeaves()}
 #: Tolerance (cell units) for a ray-list cell's bilinear coordinates.
@@ -52,10 +48,6 @@ PROJECT_THREADS = 4
 THREAD_MIN_POINTS = 16384
 #: Points projected together: small enough that each step's temporaries stay in the cache.
 PROJECT_BLOCK = 16384
-#: Groups of at most this many rays are never split into sheets.
-MIN_SHEET_RAYS = 64
-#: Sub-rays per side traced in each *mixed* cell (see MixedCells).
-SUBCELL_SAMPLES = 8
 #: Ray-list cells tried per point, nearest central ray first.
 CANDIDATE_CELLS = 3
 #: The same for the ray list of a banded camera leaf (bsp._depth_bands), whose cells are
@@ -64,59 +56,8 @@ BAND_CANDIDATES = 8
 #: Camera answers up to this many cells past their leaf's rays, across a sharp edge of
 #: the mirror, are polished on the true rays (SampleBasedCamera._across_edge).
 EDGE_REACH_CELLS = 1.0
-#: Sub-cells per side traced in each *fold* cell (see FoldCells).
-FOLD_SAMPLES = 8
 #: Fold sub-cells tried per point, nearest central ray first.
 FOLD_CANDIDATES = 16
-#: Corner triangles of a cell (corners 00, 10, 01, 11) whose orientation decides a fold.
-FOLD_TRIANGLES = ((0, 1, 2), (1, 3, 0), (3, 2, 1), (2, 0, 3))
-
-
-@dataclass(frozen=True)
-class MixedCells:
-    """Sub-cell occlusion of one group's *mixed* cells.
-
-    In a cell whose four corner rays end partly on another reflector (blocked) and
-    partly where they leave the scene box, the occluder's silhouette crosses the cell
-    and the bilinear head is meaningless: it would accept points behind the occluder
-    and refuse points beside it. There, SUBCELL_SAMPLES^2 in-between rays (the same
-    bilinear interpolation of the corner rays that projection uses) are traced at build
-    time; a point projected into the cell is limited by the head of the sub-ray nearest
-    its fractional cell (no limit where that sub-ray leaves the box). A table, not a
-    trace, so the GLSL twin reads the same answer from a texture.
-    """
-
-    index: np.ndarray  # (rows, columns) int: row in ``heads`` of the cell (i, j) = [j, i], -1 if not mixed
-    heads: np.ndarray  # (n_mixed, M, M) float: head distance of sub-ray [b, a] at ((a + .5)/M, (b + .5)/M), inf unblocked
-
-    @property
-    def nbytes(self) -> int:
-        return int(self.index.nbytes + self.heads.nbytes)
-
-
-@dataclass(frozen=True)
-class FoldCells:
-    """True in-between rays of one group's *fold* cells.
-
-    Near a caustic the reflected rays cross: along some cells the four corner rays fold
-    over between the tail and the head (one of the cell's corner triangles changes
-    orientation), so the bilinear ray patch sweeps space that no true ray reaches and
-    answers points with false images, or puts true ones pixels off. In those cells
-    (SBC paper section IV-C, ray-list leaves interpolate the unit frustum: here a finer
-    one) (FOLD_SAMPLES + 1)^2 view rays through the cell are traced and reflected at
-    build time, and an answer that falls in a fold cell is solved again on the
-    FOLD_SAMPLES^2 bilinear sub-cells of those rays, as ray-list cells are: no
-    sub-cell holds the point, no image. Sub-cell patches are charted in sub-cell units:
-    ``patches.lo`` is FOLD_SAMPLES times the ray-map cell of the sub-cell's corner.
-    """
-
-    index: np.ndarray  # (rows, columns) int: fold number of cell (i, j) = [j, i], -1 if not a fold cell
-    patches: RayPatches  # bilinear, FOLD_SAMPLES^2 rows per fold cell, row-major [b][a]
-    valid: np.ndarray  # (n_fold * FOLD_SAMPLES^2,) bool: the sub-cell's four rays hit the group's reflector
-
-    @property
-    def nbytes(self) -> int:
-        return int(self.index.nbytes + self.patches.nbytes + self.valid.nbytes)
 
 
 @dataclass
@@ -139,10 +80,10 @@ class SampleBasedCamera:
     #: polished on the true reflected rays (true_rays.py); None: answers as interpolated.
     true_rays: ReflectorSet | None = None
     #: (trees, 4) per tree, the ray-map cells its sheet owns, lo <= cell < hi as
-    #: (lo u, lo v, hi u, hi v) (``_build_sheets``); None: each tree owns every cell.
+    #: (lo u, lo v, hi u, hi v) (``sbc_build._build_sheets``); None: each tree owns every cell.
     owned: np.ndarray | None = None
     #: Per tree, the surface histories (indices into ``ray_map.surfaces``) whose rays it
-    #: holds (``surface_sets``), or None for all of its group's; None: all trees hold all.
+    #: holds (``sbc_build.surface_sets``), or None for all of its group's; None: all trees hold all.
     surfaces: list | None = None
 
     @property
@@ -330,7 +271,7 @@ class SampleBasedCamera:
 
     def _has_edges(self, g: int) -> bool:
         """Whether tree ``g`` holds the first-order rays of some of its reflector's smooth
-        pieces only (``surface_sets``), so that its reflector goes on past its rays' edge."""
+        pieces only (``sbc_build.surface_sets``), so that its reflector goes on past its rays' edge."""
         return (self.true_rays is not None and self.surfaces is not None and self.surfaces[g] is not None
                 and len(self.histories[g]) == 1)
 
@@ -691,316 +632,3 @@ def _check_on_rays(ray_map: RayMap, table: np.ndarray, grid: np.ndarray, cells: 
 
 def _norm(vectors: np.ndarray) -> np.ndarray:
     return np.sqrt(np.einsum("pd,pd->p", vectors, vectors))
-
-
-def _build_sheets(ray_map: RayMap, rays: np.ndarray, grid: np.ndarray, model, accuracy_px: float,
-                  owned: np.ndarray) -> list:
-    """(tree, owned cells) for one group's rays, split into sheets where the rays
-    cross in space (or where a split fails on more than bsp.MAX_RAY_LIST_RAYS rays).
-
-    Where rays of one history cross (a concave mirror's caustic, or two parts of a
-    mirror reflecting the same region: the Chen-Arvo vase shows points twice), no
-    plane separates them and the BSP duplicates rays without end. The rays are then
-    halved in ray-map space (at the median cell along the longer side, both halves
-    keeping the seam's line of rays) and each half gets its own tree, its own *sheet*,
-    recursively. A point may project in several sheets of one history: those are its
-    several images. ``owned`` (lo u, lo v, hi u, hi v) are the cells the sheet answers
-    for: the halves split it at the seam, so that where both reach over the seam (their
-    leaves accept half a cell beyond their rays) one image is answered once.
-    """
-    try:
-        return [(build_bsp(ray_map, rays, grid, model, accuracy_px,
-                           max_duplication=None if len(rays) <= MIN_SHEET_RAYS else MAX_DUPLICATION), owned)]
-    except RaysCrossError:
-        cells = ray_map.cell[rays]
-        axis = int(np.argmax(cells.max(axis=0) - cells.min(axis=0)))
-        seam = np.floor(np.median(cells[:, axis]))
-        # Both halves keep the seam's line of rays, so the cells across the seam (four
-        # corner rays, two on each side) belong to the upper sheet: no line of holes.
-        low, high = cells[:, axis] <= seam, cells[:, axis] >= seam
-        if low.all() or high.all():
-            return [(build_bsp(ray_map, rays, grid, model, accuracy_px, max_duplication=None), owned)]
-        owned_low, owned_high = owned.copy(), owned.copy()
-        owned_low[2 + axis] = owned_high[axis] = seam
-        return (_build_sheets(ray_map, rays[low], grid, model, accuracy_px, owned_low)
-                + _build_sheets(ray_map, rays[high], grid, model, accuracy_px, owned_high))
-
-
-def surface_sets(ray_map: RayMap, group: int) -> list:
-    """The rays of a reflection group, split by surface history (``RayMap.surfaces``):
-    tuples of surface indices, each set getting its own trees; [None] where the group
-    is not split (one set holds all its rays).
-
-    Across a sharp edge of a mirror (a teapot's lid on its body, a spout joining it)
-    the reflected rays jump, so no leaf straddling the edge is accurate however small,
-    and the BSP ended there in ray lists and sheets (SBC paper IV: leaves model a
-    continuous ray field; groups there are split by reflector for the same reason).
-    Each surface of at least MIN_SHEET_RAYS rays gets its own trees; the smaller ones
-    (a faceted mirror's flat faces) stay together in one set, as the whole group was.
-    """
-    counts = np.bincount(ray_map.surface[ray_map.group == group], minlength=len(ray_map.surfaces))
-    present = np.flatnonzero(counts)
-    large = present[counts[present] >= MIN_SHEET_RAYS]
-    small = present[counts[present] < MIN_SHEET_RAYS]
-    sets = [(int(k),) for k in large] + ([tuple(int(k) for k in small)] if len(small) else [])
-    return [None] if len(sets) <= 1 else sets
-
-
-def first_pieces(ray_map: RayMap, grid: np.ndarray) -> np.ndarray:
-    """The smooth pieces (ReflectorSet.piece) that the rays of ``grid`` first reflect off."""
-    surfaces = np.unique(ray_map.surface[grid[grid >= 0]])
-    return np.unique([ray_map.surfaces[k][0] for k in surfaces]).astype(np.int64)
-
-
-def build_from_ray_map(ray_map: RayMap, accuracy_px: float = 1.0, leaf_model: str = "ray_patch") -> SampleBasedCamera:
-    """One BSP tree per reflection group of an existing ray map (or several, its sheets)."""
-    if leaf_model not in LEAF_MODELS:
-        raise ValueError(f"leaf_model must be one of {sorted(LEAF_MODELS)}, got {leaf_model!r}")
-    if not accuracy_px > 0:
-        raise ValueError(f"accuracy_px must be positive, got {accuracy_px}")
-    start = time.perf_counter()
-    trees, grids, histories, cones, owned, surfaces = [], [], [], [], [], []
-    whole = np.array([0.0, 0.0, ray_map.columns, ray_map.rows])
-    model = LEAF_MODELS[leaf_model]
-    for g, history in enumerate(ray_map.histories):
-        for surface_set in surface_sets(ray_map, g):
-            grid = ray_map.group_grid(g, surface_set)
-            rays = grid[grid >= 0]
-            sheets = (_build_sheets(ray_map, rays, grid, model, accuracy_px, whole) if model.splits_into_sheets
-                      else [(build_bsp(ray_map, rays, grid, model, accuracy_px, max_duplication=None), whole)])
-            for tree, cells in sheets:
-                trees.append(tree)
-                grids.append(grid)
-                histories.append(history)
-                surfaces.append(surface_set)
-                cones.append(tree.cone)
-                owned.append(cells)
-    seconds = time.perf_counter() - start
-    sbc = SampleBasedCamera(ray_map, trees, grids, leaf_model, histories,
-                            cones=np.array(cones).reshape(-1, CONE_SIZE), owned=np.array(owned).reshape(-1, 4),
-                            surfaces=surfaces)
-    sbc.stats = _stats(ray_map, trees, grids, seconds)
-    return sbc
-
-
-def build_sample_based_camera(reflectors, view: View, bounds, max_order: int = 1, downsample: int = 2,
-                              accuracy_px: float = 1.0, leaf_model: str = "ray_patch") -> SampleBasedCamera:
-    """Trace the ray map of ``view`` and build its sample-based camera.
-
-    ``reflectors`` is a list of :class:`Reflector` (or a prepared :class:`ReflectorSet`),
-    ``bounds`` the scene box (lo, hi) where reflected rays end.
-    """
-    if int(downsample) < 1:
-        raise ValueError(f"downsample must be >= 1, got {downsample}")
-    if view.width // int(downsample) < 1 or view.height // int(downsample) < 1:
-        raise SceneInputError(view.name, f"a {view.width}x{view.height} view has no ray at down-sampling {downsample}")
-    start = time.perf_counter()
-    reflector_set = reflectors if isinstance(reflectors, ReflectorSet) else ReflectorSet(list(reflectors))
-    check_view_outside_reflectors(reflector_set, view)
-    ray_map = trace_ray_map(reflector_set, view, bounds, int(downsample), int(max_order))
-    trace_seconds = time.perf_counter() - start
-    sbc = build_from_ray_map(ray_map, accuracy_px, leaf_model)
-    start = time.perf_counter()
-    sbc.mixed = trace_mixed_cells(reflector_set, ray_map, bounds, sbc.grids)
-    sbc.stats["trace_seconds"] = trace_seconds + time.perf_counter() - start
-    sbc.stats["n_mixed_cells"] = int(sum(len(m.heads) for m in {id(m): m for m in sbc.mixed}.values()))
-    sbc.stats["nbytes"] += int(sum(m.nbytes for m in {id(m): m for m in sbc.mixed}.values()))
-    start = time.perf_counter()
-    sbc.folds = trace_fold_cells(reflector_set, ray_map, sbc.grids)
-    sbc.stats["fold_seconds"] = time.perf_counter() - start
-    sbc.stats["trace_seconds"] += sbc.stats["fold_seconds"]
-    distinct = {id(f): f for f in sbc.folds}.values()
-    sbc.stats["n_fold_cells"] = int(sum(len(f.valid) for f in distinct)) // (FOLD_SAMPLES * FOLD_SAMPLES)
-    sbc.stats["nbytes"] += int(sum(f.nbytes for f in distinct))
-    sbc.true_rays = reflector_set
-    return sbc
-
-
-def trace_fold_cells(reflector_set: ReflectorSet, ray_map: RayMap, grids: list) -> list:
-    """FoldCells of every tree's group (one object per distinct grid, shared by its sheets)."""
-    traced = {}
-    for grid in grids:
-        if id(grid) not in traced:
-            traced[id(grid)] = _fold_cells(reflector_set, ray_map, grid)
-    return [traced[id(grid)] for grid in grids]
-
-
-def fold_cell_mask(ray_map: RayMap, corners: np.ndarray) -> np.ndarray:
-    """(n,) bool: cells (four corner rays 00, 10, 01, 11 each) whose rays fold over
-    somewhere between their tails and their longest head (rays_fold)."""
-    return rays_fold(ray_map.tail[corners], ray_map.direction[corners], ray_map.head_distance[corners].max(axis=1))
-
-
-def _orientations(tail: np.ndarray, direction: np.ndarray) -> np.ndarray:
-    """(n, 4, 3) coefficients q0, q1, q2 of each corner triangle's orientation
-    q0 + q1 s + q2 s^2 (cross product of its edges at depth s, along the mean direction)."""
-    mean = direction.mean(axis=1)
-    out = np.empty((len(tail), len(FOLD_TRIANGLES), 3))
-    for k, (a, b, c) in enumerate(FOLD_TRIANGLES):
-        e1t, e1d = tail[:, b] - tail[:, a], direction[:, b] - direction[:, a]
-        e2t, e2d = tail[:, c] - tail[:, a], direction[:, c] - direction[:, a]
-        out[:, k, 0] = np.einsum("nd,nd->n", cross(e1t, e2t), mean)
-        out[:, k, 1] = np.einsum("nd,nd->n", cross(e1t, e2d) + cross(e1d, e2t), mean)
-        out[:, k, 2] = np.einsum("nd,nd->n", cross(e1d, e2d), mean)
-    return out
-
-
-def _mixed(q: np.ndarray, depth: np.ndarray) -> np.ndarray:
-    """(n, m) bool: at depth[:, m], do the four corner triangles disagree in orientation
-    (one turns one way, another the other; a quad collapsed to a point is not folded)?"""
-    value = q[:, :, None, 0] + depth[:, None] * (q[:, :, None, 1] + depth[:, None] * q[:, :, None, 2])
-    return np.any(value > 0, axis=1) & np.any(value < 0, axis=1)
-
-
-def rays_fold_at(tail: np.ndarray, direction: np.ndarray, depth: np.ndarray) -> np.ndarray:
-    """(n,) bool: at its depth, is each cell's quad of rays (n, 4, 3) folded over (its
-    corner triangles disagree in orientation, so the bilinear patch is not one-to-one)?"""
-    return _mixed(_orientations(tail, direction), depth[:, None])[:, 0]
-
-
-def rays_fold(tail: np.ndarray, direction: np.ndarray, reach: np.ndarray) -> np.ndarray:
-    """(n,) bool: is each cell's quad of rays (n, 4, 3; corners 00, 10, 01, 11) folded over
-    at some depth in [0, reach]?
-
-    Each corner triangle's orientation is a quadratic in the depth; the triangles can
-    only start or stop disagreeing at a root of one of them, so the test is exact at
-    the ends, the roots in [0, reach] and the midpoints between them. A quad that turns
-    over as a whole (past a focus, all four triangles flip) stays one-to-one: no fold.
-    """
-    q = _orientations(tail, direction)
-    a, b, c = q[..., 2], q[..., 1], q[..., 0]
-    root = np.sqrt(np.maximum(b * b - 4 * a * c, 0.0))
-    linear = np.abs(a) <= 1e-12 * (np.abs(b) + np.abs(c)) + 1e-300
-    with np.errstate(divide="ignore", invalid="ignore"):
-        roots = np.concatenate([np.where(linear, -c / b, (-b - root) / (2 * a)),
-                                np.where(linear, np.nan, (-b + root) / (2 * a))], axis=1)
-    roots = np.where(np.isfinite(roots), np.clip(roots, 0.0, reach[:, None]), 0.0)
-    depths = np.sort(np.concatenate([np.zeros((len(q), 1)), reach[:, None], roots], axis=1), axis=1)
-    depths = np.concatenate([depths, 0.5 * (depths[:, 1:] + depths[:, :-1])], axis=1)
-    return _mixed(q, depths).any(axis=1)
-
-
-def _fold_cells(reflector_set: ReflectorSet, ray_map: RayMap, grid: np.ndarray) -> FoldCells:
-    rows, columns = grid.shape
-    m = FOLD_SAMPLES
-    index = np.full((rows, columns), -1, dtype=np.int64)
-    corners = np.stack([grid[:-1, :-1], grid[:-1, 1:], grid[1:, :-1], grid[1:, 1:]], axis=-1)  # (rows-1, cols-1, 4)
-    j, i = np.nonzero(np.all(corners >= 0, axis=-1))
-    members = grid[grid >= 0]
-    history = ray_map.histories[int(ray_map.group[members[0]])] if len(members) else ()
-    if len(j) and len(history) == 1:  # first-order groups: sub-rays are view rays reflected once
-        fold = fold_cell_mask(ray_map, corners[j, i])
-        j, i = j[fold], i[fold]
-    else:
-        j = i = np.zeros(0, dtype=np.int64)
-    empty = RayPatches(np.zeros((0, 3)), np.zeros((0, 2, 3)), np.zeros(0), np.zeros((0, 6, 3)),
-                       np.zeros((0, 6, 3)), np.zeros((0, 6, 2)), np.zeros((0, 2)), np.zeros((0, 2)), True)
-    if len(j) == 0:
-        return FoldCells(index, empty, np.zeros(0, dtype=bool))
-    index[j, i] = np.arange(len(j))
-    lattice = np.arange(m + 1)
-    lb, la = np.meshgrid(lattice, lattice, indexing="ij")  # [b, a]
-    sub = np.stack([i[:, None] * m + la.reshape(-1), j[:, None] * m + lb.reshape(-1)], axis=-1)  # (n, (m+1)^2, 2)
-    origins, incoming = ray_map.view.pixel_rays(ray_map.cell_pixels(sub.reshape(-1, 2) / m))
-    hits = reflector_set.intersect(origins, incoming)
-    ok = (hits.reflector == history[0]) & reflection_valid(incoming, hits.normal, hits.face_normal)
-    ok &= np.isin(reflector_set.piece[np.maximum(hits.triangle, 0)], first_pieces(ray_map, grid))
-    tails = origins + np.where(ok, hits.t, 0.0)[:, None] * incoming
-    directions = reflect(incoming, hits.normal)
-    n = len(j)
-    tails, directions, ok = (x.reshape(n, m + 1, m + 1, -1) for x in (tails, directions, ok[:, None]))
-
-    def corner(x, db, da):
-        return x[:, db:db + m, da:da + m].reshape(n * m * m, -1)
-
-    t = [corner(tails, 0, 0), corner(tails, 0, 1), corner(tails, 1, 0), corner(tails, 1, 1)]
-    d = [corner(directions, 0, 0), corner(directions, 0, 1), corner(directions, 1, 0), corner(directions, 1, 1)]
-    valid = (corner(ok, 0, 0) & corner(ok, 0, 1) & corner(ok, 1, 0) & corner(ok, 1, 1))[:, 0]
-
-    def bilinear(c):  # coefficients 1, u, v, u^2, uv, v^2 of the bilinear patch through corners 00, 10, 01, 11
-        zero = np.zeros_like(c[0])
-        return np.stack([c[0], c[1] - c[0], c[2] - c[0], zero, c[3] - c[2] - c[1] + c[0], zero], axis=1)
-
-    count = n * m * m
-    lo = corner(sub.reshape(n, m + 1, m + 1, 2), 0, 0).astype(np.float64)
-    patches = RayPatches(np.zeros((count, 3)), np.zeros((count, 2, 3)), np.ones(count), bilinear(t), bilinear(d),
-                         np.zeros((count, 6, 2)), lo, lo + 1.0, True)
-    return FoldCells(index, patches, valid)
-
-
-def trace_mixed_cells(reflector_set: ReflectorSet, ray_map: RayMap, bounds, grids: list) -> list:
-    """MixedCells of every tree's group (one object per distinct grid, shared by its sheets)."""
-    lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
-    lo, hi = np.minimum(lo, reflector_set.vertices.min(axis=0)), np.maximum(hi, reflector_set.vertices.max(axis=0))
-    traced = {}
-    for grid in grids:
-        if id(grid) not in traced:
-            traced[id(grid)] = _mixed_cells(reflector_set, ray_map, grid, lo, hi)
-    return [traced[id(grid)] for grid in grids]
-
-
-def _mixed_cells(reflector_set: ReflectorSet, ray_map: RayMap, grid: np.ndarray, lo, hi) -> MixedCells:
-    rows, columns = grid.shape
-    corners = np.stack([grid[:-1, :-1], grid[:-1, 1:], grid[1:, :-1], grid[1:, 1:]], axis=-1)  # (rows-1, cols-1, 4)
-    complete = np.all(corners >= 0, axis=-1)
-    blocked = ray_map.blocked[np.maximum(corners, 0)]
-    j, i = np.nonzero(complete & blocked.any(axis=-1) & ~blocked.all(axis=-1))
-    index = np.full((rows, columns), -1, dtype=np.int64)
-    m = SUBCELL_SAMPLES
-    if len(j) == 0:
-        return MixedCells(index, np.zeros((0, m, m)))
-    index[j, i] = np.arange(len(j))
-    cell_corners = corners[j, i]  # (n, 4)
-    fraction = (np.arange(m) + 0.5) / m
-    fb, fa = np.meshgrid(fraction, fraction, indexing="ij")  # [b, a]
-    fa, fb = fa.reshape(-1), fb.reshape(-1)
-    weights = np.stack([(1 - fa) * (1 - fb), fa * (1 - fb), (1 - fa) * fb, fa * fb], axis=1)  # (m*m, 4)
-    tails = np.einsum("sk,nkd->nsd", weights, ray_map.tail[cell_corners]).reshape(-1, 3)
-    directions = np.einsum("sk,nkd->nsd", weights, ray_map.direction[cell_corners]).reshape(-1, 3)
-    directions /= np.maximum(np.linalg.norm(directions, axis=1), 1e-300)[:, None]
-    # Each sub-ray starts on the chord between the corner tails: the nearest corner's
-    # triangle (and its one-ring) is its source, as for the traced rays.
-    nearest = np.argmax(weights, axis=1)
-    sources = ray_map.triangle[cell_corners[:, nearest]].reshape(-1)
-    box = box_exit_distance(tails, directions, lo, hi)
-    hits = reflector_set.intersect(tails, directions, box, sources)
-    heads = np.where(hits.hit, hits.t, np.inf).reshape(len(j), m, m)
-    return MixedCells(index, heads)
-
-
-def check_view_outside_reflectors(reflector_set: ReflectorSet, view: View) -> None:
-    """Raise a clear error when a perspective eye sits inside a closed reflector.
-
-    From inside, rays in every direction meet the back of the same reflector first
-    (test: the six axis directions and the view direction).
-    """
-    if not view.is_perspective:
-        return
-    directions = np.concatenate([np.eye(3), -np.eye(3), [-view.backward]])
-    origins = np.broadcast_to(view.eye, directions.shape)
-    hits = reflector_set.intersect(origins, directions)
-    if not hits.hit.all():
-        return
-    back = np.einsum("ij,ij->i", reflector_set.face_normals[hits.triangle], directions) > 0
-    owners = np.unique(hits.reflector)
-    if back.all() and len(owners) == 1:
-        name = reflector_set.reflectors[int(owners[0])].name
-        raise SceneInputError(name, "the view is inside this reflector; move the camera outside it")
-
-
-def _stats(ray_map: RayMap, trees: list, grids: list, seconds: float) -> dict:
-    kinds = np.concatenate([t.leaf_kind for t in trees]) if trees else np.zeros(0, np.int8)
-    rays_in_leaves = np.concatenate([t.leaf_rays for t in trees]) if trees else np.zeros(0)
-    return {
-        "n_groups": len(set(ray_map.histories)),
-        "n_sheets": len(trees),
-        "n_rays": int(ray_map.n_rays),
-        "n_leaves": int(len(kinds)),
-        "n_camera_leaves": int((kinds == CAMERA_LEAF).sum()),
-        "n_raylist_leaves": int((kinds == RAY_LIST_LEAF).sum()),
-        "n_banded_leaves": int(sum(int((t.leaf_fallback >= 0).sum()) for t in trees if t.leaf_fallback is not None)),
-        "rays_per_leaf": float(rays_in_leaves.mean()) if len(rays_in_leaves) else 0.0,
-        "max_depth": int(max((t.depth for t in trees), default=0)),
-        "build_seconds": seconds,
-        "nbytes": int(sum(t.nbytes for t in trees) + sum(g.nbytes for g in grids)),
-    }

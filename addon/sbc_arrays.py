@@ -21,7 +21,8 @@ from .bsp import BSPTree
 from .pinhole import PinholeCameras
 from .ray_patch import RayPatches
 from .raymap import RayMap
-from .sbc import FoldCells, MixedCells, SampleBasedCamera
+from .sbc import SampleBasedCamera
+from .sbc_cells import FoldCells, MixedCells
 from .view import View
 
 CLASSES = {cls.__name__: cls for cls in (SampleBasedCamera, RayMap, View, BSPTree, RayPatches, PinholeCameras,

@@ -47,7 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..addon import ray_patch, sbc as sbc_module
+from ..addon import ray_patch, sbc as sbc_module, sbc_cells
 from ..addon.bsp import CAMERA_LEAF, RAY_LIST_LEAF
 from . import sbc_pack
 
@@ -84,8 +84,8 @@ def defines() -> dict:
         "SBC_NEWTON_ITERATIONS": str(ray_patch.NEWTON_ITERATIONS),
         "SBC_CANDIDATE_CELLS": str(sbc_module.CANDIDATE_CELLS),
         "SBC_BAND_CANDIDATES": str(sbc_module.BAND_CANDIDATES),
-        "SBC_SUBCELL_SAMPLES": str(sbc_module.SUBCELL_SAMPLES),
-        "SBC_FOLD_SAMPLES": str(sbc_module.FOLD_SAMPLES),
+        "SBC_SUBCELL_SAMPLES": str(sbc_cells.SUBCELL_SAMPLES),
+        "SBC_FOLD_SAMPLES": str(sbc_cells.FOLD_SAMPLES),
         "SBC_FOLD_CANDIDATES": str(sbc_module.FOLD_CANDIDATES),
         "SBC_MAX_CANDIDATES": str(max(sbc_module.CANDIDATE_CELLS, sbc_module.BAND_CANDIDATES,
                                       sbc_module.FOLD_CANDIDATES)),

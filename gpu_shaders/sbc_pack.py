@@ -27,7 +27,7 @@ Textures (names as the GLSL samplers, ``sbc_`` + name):
             row (``BSPTree.leaf_fallback``), else -1.
 ``patches`` 16 texels per ray patch; the camera-leaf patches of all groups, then the
             bilinear ray-list cell patches of all groups (offsets in ``groups``), then
-            the bilinear sub-cell patches of every group's fold cells (addon.sbc.FoldCells,
+            the bilinear sub-cell patches of every group's fold cells (addon.sbc_cells.FoldCells,
             FOLD_SAMPLES^2 per fold cell, row-major [b][a], lo/hi in sub-cell units):
     0: (chart origin xyz, 1 if bilinear else 0; -1 for a fold sub-cell whose rays do not
        all hit the group's reflector)
@@ -43,7 +43,7 @@ Textures (names as the GLSL samplers, ``sbc_`` + name):
             at the header's grid offset): its ray grid (rows x columns, row-major, ray
             index or -1),
             right after it its mixed-cell grid (same layout: the scalar index of the
-            cell's sub-ray heads, or -1 where the cell is not mixed; addon.sbc.MixedCells),
+            cell's sub-ray heads, or -1 where the cell is not mixed; addon.sbc_cells.MixedCells),
             its fold-cell grid (same layout: the patch index of the fold cell's first
             sub-cell, or -1 where the cell is not a fold cell), then the mixed-cell heads, SUBCELL_SAMPLES^2 per mixed cell, row-major [b][a], the head
             distance of the sub-ray, or -1 where it leaves the scene box (unblocked).
@@ -72,7 +72,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..addon.bsp import CAMERA_LEAF
-from ..addon.sbc import FOLD_SAMPLES
+from ..addon.sbc_cells import FOLD_SAMPLES
 
 #: Texels per row of every packed texture; index i lives at (i % W, i // W).
 TEXTURE_WIDTH = 4096

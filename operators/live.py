@@ -64,7 +64,7 @@ from bpy.app.handlers import persistent
 from ..addon.errors import SceneInputError
 from ..addon.morphing import ViewOutsideGrid
 from ..addon.raytrace import ReflectorSet
-from ..addon.sbc import build_sample_based_camera
+from ..addon.sbc_build import build_sample_based_camera
 from ..addon.scene import scene_bounds
 from ..addon.view import View
 from . import methods, morph_bake

@@ -35,7 +35,7 @@ from bpy.props import BoolProperty, StringProperty
 from ..addon.errors import SceneInputError
 from ..addon.metrics import linear_to_srgb
 from ..addon.raytrace import ReflectorSet
-from ..addon.sbc import build_sample_based_camera, check_view_outside_reflectors
+from ..addon.sbc_build import build_sample_based_camera, check_view_outside_reflectors
 from ..addon.scene import scene_bounds
 from ..addon.view import View
 from . import methods

@@ -9,7 +9,7 @@ import pytest
 
 from curved_reflections.addon import bake, bake_cache, look_at_view
 from curved_reflections.addon import morphing as M
-from curved_reflections.addon.sbc import build_sample_based_camera
+from curved_reflections.addon.sbc_build import build_sample_based_camera
 from curved_reflections.addon.sbc_arrays import sbc_from_arrays, sbc_to_arrays
 from curved_reflections.addon.sphere import icosphere
 

@@ -421,7 +421,7 @@ def _bowl(radius=1.5, subdivisions=5) -> Reflector:
 
 
 def test_quads_of_rays_fold_only_where_their_triangles_disagree():
-    from curved_reflections.addon.sbc import rays_fold, rays_fold_at
+    from curved_reflections.addon.sbc_cells import rays_fold, rays_fold_at
 
     tail = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], dtype=np.float64)
     up = np.array([0.0, 0.0, 1.0])
@@ -471,7 +471,7 @@ def test_staged_error_probes_build_the_same_trees_for_fewer_samples(ellipsoid_ca
     (bsp._within_accuracy): the trees equal those of measuring every error sample of every
     well-posed node, and fewer samples are measured."""
     from curved_reflections.addon import bsp
-    from curved_reflections.addon.sbc import build_from_ray_map
+    from curved_reflections.addon.sbc_build import build_from_ray_map
     from curved_reflections.addon.segments import segment_max
 
     sbc = ellipsoid_case[0][0]
@@ -520,10 +520,11 @@ def teapot_case():
 
 def test_a_mirror_with_sharp_edges_gets_trees_per_smooth_piece(teapot_case, monkeypatch):
     """Across a sharp edge the reflected rays jump, so leaves straddling it were never
-    accurate: trees per smooth piece (sbc.surface_sets) take most answers from camera
+    accurate: trees per smooth piece (sbc_build.surface_sets) take most answers from camera
     leaves where one tree set took a third from ray lists, in fewer sheets, and lose
     no image; each tree's rays lie on its own pieces."""
-    from curved_reflections.addon import sbc as sbc_module
+    from curved_reflections.addon import sbc_build
+    from curved_reflections.addon.raymap import first_pieces
 
     reflectors, view, bounds, points, exact, sbc = teapot_case
     reflector_set = ReflectorSet(reflectors)
@@ -531,11 +532,11 @@ def test_a_mirror_with_sharp_edges_gets_trees_per_smooth_piece(teapot_case, monk
     for grid, surfaces in zip(sbc.grids, sbc.surfaces):
         rays = grid[grid >= 0]
         np.testing.assert_array_equal(np.unique(reflector_set.piece[sbc.ray_map.triangle[rays]]),
-                                      sbc_module.first_pieces(sbc.ray_map, grid))
+                                      first_pieces(sbc.ray_map, grid))
         assert np.isin(sbc.ray_map.surface[rays], surfaces).all()
     projection = sbc.project(points)
 
-    monkeypatch.setattr(sbc_module, "surface_sets", lambda ray_map, group: [None])
+    monkeypatch.setattr(sbc_build, "surface_sets", lambda ray_map, group: [None])
     whole = build_sample_based_camera(reflectors, view, bounds, downsample=2)
     assert whole.surfaces == [None] * len(whole.trees)
     plain = whole.project(points)

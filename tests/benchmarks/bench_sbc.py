@@ -478,7 +478,7 @@ def throughput_points(scene: BenchScene, count: int) -> np.ndarray:
 
 def run_cell(scene: BenchScene, downsample: int, accuracy: float, model: str, args, send) -> None:
     """Build, time, project and measure one configuration (in a child process)."""
-    from curved_reflections.addon.sbc import build_from_ray_map, build_sample_based_camera
+    from curved_reflections.addon.sbc_build import build_from_ray_map, build_sample_based_camera
 
     sbc = build_sample_based_camera(scene.reflector_set, scene.view, scene.bounds, max_order=1,
                                     downsample=downsample, accuracy_px=accuracy, leaf_model=model)

@@ -76,7 +76,7 @@ def measure(width: int, height: int, steps: int, jumps: int) -> dict:
     import bpy
 
     from curved_reflections.addon import look_at_view, morphing
-    from curved_reflections.addon.sbc import build_sample_based_camera
+    from curved_reflections.addon.sbc_build import build_sample_based_camera
     from curved_reflections.addon.scene import scene_bounds
     from curved_reflections.gpu_shaders.morph_source import GPUFaceImages, MorphSource
     from curved_reflections.gpu_shaders.projection import SBCTextures

@@ -101,7 +101,7 @@ def test_degenerate_input_draws_no_nan(gpu_ready):
 
 def test_iterative_render_matches_a_sample_based_render(gpu_ready):
     """Both methods draw the same mirror ball scene: the images agree on nearly every pixel."""
-    from curved_reflections.addon.sbc import build_sample_based_camera
+    from curved_reflections.addon.sbc_build import build_sample_based_camera
     from curved_reflections.addon.scene import scene_bounds
     from curved_reflections.addon.shapes import checker_tiles
     from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer

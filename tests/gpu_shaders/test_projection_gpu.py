@@ -20,7 +20,7 @@ import pytest
 
 from curved_reflections.addon import Reflector, build_sample_based_camera, look_at_view, scene_bounds
 from curved_reflections.addon.shapes import vase
-from curved_reflections.addon import sbc as sbc_module
+from curved_reflections.addon import sbc_cells
 from curved_reflections.addon.sbc import descend_tree
 from curved_reflections.addon.sphere import icosphere
 from curved_reflections.gpu_shaders import sbc_pack
@@ -103,7 +103,7 @@ def test_gpu_projection_matches_numpy(gpu_ready, case):
         assert (handed & both).sum() >= 20
 
     # Answers in fold cells (the vase's concave inside) are solved again on traced sub-rays
-    # (sbc.FoldCells): the GPU does the same and agrees there too.
+    # (sbc_cells.FoldCells): the GPU does the same and agrees there too.
     g, k = np.nonzero(cpu.valid)
     cells = np.floor(cpu.pixels[g, k] / sbc.ray_map.downsample - 0.5).astype(np.int64)
     in_fold = np.zeros(cpu.valid.shape, dtype=bool)
@@ -178,7 +178,7 @@ def test_packing_round_trip(case):
         fold = sbc.folds[g]
         np.testing.assert_array_equal(unpacked["fold_grid"] >= 0, fold.index >= 0)
         j, i = np.nonzero(fold.index >= 0)
-        per_cell = sbc_module.FOLD_SAMPLES ** 2
+        per_cell = sbc_cells.FOLD_SAMPLES ** 2
         rows = (unpacked["fold_grid"][j, i][:, None] + np.arange(per_cell)).reshape(-1)
         sub = sbc_pack._unpack_patches(packed.patches.reshape(-1, sbc_pack.PATCH_TEXELS, 4)[rows].reshape(-1, 4))
         expected_rows = (fold.index[j, i][:, None] * per_cell + np.arange(per_cell)).reshape(-1)
