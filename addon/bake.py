@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import bake_cache
-from .morphing import NODE_OK, MorphSettings, bake_reflector, build_node, reflector_in_frame, rigid_frame
+from .morph_grid import NODE_OK, MorphSettings, bake_reflector, build_node, reflector_in_frame, rigid_frame
 from .scene import Reflector
 
 try:

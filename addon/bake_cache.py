@@ -45,7 +45,8 @@ from pathlib import Path
 import numpy as np
 
 from .errors import SceneInputError
-from .morphing import ENGINE_VERSION, NODE_INSIDE, MorphingGrid, MorphSettings, NodeCamera, TetrahedralGrid
+from .morphing import ENGINE_VERSION, MorphingGrid
+from .morph_grid import NODE_INSIDE, MorphSettings, NodeCamera, TetrahedralGrid
 from .scene import Reflector
 from .sbc_arrays import sbc_from_arrays, sbc_to_arrays
 

@@ -30,7 +30,7 @@ from collections import OrderedDict
 
 import numpy as np
 
-from ..addon import morphing
+from ..addon import morph_grid, morph_surface, morphing
 from ..addon.bake_cache import CacheError
 from .reflected_meshes import FOUND_CODE, ReflectedMeshes, glsl_source
 
@@ -63,8 +63,8 @@ FRAME_FLOATS = 4 * 16 + 4 * 4
 
 def blend_defines() -> dict:
     """The engine's constants, as the blend shader's ``#define`` s."""
-    m = morphing
-    return {"SLOTS": SLOTS, "PARTIAL_WEIGHT": f"{m.PARTIAL_WEIGHT:.9e}",
+    m = morph_surface
+    return {"SLOTS": SLOTS, "PARTIAL_WEIGHT": f"{morphing.PARTIAL_WEIGHT:.9e}",
             "SURFACE_NORMAL_MIN": f"{m.SURFACE_NORMAL_MIN:.9e}", "MIN_SURFACE_NODES": m.MIN_SURFACE_NODES,
             "SURFACE_ITERATIONS": m.SURFACE_ITERATIONS, "SURFACE_REACH": f"{m.SURFACE_REACH:.9e}",
             "SURFACE_RESIDUAL": f"{SURFACE_RESIDUAL:.9e}", "FOUND_CODE": FOUND_CODE}
@@ -208,7 +208,7 @@ class MorphPass:
         return found
 
     def _points_in_frame(self, frame: np.ndarray) -> np.ndarray:
-        return morphing.to_frame(frame, self.geometry.vertices)
+        return morph_grid.to_frame(frame, self.geometry.vertices)
 
     def _node_texture(self, k: int, node: int, frame: np.ndarray, keep=()):
         """Grid ``k``'s node ``node`` images on the GPU, projected now when missing:
@@ -252,7 +252,7 @@ class MorphPass:
                 self._results[k] = [self.meshes.answer_texture() for _ in range(SLOTS)]
             eyes = np.eye(4)
             eyes[:3, :] = grid.grid.node_positions()[np.asarray(nodes)].T
-            eye = morphing.to_frame(frame, view.eye[None])[0]
+            eye = morph_grid.to_frame(frame, view.eye[None])[0]
             matrices = [np.linalg.inv(frame) @ _translation(shift), _translation(-shift) @ frame, view_projection, eyes]
             values = np.concatenate([m.T.reshape(-1) for m in matrices] + [
                 np.asarray(weights, np.float64), np.r_[eye, morphing.MATCH_FRACTION * grid.reflector_size],
@@ -285,11 +285,11 @@ class MorphPass:
         started = 0
         for k, (_, _, _, frame) in self.covering(view):
             grid = self.grids[k][0]
-            for node in grid.grid.nodes_around(morphing.to_frame(frame, view.eye[None])[0]):
+            for node in grid.grid.nodes_around(morph_grid.to_frame(frame, view.eye[None])[0]):
                 key = (k, int(node))
                 if len(self._pending) >= max_pending:
                     return started
-                if key in self.nodes or key in self._pending or grid.node_status[node] != morphing.NODE_OK:
+                if key in self.nodes or key in self._pending or grid.node_status[node] != morph_grid.NODE_OK:
                     continue
                 if self.nodes.nbytes + (len(self._pending) + 1) * self._node_bytes() > self.nodes.budget_bytes:
                     return started

@@ -7,7 +7,7 @@ they are registered in module order and unregistered in reverse.
 
 import bpy
 
-from . import bake, demo_scenes, live, methods, morph_bake, panel, properties, reflectors, render_image
+from . import bake, demo_scenes, live_handlers, methods, morph_bake, panel, properties, reflectors, render_image
 
 _modules = (
     properties,
@@ -28,11 +28,11 @@ def register():
     for cls in _classes():
         bpy.utils.register_class(cls)
     properties.register_pointers()
-    live.register()
+    live_handlers.register()
 
 
 def unregister():
-    live.unregister()
+    live_handlers.unregister()
     methods.forget()
     properties.unregister_pointers()
     for cls in reversed(_classes()):

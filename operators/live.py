@@ -8,7 +8,7 @@ projection runs per draw on the GPU):
 - **capture** (main thread, needs ``bpy``): the evaluated scene as reflectors and
   diffuse meshes (:mod:`.capture`), and a :class:`ReflectionRenderer` holding the
   meshes' GPU batches, with the reflectors' colour, reflectivity, Fresnel and fade
-  distance (:func:`.render_image.reflector_properties`, SBC V-D). Moving or editing a
+  distance (:func:`.render_inputs.reflector_properties`, SBC V-D). Moving or editing a
   *diffuse* object re-captures and re-uploads only this, and re-projects once: the
   cameras stay valid (unless the object leaves the camera's scene box, which ends its
   reflected rays: then they are rebuilt).
@@ -59,7 +59,6 @@ from dataclasses import dataclass, field
 
 import bpy
 import numpy as np
-from bpy.app.handlers import persistent
 
 from ..addon.errors import SceneInputError
 from ..addon.morphing import ViewOutsideGrid
@@ -68,8 +67,8 @@ from ..addon.sbc_build import build_sample_based_camera
 from ..addon.scene import scene_bounds
 from ..addon.view import View
 from . import methods, morph_bake
-from .capture import capture_scene, view_from_camera, view_from_region
-from .render_image import BOUNDS_MARGIN, reflector_properties, world_color
+from .capture import capture_scene, view_from_camera
+from .render_inputs import BOUNDS_MARGIN, reflector_properties, world_color
 
 #: Seconds after the last view change before its camera is rebuilt.
 DEBOUNCE_SECONDS = 0.15
@@ -139,7 +138,6 @@ _states: dict[int, LiveScene] = {}
 _executor: ThreadPoolExecutor | None = None
 #: Projects morphing nodes around the eye ahead of time (numpy, no GPU).
 _prefetcher: ThreadPoolExecutor | None = None
-_draw_handle = None
 
 
 def state_of(scene) -> LiveScene | None:
@@ -165,7 +163,7 @@ def _capture(state: LiveScene, scene, depsgraph, reflectors: bool) -> None:
     lo, hi = scene_bounds(captured.reflectors, captured.meshes)
     if reflectors or state.reflector_set is None:
         state.reflector_set = ReflectorSet(list(captured.reflectors))
-        state.reflector_names = _marked_reflectors(scene)
+        state.reflector_names = marked_reflectors(scene)
         state.grids = morph_bake.load_grids(scene, captured.reflectors)
         state.plan = methods.plan(scene, captured.reflectors, state.settings[2],
                                   baked={grid.reflector_name for grid, _ in state.grids})
@@ -215,7 +213,7 @@ def _needs_camera(state: LiveScene, covering: list, settings: tuple) -> bool:
     return drawn < len(state.reflector_set.reflectors) or settings[0] > 1
 
 
-def _marked_reflectors(scene) -> frozenset:
+def marked_reflectors(scene) -> frozenset:
     return frozenset(o.name for o in scene.objects if o.curved_reflections.is_reflector)
 
 
@@ -368,7 +366,7 @@ def bake(scene, depsgraph, views: dict | None = None, wait: bool = False) -> Liv
     for key, view in views.items():
         _start(state, key, view, wait)
     if not wait:
-        _ensure_timer()
+        ensure_timer()
     return state
 
 
@@ -399,7 +397,7 @@ def request_view(state: LiveScene, key, view: View) -> None:
     previous = state.requests.get(key)
     if previous is None or not _same_view(previous[0], view):
         state.requests[key] = (view, time.monotonic())
-    _ensure_timer()
+    ensure_timer()
 
 
 def process(scene, depsgraph, wait: bool = False, now: float | None = None) -> bool:
@@ -496,7 +494,7 @@ def _draw_with(state: LiveScene, view: View, source, sbc) -> bool:
     if morph.grids:
         morph.collect()
         if morph.prefetch(view, _prefetcher_get().submit):
-            _ensure_timer()  # it redraws when a node is ready, which uploads it and starts the next
+            ensure_timer()  # it redraws when a node is ready, which uploads it and starts the next
     if state.renderer.counts["projections"] != projections:
         state.counts["projections"] += 1
         state.stats["projection_ms"] = 1000.0 * state.renderer.stats.get("projection_seconds", 0.0)
@@ -543,19 +541,6 @@ def draw_safely(scene, key, view: View) -> bool:
         return False
 
 
-def _draw_viewport() -> None:
-    """POST_VIEW handler of every 3D view."""
-    context = bpy.context
-    scene, space, region, rv3d = context.scene, context.space_data, context.region, context.region_data
-    if scene is None or space is None or rv3d is None or region is None:
-        return
-    if space.type != 'VIEW_3D' or space.shading.type not in SHADING_TYPES or state_of(scene) is None:
-        return
-    if region.width < 2 or region.height < 2:
-        return
-    draw_safely(scene, region.as_pointer(), view_from_region(region, rv3d))
-
-
 def _tick():
     """The timer: process the context scene's live work; unregisters when idle."""
     try:
@@ -575,7 +560,7 @@ def _tick():
         return None
 
 
-def _ensure_timer() -> None:
+def ensure_timer() -> None:
     if not bpy.app.timers.is_registered(_tick):
         bpy.app.timers.register(_tick, first_interval=POLL_SECONDS)
 
@@ -590,134 +575,12 @@ def tag_redraw() -> None:
                 area.tag_redraw()
 
 
-def classify_updates(scene, state: LiveScene, updates) -> tuple[bool, bool]:
-    """(reflectors changed, diffuse meshes changed) for a depsgraph's ``updates``.
-
-    A reflector changes when one is moved or its geometry edited, when the set of
-    marked objects differs from the baked one, or when a method setting changed (a new
-    camera for every view); any other object's geometry or transform, a material, a
-    world or a collection (objects added, removed, hidden) changes the meshes. Setting
-    a property, from the UI or from Python, tags its object (or scene) for the
-    depsgraph with geometry and transform updated (checked in the bpy module), so a
-    reflector's Reflectivity re-bakes too: the flags cannot tell it from an edit.
-    """
-    reflectors = _marked_reflectors(scene) != state.reflector_names or scene_settings(scene) != state.settings
-    meshes = False
-    for update in updates:
-        data = update.id
-        if isinstance(data, bpy.types.Object):
-            if not (update.is_updated_geometry or update.is_updated_transform):
-                continue
-            if data.original.curved_reflections.is_reflector:
-                reflectors = True
-            else:
-                meshes = True
-        elif isinstance(data, (bpy.types.Material, bpy.types.World, bpy.types.Collection)):
-            meshes = True
-    return reflectors, meshes
-
-
-@persistent
-def on_depsgraph_update(scene, depsgraph) -> None:
-    """``depsgraph_update_post``: mark the baked scene's changes for the timer (with a
-    window) or process them now (background mode, where timers never run)."""
-    state = state_of(scene)
-    if state is None or not scene.curved_reflections.auto_refresh:
-        return
-    try:
-        reflectors, meshes = classify_updates(scene, state, depsgraph.updates)
-        state.dirty_reflectors |= reflectors
-        state.dirty_meshes |= meshes
-        if not (reflectors or meshes):
-            return
-        if bpy.app.background:
-            process(scene, depsgraph, wait=True)
-        else:
-            _ensure_timer()
-    except Exception as error:  # noqa: BLE001
-        state.report('ERROR', f"Live update failed: {type(error).__name__}: {error}")
-
-
-def on_setting_changed(context, reflectors: bool = False, meshes: bool = False) -> None:
-    """Update callback of the reflector settings (``properties.py``).
-
-    Setting a property does not reliably reach ``depsgraph_update_post``: in the bpy
-    module, after a modifier was added, ticking Reflector from Python produced no
-    update at all, and at other times the update came at a later evaluation. So the
-    baked scene is told here too; with a window both land in the same timer tick.
-    ``reflectors``: the set of reflectors changed (re-bake); ``meshes``: a reflector's
-    appearance changed (new renderer only).
-    """
-    scene = getattr(context, "scene", None)
-    state = None if scene is None else state_of(scene)
-    if state is None or not scene.curved_reflections.auto_refresh:
-        return
-    state.dirty_reflectors |= reflectors
-    state.dirty_meshes |= meshes
-    if bpy.app.background:
-        process(scene, context.evaluated_depsgraph_get(), wait=True)
-    else:
-        _ensure_timer()
-
-
-@persistent
-def on_load_pre(*_args) -> None:
-    """Loading a file drops every live state and morphing status (no state leaks between files)."""
-    clear_all()
-    morph_bake.forget_statuses()
-    methods.forget()
-
-
-@persistent
-def on_load_post(*_args) -> None:
-    """Re-attach the handlers after a file load (they are persistent; this only repairs)."""
-    _attach_app_handlers()
-
-
-_APP_HANDLERS = (
-    ("depsgraph_update_post", on_depsgraph_update),
-    ("load_pre", on_load_pre),
-    ("load_post", on_load_post),
-    ("save_pre", morph_bake.on_save_pre),
-    ("save_post", morph_bake.on_save_post),
-)
-
-
-def _same_function(a, b) -> bool:
-    """Also true for a handler of an earlier import of this module (an add-on reload)."""
-    return a is b or (getattr(a, "__qualname__", None) == b.__qualname__
-                      and getattr(a, "__module__", None) == b.__module__)
-
-
-def _attach_app_handlers() -> None:
-    for name, function in _APP_HANDLERS:
-        handlers = getattr(bpy.app.handlers, name)
-        if not any(_same_function(h, function) for h in handlers):
-            handlers.append(function)
-
-
-def register() -> None:
-    global _draw_handle
-    _attach_app_handlers()
-    if _draw_handle is None:
-        _draw_handle = bpy.types.SpaceView3D.draw_handler_add(_draw_viewport, (), 'WINDOW', 'POST_VIEW')
-
-
-def unregister() -> None:
-    """Remove the draw handler, the app handlers and the timer; drop all state."""
-    global _draw_handle, _executor, _prefetcher
-    if _draw_handle is not None:
-        bpy.types.SpaceView3D.draw_handler_remove(_draw_handle, 'WINDOW')
-        _draw_handle = None
-    for name, function in _APP_HANDLERS:
-        handlers = getattr(bpy.app.handlers, name)
-        for handler in [h for h in handlers if _same_function(h, function)]:
-            handlers.remove(handler)
+def shutdown() -> None:
+    """Drop every state and stop the worker threads (the extension is unregistered)."""
+    global _executor, _prefetcher
     if bpy.app.timers.is_registered(_tick):
         bpy.app.timers.unregister(_tick)
     clear_all()
-    morph_bake.forget_statuses()
-    methods.forget()
     if _executor is not None:
         _executor.shutdown(wait=False, cancel_futures=True)
         _executor = None

@@ -26,8 +26,8 @@ from bpy.app.handlers import persistent
 
 from ..addon import bake, bake_cache
 from ..addon.errors import SceneInputError
-from ..addon.morphing import MorphSettings
-from . import methods
+from ..addon.morph_grid import MorphSettings
+from . import methods, scene_changes
 from .capture import capture_scene
 
 #: Per scene name: {"running": bool, "done": int, "total": int, "reflector": str, "message": str}
@@ -226,9 +226,7 @@ def reflector_modes(scene) -> list[tuple[str, str]]:
 
 def _refresh_live(context) -> None:
     """Tell the live view that grids changed (it reloads them with the reflectors)."""
-    from . import live
-
-    live.on_setting_changed(context, reflectors=True)
+    scene_changes.notify(context, reflectors=True)
 
 
 class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):

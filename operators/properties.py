@@ -5,6 +5,8 @@ import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, IntVectorProperty, PointerProperty,
                        StringProperty)
 
+from . import scene_changes
+
 
 #: The option that declares a path property's "//" (the .blend file's folder) supported;
 #: Blender 4.5 and newer warn about path properties without it (older ones lack it).
@@ -12,15 +14,11 @@ BLEND_RELATIVE = {'PATH_SUPPORTS_BLEND_RELATIVE'} if bpy.app.version >= (4, 5, 0
 
 
 def _reflector_toggled(self, context):
-    from . import live
-
-    live.on_setting_changed(context, reflectors=True)
+    scene_changes.notify(context, reflectors=True)
 
 
 def _appearance_changed(self, context):
-    from . import live
-
-    live.on_setting_changed(context, meshes=True)
+    scene_changes.notify(context, meshes=True)
 
 
 class CurvedReflectionsObjectSettings(bpy.types.PropertyGroup):

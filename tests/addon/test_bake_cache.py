@@ -8,12 +8,13 @@ import numpy as np
 import pytest
 
 from curved_reflections.addon import bake, bake_cache, look_at_view
-from curved_reflections.addon import morphing as M
+from curved_reflections.addon import morph_grid as G
+from curved_reflections.addon.scene import Reflector
 from curved_reflections.addon.sbc_build import build_sample_based_camera
 from curved_reflections.addon.sbc_arrays import sbc_from_arrays, sbc_to_arrays
 from curved_reflections.addon.sphere import icosphere
 
-SETTINGS = M.MorphSettings(grid=(3, 3, 2), margin=0.8, face_resolution=32)
+SETTINGS = G.MorphSettings(grid=(3, 3, 2), margin=0.8, face_resolution=32)
 CENTRE = np.array([0.0, 0.0, 1.0])
 
 
@@ -102,7 +103,7 @@ def test_nodes_are_built_and_written_in_worker_processes(sphere, tmp_path, monke
 
     monkeypatch.setattr(bake, "build_node", recording)  # inherited by the forked workers
     monkeypatch.setattr(bake_cache, "write_node", recording_write)
-    settings = M.MorphSettings(grid=(2, 2, 2), margin=0.8, face_resolution=16)
+    settings = G.MorphSettings(grid=(2, 2, 2), margin=0.8, face_resolution=16)
     result = bake.bake_grid(sphere, np.eye(4), settings, tmp_path / "cache", processes=2)
     workers = {int(p.name) for p in pids.iterdir()}
     assert workers and os.getpid() not in workers
@@ -120,14 +121,14 @@ def test_stale_missing_and_corrupt_caches_give_clear_errors(sphere, baked, tmp_p
     with pytest.raises(bake_cache.CacheError, match="other geometry or settings") as stale:
         bake.load_for(moved, np.eye(4), SETTINGS, folder)
     assert stale.value.reason == "stale"
-    other = M.MorphSettings(grid=(3, 3, 3), margin=0.8, face_resolution=32)
+    other = G.MorphSettings(grid=(3, 3, 3), margin=0.8, face_resolution=32)
     with pytest.raises(bake_cache.CacheError, match="other geometry or settings"):
         bake.load_for(sphere, np.eye(4), other, folder)
     # A rigid motion keeps the cache: the grid lives in the reflector's frame.
     matrix = np.eye(4)
     matrix[:3, :3] = [[0, -1, 0], [1, 0, 0], [0, 0, 1]]
     matrix[:3, 3] = [2.0, 1.0, 0.0]
-    world = M.Reflector(sphere.name, M.from_frame(matrix, sphere.vertices), sphere.triangles,
+    world = Reflector(sphere.name, G.from_frame(matrix, sphere.vertices), sphere.triangles,
                         sphere.normals @ matrix[:3, :3].T)
     assert bake.load_for(world, matrix, SETTINGS, folder).grid.shape == (3, 3, 2)
     assert bake_cache.cache_state(folder, sphere, result.key) == "ready"
@@ -142,7 +143,7 @@ def test_corrupt_files_raise_cache_errors_not_tracebacks(sphere, baked, tmp_path
     copy = tmp_path / "copy"
     shutil.copytree(folder, copy)
     directory = bake_cache.grid_directory(copy, sphere.name, result.key)
-    node = int(np.flatnonzero(bake.load_for(sphere, np.eye(4), SETTINGS, copy).node_status == M.NODE_OK)[0])
+    node = int(np.flatnonzero(bake.load_for(sphere, np.eye(4), SETTINGS, copy).node_status == G.NODE_OK)[0])
     bake_cache.node_file(directory, node).write_bytes(b"not a zip file")
     grid = bake.load_for(sphere, np.eye(4), SETTINGS, copy)
     with pytest.raises(bake_cache.CacheError, match=f"node_{node:05d}.npz is unreadable") as error:
@@ -176,7 +177,7 @@ def test_cancel_half_way_keeps_the_previous_cache_and_the_next_bake_resumes(sphe
             cancel.set()
 
     # Other settings: a finished bake would replace (and remove) the old grid.
-    other = M.MorphSettings(grid=(3, 3, 3), margin=0.8, face_resolution=32)
+    other = G.MorphSettings(grid=(3, 3, 3), margin=0.8, face_resolution=32)
     outcome = bake.bake_grid(sphere, np.eye(4), other, copy, processes=2, progress=progress, cancel=cancel)
     assert outcome.cancelled and outcome.directory is None and outcome.n_built < outcome.n_nodes
     assert max(seen) < 27
@@ -202,7 +203,7 @@ def test_damaged_or_foreign_node_files_are_refused_and_baked_again(sphere, baked
     copy = tmp_path / "copy"
     shutil.copytree(folder, copy)
     directory = bake_cache.grid_directory(copy, sphere.name, result.key)
-    ok = np.flatnonzero(bake.load_for(sphere, np.eye(4), SETTINGS, copy).node_status == M.NODE_OK)
+    ok = np.flatnonzero(bake.load_for(sphere, np.eye(4), SETTINGS, copy).node_status == G.NODE_OK)
     damaged, foreign = int(ok[0]), int(ok[1])
     path = bake_cache.node_file(directory, damaged)
     path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])  # truncated
@@ -223,7 +224,7 @@ def test_damaged_or_foreign_node_files_are_refused_and_baked_again(sphere, baked
     repaired = bake.bake_grid(sphere, np.eye(4), SETTINGS, copy, processes=1)
     assert repaired.n_built == 2 and repaired.n_skipped == 16 and repaired.directory == directory
     repaired_grid = bake.load_for(sphere, np.eye(4), SETTINGS, copy)
-    assert repaired_grid.nodes[damaged].status == M.NODE_OK and repaired_grid.nodes[foreign].status == M.NODE_OK
+    assert repaired_grid.nodes[damaged].status == G.NODE_OK and repaired_grid.nodes[foreign].status == G.NODE_OK
 
 
 _RANGE_BAKE = """
@@ -233,9 +234,9 @@ sys.path.insert(0, {scripts!r})
 import package_link
 package_link.import_as_package({root!r})
 from curved_reflections.addon import bake
-from curved_reflections.addon import morphing as M
+from curved_reflections.addon import morph_grid as G
 from curved_reflections.addon.sphere import icosphere
-settings = M.MorphSettings(grid=(3, 3, 2), margin=0.8, face_resolution=32)
+settings = G.MorphSettings(grid=(3, 3, 2), margin=0.8, face_resolution=32)
 sphere = icosphere(np.array([0.0, 0.0, 1.0]), 1.0, 3, "Mirror Ball")
 nodes = bake.parse_node_range(sys.argv[2], 18)
 result = bake.bake_grid(sphere, np.eye(4), settings, sys.argv[1], processes=1, nodes=nodes)

@@ -5,13 +5,14 @@ import numpy as np
 import pytest
 
 from curved_reflections.addon import look_at_view
+from curved_reflections.addon import morph_grid as G
 from curved_reflections.addon import morphing as M
 from curved_reflections.addon.exact import solve_reflections
 from curved_reflections.addon.raytrace import ReflectorSet
 from curved_reflections.addon.scene import Reflector
 from curved_reflections.addon.sphere import icosphere
 
-SETTINGS = M.MorphSettings(grid=(3, 3, 2), margin=0.8, face_resolution=48)
+SETTINGS = G.MorphSettings(grid=(3, 3, 2), margin=0.8, face_resolution=48)
 CENTRE = np.array([0.0, 0.0, 1.0])
 
 
@@ -29,14 +30,14 @@ def sphere():
 @pytest.fixture(scope="module")
 def small_grids(sphere):
     """A 4x4x4 grid of spacing 1.73 around the sphere, blended both ways (nodes shared)."""
-    settings = M.MorphSettings(grid=(4, 4, 4), margin=0.8, face_resolution=48)
+    settings = G.MorphSettings(grid=(4, 4, 4), margin=0.8, face_resolution=48)
     linear, nodes = morphing_grid(sphere, settings, blend="linear")
     surface, _ = morphing_grid(sphere, settings, blend="surface", nodes=nodes)
     return {"linear": linear, "surface": surface}
 
 
 def test_locate_gives_barycentric_weights_of_the_kuhn_tetrahedra():
-    grid = M.TetrahedralGrid(np.array([-1.0, -2.0, 0.0]), np.array([2.0, 1.0, 1.5]), (4, 3, 3))
+    grid = G.TetrahedralGrid(np.array([-1.0, -2.0, 0.0]), np.array([2.0, 1.0, 1.5]), (4, 3, 3))
     rng = np.random.default_rng(0)
     points = rng.uniform(grid.lo, grid.hi, (5000, 3))
     tet, nodes, weights, inside = grid.locate(points)
@@ -58,7 +59,7 @@ def test_locate_gives_barycentric_weights_of_the_kuhn_tetrahedra():
 
 
 def test_locate_reproduces_nodes_and_flags_points_outside():
-    grid = M.TetrahedralGrid(np.zeros(3), np.ones(3) * 2, (3, 3, 3))
+    grid = G.TetrahedralGrid(np.zeros(3), np.ones(3) * 2, (3, 3, 3))
     positions = grid.node_positions()
     tet, nodes, weights, inside = grid.locate(positions)
     assert inside.all()
@@ -70,7 +71,7 @@ def test_locate_reproduces_nodes_and_flags_points_outside():
 
 
 def test_cube_faces_cover_every_direction_with_overlap():
-    views = M.cube_face_views([0.5, -0.2, 1.0], SETTINGS, near=0.01, far=50.0)
+    views = G.cube_face_views([0.5, -0.2, 1.0], SETTINGS, near=0.01, far=50.0)
     rng = np.random.default_rng(1)
     directions = rng.normal(size=(4000, 3))
     points = np.array([0.5, -0.2, 1.0]) + 3.0 * directions / np.linalg.norm(directions, axis=1, keepdims=True)
@@ -91,14 +92,14 @@ def test_faces_left_out_see_no_triangle_and_the_others_are_built(sphere):
     through) traces an empty ray map."""
     from curved_reflections.addon.raymap import trace_ray_map
 
-    settings = M.MorphSettings(grid=(3, 3, 2), margin=0.8, face_resolution=24)
-    reflector_set, grid, bounds = M.bake_reflector(sphere, settings)
+    settings = G.MorphSettings(grid=(3, 3, 2), margin=0.8, face_resolution=24)
+    reflector_set, grid, bounds = G.bake_reflector(sphere, settings)
     lo, hi = bounds
     reach = float(np.linalg.norm(hi - lo))
     built, skipped = 0, 0
     for eye in grid.node_positions():
-        node = M.build_node(reflector_set, eye, bounds, settings)
-        views = M.cube_face_views(eye, settings, near=reach * 1e-4, far=2.0 * reach + 1.0)
+        node = G.build_node(reflector_set, eye, bounds, settings)
+        views = G.cube_face_views(eye, settings, near=reach * 1e-4, far=2.0 * reach + 1.0)
         for view, face in zip(views, node.faces):
             if face is None:
                 skipped += 1
@@ -111,7 +112,7 @@ def test_faces_left_out_see_no_triangle_and_the_others_are_built(sphere):
 
 def test_view_at_a_node_reproduces_that_nodes_projection(sphere):
     grid, _ = morphing_grid(sphere, blend="linear")
-    node = next(n for n in range(grid.grid.n_nodes) if grid.node_status[n][0] == M.NODE_OK)
+    node = next(n for n in range(grid.grid.n_nodes) if grid.node_status[n][0] == G.NODE_OK)
     eye = grid.grid.node_positions()[node]
     view = look_at_view(eye, CENTRE, width=160, height=120)
     points = np.random.default_rng(2).uniform(grid.grid.lo, grid.grid.hi, (400, 3))
@@ -187,8 +188,8 @@ def test_moving_reflector_uses_its_rigid_frame(sphere):
     points = points[np.linalg.norm(points - CENTRE, axis=1) > 1.05]
     eye, target = np.array([2.0, -2.0, 2.2]), CENTRE
     still = grid.project(points, look_at_view(eye, target, width=160, height=120))
-    moved_points = M.from_frame(matrix, points)
-    moved_view = look_at_view(M.from_frame(matrix, eye[None])[0], M.from_frame(matrix, target[None])[0],
+    moved_points = G.from_frame(matrix, points)
+    moved_view = look_at_view(G.from_frame(matrix, eye[None])[0], G.from_frame(matrix, target[None])[0],
                               up=matrix[:3, 2], width=160, height=120)
     moved = grid.project(moved_points, moved_view, matrix=matrix)
     assert np.array_equal(still.valid, moved.valid)
@@ -200,19 +201,19 @@ def test_views_outside_the_grid_or_near_the_inside_fall_back(sphere):
     with pytest.raises(M.ViewOutsideGrid, match="outside the morphing grid"):
         grid.project(np.zeros((1, 3)), look_at_view([0, -9.0, 1.0], CENTRE))
     # A 3x3x3 grid has its middle node at the sphere's centre.
-    grid, _ = morphing_grid(sphere, M.MorphSettings(grid=(3, 3, 3), margin=0.5, face_resolution=32))
-    assert grid.node_status[13] == M.NODE_INSIDE
-    assert M.build_node(ReflectorSet([sphere]), CENTRE, grid.grid.node_positions()[[0, -1]],
-                        grid.settings).status == M.NODE_INSIDE
+    grid, _ = morphing_grid(sphere, G.MorphSettings(grid=(3, 3, 3), margin=0.5, face_resolution=32))
+    assert grid.node_status[13] == G.NODE_INSIDE
+    assert G.build_node(ReflectorSet([sphere]), CENTRE, grid.grid.node_positions()[[0, -1]],
+                        grid.settings).status == G.NODE_INSIDE
     with pytest.raises(M.ViewOutsideGrid, match="inside of the mirror"):
         grid.project(np.zeros((1, 3)), look_at_view([0.2, -1.2, 1.1], CENTRE))
 
 
 def test_extended_reflector_adds_a_strip_along_open_edges_only(sphere):
-    assert M.extend_reflector(sphere, 0.1) is sphere
+    assert G.extend_reflector(sphere, 0.1) is sphere
     vertices = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
     square = Reflector("Square", vertices, np.array([[0, 1, 2], [0, 2, 3]]), np.tile([0, 0, 1.0], (4, 1)))
-    extended = M.extend_reflector(square, 0.1)
+    extended = G.extend_reflector(square, 0.1)
     assert len(extended.vertices) == 8 and len(extended.triangles) == 2 + 8
     lo, hi = extended.bounds
     diagonal = 0.1 / np.sqrt(2)
@@ -235,7 +236,7 @@ def test_ambiguous_points_get_extended_frustums_or_partial_blends(small_grids):
 
 
 def test_nodes_around_a_point_are_its_cell_and_the_cells_beside_it_nearest_first():
-    grid = M.TetrahedralGrid(np.zeros(3), np.full(3, 4.0), (5, 5, 5))
+    grid = G.TetrahedralGrid(np.zeros(3), np.full(3, 4.0), (5, 5, 5))
     point = np.array([1.6, 2.2, 1.9])  # in cell (1, 2, 1)
     around = grid.nodes_around(point)
     positions = grid.node_positions()[around]

@@ -170,7 +170,7 @@ def measure(kind: str, width: int, height: int, target_vertices: int, repeats: i
     from curved_reflections.gpu_shaders.projection import SBCTextures
     from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
     from curved_reflections.operators.capture import view_from_camera
-    from curved_reflections.operators.render_image import BOUNDS_MARGIN, reflector_appearance, world_color
+    from curved_reflections.operators.render_inputs import BOUNDS_MARGIN, reflector_appearance, world_color
 
     scene, depsgraph, captured = built_scene(kind, width, height)
     view = view_from_camera(scene.camera, scene, depsgraph)

@@ -89,15 +89,15 @@ def sphere_scene(n_points: int):
 
 def draw_views(morphing, mirror, matrix, settings, count, min_distance, rng):
     """Eyes inside the default grid (in world space), above the floor, away from the mirror."""
-    from curved_reflections.addon import look_at_view
+    from curved_reflections.addon import look_at_view, morph_grid
 
-    frame = morphing.rigid_frame(matrix)
-    local = morphing.reflector_in_frame(mirror, frame)
-    grid = morphing.grid_for(local, settings)
+    frame = morph_grid.rigid_frame(matrix)
+    local = morph_grid.reflector_in_frame(mirror, frame)
+    grid = morph_grid.grid_for(local, settings)
     centre = mirror.vertices.mean(axis=0)
     views = []
     while len(views) < count:
-        eye = morphing.from_frame(frame, rng.uniform(grid.lo, grid.hi)[None])[0]
+        eye = morph_grid.from_frame(frame, rng.uniform(grid.lo, grid.hi)[None])[0]
         if eye[2] < 0.3 or np.linalg.norm(eye - centre) < min_distance:
             continue
         target = centre + rng.normal(scale=0.2, size=3)
@@ -107,13 +107,14 @@ def draw_views(morphing, mirror, matrix, settings, count, min_distance, rng):
 
 def measure_grid(morphing, mirror, matrix, settings, views, view_points, exact, args) -> dict:
     """Error, coverage and rates of one grid shape over all views, for both blends."""
+    from curved_reflections.addon import morph_grid
     from curved_reflections.addon.raytrace import ReflectorSet
 
-    frame = morphing.rigid_frame(matrix)
-    local = morphing.reflector_in_frame(mirror, frame)
+    frame = morph_grid.rigid_frame(matrix)
+    local = morph_grid.reflector_in_frame(mirror, frame)
     reflector_set_world = ReflectorSet([mirror])
     nodes = None
-    grid = morphing.grid_for(local, settings)
+    grid = morph_grid.grid_for(local, settings)
     cell = {"grid": list(settings.grid), "spacing": [float(x) for x in grid.spacing], "blends": {}}
     fallbacks = 0
     for blend in ("linear", "surface"):
@@ -329,13 +330,13 @@ def main(argv=None) -> int:
     started = time.perf_counter()
     args.out.mkdir(parents=True, exist_ok=True)
     B.import_package()
-    from curved_reflections.addon import bake, morphing
+    from curved_reflections.addon import bake, morph_grid, morphing
     from curved_reflections.addon.exact import solve_reflections
     from curved_reflections.addon.raytrace import ReflectorSet
 
-    face = args.face_resolution or morphing.MorphSettings.face_resolution
-    accuracy = args.accuracy or morphing.MorphSettings.accuracy_px
-    settings_for = {g: morphing.MorphSettings(grid=tuple(int(n) for n in g.split(",")), face_resolution=face,
+    face = args.face_resolution or morph_grid.MorphSettings.face_resolution
+    accuracy = args.accuracy or morph_grid.MorphSettings.accuracy_px
+    settings_for = {g: morph_grid.MorphSettings(grid=tuple(int(n) for n in g.split(",")), face_resolution=face,
                                               accuracy_px=accuracy)
                     for g in args.grids + [args.bake_grid]}
     mirror, matrix, bounds, meshes = sphere_scene(args.points)
@@ -349,7 +350,7 @@ def main(argv=None) -> int:
              f"peak RSS {bake_result['peak_rss_mb']:.0f} MB; wrote {args.out / 'morphing_bake.json'}")
         return 0
     rng = np.random.default_rng(SEED)
-    default = morphing.MorphSettings()
+    default = morph_grid.MorphSettings()
     views = draw_views(morphing, mirror, matrix, default, args.views, args.min_eye_distance, rng)
     reference = ReflectorSet([mirror])
     view_points, exact = [], []

@@ -75,7 +75,7 @@ def eye_path(centre: np.ndarray, radius: float, steps: int, jumps: int) -> list:
 def measure(width: int, height: int, steps: int, jumps: int) -> dict:
     import bpy
 
-    from curved_reflections.addon import look_at_view, morphing
+    from curved_reflections.addon import look_at_view, morph_grid, morphing
     from curved_reflections.addon.sbc_build import build_sample_based_camera
     from curved_reflections.addon.scene import scene_bounds
     from curved_reflections.gpu_shaders.morph_source import GPUFaceImages, MorphSource
@@ -84,7 +84,7 @@ def measure(width: int, height: int, steps: int, jumps: int) -> dict:
     from curved_reflections.operators import demo_scenes
     from curved_reflections.operators.capture import capture_scene
     from curved_reflections.operators.gpu_init import ensure_gpu
-    from curved_reflections.operators.render_image import BOUNDS_MARGIN, reflector_appearance
+    from curved_reflections.operators.render_inputs import BOUNDS_MARGIN, reflector_appearance
 
     ensure_gpu()
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
@@ -98,8 +98,8 @@ def measure(width: int, height: int, steps: int, jumps: int) -> dict:
     colors, reflectivity = reflector_appearance(captured.reflectors, scene)
     renderer = ReflectionRenderer(captured.reflectors, captured.meshes, colors, reflectivity, polish=False)  # as live
 
-    local = morphing.reflector_in_frame(mirror, morphing.rigid_frame(matrix))
-    grid = morphing.grid_on_demand(local, morphing.MorphSettings())
+    local = morph_grid.reflector_in_frame(mirror, morph_grid.rigid_frame(matrix))
+    grid = morphing.grid_on_demand(local, morph_grid.MorphSettings())
     centre = mirror.vertices.mean(axis=0)
     radius = float(np.max(np.linalg.norm(mirror.vertices - centre, axis=1)))
     views = [look_at_view(eye, centre, fov_y_deg=45.0, width=width, height=height)
@@ -214,7 +214,7 @@ def measure_iterative(kind: str, width: int, height: int, target_vertices: int, 
     from curved_reflections.gpu_shaders.reflection_draw import ITERATIVE_ORDER_RANGE, ReflectionRenderer
     from curved_reflections.operators import methods
     from curved_reflections.operators.capture import view_from_camera
-    from curved_reflections.operators.render_image import reflector_properties, world_color
+    from curved_reflections.operators.render_inputs import reflector_properties, world_color
 
     scene, depsgraph, captured = bench_draw.built_scene(kind, width, height)
     start = time.perf_counter()
@@ -314,16 +314,16 @@ def measure_morph_frames(width: int, height: int, target_vertices: int, frames: 
     import gpu
     from mathutils import Matrix
 
-    from curved_reflections.addon import look_at_view, morphing
+    from curved_reflections.addon import look_at_view, morph_grid, morphing
     from curved_reflections.gpu_shaders.morph_source import GPUFaceImages
     from curved_reflections.gpu_shaders.reflection_draw import ITERATIVE_ORDER_RANGE, ReflectionRenderer
-    from curved_reflections.operators.render_image import reflector_properties, world_color
+    from curved_reflections.operators.render_inputs import reflector_properties, world_color
 
     scene, _, captured = bench_draw.built_scene("sbc_fig3", width, height)
     mirror = captured.reflectors[0]
     matrix = np.array(bpy.data.objects[mirror.name].matrix_world, dtype=np.float64)
-    grid = morphing.grid_on_demand(morphing.reflector_in_frame(mirror, morphing.rigid_frame(matrix)),
-                                   morphing.MorphSettings())
+    grid = morphing.grid_on_demand(morph_grid.reflector_in_frame(mirror, morph_grid.rigid_frame(matrix)),
+                                   morph_grid.MorphSettings())
     grid.face_images = GPUFaceImages()
     meshes = bench_draw.scaled_meshes(captured.meshes, bench_draw.levels_for(captured, target_vertices))
     renderer = ReflectionRenderer(captured.reflectors, meshes, polish=False, morph=[(grid, matrix)],

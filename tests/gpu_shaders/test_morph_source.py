@@ -11,13 +11,14 @@ import numpy as np
 import pytest
 
 from curved_reflections.addon import DiffuseMesh, build_sample_based_camera, look_at_view, scene_bounds
+from curved_reflections.addon import morph_grid as G
 from curved_reflections.addon import morphing as M
 from curved_reflections.addon.exact import solve_reflections
 from curved_reflections.addon.raytrace import ReflectorSet
 from curved_reflections.addon.sphere import icosphere
 
 RED, GREEN, BLUE = np.eye(3)
-SETTINGS = M.MorphSettings(grid=(7, 7, 7), margin=0.8, face_resolution=48)
+SETTINGS = G.MorphSettings(grid=(7, 7, 7), margin=0.8, face_resolution=48)
 
 
 def _square(name, x, size, colour):

@@ -369,7 +369,7 @@ def test_per_sheet_culling_leaves_the_image_identical(gpu_ready):
     from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
     from curved_reflections.operators import demo_scenes
     from curved_reflections.operators.capture import capture_scene, view_from_camera
-    from curved_reflections.operators.render_image import BOUNDS_MARGIN
+    from curved_reflections.operators.render_inputs import BOUNDS_MARGIN
 
     curved_reflections.register()
     try:

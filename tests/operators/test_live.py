@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from curved_reflections.addon.view import look_at_view
-from curved_reflections.operators import demo_scenes, live
+from curved_reflections.operators import demo_scenes, live, live_handlers, scene_changes
 from curved_reflections.operators.capture import view_from_camera
 
 #: Clear colour of the offscreen: in no demo palette, so untouched pixels are known.
@@ -213,12 +213,13 @@ def test_unregister_leaves_no_handler_timer_or_state(empty_scene, gpu_ready):
     scene = demo_scenes.build("sbc_fig3", bpy.context.scene, 64, 48)
     live.bake(scene, bpy.context.evaluated_depsgraph_get())  # on the worker: the timer polls it
     assert bpy.app.timers.is_registered(live._tick)
-    assert live.on_depsgraph_update in bpy.app.handlers.depsgraph_update_post
+    assert live_handlers.on_depsgraph_update in bpy.app.handlers.depsgraph_update_post
     curved_reflections.unregister()
     for name in ("depsgraph_update_post", "load_pre", "load_post"):
         assert not [h for h in getattr(bpy.app.handlers, name) if "curved_reflections" in h.__module__]
     assert not bpy.app.timers.is_registered(live._tick)
-    assert live._draw_handle is None and live._executor is None and not live._states
+    assert live_handlers._draw_handle is None and live._executor is None and not live._states
+    assert not scene_changes._listeners
 
 
 def test_loading_a_file_drops_the_live_state_and_keeps_the_handlers(fig3, tmp_path):
@@ -227,7 +228,7 @@ def test_loading_a_file_drops_the_live_state_and_keeps_the_handlers(fig3, tmp_pa
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
     bpy.ops.wm.open_mainfile(filepath=str(path))
     assert not live._states
-    assert live.on_depsgraph_update in bpy.app.handlers.depsgraph_update_post
+    assert live_handlers.on_depsgraph_update in bpy.app.handlers.depsgraph_update_post
     assert bpy.ops.curved_reflections.bake() == {'FINISHED'}
     assert _draw(bpy.context.scene, _camera_view(bpy.context.scene))[0]
 

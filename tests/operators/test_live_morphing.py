@@ -14,13 +14,13 @@ import bpy
 import numpy as np
 import pytest
 
-from curved_reflections.addon import morphing
+from curved_reflections.addon import morph_grid, morphing
 from curved_reflections.addon.view import look_at_view
 from curved_reflections.operators import demo_scenes, live, morph_bake
 
 from test_live import HEIGHT, WIDTH, _draw, _pixels_of, _touched
 
-SETTINGS = morphing.MorphSettings(grid=(7, 7, 5), margin=0.8, face_resolution=48)
+SETTINGS = morph_grid.MorphSettings(grid=(7, 7, 5), margin=0.8, face_resolution=48)
 
 
 @pytest.fixture
@@ -29,7 +29,7 @@ def fig3_morphing(empty_scene, registered, gpu_ready, monkeypatch):
     bpy.data.objects["MirrorSphere"].curved_reflections.mode = 'RUNTIME'  # each test chooses its mode
 
     def grid_on_demand(reflector, matrix, scene, reflector_index=0):
-        local = morphing.reflector_in_frame(reflector, morphing.rigid_frame(matrix))
+        local = morph_grid.reflector_in_frame(reflector, morph_grid.rigid_frame(matrix))
         morph_bake._REFLECTOR_STATUS[reflector.name] = "morphing (baked grid loaded)"
         return morphing.grid_on_demand(local, SETTINGS, reflector_index)
 

@@ -107,7 +107,7 @@ def test_reflector_settings_reach_the_renderer(fig3):
     """``obj.curved_reflections`` Fresnel and fade distance become the renderer's per
     reflector arguments (SBC V-D): F0 where Fresnel is on, NaN where off."""
     from curved_reflections.operators.capture import capture_scene
-    from curved_reflections.operators.render_image import reflector_appearance, reflector_properties
+    from curved_reflections.operators.render_inputs import reflector_appearance, reflector_properties
 
     reflectors = capture_scene(bpy.context.evaluated_depsgraph_get()).reflectors
     names = [r.name for r in reflectors]

@@ -1,0 +1,118 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The layout rules of the extension's code (issue 20; ``../shared/DESIGN.md``): no
+import circle between its modules (imports inside functions count: they hide a circle,
+they do not remove it), no module much over 600 lines, and the engine (``addon/``) free
+of Blender. Read from the source with ``ast``; nothing is imported."""
+
+import ast
+from pathlib import Path
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("addon", "gpu_shaders", "operators")
+#: "No module over about 600 lines" (issue 20): this much over is still "about".
+MAX_LINES = 650
+
+
+def _modules() -> dict:
+    """{dotted name relative to the repository root: path} of the extension's modules."""
+    modules = {"": REPO_ROOT / "__init__.py"}
+    for package in PACKAGES:
+        for path in (REPO_ROOT / package).rglob("*.py"):
+            parts = path.relative_to(REPO_ROOT).with_suffix("").parts
+            name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+            modules[name] = path
+    return modules
+
+
+def _imports(name: str, path: Path, modules: dict) -> set:
+    """The extension's modules that ``name`` imports, anywhere in its source."""
+    is_package = path.name == "__init__.py"
+    package = name.split(".") if is_package else name.split(".")[:-1]
+    if name == "":
+        package = []
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if not isinstance(node, ast.ImportFrom) or node.level == 0:
+            continue
+        base = package[:len(package) - (node.level - 1)] if node.level > 1 else package
+        target = ".".join(base + ([node.module] if node.module else []))
+        for alias in node.names:
+            submodule = f"{target}.{alias.name}" if target else alias.name
+            if submodule in modules:
+                found.add(submodule)
+            elif target in modules:
+                found.add(target)
+    found.discard(name)
+    return found
+
+
+def _cycles(graph: dict) -> list:
+    """Strongly connected components of more than one module (Tarjan)."""
+    index, low, stack, on_stack, components = {}, {}, [], set(), []
+
+    def visit(node):
+        index[node] = low[node] = len(index)
+        stack.append(node)
+        on_stack.add(node)
+        for target in graph[node]:
+            if target not in index:
+                visit(target)
+                low[node] = min(low[node], low[target])
+            elif target in on_stack:
+                low[node] = min(low[node], index[target])
+        if low[node] == index[node]:
+            component = []
+            while True:
+                member = stack.pop()
+                on_stack.discard(member)
+                component.append(member)
+                if member == node:
+                    break
+            if len(component) > 1:
+                components.append(sorted(component))
+
+    for node in graph:
+        if node not in index:
+            visit(node)
+    return components
+
+
+def _graph() -> dict:
+    modules = _modules()
+    # A package's __init__ importing its own modules (to register them) is not a circle
+    # with a module that imports a sibling through the package.
+    return {name: {target for target in _imports(name, path, modules) if not name.startswith(target + ".")}
+            for name, path in modules.items()}
+
+
+def test_the_graph_sees_the_known_imports():
+    graph = _graph()
+    assert "gpu_shaders.sbc_triangles" in graph["gpu_shaders.reflection_draw"]
+    assert "addon.sbc" in graph["addon.sbc_build"]
+    assert "operators.live" in graph["operators.live_handlers"]
+    assert "addon.morph_grid" in graph["addon.morphing"]
+
+
+def test_no_import_circle():
+    assert _cycles(_graph()) == []
+
+
+def test_a_circle_is_found():
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+def test_no_module_over_about_600_lines():
+    lengths = {name or "__init__": len(path.read_text(encoding="utf-8").splitlines())
+               for name, path in _modules().items()}
+    assert {name: n for name, n in lengths.items() if n > MAX_LINES} == {}
+
+
+def test_the_engine_never_imports_blender():
+    for name, path in _modules().items():
+        if not name.startswith("addon"):
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, (ast.Import, ast.ImportFrom)):
+                roots = [a.name.split(".")[0] for a in node.names] if isinstance(node, ast.Import) else (
+                    [node.module.split(".")[0]] if node.level == 0 and node.module else [])
+                assert not set(roots) & {"bpy", "gpu", "mathutils", "bmesh"}, (name, roots)
