@@ -21,7 +21,7 @@ import functools
 import numpy as np
 
 from ..addon.methods.iterative import search as search_module
-from .reflected_meshes import ReflectedMeshes, glsl_source
+from .reflected_meshes import FLIPPED_CODE, ReflectedMeshes, glsl_source
 
 #: Invocations per work group of the search (along x).
 LOCAL_SIZE = 64
@@ -34,7 +34,7 @@ def search_defines() -> dict:
             "DERIVATIVE_STEP": f"{s.DERIVATIVE_STEP:.9e}", "TRUST_RADIUS": f"{s.TRUST_RADIUS:.9e}",
             "HALVINGS": s.HALVINGS, "MAX_CHART": f"{s.MAX_CHART:.9e}",
             "RESIDUAL_TOLERANCE": f"{s.RESIDUAL_TOLERANCE:.9e}", "OCCLUSION_SAMPLES": s.OCCLUSION_SAMPLES,
-            "RESTART_OFFSET": f"{s.RESTARTS[1][0]:.9e}"}
+            "RESTART_OFFSET": f"{s.RESTARTS[1][0]:.9e}", "FLIPPED_CODE": FLIPPED_CODE}
 
 
 @functools.cache
@@ -158,7 +158,8 @@ class IterativePass:
         """The last search of one reflector, read back (tests, the status counts)."""
         positions, code = self.meshes.read(self._results[reflector_index])
         status = (code % 16 - 8).astype(np.int8)
-        return search_module.SearchResult(positions, status, (code // 16).astype(np.int16))
+        return search_module.SearchResult(positions, status, (code % FLIPPED_CODE // 16).astype(np.int16),
+                                          code >= FLIPPED_CODE)
 
     def status_counts(self) -> dict:
         """{reflector name: {"found", "not_converged", "unanswered"}} of the last search,

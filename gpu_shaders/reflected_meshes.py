@@ -31,6 +31,9 @@ VALID_THRESHOLD = 0.9999
 #: An answer texel's code for a found answer: (FOUND + 8) + 16 steps, modulo 16 (the
 #: iterative search's status and step count; morphing writes FOUND_CODE itself).
 FOUND_CODE = search_module.FOUND + 8
+#: Added to the code of a flipped image (``search.flipped_images``): a triangle whose
+#: corners disagree spans a fold and is not drawn. Above 16 times any step count.
+FLIPPED_CODE = 2048
 
 
 def glsl_source(name: str, defines: dict) -> str:
@@ -65,7 +68,8 @@ def reflected_shader():
     info.vertex_in(3, 'VEC2', "uv")
     info.vertex_out(interface)
     info.fragment_out(0, 'VEC4', "color_out")
-    info.vertex_source(glsl_source("iterative_mesh_vert.glsl", {"FOUND_CODE": FOUND_CODE}))
+    info.vertex_source(glsl_source("iterative_mesh_vert.glsl", {"FOUND_CODE": FOUND_CODE,
+                                                                "FLIPPED_CODE": FLIPPED_CODE}))
     info.fragment_source(reflected_fragment_source(f"#define SEARCHED\n#define VALID_THRESHOLD {VALID_THRESHOLD}\n"))
     return gpu.shader.create_from_info(info)
 

@@ -99,6 +99,9 @@ ITERATIVE_ORDER_RANGE = 0.5
 #: mirror, the eye on its surface), it is filled by the composite instead of traced, so
 #: that no view costs many times an ordinary one (the demo scenes trace 1-9 %).
 MAX_TRACED_FRACTION = 0.25
+#: A render traces the pixels of a searched mirror (the iterative search) that got no
+#: reflection within this many pixels of its silhouette or of a drawn reflection.
+SEARCHED_BAND_PX = 2
 
 
 class FrameTargets:
@@ -398,9 +401,10 @@ class ReflectionRenderer:
         if self._tracer is None:
             self._tracer = band_trace.BandTracer(self._reflectors, self._meshes)
         labels = read_texture(targets.prepass_labels, targets.width, targets.height)[..., 0]
-        # The iterative search reaches a mirror's silhouette: its reflectors have no band.
-        labels = np.where(np.isin(np.rint(labels) - 1, self.iterative.reflector_indices), 0.0, labels)
+        searched = np.isin(np.rint(labels) - 1, self.iterative.reflector_indices)
         drawn = read_texture(targets.reflection_colors, targets.width, targets.height)[..., 3] > 0.5
+        # The searched reflectors' pixels are traced by their own rule, below.
+        searched_labels, labels = np.where(searched, labels, 0.0), np.where(searched, 0.0, labels)
         boundary = None if ray_map is None else band_trace.history_boundary(
             ray_map, targets.width, targets.height, max_order)
         if camera is not None:
@@ -413,6 +417,13 @@ class ReflectionRenderer:
             holes = np.isin(np.rint(labels) - 1, list(holes_of))
             boundary = holes if boundary is None else boundary | holes
         pixels = band_trace.band_pixels(labels, drawn, radius, edges_of_drawn, boundary)
+        if searched.any():
+            # The search reaches a mirror's silhouette, but there, and where a fold of a
+            # non-convex mirror crowds several images, vertices go unanswered and their
+            # triangles undrawn: the pixels without a reflection next to the silhouette or
+            # to a drawn reflection are traced (those farther from both show the world).
+            pixels = np.unique(np.concatenate([pixels, band_trace.band_pixels(
+                searched_labels, drawn, max(radius, SEARCHED_BAND_PX), edges_of_drawn=True)]), axis=0)
         self.stats["untraced_pixels"] = 0
         if not len(holes_of) and len(pixels) > MAX_TRACED_FRACTION * targets.width * targets.height:
             # Not a band but most of the mirror (the near plane cutting it, the eye on it):
@@ -439,7 +450,9 @@ class ReflectionRenderer:
         (:class:`.sbc_triangles.SheetSources`, :class:`.morph_source.MorphSource`), or ``None`` when
         the per-frame passes (iterative search, morphing grids) draw every reflector.
         With ``trace`` the band along each footprint's edge that the camera cannot reach
-        (d pixels wide) is ray traced (:meth:`trace_band`), and with ``trace_gaps`` every
+        (d pixels wide) is ray traced (:meth:`trace_band`; on a searched mirror, the pixels
+        without a reflection within :data:`SEARCHED_BAND_PX` of its silhouette or of a drawn
+        reflection), and with ``trace_gaps`` every
         pixel of a mirror drawn from its grid that the blend left without a reflection
         (exact there, but tens of thousands of rays a frame: the sky's pixels too);
         without, it gets the composite's fill (``fill_radius``, ``None``: d). With
@@ -465,7 +478,7 @@ class ReflectionRenderer:
         drawn = time.perf_counter()
         traced = 0
         morphed = self.morph.drawn_reflectors if trace_gaps else []
-        if trace and ((textures is not None and textures.groups) or morphed):
+        if trace and ((textures is not None and textures.groups) or morphed or self.iterative.methods):
             max_order = max((len(h) for h in textures.groups), default=1) if textures is not None else 1
             traced = self.trace_band(view, targets, max_order, world_color, downsample, trace_edges,
                                      getattr(sbc_or_textures, "ray_map", None), camera, holes_of=morphed)

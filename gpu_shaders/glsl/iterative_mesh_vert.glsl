@@ -10,7 +10,10 @@
  * hidden, inside the mirror) or behind the view gets `valid_interp` 0 and stays at its
  * last search sample: the fragment stage discards every fragment of a triangle with
  * such a corner (its interpolated validity is below 1 everywhere but at the valid
- * corners), so an unanswered vertex is never drawn at a wrong place. Shading data as
+ * corners), so an unanswered vertex is never drawn at a wrong place. A flipped image
+ * (beyond the caustic, FLIPPED_CODE) gets -1: a triangle joining it to a direct image
+ * spans a fold of the mirror, its interpolated validity is below 1 in magnitude inside,
+ * and it is discarded as well. Shading data as
  * reflection_mesh_vert.glsl: the true eye vector from the vertex toward P, and the
  * distance. */
 
@@ -22,6 +25,7 @@ void main()
   vec3 p = found.xyz;
   vec4 clip = view_projection * vec4(p, 1.0);
   bool valid = int(found.w) % 16 == FOUND_CODE && clip.w > 0.0;
+  bool flipped = int(found.w) >= FLIPPED_CODE;
   vec3 to_mirror = p - vertex;
   float distance = length(to_mirror);
   color_interp = color;
@@ -31,7 +35,7 @@ void main()
   eye_interp = to_mirror / max(distance, 1e-30);
   distance_interp = distance;
   reflector_interp = reflector_id;
-  valid_interp = valid ? 1.0 : 0.0;
+  valid_interp = valid ? (flipped ? -1.0 : 1.0) : 0.0;
   float depth = clamp(distance * inverse_diameter, 0.0, 1.0) * order_range;
   gl_Position = clip.w > 0.0 ? vec4(clip.xy / clip.w, depth * 2.0 - 1.0, 1.0) : vec4(0.0, 0.0, 1.0, 1.0);
 }

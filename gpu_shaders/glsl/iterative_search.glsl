@@ -17,7 +17,8 @@
  *      surface's own), the residual vanishes, and on a non-convex mirror nothing of it
  *      lies between P and either.
  * Everything runs relative to O. Output texel: (P relative to the renderer's shift,
- * (status + 8) + 16 * steps), status as the numpy twin's (FOUND = 1). */
+ * (status + 8) + 16 * steps + FLIPPED_CODE * flipped), status as the numpy twin's
+ * (FOUND = 1), flipped: the image lies beyond the caustic (flipped_image). */
 
 #define FOUND 1
 #define NOT_CONVERGED 0
@@ -193,6 +194,21 @@ bool segment_blocked(vec3 start, vec3 direction, float length_, bool dense_near_
   return false;
 }
 
+/* The numpy twin's flipped_images: whether the vertex lies beyond the caustic of the
+ * reflected rays seen through its reflection point p (det [Q_u, Q_v, R] < 0 for the map
+ * (u, v, t) -> P + t R), from the chart samples pu, pv a step along each chart axis. */
+bool flipped_image(vec3 p, vec3 n, vec3 pu, vec3 pv, vec3 nu, vec3 nv)
+{
+  vec3 r = reflect(-to_eye(p), n);
+  float t = length(vertex - p);
+  vec3 qu = pu - p + t * (reflect(-to_eye(pu), nu) - r);
+  vec3 qv = pv - p + t * (reflect(-to_eye(pv), nv) - r);
+  return dot(cross(qu, qv), r) < 0.0;
+}
+
+/* Whether the last converged answer of newton() is a flipped image. */
+bool flipped;
+
 int check(vec3 p, vec3 n, vec3 h, vec3 face)
 {
   vec3 e = to_eye(p);
@@ -224,9 +240,9 @@ int newton(vec2 x, inout int steps, out vec3 p)
   }
   for (int step = 0; step < MAX_ITERATIONS; step++) {
     vec2 fu, fv, ft;
-    vec3 pt, nt, ht, pu, pv;
-    evaluate(x + vec2(DERIVATIVE_STEP, 0.0), fu, pu, nt, ht);
-    evaluate(x + vec2(0.0, DERIVATIVE_STEP), fv, pv, nt, ht);
+    vec3 pt, nt, ht, pu, pv, nu, nv;
+    evaluate(x + vec2(DERIVATIVE_STEP, 0.0), fu, pu, nu, ht);
+    evaluate(x + vec2(0.0, DERIVATIVE_STEP), fv, pv, nv, ht);
     /* The map surface's own normal: the ray from the eye must meet its front and the
      * reflected ray leave it (as addon/exact.py asks of the facet). */
     vec3 facet = cross(pu - p, pv - p);
@@ -243,6 +259,7 @@ int newton(vec2 x, inout int steps, out vec3 p)
     float current = length(f);
     float scale = 1.0;
     vec3 previous = p;
+    bool previous_flipped = flipped_image(p, n, pu, pv, nu, nv);
     bool valid = false;
     for (int k = 0; k <= HALVINGS; k++) {
       valid = evaluate(x + scale * delta, ft, pt, nt, ht);
@@ -261,6 +278,7 @@ int newton(vec2 x, inout int steps, out vec3 p)
       return NO_SURFACE;
     }
     if (length(p - previous) < pixel_tolerance(p)) {
+      flipped = previous_flipped;
       return check(p, n, h, face);
     }
   }
@@ -283,6 +301,7 @@ void main()
   bool resume = warm != 0 && int(last.w) % 16 == FOUND + 8;
   int status = NO_SURFACE;
   int steps = 0;
+  bool image_flipped = false;
   vec3 p = vec3(0.0);
   bool eye_inside = camera.w > 0.5 && inside_surface(camera.xyz - centre);
   if (eye_inside || length(vertex) <= 1e-9 * max(max_radius, 1e-30) || inside_surface(vertex)) {
@@ -301,6 +320,7 @@ void main()
       if (verdict == FOUND) {
         status = verdict;
         p = answer;
+        image_flipped = flipped;
         found = true;
       }
     }
@@ -315,6 +335,7 @@ void main()
         if (attempt == 0 || verdict == FOUND) {
           status = verdict;
           p = answer;
+          image_flipped = flipped;
         }
         if (verdict == FOUND) {
           break;
@@ -335,5 +356,6 @@ void main()
       }
     }
   }
-  imageStore(result, texel, vec4(answer, float(status + 8) + 16.0 * float(steps)));
+  bool flip = status == FOUND && image_flipped;
+  imageStore(result, texel, vec4(answer, float(status + 8) + 16.0 * float(steps) + (flip ? float(FLIPPED_CODE) : 0.0)));
 }

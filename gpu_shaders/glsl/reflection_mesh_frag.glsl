@@ -16,8 +16,9 @@
 void main()
 {
 #ifdef SEARCHED
-  /* Iterative search (iterative_mesh_vert.glsl): a triangle with an unanswered corner. */
-  if (!(valid_interp >= VALID_THRESHOLD)) {  /* NaN too */
+  /* Iterative search (iterative_mesh_vert.glsl): a triangle with an unanswered corner, or
+   * joining a flipped image (-1) to a direct one (1). */
+  if (!(abs(valid_interp) >= VALID_THRESHOLD)) {  /* NaN too */
     discard;
   }
 #endif

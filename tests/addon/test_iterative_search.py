@@ -126,6 +126,33 @@ def test_search_on_a_bumpy_sphere_finds_its_reflections():
     assert np.percentile(errors, 95) <= 0.5
 
 
+def test_flipped_images_alternate_across_a_fold():
+    """Where a bump folds the reflection, a point has three images: two direct, one
+    flipped, beyond the caustic (``search.flipped_images``), as Morse theory has it
+    (direct minus flipped is one). Every image of the exact solver, resumed from, is
+    found again with that parity; a single image is never flipped, nor any on a sphere."""
+    reflector = _bumpy(0.05, 4)
+    shape, bake = prepare_iterative(reflector, 48)
+    view = look_at_view((3.5, -2.0, 1.5), CENTRE, width=320, height=240)
+    points = _outside_points(reflector, 600, 2)
+    exact = solve_reflections(ReflectorSet([reflector]), view, points)
+    exact = exact.select(exact.visible)
+    found = search_reflections(bake.reflector_map, view, points[exact.point], 1.0, previous=exact.position)
+    same = found.found & (np.linalg.norm(found.reflector_points - exact.position, axis=1) < 0.02)
+    assert same.mean() >= 0.97
+    parities = {}
+    for point in np.unique(exact.point):
+        rows = np.flatnonzero(exact.point == point)
+        if same[rows].all():
+            parities.setdefault(len(rows), []).append(int(found.flipped[rows].sum()))
+    assert len(parities[3]) >= 10 and set(parities[3]) == {1}
+    assert set(parities[1]) == {0}
+    sphere = icosphere(CENTRE, 1.0, 4)
+    sphere_points = _outside_points(sphere, 300, 3)
+    plain = search_reflections(prepare_iterative(sphere, 48)[1].reflector_map, view, sphere_points, 1.0)
+    assert plain.found.sum() > 100 and not plain.flipped.any()
+
+
 def test_degenerate_points_and_views():
     sphere = icosphere(CENTRE, 1.0, 3)
     shape, bake = prepare_iterative(sphere, 24)

@@ -70,6 +70,10 @@ def test_gpu_search_agrees_with_the_numpy_twin(gpu_ready, make_reflector, view):
     # A few points have several reflections; float32 rounding can send a restart to another one.
     assert np.mean(error <= 0.05) >= 0.995, np.percentile(error, [50, 99, 100])
     assert np.isfinite(gpu.reflector_points[gpu.found]).all()
+    # Flipped images (beyond the caustic, where a fold crowds two images) agree too.
+    assert not gpu.flipped[~gpu.found].any()
+    assert np.mean(gpu.flipped[both] == twin.flipped[both]) >= 0.995
+    assert twin.flipped[both].any() == (make_reflector is _bumpy)
 
 
 def test_degenerate_input_draws_no_nan(gpu_ready):
@@ -178,3 +182,75 @@ def test_another_searched_mirror_blocks_reflected_segments(gpu_ready):
     blocked = alone.found & (twin.status == search_module.OCCLUDED)
     assert blocked.sum() > 200  # many points behind the second sphere are hidden in the first
     assert (gpu.status == twin.status).mean() >= 0.995
+
+
+def _drawn_pixels(renderer, view) -> int:
+    from curved_reflections.gpu_shaders.gpu_data import read_texture
+
+    targets = renderer.draw_passes(view, None)
+    return int((read_texture(targets.reflection_colors, view.width, view.height)[..., 3] > 0.5).sum())
+
+
+def test_a_triangle_across_a_fold_is_not_drawn(gpu_ready):
+    """A triangle joining a flipped image (beyond the caustic) to direct ones spans a fold
+    of the bumpy mirror: drawn, it would smear one image across the other. It is
+    discarded; the same triangle with its flipped corner moved to a direct one is drawn."""
+    from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
+
+    reflector = _bumpy(0.06)
+    shape, bake = prepare_iterative(reflector, 64)
+    view = look_at_view((3.5, -2.0, 1.5), (0, 0, 0), width=320, height=240)
+    cloud = _cloud(6000, 5)
+    found = search_reflections(bake.reflector_map, view, cloud, 1.0)
+    flipped = np.flatnonzero(found.found & found.flipped)
+    direct = np.flatnonzero(found.found & ~found.flipped)
+    assert len(flipped) > 20
+    method = IterativeReflector(0, reflector.name, bake.reflector_map, 1.0)
+    across, control = [], []
+    for a in flipped[:20]:
+        near = direct[np.argsort(np.linalg.norm(cloud[direct] - cloud[a], axis=1))[:3]]
+        for corner, drawn in ((a, across), (near[2], control)):
+            mesh = DiffuseMesh("triangle", np.array([cloud[near[0]], cloud[near[1]], cloud[corner]]),
+                               np.array([[0, 1, 2]]), np.ones((3, 4)))
+            renderer = ReflectionRenderer([reflector], [mesh], edge_fraction=None, iterative=[method])
+            pixels = _drawn_pixels(renderer, view)
+            gpu = renderer.iterative.read(0)  # the GPU's own verdicts (float32 may pick another root)
+            corners = [np.flatnonzero((renderer.geometry.vertices == cloud[k]).all(axis=1))[0]
+                       for k in (near[0], near[1], corner)]  # the renderer sorts its vertices
+            if gpu.found.all() and list(gpu.flipped[corners]) == [False, False, corner == a]:
+                drawn.append(pixels)
+    assert len(across) >= 15 and max(across) == 0, across
+    assert len(control) >= 15 and np.mean(np.array(control) > 0) >= 0.5, control
+
+
+def test_a_render_traces_the_searched_mirror_where_nothing_was_drawn_next_to_its_edges(gpu_ready):
+    """Render (not the viewport) traces the pixels of a searched mirror left without a
+    reflection within SEARCHED_BAND_PX of its silhouette or of a drawn reflection (the
+    search misses vertices there, and triangles across folds are dropped); nothing else."""
+    from curved_reflections.addon.band_trace import band_pixels
+    from curved_reflections.gpu_shaders.gpu_data import read_texture
+    from curved_reflections.gpu_shaders.reflection_draw import SEARCHED_BAND_PX, ReflectionRenderer
+
+    reflector = _bumpy(0.06)
+    shape, bake = prepare_iterative(reflector, 64)
+    u, v = np.meshgrid(np.linspace(-4.0, 4.0, 41), np.linspace(-4.0, 4.0, 41))
+    floor = np.c_[u.ravel(), v.ravel(), np.full(u.size, -1.3)]
+    index = np.arange(41 * 41).reshape(41, 41)
+    quads = np.stack([index[:-1, :-1], index[:-1, 1:], index[1:, 1:], index[1:, :-1]], axis=-1).reshape(-1, 4)
+    triangles = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    colors = np.where((np.add(*np.divmod(np.arange(41 * 41), 41)) % 2 == 0)[:, None], (1, 0.3, 0.3, 1), (1, 1, 0.3, 1))
+    mesh = DiffuseMesh("floor", floor, triangles, colors.astype(np.float64))
+    method = IterativeReflector(0, reflector.name, bake.reflector_map, 1.0)
+    renderer = ReflectionRenderer([reflector], [mesh], iterative=[method])
+    view = look_at_view((3.5, -2.0, 1.5), (0, 0, 0), width=160, height=120)
+    plain = renderer.render(view, None, (0.2, 0.3, 0.9, 1.0), trace=False)
+    targets = renderer.draw_passes(view, None)
+    labels = read_texture(targets.prepass_labels, 160, 120)[..., 0]
+    drawn = read_texture(targets.reflection_colors, 160, 120)[..., 3] > 0.5
+    traced = renderer.render(view, None, (0.2, 0.3, 0.9, 1.0))
+    assert renderer.stats["traced_pixels"] > 0
+    expected = band_pixels(labels, drawn, SEARCHED_BAND_PX, edges_of_drawn=True)
+    assert renderer.stats["traced_pixels"] == len(expected)
+    changed = np.argwhere(np.abs(traced - plain).max(axis=2) > 1e-6)[:, ::-1]
+    assert len(changed) > 0
+    assert {tuple(p) for p in changed} <= {tuple(p) for p in expected}

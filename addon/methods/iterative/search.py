@@ -87,6 +87,9 @@ class SearchResult:
     reflector_points: np.ndarray  # (P, 3), NaN where not found
     status: np.ndarray  # (P,) int8: FOUND, NOT_CONVERGED, NO_SURFACE, FACES_AWAY, OCCLUDED, INSIDE
     iterations: np.ndarray  # (P,) int16 Newton steps taken, every start counted
+    #: (P,) bool: the answer is a *flipped* image, the point lying beyond the caustic of
+    #: the mirror's reflected rays (:func:`flipped_images`); False where not found.
+    flipped: np.ndarray | None = None
 
     @property
     def found(self) -> np.ndarray:
@@ -174,15 +177,39 @@ def _solve_2x2(jacobian: np.ndarray, rhs: np.ndarray) -> np.ndarray:
                      (jacobian[:, 0, 0] * rhs[:, 1] - jacobian[:, 1, 0] * rhs[:, 0]) / safe], axis=1)
 
 
+def flipped_images(camera, perspective: bool, points, position, normal, position_u, position_v, normal_u,
+                   normal_v) -> np.ndarray:
+    """(K,) bool: whether each point is seen in a *flipped* image at its reflection point:
+    beyond the caustic of the reflected rays, where the map (u, v, t) -> P(u, v) + t R(u, v)
+    from the chart and the distance along the reflected ray R reverses orientation
+    (det [Q_u, Q_v, R] < 0). Near the mirror (t = 0) every image is direct, and a convex
+    mirror's caustic is virtual, so there none is flipped; where a fold of a non-convex
+    mirror crowds two images of one region, one of them is flipped. A reflected triangle
+    whose corners disagree joins two images across the fold: it is not drawn
+    (``glsl/iterative_mesh_vert.glsl``). ``position_u``, ``position_v`` (and their
+    normals) are the surface a chart step along each chart axis from ``position``."""
+    def reflected(at, n):
+        e = _to_eye(camera, perspective, at)
+        return 2.0 * dot(n, e)[:, None] * n - e
+
+    r = reflected(position, normal)
+    t = lengths(points - position)[:, None]
+    q_u = position_u - position + t * (reflected(position_u, normal_u) - r)
+    q_v = position_v - position + t * (reflected(position_v, normal_v) - r)
+    return dot(cross(q_u, q_v), r) < 0.0
+
+
 def _newton(chart: _Chart, view: View, rows: np.ndarray, start, accuracy_px: float):
     """Damped Newton from chart point ``start`` (2,) for the points ``rows``: converged
     (K,) bool, left (K,) bool (off the map or the chart), position, normal, half vector
     (K, 3) of the last sample, the map surface's outward normal there (from the last
-    Jacobian's samples, not unit) and the steps taken (K,)."""
+    Jacobian's samples, not unit), the steps taken (K,) and whether a converged image is
+    flipped (K,) (:func:`flipped_images`, from the last Jacobian's samples)."""
     k = len(rows)
     x = np.broadcast_to(np.asarray(start, dtype=np.float64), (k, 2)).copy()
     f, position, normal, half, ok = chart.evaluate(rows, x)
     face = np.zeros((k, 3))
+    flipped = np.zeros(k, dtype=bool)
     converged = np.zeros(k, dtype=bool)
     left = ~ok
     steps = np.zeros(k, np.int16)
@@ -191,8 +218,8 @@ def _newton(chart: _Chart, view: View, rows: np.ndarray, start, accuracy_px: flo
         if len(live) == 0:
             break
         r, xl, fl = rows[live], x[live], f[live]
-        fu, pu = chart.evaluate(r, xl + (DERIVATIVE_STEP, 0.0))[:2]
-        fv, pv = chart.evaluate(r, xl + (0.0, DERIVATIVE_STEP))[:2]
+        fu, pu, nu = chart.evaluate(r, xl + (DERIVATIVE_STEP, 0.0))[:3]
+        fv, pv, nv = chart.evaluate(r, xl + (0.0, DERIVATIVE_STEP))[:3]
         # The map surface's own normal (its facets', smoothed over a texel): the ray
         # from the eye must meet its front and the reflected ray leave it (as exact.py).
         facet = cross(pu - position[live], pv - position[live])
@@ -217,6 +244,8 @@ def _newton(chart: _Chart, view: View, rows: np.ndarray, start, accuracy_px: flo
             scale[trying] *= 0.5
         moved = lengths(new_p - position[live])
         tolerance = STOP_FRACTION * accuracy_px * view.pixel_size_at(new_p)
+        flipped[live] = flipped_images(chart.camera, chart.perspective, chart.points[r], position[live], normal[live],
+                                       pu, pv, nu, nv)
         x[live], f[live], position[live], normal[live], half[live] = new_x, new_f, new_p, new_n, new_h
         steps[live] = step + 1
         lost = ~new_ok | (lengths(new_x) > MAX_CHART)
@@ -224,7 +253,7 @@ def _newton(chart: _Chart, view: View, rows: np.ndarray, start, accuracy_px: flo
         left[live[lost]] = True
         converged[live[finished]] = True
         live = live[~(lost | finished)]
-    return converged, left, position, normal, half, face, steps
+    return converged, left, position, normal, half, face, steps, flipped
 
 
 def search_reflections(rmap: ReflectorMap, view: View, points, accuracy_px: float = 1.0,
@@ -238,6 +267,7 @@ def search_reflections(rmap: ReflectorMap, view: View, points, accuracy_px: floa
     n = len(points)
     status = np.full(n, NO_SURFACE, np.int8)
     iterations = np.zeros(n, np.int16)
+    flipped = np.zeros(n, dtype=bool)
     answer = np.full((n, 3), np.nan)
     camera, perspective = _camera(view)
     finite = np.isfinite(points).all(axis=1)
@@ -249,13 +279,13 @@ def search_reflections(rmap: ReflectorMap, view: View, points, accuracy_px: floa
     status[inside] = INSIDE
     active = np.flatnonzero(finite & ~inside)
     if len(active) == 0:
-        return SearchResult(answer, status, iterations)
+        return SearchResult(answer, status, iterations, flipped)
     pending = active
     if previous is not None:
         resumed = pending[np.isfinite(previous[pending]).all(axis=1)]
         axis = np.zeros((n, 3))
         axis[resumed] = normalized(previous[resumed] - rmap.centre)
-        converged, left, position, normal, half, face, steps = _newton(
+        converged, left, position, normal, half, face, steps, image_flipped = _newton(
             _Chart(rmap, camera, perspective, points, axis), view, resumed, (0.0, 0.0), accuracy_px)
         iterations[resumed] += steps
         verdict = np.full(len(resumed), NOT_CONVERGED, np.int8)
@@ -263,6 +293,7 @@ def search_reflections(rmap: ReflectorMap, view: View, points, accuracy_px: floa
                                     normal[converged], half[converged], face[converged])
         status[resumed[verdict == FOUND]] = FOUND
         answer[resumed[verdict == FOUND]] = position[verdict == FOUND]
+        flipped[resumed[verdict == FOUND]] = image_flipped[verdict == FOUND]
         pending = np.setdiff1d(pending, resumed[verdict == FOUND])
     guess = np.zeros((n, 3))
     guess[pending] = sphere_guess(rmap.centre, camera, perspective, points[pending], rmap.mean_radius)
@@ -271,7 +302,8 @@ def search_reflections(rmap: ReflectorMap, view: View, points, accuracy_px: floa
     for attempt, start in enumerate(RESTARTS[:1] if rmap.convex else RESTARTS):
         if len(pending) == 0:
             break
-        converged, left, position, normal, half, face, steps = _newton(chart, view, pending, start, accuracy_px)
+        converged, left, position, normal, half, face, steps, image_flipped = _newton(chart, view, pending, start,
+                                                                                      accuracy_px)
         iterations[pending] += steps
         verdict = np.where(left, NO_SURFACE, NOT_CONVERGED).astype(np.int8)
         verdict[converged] = _check(rmap, camera, perspective, points[pending[converged]], position[converged],
@@ -280,13 +312,15 @@ def search_reflections(rmap: ReflectorMap, view: View, points, accuracy_px: floa
         keep = (verdict == FOUND) | (attempt == 0)
         status[pending[keep]] = verdict[keep]
         answer[pending[verdict == FOUND]] = position[verdict == FOUND]
+        flipped[pending[verdict == FOUND]] = image_flipped[verdict == FOUND]
         pending = pending[verdict != FOUND]
     found = np.flatnonzero(status == FOUND)
     for occluder in occluders:
         blocked = found[_segment_blocked(occluder, answer[found], points[found], dense_near_start=False)]
         status[blocked] = OCCLUDED
         answer[blocked] = np.nan
-    return SearchResult(answer, status, iterations)
+        flipped[blocked] = False
+    return SearchResult(answer, status, iterations, flipped)
 
 
 def _check(rmap: ReflectorMap, camera, perspective: bool, points, position, normal, half, face) -> np.ndarray:
