@@ -100,7 +100,8 @@ ITERATIVE_ORDER_RANGE = 0.5
 #: that no view costs many times an ordinary one (the demo scenes trace 1-9 %).
 MAX_TRACED_FRACTION = 0.25
 #: A render traces the pixels of a searched mirror (the iterative search) that got no
-#: reflection within this many pixels of its silhouette or of a drawn reflection.
+#: reflection within this many pixels of its silhouette or, on a non-convex mirror or
+#: with other mirrors in the scene, of a drawn reflection.
 SEARCHED_BAND_PX = 2
 
 
@@ -418,12 +419,19 @@ class ReflectionRenderer:
             boundary = holes if boundary is None else boundary | holes
         pixels = band_trace.band_pixels(labels, drawn, radius, edges_of_drawn, boundary)
         if searched.any():
-            # The search reaches a mirror's silhouette, but there, and where a fold of a
-            # non-convex mirror crowds several images, vertices go unanswered and their
-            # triangles undrawn: the pixels without a reflection next to the silhouette or
-            # to a drawn reflection are traced (those farther from both show the world).
-            pixels = np.unique(np.concatenate([pixels, band_trace.band_pixels(
-                searched_labels, drawn, max(radius, SEARCHED_BAND_PX), edges_of_drawn=True)]), axis=0)
+            # The search reaches a mirror's silhouette, but vertices go unanswered there;
+            # on a non-convex mirror also where a fold crowds several images (and triangles
+            # across a fold are dropped), and with other mirrors where their reflection (a
+            # higher order) begins. The pixels without a reflection next to the
+            # silhouette, and in those two cases next to a drawn reflection, are traced
+            # (those farther from both show the world).
+            reach = max(radius, SEARCHED_BAND_PX)
+            folded = np.isin(np.rint(searched_labels) - 1, [
+                m.index for m in self.iterative.methods if not m.reflector_map.convex or len(self._reflectors) > 1])
+            pixels = np.unique(np.concatenate([
+                pixels, band_trace.band_pixels(searched_labels, drawn, reach),
+                band_trace.band_pixels(np.where(folded, searched_labels, 0.0), drawn, reach, edges_of_drawn=True)]),
+                axis=0)
         self.stats["untraced_pixels"] = 0
         if not len(holes_of) and len(pixels) > MAX_TRACED_FRACTION * targets.width * targets.height:
             # Not a band but most of the mirror (the near plane cutting it, the eye on it):
@@ -451,8 +459,8 @@ class ReflectionRenderer:
         the per-frame passes (iterative search, morphing grids) draw every reflector.
         With ``trace`` the band along each footprint's edge that the camera cannot reach
         (d pixels wide) is ray traced (:meth:`trace_band`; on a searched mirror, the pixels
-        without a reflection within :data:`SEARCHED_BAND_PX` of its silhouette or of a drawn
-        reflection), and with ``trace_gaps`` every
+        without a reflection within :data:`SEARCHED_BAND_PX` of its silhouette or, if it is
+        not convex or not alone, of a drawn reflection), and with ``trace_gaps`` every
         pixel of a mirror drawn from its grid that the blend left without a reflection
         (exact there, but tens of thousands of rays a frame: the sky's pixels too);
         without, it gets the composite's fill (``fill_radius``, ``None``: d). With

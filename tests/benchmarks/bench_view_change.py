@@ -470,8 +470,9 @@ def main(argv=None) -> int:
     bench_sbc.import_package()
     command = bench_draw.command_line("bench_view_change.py", argv)
     previous = args.out.read_text(encoding="utf-8") if args.out.exists() else "# Cost of a view change\n"
-    morph = morph_report(measure_morph_frames(args.width, args.height, args.vertices, args.frames,
-                                              args.orbit_degrees), command)
+    if not args.iterative_only:
+        morph = morph_report(measure_morph_frames(args.width, args.height, args.vertices, args.frames,
+                                                  args.orbit_degrees), command)
     if args.morph_only:
         return bench_draw.write_report(args.out, replace_section(previous, MORPH_HEADING, morph))
     rows = [measure_iterative(kind, args.width, args.height, args.vertices, args.frames, args.orbit_degrees)

@@ -223,16 +223,21 @@ def test_a_triangle_across_a_fold_is_not_drawn(gpu_ready):
     assert len(control) >= 15 and np.mean(np.array(control) > 0) >= 0.5, control
 
 
-def test_a_render_traces_the_searched_mirror_where_nothing_was_drawn_next_to_its_edges(gpu_ready):
+@pytest.mark.parametrize("make_reflector, folded", [(lambda: _bumpy(0.06), True),
+                                                    (lambda: icosphere((0.3, -0.2, 0.1), 1.0, 4), False)])
+def test_a_render_traces_the_searched_mirror_where_nothing_was_drawn_next_to_its_edges(gpu_ready, make_reflector,
+                                                                                       folded):
     """Render (not the viewport) traces the pixels of a searched mirror left without a
-    reflection within SEARCHED_BAND_PX of its silhouette or of a drawn reflection (the
-    search misses vertices there, and triangles across folds are dropped); nothing else."""
+    reflection within SEARCHED_BAND_PX of its silhouette (the search misses vertices
+    there) and, on a non-convex mirror, of a drawn reflection (triangles across folds are
+    dropped); nothing else."""
     from curved_reflections.addon.band_trace import band_pixels
     from curved_reflections.gpu_shaders.gpu_data import read_texture
     from curved_reflections.gpu_shaders.reflection_draw import SEARCHED_BAND_PX, ReflectionRenderer
 
-    reflector = _bumpy(0.06)
+    reflector = make_reflector()
     shape, bake = prepare_iterative(reflector, 64)
+    assert bake.reflector_map.convex != folded
     u, v = np.meshgrid(np.linspace(-4.0, 4.0, 41), np.linspace(-4.0, 4.0, 41))
     floor = np.c_[u.ravel(), v.ravel(), np.full(u.size, -1.3)]
     index = np.arange(41 * 41).reshape(41, 41)
@@ -249,7 +254,7 @@ def test_a_render_traces_the_searched_mirror_where_nothing_was_drawn_next_to_its
     drawn = read_texture(targets.reflection_colors, 160, 120)[..., 3] > 0.5
     traced = renderer.render(view, None, (0.2, 0.3, 0.9, 1.0))
     assert renderer.stats["traced_pixels"] > 0
-    expected = band_pixels(labels, drawn, SEARCHED_BAND_PX, edges_of_drawn=True)
+    expected = band_pixels(labels, drawn, SEARCHED_BAND_PX, edges_of_drawn=folded)
     assert renderer.stats["traced_pixels"] == len(expected)
     changed = np.argwhere(np.abs(traced - plain).max(axis=2) > 1e-6)[:, ::-1]
     assert len(changed) > 0
