@@ -35,6 +35,8 @@ from .ray_patch import RayPatchLeaves, invert_patches
 from .raymap import RayMap, first_pieces
 from .raytrace import ReflectorSet
 from .sbc_cells import FOLD_SAMPLES, FoldCells, MixedCells, rays_fold_at
+from .sbc_edges import (EDGE_REACH_CELLS, _complete, _complete_quads, _edge_seeds, _nearest_ray_seeds,
+                        _touches)
 from .segments import expand_ranges
 from .true_rays import polish_on_true_rays
 
@@ -53,9 +55,6 @@ CANDIDATE_CELLS = 3
 #: The same for the ray list of a banded camera leaf (bsp._depth_bands), whose cells are
 #: many and whose band lies where its rays cross, so several centre rays pass close.
 BAND_CANDIDATES = 8
-#: Camera answers up to this many cells past their leaf's rays, across a sharp edge of
-#: the mirror, are polished on the true rays (SampleBasedCamera._across_edge).
-EDGE_REACH_CELLS = 1.0
 #: Fold sub-cells tried per point, nearest central ray first.
 FOLD_CANDIDATES = 16
 
@@ -137,7 +136,7 @@ class SampleBasedCamera:
             # Answers across an edge were never checked against the rays' heads: the
             # reflected segment must reach the point past every reflector.
             check = np.flatnonzero(edge & keep)
-            if len(check):
+            if len(check) and len(self.histories[g]) == 1:  # a higher order's polish checked its last segment
                 offset = points[target[check]] - reflector_points[check]
                 length = _norm(offset)
                 keep[check] = ~self.true_rays.occluded(reflector_points[check], offset / length[:, None], length)
@@ -232,6 +231,17 @@ class SampleBasedCamera:
                 cells[seeded[reached]] = seed_cells[reached]
                 edge = np.concatenate([edge, seeded[reached]])
                 edge_distance = np.concatenate([edge_distance, seed_distance[reached]])
+        if edges and len(self.histories[g]) > 1:
+            # A higher order's footprint is small and its leaves' patches extrapolate
+            # poorly past it: a point no leaf answers is seeded by the footprint's last
+            # ring of rays (the one passing closest), and polished on the true rays.
+            rest = np.setdiff1d(np.flatnonzero(~accepted), edge)
+            seed_cells, seed_distance = _nearest_ray_seeds(self.ray_map, points[rest], self._edge_rays[g],
+                                                           self._ray_spacing[g])
+            reached = np.flatnonzero(np.isfinite(seed_distance))
+            cells[rest[reached]] = seed_cells[reached]
+            edge = np.concatenate([edge, rest[reached]])
+            edge_distance = np.concatenate([edge_distance, seed_distance[reached]])
         if self.owned is not None:
             # Next to a seam both sheets' leaves reach half a cell over it: the answer counts
             # in the sheet owning its cell only, so one image is not answered twice.
@@ -248,6 +258,13 @@ class SampleBasedCamera:
         points, cells, kind, target = points[found], cells[found], kind[found], point_index[found]
         mixed = None if self.mixed is None else self.mixed[g]
         hits, s, first_depth, spacing = _check_on_rays(self.ray_map, self._ray_table, grid, cells, points, mixed)
+        if edges and len(self.histories[g]) > 1 and not hits.all():
+            # A higher order's interpolated rays bend fast near a mirror's silhouette: an
+            # answer they refuse is tried again on the true rays, from where it is.
+            failed = np.flatnonzero(~hits)
+            pending.append((g, target[failed], self.ray_map.cell_pixels(cells[failed]),
+                            np.full((len(failed), 3), np.nan), np.full(len(failed), np.nan), kind[failed],
+                            np.zeros(len(failed)), np.ones(len(failed), dtype=bool)))
         pixels = self.ray_map.cell_pixels(cells[hits])
         origins, directions = self.ray_map.view.pixel_rays(pixels)
         target, kind = target[hits], kind[hits]
@@ -270,36 +287,53 @@ class SampleBasedCamera:
             return np.all((cells >= lo) & (cells < hi), axis=1)
 
     def _has_edges(self, g: int) -> bool:
-        """Whether tree ``g`` holds the first-order rays of some of its reflector's smooth
-        pieces only (``sbc_build.surface_sets``), so that its reflector goes on past its rays' edge."""
-        return (self.true_rays is not None and self.surfaces is not None and self.surfaces[g] is not None
-                and len(self.histories[g]) == 1)
+        """Whether tree ``g``'s answers may lie past its rays, and are then found on the
+        true rays: a first-order tree holding some of its reflector's smooth pieces only
+        (``sbc_build.surface_sets``: its reflector goes on past its rays' edge), or a
+        higher order (the last ring of its footprint's cells, where a ray leaves the path's
+        mirrors)."""
+        if self.true_rays is None:
+            return False
+        return len(self.histories[g]) > 1 or (self.surfaces is not None and self.surfaces[g] is not None)
 
     def _across_edge(self, g: int, cells, distance) -> np.ndarray:
         """Indices of leaf answers (``cells``, ray ``distance``) of tree ``g`` that lie just
-        across a sharp edge of its mirror: in front of the mirror, in a cell whose four
-        rays exist in the history but not all in the tree's surfaces (the ray map cannot
-        check them: the cell's rays straddle the edge).
+        past its rays, in front of the mirror: first order, in a cell whose four rays exist
+        in the history but not all in the tree's surfaces (the ray map cannot check them:
+        the cell's rays straddle a sharp edge of the mirror); higher order, in a cell of the
+        footprint's last ring (some of its four rays in the group, not all: the others
+        left the path's mirrors, at a silhouette of one of them).
 
         Between the last ray of one smooth piece and the first of the next, the tree's
-        cells end, yet the piece goes on up to the edge and reflects points there. The
-        leaf's model (a camera leaf's patch, a ray-list leaf's nearest cell patch),
-        extrapolated less than EDGE_REACH_CELLS past its rays, seeds the true-ray
-        polish, which keeps an image only on the tree's pieces (``polish_on_true_rays``).
+        cells end, yet the piece goes on up to the edge and reflects points there; a
+        higher-order footprint goes on up to where its path leaves a mirror, which is
+        between rays too (on two facing spheres, a fifth to a third of the second-order
+        images lie in that last ring at d = 2). The leaf's model (a camera leaf's patch, a
+        ray-list leaf's nearest cell patch), extrapolated less than EDGE_REACH_CELLS past
+        its rays, seeds the true-ray polish, which keeps an image only on the tree's pieces
+        and along its whole history (``polish_on_true_rays``).
         """
         with np.errstate(invalid="ignore"):
             near = np.flatnonzero(np.isfinite(cells).all(axis=1) & (distance >= 0))
+        if len(self.histories[g]) > 1:
+            return near[~_complete(self.grids[g], cells[near]) & _touches(self.grids[g], cells[near])]
         return near[_complete(self._history_grids[g], cells[near]) & ~_complete(self.grids[g], cells[near])]
 
     @functools.cached_property
     def _edge_rays(self) -> list:
         """Per tree, (R,) bool: its rays at a corner of a cell whose four rays exist in the
         history but not all in the tree (the rays along a sharp edge of its mirror,
-        ``_across_edge``); None for a tree without edges. Sheets of one set share theirs."""
+        ``_across_edge``), or for a higher order at a corner of its footprint's last ring;
+        None for a tree without edges. Sheets of one set share theirs."""
         masks = {}
         for g, (grid, history) in enumerate(zip(self.grids, self._history_grids)):
             if self._has_edges(g) and id(grid) not in masks:
-                edge = _complete_quads(history) & ~_complete_quads(grid)
+                if len(self.histories[g]) > 1:  # the last ring of the footprint
+                    present = grid >= 0
+                    edge = (present[:-1, :-1] | present[:-1, 1:] | present[1:, :-1] | present[1:, 1:]) & ~_complete_quads(
+                        grid)
+                else:
+                    edge = _complete_quads(history) & ~_complete_quads(grid)
                 corner = np.zeros(grid.shape, dtype=bool)
                 for dj in (0, 1):
                     for di in (0, 1):
@@ -343,7 +377,7 @@ class SampleBasedCamera:
         keep = np.ones(len(pixels), dtype=bool)
         if len(risky):
             pixels[risky], reflector_points[risky], s[risky], ok = polish_on_true_rays(
-                self.true_rays, self.ray_map.view, self.histories[g][0], pixels[risky], points[risky],
+                self.true_rays, self.ray_map.view, self.histories[g], pixels[risky], points[risky],
                 self.ray_map.downsample, spacing[risky] / self.ray_map.downsample,
                 first_pieces(self.ray_map, self.grids[g]) if self.surfaces and self.surfaces[g] else None)
             keep[risky[~ok]] = False
@@ -373,54 +407,6 @@ class SampleBasedCamera:
         """(R, 8) rows tail, direction, head distance, first-hit depth: one gather per corner."""
         m = self.ray_map
         return np.concatenate([m.tail, m.direction, m.head_distance[:, None], m.first_depth[:, None]], axis=1)
-
-
-def _complete_quads(grid: np.ndarray) -> np.ndarray:
-    """(rows - 1, columns - 1) whether the four rays at the corners of each unit cell exist in ``grid``."""
-    present = grid >= 0
-    return present[:-1, :-1] & present[:-1, 1:] & present[1:, :-1] & present[1:, 1:]
-
-
-def _edge_seeds(ray_map: RayMap, tree: BSPTree, row, points, edge_rays: np.ndarray, spacing):
-    """Seeds for images near a sharp edge, on ray-list rows ``row`` (P,) whose cells
-    neither hold the point nor reach it across the edge: per point, the row's ray along
-    the edge (``edge_rays``) whose line passes closest to it, relative to how far the
-    neighbouring rays pass there (``spacing``: per ray, (tail, direction) of
-    ``bsp.neighbour_spacing``; within EDGE_REACH_CELLS of them). Returns (ray-map
-    cells (P, 2), distance along the ray (P,)), NaN where no such ray passes near.
-
-    A ray-list leaf one ray wide along the edge has no complete cell, and next to where
-    three pieces meet a point's image may lie in the cells of another leaf than the one
-    it descends to; the true-ray polish starts at the ray.
-    """
-    start, stop = tree.list_ray_start[row], tree.list_ray_start[row + 1]
-    pair_point, pair_ray = expand_ranges(start, stop - start)
-    ray = tree.list_rays[pair_ray]
-    on_edge = edge_rays[ray]
-    pair_point, ray = pair_point[on_edge], ray[on_edge]
-    offset = points[pair_point] - ray_map.tail[ray]
-    along = np.einsum("ij,ij->i", offset, ray_map.direction[ray])
-    miss = np.sqrt(np.maximum(np.einsum("ij,ij->i", offset, offset) - along * along, 0.0))
-    tail_step, direction_step = spacing[0][ray], spacing[1][ray]
-    ratio = miss / np.maximum(EDGE_REACH_CELLS * (tail_step + np.maximum(along, 0.0) * direction_step), 1e-300)
-    near = np.flatnonzero((along >= 0) & (ratio <= 1.0))
-    order = near[np.lexsort((ratio[near], pair_point[near]))]
-    first = order[np.concatenate([[True], pair_point[order][1:] != pair_point[order][:-1]])] if len(order) else order
-    cells = np.full((len(points), 2), np.nan)
-    distance = np.full(len(points), np.nan)
-    cells[pair_point[first]] = ray_map.cell[ray[first]]
-    distance[pair_point[first]] = along[first]
-    return cells, distance
-
-
-def _complete(grid: np.ndarray, cells: np.ndarray) -> np.ndarray:
-    """Whether the four rays around each fractional cell exist in ``grid``."""
-    base = np.floor(cells).astype(np.int64)
-    rows, columns = grid.shape
-    i, j = base[:, 0], base[:, 1]
-    inside = (i >= 0) & (j >= 0) & (i + 1 < columns) & (j + 1 < rows)
-    i, j = np.where(inside, i, 0), np.where(inside, j, 0)
-    return inside & (grid[j, i] >= 0) & (grid[j, i + 1] >= 0) & (grid[j + 1, i] >= 0) & (grid[j + 1, i + 1] >= 0)
 
 
 def descend_tree(tree: BSPTree, points: np.ndarray) -> np.ndarray:

@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""First-order images polished on the true reflected rays of the reflector mesh.
+"""Images polished on the true reflected rays of the reflector mesh.
 
 A sample-based camera answers from rays traced at ray-map resolution and interpolated in
 between (SBC paper, Popescu, Sacks, Mei 2006, sections III-IV). Where the reflected ray
@@ -20,7 +20,9 @@ edge. An image is kept where the iteration converges to a ray that meets the gro
 reflector, reflects off its front and reaches p ahead of the mirror, within
 :data:`MAX_SHIFT_CELLS` ray-map cells of where it started; it then carries the exact
 first reflector point x and distance s. A point whose answer does not converge has no
-image in that group (as a point that no ray reaches has none).
+image in that group (as a point that no ray reaches has none). A higher-order image is
+polished the same way along its whole path: the view ray bounces off each reflector of
+the history in turn, and the last reflected ray must pass the point unblocked.
 
 Only the first and the last ray of an image are traced through the BVH; the iterations
 in between intersect the ring of triangles around the previous hit
@@ -39,7 +41,10 @@ from .raytrace import ReflectorSet, reflect, reflection_valid
 from .view import View
 
 #: Gauss-Newton iterations at most (each traces three rays per unconverged image).
-ITERATIONS = 6
+ITERATIONS = 10
+#: A step whose ray leaves the path (off the mirror, or past a silhouette of a
+#: later mirror in the history) is halved at most this many times, from where it started.
+HALVINGS = 3
 #: Finite-difference step of the Jacobian, desired-view pixels.
 STEP_PX = 0.25
 #: A step shorter than this (pixels) ends an image's iteration: converged.
@@ -52,34 +57,51 @@ MAX_STEP_PX = 4.0
 MAX_SHIFT_CELLS = 12.0
 
 
-def _true_residual(reflector_set: ReflectorSet, view: View, reflector: int, pixels, points, near=None,
-                   pieces=None):
+def _history(reflector) -> tuple:
+    """A reflection history: the reflectors a path meets in order (an int: first order)."""
+    return (int(reflector),) if np.ndim(reflector) == 0 else tuple(int(r) for r in reflector)
+
+
+def _true_residual(reflector_set: ReflectorSet, view: View, reflector, pixels, points, near=None, pieces=None):
     """Per pixel: (P, 3) offset of the point from the true reflected ray (perpendicular
-    part), the first reflector point, the distance along the reflected ray, whether the
-    ray is a valid first-order reflection off ``reflector`` (on one of its smooth
-    ``pieces``, if given) reaching the point, and the triangle it hits. With ``near``
-    (P,) triangles, the view ray is intersected with their rings only
-    (``ReflectorSet.intersect_near``), else with the whole mesh."""
+    part), the first reflector point, the distance along the last reflected ray, whether
+    the ray is a valid reflection path through the history ``reflector`` (an index, or
+    the tuple of a higher order: each bounce off the next reflector, off its front; the
+    first on one of its smooth ``pieces``, if given) reaching the point, and the triangle
+    the view ray hits. With ``near`` (P,) triangles, the view ray is intersected with
+    their rings only (``ReflectorSet.intersect_near``), else with the whole mesh."""
+    history = _history(reflector)
     origins, directions = view.pixel_rays(pixels)
     hits = (reflector_set.intersect(origins, directions) if near is None
             else reflector_set.intersect_near(origins, directions, near))
-    normal = np.where(hits.hit[:, None], hits.normal, 0.0)
-    reflected = reflect(directions, normal)
-    offset = points - hits.position
-    distance = np.einsum("ij,ij->i", offset, reflected)
-    residual = offset - distance[:, None] * reflected
-    valid = (hits.hit & (hits.reflector == reflector)
-             & reflection_valid(directions, normal, np.where(hits.hit[:, None], hits.face_normal, 0.0))
-             & (distance > 0))
-    if pieces is not None:
-        valid &= np.isin(reflector_set.piece[np.maximum(hits.triangle, 0)], pieces)
-    return np.nan_to_num(residual), hits.position, distance, valid, hits.triangle
+    first, triangle = hits.position, hits.triangle
+    valid = np.ones(len(origins), dtype=bool)
+    for bounce, mirror in enumerate(history):
+        if bounce:
+            hits = reflector_set.intersect(origins, directions, source_triangles=hits.triangle)
+        normal = np.where(hits.hit[:, None], hits.normal, 0.0)
+        valid &= (hits.hit & (hits.reflector == mirror)
+                  & reflection_valid(directions, normal, np.where(hits.hit[:, None], hits.face_normal, 0.0)))
+        if bounce == 0 and pieces is not None:
+            valid &= np.isin(reflector_set.piece[np.maximum(hits.triangle, 0)], pieces)
+        origins, directions = np.where(valid[:, None], hits.position, origins), reflect(directions, normal)
+        last = hits.triangle
+    offset = points - origins
+    distance = np.einsum("ij,ij->i", offset, directions)
+    residual = offset - distance[:, None] * directions
+    valid &= distance > 0
+    if len(history) > 1 and near is None and valid.any():
+        # The last segment may pass another part of the mirrors on its way to the point.
+        check = np.flatnonzero(valid)
+        valid[check] = ~reflector_set.occluded(origins[check], directions[check], distance[check], last[check])
+    return np.nan_to_num(residual), first, distance, valid, triangle
 
 
-def polish_on_true_rays(reflector_set: ReflectorSet, view: View, reflector: int, pixels: np.ndarray,
+def polish_on_true_rays(reflector_set: ReflectorSet, view: View, reflector, pixels: np.ndarray,
                         points: np.ndarray, cell_px: float, spacing_px: np.ndarray | None = None,
                         pieces: np.ndarray | None = None):
-    """Polish first-order images of ``points`` in ``reflector`` starting at ``pixels``.
+    """Polish images of ``points`` in ``reflector`` starting at ``pixels``: first-order
+    images for a reflector index, or of a higher order for a history (a tuple of indices).
 
     Returns (pixels (P, 2), first reflector points (P, 3), distances along the reflected
     ray (P,), ok (P,)); rows not ok are left as given. ``cell_px`` is the ray map's cell
@@ -103,6 +125,8 @@ def polish_on_true_rays(reflector_set: ReflectorSet, view: View, reflector: int,
     if spacing_px is not None:
         converged = valid & (np.linalg.norm(f, axis=1) < RESIDUAL_PX * np.asarray(spacing_px))
     active = np.flatnonzero(~converged)
+    last_step = np.zeros((n, 2))
+    halvings = np.zeros(n, dtype=np.int64)
     for _ in range(ITERATIONS):
         if len(active) == 0:
             break
@@ -134,12 +158,20 @@ def polish_on_true_rays(reflector_set: ReflectorSet, view: View, reflector: int,
         length = np.linalg.norm(step, axis=1)
         step *= np.minimum(1.0, MAX_STEP_PX / np.maximum(length, 1e-300))[:, None]
         polished[active] = q - np.where(usable[:, None], step, 0.0)
+        # A step that left the path is halved instead (near a silhouette the path bends
+        # fast: on two facing spheres half the seeds of second-order images needed it).
+        lost = ~reflects & (halvings[active] < HALVINGS) & last_step[active].any(axis=1)
+        back_off = active[lost]
+        last_step[back_off] *= 0.5
+        polished[back_off] = q[lost] + last_step[back_off]
+        halvings[back_off] += 1
+        last_step[active[usable]], halvings[active[usable]] = step[usable], 0
         # Converged on a root, not on the closest approach of rays that miss the point.
         limit = RESIDUAL_PX * np.sqrt(np.minimum(a, c))
         done = usable & (length < CONVERGED_PX) & (np.linalg.norm(f, axis=1) < limit)
         converged[active[done]] = True
         tolerance[active[done]] = limit[done]
-        active = active[usable & ~done]
+        active = active[(usable & ~done) | lost]
     moved = np.flatnonzero(np.any(polished != pixels, axis=1))
     f, position[moved], distance[moved], valid[moved], _ = _true_residual(reflector_set, view, reflector,
                                                                           polished[moved], points[moved],
