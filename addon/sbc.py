@@ -130,6 +130,18 @@ class SampleBasedCamera:
             target, pixels, reflector_points, s, kind, spacing, edge = (
                 np.concatenate(column) for column in zip(*(entry[1:] for entry in pending if entry[0] == g)))
             keep = self._polish(g, np.arange(len(target)), pixels, reflector_points, s, points[target], spacing)
+            if len(self.histories[g]) > 1:
+                # A higher order's answer that did not polish from where it was found (a
+                # leaf's patch extrapolated, or refused by the ray checks) starts again
+                # from the footprint's last ring.
+                retry = np.flatnonzero(edge & ~keep)
+                seed_cells, seed_distance = _nearest_ray_seeds(self.ray_map, points[target[retry]],
+                                                               self._edge_rays[g], self._ray_spacing[g])
+                seeds = self.ray_map.cell_pixels(seed_cells)
+                fresh = np.isfinite(seed_distance) & (np.abs(seeds - pixels[retry]).max(axis=1) > 0.5)
+                again = retry[fresh]
+                pixels[again], s[again] = seeds[fresh], seed_distance[fresh]
+                keep[again] = self._polish(g, again, pixels, reflector_points, s, points[target], spacing)[again]
             if self.owned is not None:
                 # Polished from a seed, an image across an edge may come to rest in another sheet's cells.
                 keep[edge] &= self._owns(g, pixels[edge] / self.ray_map.downsample - 0.5)
