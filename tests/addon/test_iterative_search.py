@@ -173,6 +173,17 @@ def test_degenerate_points_and_views():
     assert result.found.mean() > 0.5 and np.isfinite(result.reflector_points[result.found]).all()
 
 
+def test_a_mirror_seen_nearly_edge_on_from_every_centre_is_left_to_the_camera():
+    """Deep bumps (amplitude 0.3) are still met once by every ray from the centre, but
+    their flanks are seen nearly edge-on (the map's radius too steep for its texels and
+    for the search, as on fused metaballs): not star-shaped enough, with the cosine in
+    the reason; shallower ones stay searched."""
+    deep = check_star_shaped(_bumpy(0.3, 4))
+    assert not deep.star_shaped and deep.crossings == 0 and deep.hidden_share == 0
+    assert "nearly edge-on" in deep.reason and f"{deep.min_cosine:.2f}" in deep.reason
+    assert check_star_shaped(_bumpy(0.15, 4)).star_shaped
+
+
 def test_an_open_mirror_is_not_star_shaped():
     """The Chen-Arvo vase, open at both ends: seen whole from its axis, but its inner side
     shows through the openings and has no place in a map of one radius per direction."""
