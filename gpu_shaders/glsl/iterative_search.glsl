@@ -259,7 +259,7 @@ int newton(vec2 x, inout int steps, out vec3 p)
     float current = length(f);
     float scale = 1.0;
     vec3 previous = p;
-    bool previous_flipped = flipped_image(p, n, pu, pv, nu, nv);
+    vec3 previous_n = n;
     bool valid = false;
     for (int k = 0; k <= HALVINGS; k++) {
       valid = evaluate(x + scale * delta, ft, pt, nt, ht);
@@ -278,7 +278,7 @@ int newton(vec2 x, inout int steps, out vec3 p)
       return NO_SURFACE;
     }
     if (length(p - previous) < pixel_tolerance(p)) {
-      flipped = previous_flipped;
+      flipped = flipped_image(previous, previous_n, pu, pv, nu, nv);  /* read only once converged */
       return check(p, n, h, face);
     }
   }

@@ -244,12 +244,14 @@ def _newton(chart: _Chart, view: View, rows: np.ndarray, start, accuracy_px: flo
             scale[trying] *= 0.5
         moved = lengths(new_p - position[live])
         tolerance = STOP_FRACTION * accuracy_px * view.pixel_size_at(new_p)
-        flipped[live] = flipped_images(chart.camera, chart.perspective, chart.points[r], position[live], normal[live],
-                                       pu, pv, nu, nv)
-        x[live], f[live], position[live], normal[live], half[live] = new_x, new_f, new_p, new_n, new_h
-        steps[live] = step + 1
         lost = ~new_ok | (lengths(new_x) > MAX_CHART)
         finished = ~lost & (moved < tolerance)
+        # Only a converged answer's parity is read: from this step's samples, before they move.
+        done = live[finished]
+        flipped[done] = flipped_images(chart.camera, chart.perspective, chart.points[r[finished]], position[done],
+                                       normal[done], pu[finished], pv[finished], nu[finished], nv[finished])
+        x[live], f[live], position[live], normal[live], half[live] = new_x, new_f, new_p, new_n, new_h
+        steps[live] = step + 1
         left[live[lost]] = True
         converged[live[finished]] = True
         live = live[~(lost | finished)]
