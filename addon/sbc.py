@@ -35,8 +35,8 @@ from .ray_patch import RayPatchLeaves, invert_patches
 from .raymap import RayMap, first_pieces
 from .raytrace import ReflectorSet
 from .sbc_cells import FOLD_SAMPLES, FoldCells, MixedCells, rays_fold_at
-from .sbc_edges import (EDGE_REACH_CELLS, _complete, _complete_quads, _edge_seeds, _nearest_ray_seeds,
-                        _touches)
+from .sbc_edges import (EDGE_REACH_CELLS, complete, complete_quads, edge_seeds, nearest_ray_seeds,
+                        touches)
 from .segments import expand_ranges
 from .true_rays import polish_on_true_rays
 
@@ -135,7 +135,7 @@ class SampleBasedCamera:
                 # leaf's patch extrapolated, or refused by the ray checks) starts again
                 # from the footprint's last ring.
                 retry = np.flatnonzero(edge & ~keep)
-                seed_cells, seed_distance = _nearest_ray_seeds(self.ray_map, points[target[retry]],
+                seed_cells, seed_distance = nearest_ray_seeds(self.ray_map, points[target[retry]],
                                                                self._edge_rays[g], self._ray_spacing[g])
                 seeds = self.ray_map.cell_pixels(seed_cells)
                 fresh = np.isfinite(seed_distance) & (np.abs(seeds - pixels[retry]).max(axis=1) > 0.5)
@@ -237,7 +237,7 @@ class SampleBasedCamera:
             if len(seeded) and tree.list_rays is not None:
                 # No cell of the ray list holds the point, nor reaches it across the edge:
                 # its rays along the edge seed it.
-                seed_cells, seed_distance = _edge_seeds(self.ray_map, tree, row[seeded], points[seeded],
+                seed_cells, seed_distance = edge_seeds(self.ray_map, tree, row[seeded], points[seeded],
                                                         self._edge_rays[g], self._ray_spacing[g])
                 reached = np.flatnonzero(np.isfinite(seed_distance))
                 cells[seeded[reached]] = seed_cells[reached]
@@ -248,7 +248,7 @@ class SampleBasedCamera:
             # poorly past it: a point no leaf answers is seeded by the footprint's last
             # ring of rays (the one passing closest), and polished on the true rays.
             rest = np.setdiff1d(np.flatnonzero(~accepted), edge)
-            seed_cells, seed_distance = _nearest_ray_seeds(self.ray_map, points[rest], self._edge_rays[g],
+            seed_cells, seed_distance = nearest_ray_seeds(self.ray_map, points[rest], self._edge_rays[g],
                                                            self._ray_spacing[g])
             reached = np.flatnonzero(np.isfinite(seed_distance))
             cells[rest[reached]] = seed_cells[reached]
@@ -328,8 +328,8 @@ class SampleBasedCamera:
         with np.errstate(invalid="ignore"):
             near = np.flatnonzero(np.isfinite(cells).all(axis=1) & (distance >= 0))
         if len(self.histories[g]) > 1:
-            return near[~_complete(self.grids[g], cells[near]) & _touches(self.grids[g], cells[near])]
-        return near[_complete(self._history_grids[g], cells[near]) & ~_complete(self.grids[g], cells[near])]
+            return near[~complete(self.grids[g], cells[near]) & touches(self.grids[g], cells[near])]
+        return near[complete(self._history_grids[g], cells[near]) & ~complete(self.grids[g], cells[near])]
 
     @functools.cached_property
     def _edge_rays(self) -> list:
@@ -342,10 +342,10 @@ class SampleBasedCamera:
             if self._has_edges(g) and id(grid) not in masks:
                 if len(self.histories[g]) > 1:  # the last ring of the footprint
                     present = grid >= 0
-                    edge = (present[:-1, :-1] | present[:-1, 1:] | present[1:, :-1] | present[1:, 1:]) & ~_complete_quads(
+                    edge = (present[:-1, :-1] | present[:-1, 1:] | present[1:, :-1] | present[1:, 1:]) & ~complete_quads(
                         grid)
                 else:
-                    edge = _complete_quads(history) & ~_complete_quads(grid)
+                    edge = complete_quads(history) & ~complete_quads(grid)
                 corner = np.zeros(grid.shape, dtype=bool)
                 for dj in (0, 1):
                     for di in (0, 1):
@@ -593,9 +593,9 @@ def _check_on_rays(ray_map: RayMap, table: np.ndarray, grid: np.ndarray, cells: 
     flat = grid.reshape(-1)
     first = j0[keep] * columns + i0[keep]
     corners = [flat[first], flat[first + 1], flat[first + columns], flat[first + columns + 1]]
-    complete = np.flatnonzero((corners[0] >= 0) & (corners[1] >= 0) & (corners[2] >= 0) & (corners[3] >= 0))
-    keep = keep[complete]
-    corners = [c[complete] for c in corners]
+    four = np.flatnonzero((corners[0] >= 0) & (corners[1] >= 0) & (corners[2] >= 0) & (corners[3] >= 0))
+    keep = keep[four]
+    corners = [c[four] for c in corners]
     frac = cells[keep] - base[keep]
     fu, fv = frac[:, 0:1], frac[:, 1:2]
     rays = [table[c] for c in corners]
@@ -605,7 +605,7 @@ def _check_on_rays(ray_map: RayMap, table: np.ndarray, grid: np.ndarray, cells: 
     blocked = ray_map.blocked
     blocked = blocked[corners[0]] | blocked[corners[1]] | blocked[corners[2]] | blocked[corners[3]]
     if mixed_cells is not None and len(mixed_cells.heads):
-        row = mixed_cells.index.reshape(-1)[first[complete]]
+        row = mixed_cells.index.reshape(-1)[first[four]]
         in_mixed = np.flatnonzero(row >= 0)
         if len(in_mixed):
             m = mixed_cells.heads.shape[1]

@@ -19,13 +19,13 @@ from .segments import expand_ranges
 EDGE_REACH_CELLS = 1.0
 
 
-def _complete_quads(grid: np.ndarray) -> np.ndarray:
+def complete_quads(grid: np.ndarray) -> np.ndarray:
     """(rows - 1, columns - 1) whether the four rays at the corners of each unit cell exist in ``grid``."""
     present = grid >= 0
     return present[:-1, :-1] & present[:-1, 1:] & present[1:, :-1] & present[1:, 1:]
 
 
-def _edge_seeds(ray_map: RayMap, tree: BSPTree, row, points, edge_rays: np.ndarray, spacing):
+def edge_seeds(ray_map: RayMap, tree: BSPTree, row, points, edge_rays: np.ndarray, spacing):
     """Seeds for images near a sharp edge, on ray-list rows ``row`` (P,) whose cells
     neither hold the point nor reach it across the edge: per point, the row's ray along
     the edge (``edge_rays``) whose line passes closest to it (:func:`_closest_rays`).
@@ -49,8 +49,8 @@ SEED_REACH = 3.0
 SEED_PAIRS = 1 << 22
 
 
-def _nearest_ray_seeds(ray_map: RayMap, points, edge_rays: np.ndarray, spacing):
-    """As :func:`_edge_seeds`, over every ray of ``edge_rays`` (a higher order's last ring
+def nearest_ray_seeds(ray_map: RayMap, points, edge_rays: np.ndarray, spacing):
+    """As :func:`edge_seeds`, over every ray of ``edge_rays`` (a higher order's last ring
     of footprint rays, a few hundred) for each of ``points``, in batches."""
     rays = np.flatnonzero(edge_rays)
     cells = np.full((len(points), 2), np.nan)
@@ -100,11 +100,11 @@ def _corners(grid: np.ndarray, cells: np.ndarray) -> np.ndarray:
     return present
 
 
-def _complete(grid: np.ndarray, cells: np.ndarray) -> np.ndarray:
+def complete(grid: np.ndarray, cells: np.ndarray) -> np.ndarray:
     """Whether the four rays around each fractional cell exist in ``grid``."""
     return _corners(grid, cells).all(axis=1)
 
 
-def _touches(grid: np.ndarray, cells: np.ndarray) -> np.ndarray:
+def touches(grid: np.ndarray, cells: np.ndarray) -> np.ndarray:
     """Whether some of the four rays around each fractional cell exist in ``grid``."""
     return _corners(grid, cells).any(axis=1)

@@ -551,13 +551,13 @@ def test_images_just_across_a_sharp_edge_are_found_on_the_true_rays_once(teapot_
     camera answers extrapolated there are polished on the true rays of their own piece
     (SampleBasedCamera._across_edge): images in those cells are found, within a pixel,
     and no image is answered by two trees."""
-    from curved_reflections.addon.sbc_edges import _complete
+    from curved_reflections.addon.sbc_edges import complete
 
     reflectors, view, bounds, points, exact, sbc = teapot_case
     projection = sbc.project(points)
     cells = exact.pixel / sbc.ray_map.downsample - 0.5
     history = sbc.ray_map.group_grid(0)
-    straddling = _complete(history, cells) & ~np.any([_complete(grid, cells) for grid in sbc.grids], axis=0)
+    straddling = complete(history, cells) & ~np.any([complete(grid, cells) for grid in sbc.grids], axis=0)
     assert straddling.sum() >= 10
     found = np.zeros(len(exact.point), dtype=bool)
     for g in range(len(sbc.trees)):
@@ -568,7 +568,7 @@ def test_images_just_across_a_sharp_edge_are_found_on_the_true_rays_once(teapot_
     unpolished = sbc.project(points, polish=False)
     for g, grid in enumerate(sbc.grids):
         answered = unpolished.pixels[g, unpolished.valid[g]] / sbc.ray_map.downsample - 0.5
-        assert _complete(grid, answered).all()
+        assert complete(grid, answered).all()
     # One image, one answer: no trees of two pieces answer a point within a pixel of each other.
     g, p = np.nonzero(projection.valid)
     order = np.lexsort((g, p))
@@ -584,10 +584,10 @@ def _points_seen_across_edges(sbc, reflectors, count, rng):
     not all in any tree): a view ray through a random spot of such a cell, reflected
     off the mirror, carries the point 0.3 to 3 units out."""
     from curved_reflections.addon.raytrace import reflect
-    from curved_reflections.addon.sbc_edges import _complete_quads
+    from curved_reflections.addon.sbc_edges import complete_quads
 
     ray_map = sbc.ray_map
-    straddling = _complete_quads(ray_map.group_grid(0)) & ~np.any([_complete_quads(g) for g in sbc.grids], axis=0)
+    straddling = complete_quads(ray_map.group_grid(0)) & ~np.any([complete_quads(g) for g in sbc.grids], axis=0)
     j, i = np.nonzero(straddling)
     pick = rng.integers(0, len(i), count)
     cells = np.stack([i[pick], j[pick]], axis=1) + rng.uniform(0.05, 0.95, (count, 2))
@@ -602,7 +602,7 @@ def test_ray_lists_along_an_edge_seed_the_images_across_it(monkeypatch):
     """Along a sharp edge the BSP ends in ray-list leaves, some one ray wide with no
     complete cell, so no cell patch holds, or extrapolates to, a point reflected between
     their rays and the edge: the leaf's ray along the edge passing closest seeds the
-    true-ray polish (sbc._edge_seeds). On points reflected just across the teapot's
+    true-ray polish (sbc_edges.edge_seeds). On points reflected just across the teapot's
     edges, the seeds find images that are otherwise lost, every one an exact image
     within a pixel, and change no other answer."""
     from curved_reflections.addon import sbc as sbc_module
@@ -629,7 +629,7 @@ def test_ray_lists_along_an_edge_seed_the_images_across_it(monkeypatch):
     exact = solve_reflections(ReflectorSet(reflectors), view, points)
     exact = exact.select(exact.visible)
     seeded = sbc.project(points)
-    monkeypatch.setattr(sbc_module, "_edge_seeds", lambda ray_map, tree, row, points, edge_rays, spacing: (
+    monkeypatch.setattr(sbc_module, "edge_seeds", lambda ray_map, tree, row, points, edge_rays, spacing: (
         np.full((len(points), 2), np.nan), np.full(len(points), np.nan)))
     unseeded = sbc.project(points)
     added = seeded.valid & ~unseeded.valid
