@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 #: ``Projection.leaf_kind`` values: how an answer was found.
-NOT_PROJECTED, CAMERA_LEAF_ANSWER, RAY_LIST_ANSWER, SEARCH_ANSWER = 0, 1, 2, 3
+NOT_PROJECTED, CAMERA_LEAF_ANSWER, RAY_LIST_ANSWER, SEARCH_ANSWER, PERTURBATION_ANSWER = 0, 1, 2, 3, 4
 
 
 @dataclass(frozen=True)
@@ -28,6 +28,6 @@ class Projection:
     groups: list  # G reflection histories, tuples of reflector indices
     reflector_points: np.ndarray  # (G, P, 3) first reflector point, NaN where not projected
     valid: np.ndarray  # (G, P) bool
-    leaf_kind: np.ndarray  # (G, P) int8: NOT_PROJECTED, CAMERA_LEAF_ANSWER, RAY_LIST_ANSWER, SEARCH_ANSWER
+    leaf_kind: np.ndarray  # (G, P) int8: NOT_PROJECTED ... PERTURBATION_ANSWER
     pixels: np.ndarray  # (G, P, 2) desired-view pixel of the reflection, NaN where not projected
     ray_distance: np.ndarray  # (G, P) distance from the last reflector point along the ray

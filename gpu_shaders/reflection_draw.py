@@ -87,6 +87,7 @@ from .draw_geometry import prepare_geometry
 from .gpu_data import data_texture, read_texture, saved_state, vertex_buffer
 from .iterative_draw import IterativePass
 from .morph_pass import DEFAULT_BUDGET_MB, MorphPass
+from .perturbation_pass import PerturbationPass
 from .reflected_meshes import ReflectedMeshes
 from .sbc_triangles import MIXED_SUBDIVISIONS, CachedProjection, CameraProjections, _same_view
 
@@ -179,7 +180,8 @@ class ReflectionRenderer:
     def __init__(self, reflectors, meshes, reflector_colors=None, reflectivity=None,
                  edge_fraction: float | None = subdivision.EDGE_FRACTION, *, fresnel_f0=None,
                  attenuation_distance=None, mixed_subdivisions: int = MIXED_SUBDIVISIONS, cull: bool = True,
-                 polish: bool = True, iterative=(), morph=(), morph_budget_mb: float = DEFAULT_BUDGET_MB):
+                 polish: bool = True, iterative=(), morph=(), morph_budget_mb: float = DEFAULT_BUDGET_MB,
+                 perturbation=(), perturbation_accuracy_px: float = 0.5):
         self.geometry = prepare_geometry(reflectors, meshes, reflector_colors, reflectivity, edge_fraction,
                                          fresnel_f0, attenuation_distance)
         #: The diffuse meshes on the GPU, placed by the per-frame passes' answers.
@@ -189,6 +191,9 @@ class ReflectionRenderer:
         self.iterative = IterativePass(self.geometry, iterative, self.meshes)
         #: The reflectors drawn from their morphing grids every frame (views inside a grid).
         self.morph = MorphPass(self.geometry, morph, self.meshes, morph_budget_mb)
+        #: The reflectors drawn by perturbation (Chen & Arvo 2000), projected per new view.
+        self.perturbation = PerturbationPass(self.geometry, reflectors, perturbation, self.meshes,
+                                             perturbation_accuracy_px)
         self.stats = dict(self.geometry.stats)
         self.counts = {"projections": 0, "frames": 0}
         #: The sample-based cameras' reflected triangles, made once per camera.
@@ -233,7 +238,7 @@ class ReflectionRenderer:
     def per_frame_reflectors(self, view) -> frozenset:
         """The reflectors whose first-order reflections of ``view`` the per-frame passes
         draw: the searched ones, and those whose grid covers the view."""
-        return frozenset(self.iterative.reflector_indices) | frozenset(
+        return frozenset(self.iterative.reflector_indices) | frozenset(self.perturbation.reflector_indices) | frozenset(
             self.morph.grids[k][0].reflector_index for k, _ in self.morph.covering(view))
 
     def invalidate(self) -> None:
@@ -312,7 +317,8 @@ class ReflectionRenderer:
             # A grid's reflector is blended here unless the camera's projection draws it.
             self.morph.blend(view, skip=set() if cached is None else
                              set(self.morph.reflector_indices) - cached.per_frame)
-            answers = self.iterative.answers() + self.morph.answers()
+            self.perturbation.project(view)
+            answers = self.iterative.answers() + self.morph.answers() + self.perturbation.answers()
             with targets.reflection.bind():
                 gpu.state.viewport_set(0, 0, width, height)
                 targets.reflection.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
@@ -402,7 +408,7 @@ class ReflectionRenderer:
         if self._tracer is None:
             self._tracer = band_trace.BandTracer(self._reflectors, self._meshes)
         labels = read_texture(targets.prepass_labels, targets.width, targets.height)[..., 0]
-        searched = np.isin(np.rint(labels) - 1, self.iterative.reflector_indices)
+        searched = np.isin(np.rint(labels) - 1, self.iterative.reflector_indices + self.perturbation.reflector_indices)
         drawn = read_texture(targets.reflection_colors, targets.width, targets.height)[..., 3] > 0.5
         # The searched reflectors' pixels are traced by their own rule, below.
         searched_labels, labels = np.where(searched, labels, 0.0), np.where(searched, 0.0, labels)
@@ -427,7 +433,8 @@ class ReflectionRenderer:
             # (those farther from both show the world).
             reach = max(radius, SEARCHED_BAND_PX)
             folded = np.isin(np.rint(searched_labels) - 1, [
-                m.index for m in self.iterative.methods if not m.reflector_map.convex or len(self._reflectors) > 1])
+                m.index for m in self.iterative.methods if not m.reflector_map.convex or len(self._reflectors) > 1]
+                + self.perturbation.folded_reflectors)
             pixels = np.unique(np.concatenate([
                 pixels, band_trace.band_pixels(searched_labels, drawn, reach),
                 band_trace.band_pixels(np.where(folded, searched_labels, 0.0), drawn, reach, edges_of_drawn=True)]),
@@ -486,7 +493,8 @@ class ReflectionRenderer:
         drawn = time.perf_counter()
         traced = 0
         morphed = self.morph.drawn_reflectors if trace_gaps else []
-        if trace and ((textures is not None and textures.groups) or morphed or self.iterative.methods):
+        if trace and ((textures is not None and textures.groups) or morphed or self.iterative.methods
+                      or self.perturbation.methods):
             max_order = max((len(h) for h in textures.groups), default=1) if textures is not None else 1
             traced = self.trace_band(view, targets, max_order, world_color, downsample, trace_edges,
                                      getattr(sbc_or_textures, "ray_map", None), camera, holes_of=morphed)

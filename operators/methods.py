@@ -9,7 +9,9 @@ Per reflector, ``obj.curved_reflections.mode``:
   is inside it), else Runtime;
 - ``ITERATIVE``: the iterative search, or Runtime with the reason when the reflector is
   not star-shaped;
-- ``MORPHING`` and ``RUNTIME``: the sample-based camera's modes (SBC paper VI and IV).
+- ``MORPHING`` and ``RUNTIME``: the sample-based camera's modes (SBC paper VI and IV);
+- ``PERTURBATION``: Chen & Arvo (2000), on the reflector's declared exact surface
+  (``analytic_shape``) when its mesh matches it, else on the mesh.
 
 The star-shape verdict and the cube map are made once per reflector shape (compared up to a
 translation with the ones kept, :data:`CACHED_MAPS` of them): a viewport orbit,
@@ -19,9 +21,11 @@ it is initialised (``gpu_shaders/iterative_bake.py``, milliseconds), else traced
 CPU. :func:`plan` is what the live view, Render Image and the panel use; its choices
 say per reflector which method and why, and the last ones are kept for the panel.
 
-Higher orders: the iterative search draws first-order reflections; reflections of
-order 2 and more, in every mode, come from the sample-based camera, which is built for
-them (and for the reflectors it draws) alone.
+Higher orders: the iterative search and perturbation draw first-order reflections;
+reflections of order 2 and more, in every mode, come from the sample-based camera,
+which is built for them (and for the reflectors it draws) alone. (Perturbation answers
+second-order paths too, ``addon/methods/perturbation``; the renderer does not draw them
+from it yet.)
 """
 
 from __future__ import annotations
@@ -35,6 +39,7 @@ import numpy as np
 from ..addon.methods.iterative import IterativeReflector, StarShape, check_star_shaped
 from ..addon.methods.iterative.star import verdict
 from ..addon.methods.iterative.reflector_map import bake_reflector_map
+from ..addon.methods.perturbation import AnalyticSurface, PerturbationReflector
 from ..addon.raytrace import ReflectorSet
 
 #: Cube-map face size of the iterative search's reflector maps (texels along a side).
@@ -42,7 +47,10 @@ FACE_SIZE = 256
 #: Reflector geometries whose verdict and map are kept.
 CACHED_MAPS = 16
 
-ITERATIVE, MORPHING, RUNTIME = 'ITERATIVE', 'MORPHING', 'RUNTIME'
+ITERATIVE, MORPHING, RUNTIME, PERTURBATION = 'ITERATIVE', 'MORPHING', 'RUNTIME', 'PERTURBATION'
+#: A declared exact surface is used when the mesh's vertices lie this close to it
+#: (share of its radius); farther, the mesh itself reflects and the panel says why.
+ANALYTIC_TOLERANCE = 0.02
 
 
 @dataclass(frozen=True)
@@ -59,6 +67,7 @@ class MethodPlan:
     """The iterative reflectors (engine objects, for the renderer) and every choice."""
 
     iterative: list = field(default_factory=list)
+    perturbation: list = field(default_factory=list)  # PerturbationReflector each
     choices: list = field(default_factory=list)
 
     @property
@@ -168,6 +177,10 @@ def plan(scene, reflectors, accuracy_px: float | None = None, baked=frozenset())
             else:
                 fallback = "no baked morphing grid, so Runtime" if mode == 'AUTO' else "drawn in Runtime mode"
                 result.choices.append(MethodChoice(reflector.name, RUNTIME, f"{shape.reason}; {fallback}"))
+        elif mode == PERTURBATION:
+            chosen, reason = perturbation_reflector(scene, index, reflector)
+            result.perturbation.append(chosen)
+            result.choices.append(MethodChoice(reflector.name, PERTURBATION, reason))
         elif mode == MORPHING:
             result.choices.append(MethodChoice(reflector.name, MORPHING if reflector.name in baked else RUNTIME,
                                                "Morphing mode" if reflector.name in baked
@@ -178,6 +191,26 @@ def plan(scene, reflectors, accuracy_px: float | None = None, baked=frozenset())
         method.occluders = tuple(other.reflector_map for other in result.iterative if other is not method)
     _last_choices[scene.name] = result.choices
     return result
+
+
+def perturbation_reflector(scene, index: int, reflector) -> tuple:
+    """(PerturbationReflector, panel reason): with its declared exact surface where the
+    object has one and its mesh lies within ANALYTIC_TOLERANCE of it."""
+    obj = scene.objects.get(reflector.name)
+    settings = None if obj is None else obj.curved_reflections
+    if settings is None or settings.analytic_shape == 'NONE':
+        return (PerturbationReflector(index, reflector.name),
+                "Perturbation of traced paths on the mesh's osculating quadrics (Chen & Arvo 2000)")
+    surface = AnalyticSurface(reflector.name, settings.analytic_shape, np.array(obj.matrix_world),
+                              tuple(settings.analytic_radii))
+    deviation = surface.mesh_deviation(reflector)
+    shape = settings.analytic_shape.lower()
+    if deviation > ANALYTIC_TOLERANCE:
+        return (PerturbationReflector(index, reflector.name),
+                f"the mesh lies up to {100 * deviation:.1f} % of the radius from the declared {shape} (more than "
+                f"{100 * ANALYTIC_TOLERANCE:.0f} %): Perturbation on the mesh; set Radii to match it")
+    return (PerturbationReflector(index, reflector.name, surface),
+            f"Perturbation on the exact {shape} (mesh within {100 * deviation:.2f} % of it)")
 
 
 def wants_grid(scene, reflector) -> bool:

@@ -30,11 +30,17 @@ def _reflector_settings(layout, obj) -> None:
     facing.prop(settings, "fresnel_f0")
     details.prop(settings, "attenuation_distance")
     details.prop(settings, "mode")
+    if settings.mode == 'PERTURBATION':
+        details.prop(settings, "analytic_shape")
+        radii = details.row()
+        radii.active = settings.analytic_shape != 'NONE'
+        radii.prop(settings, "analytic_radii")
 
 
 #: Characters per line of a reflector's reason in the panel.
 REASON_WIDTH = 52
-_METHOD_ICONS = {methods.ITERATIVE: 'SHADERFX', methods.MORPHING: 'LIGHTPROBE_VOLUME', methods.RUNTIME: 'CAMERA_DATA'}
+_METHOD_ICONS = {methods.ITERATIVE: 'SHADERFX', methods.MORPHING: 'LIGHTPROBE_VOLUME', methods.RUNTIME: 'CAMERA_DATA',
+                 methods.PERTURBATION: 'FORCE_HARMONIC'}
 
 
 def _reflector_methods(box, scene, reflectors) -> None:

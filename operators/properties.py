@@ -2,8 +2,8 @@
 """Settings stored in the .blend: per object and per scene PropertyGroups."""
 
 import bpy
-from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, IntVectorProperty, PointerProperty,
-                       StringProperty)
+from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, IntVectorProperty,
+                       PointerProperty, StringProperty)
 
 from . import scene_changes
 
@@ -65,8 +65,29 @@ class CurvedReflectionsObjectSettings(bpy.types.PropertyGroup):
             ('RUNTIME', "Runtime", "Rebuild the sample-based camera for every new view (SBC paper IV)"),
             ('MORPHING', "Morphing", "Bake a grid of panoramic cameras around the reflector and blend them "
                                      "as the view moves (SBC paper VI)"),
+            ('PERTURBATION', "Perturbation", "Trace a sparse grid of reflection paths per view and move every "
+                                             "vertex's reflection from the nearest one by its path Jacobian and "
+                                             "Hessian (Chen & Arvo 2000); any smooth reflector"),
         ),
         default='AUTO',
+        update=_reflector_toggled,
+    )
+    analytic_shape: EnumProperty(
+        name="Exact Surface",
+        description="Declare the reflector an exact surface: Perturbation mode then reflects off it, not off its "
+                    "mesh, which is only drawn (the panel reports how far the mesh is from it)",
+        items=(
+            ('NONE', "Mesh", "Reflect off the mesh (its interpolated normals)"),
+            ('SPHERE', "Sphere", "A sphere of radius Radii X around the object's origin, in its local axes"),
+            ('ELLIPSOID', "Ellipsoid", "An ellipsoid with the radii along the object's local axes"),
+        ),
+        default='NONE',
+        update=_reflector_toggled,
+    )
+    analytic_radii: FloatVectorProperty(
+        name="Radii",
+        description="Radii of the exact surface along the object's local X, Y and Z (scaled by the object)",
+        size=3, default=(1.0, 1.0, 1.0), min=1e-6, soft_max=100.0, subtype='XYZ',
         update=_reflector_toggled,
     )
 

@@ -144,7 +144,8 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
         state.renderer = None
     if state.renderer is None or key != state.key:
         state.renderer = ReflectionRenderer(captured.reflectors, captured.meshes, iterative=state.plan.iterative,
-                                            morph=state.grids, **properties)
+                                            morph=state.grids, perturbation=state.plan.perturbation,
+                                            perturbation_accuracy_px=accuracy_px, **properties)
     else:
         state.reused += 1
     state.key = key

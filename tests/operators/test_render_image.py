@@ -9,7 +9,7 @@ import bpy
 import numpy as np
 import pytest
 
-from curved_reflections.operators import demo_scenes, reference_render
+from curved_reflections.operators import demo_scenes, methods, reference_render
 
 
 @pytest.fixture
@@ -216,3 +216,29 @@ def test_a_view_whose_near_plane_cuts_the_mirror_is_filled_not_traced(fig3, tmp_
     assert near.stats["traced_pixels"] == 0 and near.stats["untraced_pixels"] > 0.25 * 48 * 36
     assert bpy.ops.curved_reflections.render_image(filepath=str(tmp_path / "near.png")) == {'FINISHED'}
     assert "mirror pixels without a reflection were filled, not ray traced" in capfd.readouterr().out
+
+
+def test_perturbation_mode_draws_what_the_camera_draws(fig3):
+    """Perturbation (Chen & Arvo 2000) on the mesh and on the declared exact sphere: each
+    image agrees with the Runtime camera's on nearly every pixel, and the plan says why."""
+    from curved_reflections.operators.render_image import render_scene
+
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    settings = bpy.data.objects["MirrorSphere"].curved_reflections
+    settings.mode = 'RUNTIME'
+    camera = render_scene(fig3, depsgraph)
+    settings.mode = 'PERTURBATION'
+    on_mesh = render_scene(fig3, depsgraph)
+    assert on_mesh.stats["methods"] == {"MirrorSphere": "PERTURBATION"}
+    assert on_mesh.seconds["sbc"] < 0.05 and "n_rays" not in on_mesh.stats  # no camera built
+    settings.analytic_shape = 'SPHERE'  # the demo's mirror: radius 1 around its origin
+    exact = render_scene(fig3, depsgraph)
+    reason = methods.last_choices(fig3)[0].reason
+    assert "exact sphere" in reason and "mesh within" in reason
+    for image in (on_mesh.image, exact.image):
+        differing = np.abs(image[..., :3] - camera.image[..., :3]).max(axis=2) > 0.05
+        assert differing.mean() < 0.03
+    settings.analytic_radii = (1.5, 1.5, 1.5)  # no longer the mesh's sphere: the mesh reflects, and the panel says so
+    render_scene(fig3, depsgraph)
+    reason = methods.last_choices(fig3)[0].reason
+    assert "from the declared sphere" in reason and "Perturbation on the mesh" in reason

@@ -1,0 +1,432 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Perturbation (Chen & Arvo 2000) behind the one interface: where does each point
+appear, reflected, in this view?
+
+Per view (section III):
+
+1. *Seeds*: exact paths traced from the eye through every ``seed_stride_px``-th pixel
+   and scan line (``seeds.py``, III-B.1), grouped by reflection history.
+2. *Nearest path*: instead of the paper's ray octree (III-B.2) the seeds' image-plane
+   grid is searched. The local minima of the distance from the point to the seeds'
+   outgoing rays over a coarse sub-grid (every ``COARSE``-th seed) are the point's
+   candidate images (several on a non-convex mirror: the paper's grouping of III-C.1,
+   without its thresholds); each then *hops*: the Taylor step from its seed predicts
+   the pixel, and the seed at that pixel is taken, until the seed stays.
+3. *Perturbation*: from the point p on the seed's outgoing ray closest to the vertex
+   p', the path Jacobian and Hessian give the reflector points of the path to p'
+   (eq. 4, ``path_derivatives.py``; orders 2 and more in one system).
+4. *Adaptive seeds*: the Taylor series' next term is estimated from the last two
+   (e3 ~ e2^2 / e1, in pixels); where it exceeds ``accuracy_px`` a new seed is traced
+   through the predicted pixel and the step is taken again from it (up to
+   ``REFINE_ROUNDS`` times). An answer still above the bound, or whose pixel falls
+   outside the seeds' footprint of its history (an image beyond the mirror's
+   silhouette), is not given: never drawn at a wrong place.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ...projection import NOT_PROJECTED, PERTURBATION_ANSWER, Projection
+from ...raytrace import ReflectorSet
+from ...view import View
+from .path_derivatives import perturb
+from .seeds import SeedPaths, seed_paths_to, seed_quadrics, trace_seed_paths
+
+#: A history with fewer grid seeds is traced again at half the spacing over its footprint.
+MIN_GROUP_SEEDS = 600
+#: Seed spacing of the coarse search for candidate images, in grid seeds.
+COARSE = 2
+#: Hops from a candidate seed to the seed at its predicted pixel.
+HOPS = 3
+#: How far (in seed spacings) a Taylor step may move an image from its seed's pixel.
+REACH = 1.5
+#: Rounds of adaptive seeds through predicted pixels.
+REFINE_ROUNDS = 6
+#: A candidate whose adaptive seeds leave the history this often gives up (an image
+#: beyond the silhouette, or none).
+MAX_MISSES = 2
+#: Images of one point in one history kept at most (non-convex mirrors).
+MAX_IMAGES = 8
+#: Two answers of one point and history closer than this (px) are one image.
+SAME_IMAGE_PX = 1.0
+POINT_CHUNK = 2048
+#: The longest step trusted, against the distance from the seed's last bounce (radians).
+MAX_RELATIVE_STEP = 0.3
+#: A target behind its seed's reflected ray steps from this share of its distance along it.
+BEHIND_START = 0.1
+#: Factor on the mesh model's error term of a step's estimate (``_model_errors``).
+MODEL_SAFETY = 2.0
+
+
+@dataclass(frozen=True)
+class PerturbationSettings:
+    """What the method does per view."""
+
+    seed_stride_px: int = 8
+    accuracy_px: float = 0.5
+    max_order: int = 1
+
+
+@dataclass
+class PerturbationStats:
+    """What one projection cost: seeds traced (grid and adaptive), answers refined."""
+
+    grid_seeds: int = 0
+    adaptive_seeds: int = 0
+    refused: int = 0
+    per_history: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class PerturbationReflector:
+    """One reflector drawn by perturbation: its index among the scene's reflectors, its
+    name and, when declared, its exact surface (``quadrics.AnalyticSurface``)."""
+
+    index: int
+    name: str
+    surface: object = None
+
+
+@dataclass(frozen=True)
+class _Group:
+    """The grid seeds of one reflection history: their paths, quadrics, grid."""
+
+    history: tuple
+    seeds: SeedPaths
+    quadrics: list
+    grid: np.ndarray  # (rows, columns) seed index, -1 where the history has none
+    origin: tuple  # (column, row) of grid[0, 0] in the view's seed grid
+    model_error: np.ndarray  # (S,) per seed, :func:`_model_errors`
+    stride: int  # pixels between grid seeds
+
+
+class PerturbationMethod:
+    """Chen-Arvo perturbation for the reflectors of a :class:`ReflectorSet`; reflectors
+    in ``analytic`` ({reflector index: quadrics.AnalyticSurface}) use their exact
+    surface."""
+
+    def __init__(self, reflector_set: ReflectorSet, analytic: dict | None = None,
+                 settings: PerturbationSettings = PerturbationSettings()):
+        self.reflector_set = reflector_set
+        self.analytic = dict(analytic or {})
+        self.settings = settings
+        self.stats = PerturbationStats()
+
+    def project(self, view: View, points, histories=None) -> Projection:
+        """Every image of ``points`` in ``view``; ``histories``: answer only these
+        reflection histories (tuples of reflector indices; default all up to the order)."""
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        self.stats = PerturbationStats()
+        groups = self._grid_groups(view)
+        if histories is not None:
+            wanted = {tuple(h) for h in histories}
+            groups = [g for g in groups if g.history in wanted]
+        histories, rows = [], []
+        for group in groups:
+            answers = self._answer_group(view, group, points)
+            self.stats.per_history[group.history] = int(sum(np.isfinite(a[:, 0]).sum() for a in answers[0]))
+            for rank in range(len(answers[0])):
+                histories.append(group.history)
+                rows.append((answers[0][rank], answers[1][rank]))
+        return _as_projection(view, points, histories, rows)
+
+    def _grid_groups(self, view: View) -> list:
+        """The seeds of every history: the view's grid, refined (halving the spacing) over
+        the footprint of a history with fewer than MIN_GROUP_SEEDS seeds: a small image,
+        such as a second-order one, needs denser paths than the first-order footprints."""
+        stride = int(self.settings.seed_stride_px)
+        pixels = view.pixel_grid(stride)
+        traced = trace_seed_paths(self.reflector_set, view, pixels, self.settings.max_order, self.analytic)
+        self.stats.grid_seeds = len(pixels)
+        groups = []
+        for seeds in traced:
+            if len(seeds.pixels) == 0:
+                continue
+            keys, inverse = np.unique(seeds.histories, axis=0, return_inverse=True)
+            for k, key in enumerate(keys):
+                members = seeds.select(np.flatnonzero(inverse.reshape(-1) == k))
+                group = self._group(tuple(int(r) for r in key), members, stride)
+                while len(group.seeds.pixels) < MIN_GROUP_SEEDS and group.stride > 1:
+                    finer = self._finer(view, group)
+                    if finer is None:
+                        break
+                    group = finer
+                groups.append(group)
+        return groups
+
+    def _group(self, history: tuple, seeds: SeedPaths, stride: int) -> _Group:
+        cell = np.floor(seeds.pixels / stride).astype(np.int64)
+        lo = cell.min(axis=0)
+        grid = np.full(tuple((cell.max(axis=0) - lo + 1)[::-1]), -1, dtype=np.int64)
+        grid[cell[:, 1] - lo[1], cell[:, 0] - lo[0]] = np.arange(len(cell))
+        quadrics = seed_quadrics(self.reflector_set, seeds, self.analytic)
+        return _Group(history, seeds, quadrics, grid, tuple(lo), _model_errors(seeds, quadrics, grid), stride)
+
+    def _finer(self, view: View, group: _Group) -> _Group | None:
+        """The group traced again at half its spacing over its footprint (one old cell
+        around); None when that finds no more seeds."""
+        stride = group.stride // 2
+        lo, hi = group.seeds.pixels.min(axis=0) - group.stride, group.seeds.pixels.max(axis=0) + group.stride
+        pixels = view.pixel_grid(stride)
+        pixels = pixels[((pixels >= lo) & (pixels <= hi)).all(axis=1)]
+        traced = trace_seed_paths(self.reflector_set, view, pixels, len(group.history), self.analytic)[-1]
+        self.stats.grid_seeds += len(pixels)
+        same = np.flatnonzero((traced.histories == np.array(group.history)).all(axis=1))
+        if len(same) <= len(group.seeds.pixels):
+            return None
+        return self._group(group.history, traced.select(same), stride)
+
+    def _answer_group(self, view, group: _Group, points):
+        """Per image rank: (P, 3) first reflector points (NaN: none) and (P, 3) last ones."""
+        point_of, seed_of = _candidate_images(group, points)
+        seed_of = self._hop(view, group, points, point_of, seed_of)
+        # Candidates that hopped onto one seed are one image.
+        _, first_of = np.unique(point_of * len(group.seeds.pixels) + seed_of, return_index=True)
+        point_of, seed_of = point_of[first_of], seed_of[first_of]
+        model_error = group.model_error[seed_of]
+        first, last, estimate, pixel = self._step(view, group.seeds, group.quadrics, points[point_of], seed_of,
+                                                  model_error, REACH * group.stride)
+        # Along a convex mirror's edge the distance falls toward the silhouette, and
+        # each edge seed is a candidate whose step leaves the mirror: where the point
+        # has a candidate with a local step, those are not followed.
+        # A point with no local candidate follows its shortest step only.
+        local = np.isfinite(estimate)
+        move = np.linalg.norm(pixel - group.seeds.pixels[seed_of], axis=1)
+        far = np.flatnonzero(~local & ~np.isin(point_of, point_of[local]) & np.isfinite(move))
+        far = far[np.lexsort((move[far], point_of[far]))]
+        shortest = far[np.r_[True, point_of[far][1:] != point_of[far][:-1]]] if len(far) else far
+        keep = local.copy()
+        keep[shortest] = True
+        point_of, seed_of, model_error = point_of[keep], seed_of[keep], model_error[keep]
+        first, last, estimate, pixel = first[keep], last[keep], estimate[keep], pixel[keep]
+        self._refine(view, group, points[point_of], group.seeds.pixels[seed_of], model_error,
+                     (first, last, estimate, pixel))
+        ok = (estimate <= max(self.settings.accuracy_px, 1e-9)) & _in_footprint(group, pixel) \
+            & view.in_view(np.nan_to_num(first))
+        self.stats.refused += int((~ok).sum())
+        return _ranked(len(points), point_of[ok], first[ok], last[ok], pixel[ok])
+
+    def _refine(self, view, group: _Group, targets, seed_pixel, model_error, answer) -> None:
+        """Adaptive seeds (in place on ``answer``: first, last, estimate, pixel): where the
+        estimate is above the accuracy, a seed is traced toward the predicted pixel, at
+        most REACH seed spacings from the last seed (a damped step: near the silhouette a
+        far step leaves the mirror), halving toward the last seed when the ray misses the
+        history; its step replaces the answer when its estimate is lower."""
+        first, last, estimate, pixel = answer
+        reach = REACH * group.stride
+        aim = pixel.copy()
+        misses = np.zeros(len(aim), dtype=np.int64)
+        for _ in range(REFINE_ROUNDS):
+            redo = np.flatnonzero(~(estimate <= self.settings.accuracy_px) & np.isfinite(aim[:, 0]))
+            if len(redo) == 0:
+                break
+            move = aim[redo] - seed_pixel[redo]
+            size = np.linalg.norm(move, axis=1)
+            target = seed_pixel[redo] + move * np.minimum(1.0, reach / np.maximum(size, 1e-12))[:, None]
+            traced = trace_seed_paths(self.reflector_set, view, target, group.seeds.order, self.analytic)[-1]
+            self.stats.adaptive_seeds += len(redo)
+            traced = traced.select(np.flatnonzero((traced.histories == np.array(group.history)).all(axis=1)))
+            missed = np.ones(len(redo), dtype=bool)
+            missed[traced.ray] = False
+            misses[redo] += missed
+            aim[redo[missed]] = np.where((misses[redo[missed]] < MAX_MISSES)[:, None],
+                                         0.5 * (seed_pixel[redo[missed]] + target[missed]), np.nan)
+            rows = redo[traced.ray]
+            quadrics = seed_quadrics(self.reflector_set, traced, self.analytic)
+            f, l, e, p = self._step(view, traced, quadrics, targets[rows], np.arange(len(rows)), model_error[rows],
+                                    reach)
+            seed_pixel[rows], aim[rows] = target[traced.ray], p
+            better = ~(e >= estimate[rows])
+            rows = rows[better]
+            first[rows], last[rows], estimate[rows], pixel[rows] = f[better], l[better], e[better], p[better]
+
+    def _hop(self, view, group, points, point_of, seed_of):
+        """Move each candidate to the grid seed at its predicted pixel, until it stays."""
+        for _ in range(HOPS):
+            _, _, _, pixel = self._step(view, group.seeds, group.quadrics, points[point_of], seed_of,
+                                        group.model_error[seed_of], REACH * group.stride)
+            cell = np.floor(np.nan_to_num(pixel, nan=-1e9) / group.stride).astype(np.int64) - np.array(group.origin)
+            rows, columns = group.grid.shape
+            inside = (cell[:, 0] >= 0) & (cell[:, 0] < columns) & (cell[:, 1] >= 0) & (cell[:, 1] < rows)
+            moved = np.full(len(seed_of), -1, dtype=np.int64)
+            moved[inside] = group.grid[cell[inside, 1], cell[inside, 0]]
+            moved = np.where(moved >= 0, moved, seed_of)
+            if (moved == seed_of).all():
+                break
+            seed_of = moved
+        return seed_of
+
+    def _step(self, view, seeds: SeedPaths, quadrics: list, targets, seed_of, model_error, reach_px):
+        """The Taylor step from seeds ``seed_of`` to ``targets``: first and last reflector
+        points (K, 3), the error estimate (px) and the pixel (K, 2), NaN where the target
+        lies beyond the next reflector on the seed's reflected ray (blocked: the seed
+        cannot lead to an image). ``model_error`` (K,):
+        how far each seed's quadrics miss the surface (:func:`_model_errors`); ``reach_px``:
+        the longest step trusted (REACH seed spacings)."""
+        tail, direction = seeds.points[seed_of, -1], seeds.outgoing[seed_of]
+        along = np.einsum("ki,ki->k", targets - tail, direction)
+        # A target behind the ray's start (a fast-spreading fan: a small second-order
+        # image) steps from a point a little way along the ray: a long step, not trusted,
+        # but it points the adaptive seeds the right way.
+        reach = np.maximum(along, BEHIND_START * np.linalg.norm(targets - tail, axis=1))
+        foot = tail + reach[:, None] * direction
+        picked = seeds.select(seed_of)
+        paths = seed_paths_to(picked, [_rows(q, seed_of) for q in quadrics], view, foot)
+        step = perturb(paths, targets)
+        seen = paths.reflector_points[:, -1]
+        at = [view.to_pixels(seen + move)[0] for move in (0.0, step.first[:, -1], step.first[:, -1] + step.second[:, -1])]
+        e1 = np.linalg.norm(at[1] - at[0], axis=1)
+        e2 = np.linalg.norm(at[2] - at[1], axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            estimate = np.where(e2 > 0, e2 * e2 / np.maximum(e1, e2), np.where(e2 == 0, 0.0, np.inf))
+        # On a mesh the quadric is only osculating: its series says nothing of where the
+        # mesh bends differently. The image moves by e1; the normals it moves over turn
+        # by a share ``model_error`` other than the quadric's, and so does the image.
+        estimate = np.maximum(estimate, MODEL_SAFETY * model_error * e1)
+        # A step is local: it may not carry the image farther than REACH seed spacings from
+        # its seed's pixel (farther, the series is taken past a fold or off the mirror).
+        local = np.linalg.norm(at[2] - seeds.pixels[seed_of], axis=1) <= reach_px
+        # Nor may it be long against the path: at a grazing edge a long step moves the
+        # image by little, and its series looks converged in pixels while the point has
+        # no image there at all.
+        short = np.linalg.norm(targets - foot, axis=1) <= MAX_RELATIVE_STEP * np.maximum(along, 0.0)
+        reachable = along < seeds.head[seed_of]
+        estimate = np.where(reachable & local & short, estimate, np.inf)
+        moved = step.points(paths)
+        return moved[:, -1], moved[:, 0], estimate, np.where(reachable[:, None], at[2], np.nan)
+
+
+def _model_errors(seeds: SeedPaths, quadrics: list, grid: np.ndarray) -> np.ndarray:
+    """(S,) how far each seed's quadrics miss the surface next to it: at each grid
+    neighbour's reflection point (same history, so the same reflectors), the normal the
+    seed's quadric predicts against the neighbour's own, relative to how much the normal
+    turned between the two; the largest over neighbours and bounces. Zero on an exact
+    surface (the same quadric); 1, the most cautious, for a seed without neighbours."""
+    error = np.zeros(len(seeds.pixels))
+    seen = np.zeros(len(seeds.pixels), dtype=bool)
+    for di, dj in ((0, 1), (1, 0)):
+        a = grid[:grid.shape[0] - di, :grid.shape[1] - dj]
+        b = grid[di:, dj:]
+        both = (a >= 0) & (b >= 0)
+        a, b = a[both], b[both]
+        for s, t in ((a, b), (b, a)):
+            for bounce, q in enumerate(quadrics):
+                x_t = seeds.points[t, bounce]
+                own_s = _unit(_rows(q, s).gradients(seeds.points[s, bounce]))
+                own_t = _unit(_rows(q, t).gradients(x_t))
+                predicted = _unit(_rows(q, s).gradients(x_t))
+                turned = np.linalg.norm(own_t - own_s, axis=1)
+                ratio = np.linalg.norm(predicted - own_t, axis=1) / np.maximum(turned, 1e-12)
+                np.maximum.at(error, s, np.where(turned > 1e-12, ratio, 0.0))
+            seen[s] = True
+    return np.where(seen, error, 1.0)
+
+
+def _unit(v):
+    return v / np.maximum(np.linalg.norm(v, axis=1), 1e-300)[:, None]
+
+
+def _rows(quadrics, rows):
+    return type(quadrics)(quadrics.hessian[rows], quadrics.linear[rows], quadrics.constant[rows])
+
+
+def _candidate_images(group: _Group, points):
+    """(point, seed) pairs: the local minima over the coarse sub-grid of the distance
+    from each point to each seed's outgoing ray (behind its start: to the start)."""
+    coarse = group.grid[COARSE // 2::COARSE, COARSE // 2::COARSE]
+    if not (coarse >= 0).any():
+        coarse = group.grid
+    seeds = group.seeds
+    tail, direction = seeds.points[:, -1], seeds.outgoing
+    point_of, seed_of = [], []
+    present = coarse >= 0
+    index = np.where(present, coarse, 0)
+    for start in range(0, len(points), POINT_CHUNK):
+        chunk = points[start:start + POINT_CHUNK]
+        offset = chunk[:, None, None, :] - tail[index][None]
+        along = np.maximum(np.einsum("pijk,ijk->pij", offset, direction[index]), 0.0)
+        distance = np.linalg.norm(offset - along[..., None] * direction[index][None], axis=3)
+        distance = np.where(present[None], distance, np.inf)
+        minimum = _local_minima(distance)
+        p, i, j = np.nonzero(minimum)
+        order = np.lexsort((distance[p, i, j], p))
+        p, i, j = p[order], i[order], j[order]
+        rank = np.arange(len(p)) - np.searchsorted(p, p)
+        keep = rank < MAX_IMAGES
+        point_of.append(p[keep] + start)
+        seed_of.append(coarse[i[keep], j[keep]])
+    return np.concatenate(point_of), np.concatenate(seed_of)
+
+
+def _local_minima(distance: np.ndarray) -> np.ndarray:
+    """(P, R, C) bool: finite cells no larger than their 8 neighbours (ties go to the
+    first in raster order, so a flat minimum is one candidate). Cells on the footprint's
+    edge count whenever the distance falls toward the edge: an image close to the
+    silhouette lies beyond the last seeds."""
+    padded = np.pad(distance, ((0, 0), (1, 1), (1, 1)), constant_values=np.inf)
+    rows, columns = distance.shape[1:]
+    minimum = np.isfinite(distance)
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            if di == 0 and dj == 0:
+                continue
+            neighbour = padded[:, 1 + di:1 + di + rows, 1 + dj:1 + dj + columns]
+            before = di < 0 or (di == 0 and dj < 0)
+            minimum &= (distance < neighbour) if before else (distance <= neighbour)
+    return minimum
+
+
+def _in_footprint(group: _Group, pixel) -> np.ndarray:
+    """(K,) bool: a grid seed of the history lies within one cell of the pixel."""
+    cell = np.floor(np.nan_to_num(pixel, nan=-1e9) / group.stride).astype(np.int64) - np.array(group.origin)
+    rows, columns = group.grid.shape
+    occupied = np.pad(group.grid >= 0, 1)
+    near = np.zeros(len(pixel), dtype=bool)
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            r, c = cell[:, 1] + di + 1, cell[:, 0] + dj + 1
+            inside = (r >= 0) & (r < rows + 2) & (c >= 0) & (c < columns + 2)
+            near[inside] |= occupied[r[inside], c[inside]]
+    return near
+
+
+def _ranked(n_points, point_of, first, last, pixel):
+    """Answers per image rank: ([first (P, 3)] * ranks, [last (P, 3)] * ranks); one point's
+    answers closer than SAME_IMAGE_PX are one image."""
+    order = np.lexsort((pixel[:, 1], pixel[:, 0], point_of))
+    point_of, first, last, pixel = point_of[order], first[order], last[order], pixel[order]
+    keep = np.ones(len(point_of), dtype=bool)
+    for lag in range(1, MAX_IMAGES):
+        same = (point_of[lag:] == point_of[:-lag]) \
+            & (np.linalg.norm(pixel[lag:] - pixel[:-lag], axis=1) < SAME_IMAGE_PX)
+        keep[lag:] &= ~same
+    point_of, first, last = point_of[keep], first[keep], last[keep]
+    rank = np.arange(len(point_of)) - np.searchsorted(point_of, point_of)
+    firsts, lasts = [], []
+    for r in range(int(rank.max()) + 1 if len(rank) else 0):
+        f, l = np.full((n_points, 3), np.nan), np.full((n_points, 3), np.nan)
+        on = rank == r
+        f[point_of[on]], l[point_of[on]] = first[on], last[on]
+        firsts.append(f)
+        lasts.append(l)
+    return firsts, lasts
+
+
+def _as_projection(view, points, histories, rows) -> Projection:
+    n = len(points)
+    if not rows:
+        empty = np.zeros((0, n))
+        return Projection([], np.zeros((0, n, 3)), empty.astype(bool), empty.astype(np.int8), np.zeros((0, n, 2)),
+                          empty)
+    first = np.stack([r[0] for r in rows])
+    last = np.stack([r[1] for r in rows])
+    valid = np.isfinite(first[..., 0])
+    pixels = np.stack([view.to_pixels(np.nan_to_num(f))[0] for f in first])
+    pixels[~valid] = np.nan
+    distance = np.where(valid, np.linalg.norm(points[None] - last, axis=2), np.nan)
+    return Projection(groups=list(histories), reflector_points=first, valid=valid,
+                      leaf_kind=np.where(valid, PERTURBATION_ANSWER, NOT_PROJECTED).astype(np.int8),
+                      pixels=pixels, ray_distance=distance)

@@ -1,0 +1,83 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Perturbation (Chen & Arvo 2000) drawn like the other per-frame methods.
+
+Per new view, ``addon.methods.perturbation`` traces the seed paths and takes every
+diffuse vertex's Taylor step (numpy); each reflector's images are then uploaded as
+answer textures (one per image rank: a non-convex mirror shows a point several times),
+which :class:`.reflected_meshes.ReflectedMeshes` draws with the iterative search's and
+morphing's vertex stage. An unchanged view reuses the textures: an orbit costs one
+projection per frame, a still viewport none.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..addon.methods.perturbation import PerturbationMethod, PerturbationSettings
+from ..addon.raytrace import ReflectorSet
+from .reflected_meshes import FOUND_CODE, ReflectedMeshes
+
+
+class PerturbationPass:
+    """The perturbation reflectors of one renderer (``reflectors``: every reflector of
+    the scene, which may block or carry the paths; ``methods``: the
+    ``addon.methods.perturbation.PerturbationReflector`` s drawn here)."""
+
+    def __init__(self, geometry, reflectors, methods, meshes: ReflectedMeshes, accuracy_px: float = 0.5):
+        self.geometry = geometry
+        self.methods = list(methods)
+        self.meshes = meshes
+        self._engine = None
+        self._reflectors = list(reflectors)
+        self._accuracy = float(accuracy_px)
+        self._view_key = None
+        self._answers: list = []
+        self.counts = {"projections": 0}
+        self.last_stats = None
+
+    @property
+    def reflector_indices(self) -> list:
+        return [m.index for m in self.methods]
+
+    @property
+    def engine(self) -> PerturbationMethod:
+        if self._engine is None:
+            analytic = {m.index: m.surface for m in self.methods if m.surface is not None}
+            self._engine = PerturbationMethod(ReflectorSet(self._reflectors), analytic,
+                                              PerturbationSettings(accuracy_px=self._accuracy))
+        return self._engine
+
+    def project(self, view) -> None:
+        """This view's answer textures (kept while the view does not change)."""
+        if not self.methods or self.meshes.n_vertices == 0:
+            return
+        key = (np.asarray(view.view_matrix).tobytes(), np.asarray(view.projection_matrix).tobytes(),
+               view.width, view.height)
+        if key == self._view_key:
+            return
+        from .gpu_data import data_texture
+
+        projection = self.engine.project(view, self.geometry.vertices, [(m.index,) for m in self.methods])
+        self.last_stats = self.engine.stats
+        answers = []
+        for g, history in enumerate(projection.groups):
+            texels = np.zeros((self.meshes.n_vertices, 4), np.float32)
+            valid = projection.valid[g]
+            texels[valid, :3] = projection.reflector_points[g, valid] - self.geometry.shift
+            texels[valid, 3] = FOUND_CODE
+            answers.append((history[0], data_texture(texels, self.meshes.width)))
+        self._answers = answers
+        self._view_key = key
+        self.counts["projections"] += 1
+
+    @property
+    def folded_reflectors(self) -> list:
+        """The reflectors that showed a point twice in the last view (a non-convex
+        mirror), or share the scene with other mirrors: the renderer traces the pixels
+        next to their drawn reflections too."""
+        indices = [k for k, _ in self._answers]
+        return [m.index for m in self.methods if indices.count(m.index) > 1 or len(self._reflectors) > 1]
+
+    def answers(self) -> list:
+        """(reflector index, answer texture) of the last view, for ``ReflectedMeshes.draw``."""
+        return list(self._answers)
