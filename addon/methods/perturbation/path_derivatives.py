@@ -154,8 +154,9 @@ class Perturbation:
         return paths.reflector_points + self.first + (self.second if order >= 2 else 0.0)
 
 
-def perturb(paths: Paths, targets: np.ndarray) -> Perturbation:
-    """The reflector points' moves when each path's scene point moves to ``targets`` (K, 3)."""
+def perturb(paths: Paths, targets: np.ndarray, order: int = 2) -> Perturbation:
+    """The reflector points' moves when each path's scene point moves to ``targets`` (K, 3),
+    to first or second ``order`` (the second term is zero at order 1)."""
     k, n = len(paths.scene_points), paths.bounces
     dp = np.asarray(targets, dtype=np.float64) - paths.scene_points
     _, a, unit, inverse = system(paths)
@@ -164,6 +165,8 @@ def perturb(paths: Paths, targets: np.ndarray) -> Perturbation:
     along = np.einsum("ki,ki->k", unit[:, 0], dp)
     t_dp[:, :3] = -(dp - along[:, None] * unit[:, 0]) * inverse[:, 0, None]
     dz = -_solve(a, t_dp)
+    if order < 2:
+        return Perturbation(dz.reshape(k, n, 4)[:, :, :3], np.zeros((k, n, 3)))
     moves = np.zeros((k, n + 2, 3))
     moves[:, 0] = dp
     moves[:, 1:-1] = dz.reshape(k, n, 4)[:, :, :3]

@@ -246,8 +246,7 @@ class PerturbationMethod:
     def _hop(self, view, group, points, point_of, seed_of):
         """Move each candidate to the grid seed at its predicted pixel, until it stays."""
         for _ in range(HOPS):
-            _, _, _, pixel = self._step(view, group.seeds, group.quadrics, points[point_of], seed_of,
-                                        group.model_error[seed_of], REACH * group.stride)
+            pixel = self._first_order_pixels(view, group.seeds, group.quadrics, points[point_of], seed_of)
             cell = np.floor(np.nan_to_num(pixel, nan=-1e9) / group.stride).astype(np.int64) - np.array(group.origin)
             rows, columns = group.grid.shape
             inside = (cell[:, 0] >= 0) & (cell[:, 0] < columns) & (cell[:, 1] >= 0) & (cell[:, 1] < rows)
@@ -259,6 +258,24 @@ class PerturbationMethod:
             seed_of = moved
         return seed_of
 
+    def _first_order_pixels(self, view, seeds: SeedPaths, quadrics: list, targets, seed_of) -> np.ndarray:
+        """(K, 2) where a first-order step from seeds ``seed_of`` puts ``targets`` (hops)."""
+        paths = seed_paths_to(seeds.select(seed_of), [_rows(q, seed_of) for q in quadrics], view,
+                              self._feet(seeds, targets, seed_of)[0])
+        return view.to_pixels(paths.reflector_points[:, -1] + perturb(paths, targets, order=1).first[:, -1])[0]
+
+    @staticmethod
+    def _feet(seeds: SeedPaths, targets, seed_of):
+        """The points on the seeds' reflected rays the steps start from, and the targets'
+        distances along the rays."""
+        tail, direction = seeds.points[seed_of, -1], seeds.outgoing[seed_of]
+        along = np.einsum("ki,ki->k", targets - tail, direction)
+        # A target behind the ray's start (a fast-spreading fan: a small second-order
+        # image) steps from a point a little way along the ray: a long step, not trusted,
+        # but it points the adaptive seeds the right way.
+        reach = np.maximum(along, BEHIND_START * np.linalg.norm(targets - tail, axis=1))
+        return tail + reach[:, None] * direction, along
+
     def _step(self, view, seeds: SeedPaths, quadrics: list, targets, seed_of, model_error, reach_px):
         """The Taylor step from seeds ``seed_of`` to ``targets``: first and last reflector
         points (K, 3), the error estimate (px) and the pixel (K, 2), NaN where the target
@@ -266,15 +283,8 @@ class PerturbationMethod:
         cannot lead to an image). ``model_error`` (K,):
         how far each seed's quadrics miss the surface (:func:`_model_errors`); ``reach_px``:
         the longest step trusted (REACH seed spacings)."""
-        tail, direction = seeds.points[seed_of, -1], seeds.outgoing[seed_of]
-        along = np.einsum("ki,ki->k", targets - tail, direction)
-        # A target behind the ray's start (a fast-spreading fan: a small second-order
-        # image) steps from a point a little way along the ray: a long step, not trusted,
-        # but it points the adaptive seeds the right way.
-        reach = np.maximum(along, BEHIND_START * np.linalg.norm(targets - tail, axis=1))
-        foot = tail + reach[:, None] * direction
-        picked = seeds.select(seed_of)
-        paths = seed_paths_to(picked, [_rows(q, seed_of) for q in quadrics], view, foot)
+        foot, along = self._feet(seeds, targets, seed_of)
+        paths = seed_paths_to(seeds.select(seed_of), [_rows(q, seed_of) for q in quadrics], view, foot)
         step = perturb(paths, targets)
         seen = paths.reflector_points[:, -1]
         at = [view.to_pixels(seen + move)[0] for move in (0.0, step.first[:, -1], step.first[:, -1] + step.second[:, -1])]
@@ -340,15 +350,19 @@ def _candidate_images(group: _Group, points):
     if not (coarse >= 0).any():
         coarse = group.grid
     seeds = group.seeds
-    tail, direction = seeds.points[:, -1], seeds.outgoing
-    point_of, seed_of = [], []
     present = coarse >= 0
-    index = np.where(present, coarse, 0)
+    index = np.where(present, coarse, 0).reshape(-1)
+    tail, direction = seeds.points[index, -1], seeds.outgoing[index]
+    # Squared distance to each ray from dot products alone (two small matrix products):
+    # |p - t|^2 - max((p - t) . d, 0)^2.
+    tail_along = np.einsum("si,si->s", tail, direction)
+    tail_square = np.einsum("si,si->s", tail, tail)
+    point_of, seed_of = [], []
     for start in range(0, len(points), POINT_CHUNK):
         chunk = points[start:start + POINT_CHUNK]
-        offset = chunk[:, None, None, :] - tail[index][None]
-        along = np.maximum(np.einsum("pijk,ijk->pij", offset, direction[index]), 0.0)
-        distance = np.linalg.norm(offset - along[..., None] * direction[index][None], axis=3)
+        along = np.maximum(chunk @ direction.T - tail_along, 0.0)
+        square = np.einsum("pi,pi->p", chunk, chunk)[:, None] - 2.0 * chunk @ tail.T + tail_square - along * along
+        distance = np.sqrt(np.maximum(square, 0.0)).reshape(len(chunk), *coarse.shape)
         distance = np.where(present[None], distance, np.inf)
         minimum = _local_minima(distance)
         p, i, j = np.nonzero(minimum)
