@@ -139,3 +139,29 @@ def test_a_new_capture_of_the_reflectors_makes_older_cameras_stale(fig3):
     state.dirty_reflectors = True  # a mirror changed: every camera is built again
     live.process(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
     assert (state.generation, state.counts["bakes"]) == (generation + 1, bakes + 1)
+
+
+def test_perturbation_mode_draws_live_with_no_camera_and_the_torus_too(fig3):
+    """Perturbation (Chen & Arvo 2000) draws the ball and a torus in the viewport with no
+    sample-based camera; a new view is projected again, the same view is not."""
+    bpy.data.objects["MirrorSphere"].curved_reflections.mode = 'PERTURBATION'
+    torus = _torus(fig3)
+    torus.curved_reflections.mode = 'PERTURBATION'
+    state = live.bake(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
+    choices = {c.reflector: c for c in methods.last_choices(fig3)}
+    assert {name: c.method for name, c in choices.items()} == {"MirrorSphere": methods.PERTURBATION,
+                                                               "Ring": methods.PERTURBATION}
+    assert all(c.sbc is None for c in state.cameras.values())
+    drawn, image = _draw(fig3, _camera_view(fig3))
+    assert drawn
+    passes = state.renderer.perturbation
+    assert passes.counts["projections"] == 1 and len(passes.answers()) >= 2
+    touched = _touched(image)
+    cube = _pixels_of(image, "Cube", fig3)
+    assert len(cube) >= 15 and touched[cube[:, 0], cube[:, 1]].mean() > 0.95
+    drawn, _ = _draw(fig3, _camera_view(fig3))
+    assert drawn and passes.counts["projections"] == 1  # the same view: the answers are kept
+    centre = np.array(bpy.data.objects["MirrorSphere"].matrix_world.translation)
+    moved = look_at_view(centre + (3.0, -4.0, 1.5), centre, fov_y_deg=40.0, width=WIDTH, height=HEIGHT)
+    drawn, other = _draw(fig3, moved, key="another region")
+    assert drawn and passes.counts["projections"] == 2 and np.abs(other - image).max() > 0.1
