@@ -44,10 +44,12 @@ HOPS = 3
 #: How far (in seed spacings) a Taylor step may move an image from its seed's pixel.
 REACH = 1.5
 #: Rounds of adaptive seeds through predicted pixels.
-REFINE_ROUNDS = 6
+REFINE_ROUNDS = 8
 #: A candidate whose adaptive seeds leave the history this often gives up (an image
 #: beyond the silhouette, or none).
-MAX_MISSES = 2
+MAX_MISSES = 4
+#: Candidates farther from their nearest ray than this many times the point's best are dropped.
+CANDIDATE_SPREAD = 4.0
 #: Images of one point in one history kept at most (non-convex mirrors).
 MAX_IMAGES = 8
 #: Two answers of one point and history closer than this (px) are one image.
@@ -368,8 +370,12 @@ def _candidate_images(group: _Group, points):
         p, i, j = np.nonzero(minimum)
         order = np.lexsort((distance[p, i, j], p))
         p, i, j = p[order], i[order], j[order]
-        rank = np.arange(len(p)) - np.searchsorted(p, p)
-        keep = rank < MAX_IMAGES
+        first = np.searchsorted(p, p)
+        rank = np.arange(len(p)) - first
+        # A candidate much farther from its rays than the point's best is an edge
+        # minimum, not an image: every image's rays pass within a seed spacing's spread.
+        found = distance[p, i, j]
+        keep = (rank < MAX_IMAGES) & (found <= CANDIDATE_SPREAD * found[first])
         point_of.append(p[keep] + start)
         seed_of.append(coarse[i[keep], j[keep]])
     return np.concatenate(point_of), np.concatenate(seed_of)
