@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import animation_runs  # noqa: E402  (same folder: the animation runs shared with bench_perturbation.py)
 import bench_draw  # noqa: E402  (same folder: machine facts with the GPU)
 import bench_sbc  # noqa: E402  (same folder: package import)
 
@@ -64,7 +65,6 @@ def measure(width: int, height: int, grid: tuple, frames: int, degrees: float, s
             images: Path | None = None) -> dict:
     import bpy
 
-    from curved_reflections.addon import metrics
     from curved_reflections.operators import demo_scenes, reference_render as rr
     from curved_reflections.operators.gpu_init import ensure_gpu
     from curved_reflections.operators.render_image import render_scene
@@ -75,14 +75,12 @@ def measure(width: int, height: int, grid: tuple, frames: int, degrees: float, s
     scene.curved_reflections.max_order = 1
     scene.curved_reflections.morph_grid = grid
     _orbit_inside_grid(scene, frames, degrees)
-    mirror = bpy.data.objects[MIRROR]
-    palette = demo_scenes.palette(scene)
-    reflectors = demo_scenes.reflectors(scene)
+    settings = bpy.data.objects[MIRROR].curved_reflections
     result = {"width": width, "height": height, "grid": grid, "frames": frames, "degrees": degrees, "samples": samples}
     with tempfile.TemporaryDirectory() as folder:
         folder = Path(folder)
         scene.curved_reflections.morph_cache_dir = str(folder / "cache")
-        mirror.curved_reflections.mode = 'MORPHING'
+        settings.mode = 'MORPHING'
         start = time.perf_counter()
         assert bpy.ops.curved_reflections.bake_morphing() == {'FINISHED'}
         result["bake_seconds"] = time.perf_counter() - start
@@ -90,40 +88,22 @@ def measure(width: int, height: int, grid: tuple, frames: int, degrees: float, s
         scene.frame_set(1)
         check = render_scene(scene, bpy.context.evaluated_depsgraph_get())
         assert check.stats["methods"] == {MIRROR: "MORPHING"} and "n_rays" not in check.stats, check.stats
-        start = time.perf_counter()
-        assert bpy.ops.curved_reflections.render_image(filepath=str(folder / "ours_###"), animation=True) == {
-            'FINISHED'}
-        result["ours"] = (time.perf_counter() - start) / frames
-        engine = scene.render.engine
-        scene.render.engine = 'BLENDER_WORKBENCH'
-        scene.render.filepath = str(folder / "workbench_")
-        start = time.perf_counter()
-        bpy.ops.render.render(animation=True)
-        result["workbench"] = (time.perf_counter() - start) / frames
-        scene.render.engine = engine
+        result["ours"], result["workbench"] = animation_runs.time_against_workbench(scene, folder, frames)
 
-        rows = []
-        for frame in np.linspace(1, frames, sampled).round().astype(int):
-            scene.frame_set(int(frame))
-            depsgraph = bpy.context.evaluated_depsgraph_get()
-            mask, _ = rr.render_mask(scene, folder / f"mask_{frame}.png", reflectors)
-            cycles = rr.render_cycles(scene, folder / f"cycles_{frame}.png", samples=samples)
-            row = {"frame": int(frame), "mirror_px": int(mask.sum())}
-            for name, mode, gaps in (("MORPHING", 'MORPHING', False), ("GAPS", 'MORPHING', True),
-                                     ("RUNTIME", 'RUNTIME', False)):
-                mirror.curved_reflections.mode = mode
-                start = time.perf_counter()
-                ours = render_scene(scene, depsgraph, trace_gaps=gaps)
-                row[f"{name}_seconds"] = time.perf_counter() - start
-                path = rr.write_png(folder / f"{name}_{frame}.png", ours.display)
-                row[name] = metrics.label_disagreement(rr.read_png(path), cycles.image, mask, palette)
-                assert ours.stats["methods"][MIRROR] == mode
-            mirror.curved_reflections.mode = 'MORPHING'
-            rows.append(row)
+        def mode(name):
+            return lambda: setattr(settings, "mode", name)
+
+        rows = animation_runs.sampled_frames(scene, folder, frames, sampled, samples, [
+            ("MORPHING", mode('MORPHING'), {}), ("GAPS", mode('MORPHING'), {"trace_gaps": True}),
+            ("RUNTIME", mode('RUNTIME'), {})])
+        settings.mode = 'MORPHING'
+        for row in rows:
+            assert all(row[f"{name}_methods"][MIRROR] == name.replace("GAPS", "MORPHING")
+                       for name in ("MORPHING", "GAPS", "RUNTIME")), row
             if images is not None:
-                strip = np.concatenate([rr.read_png(folder / f"{name}_{frame}.png")[..., :3]
+                strip = np.concatenate([rr.read_png(folder / f"{name}_{row['frame']}.png")[..., :3]
                                         for name in ("cycles", "MORPHING", "GAPS", "RUNTIME")], axis=1)
-                rr.write_png(Path(images) / f"morph_animation_frame_{frame}.png", strip)
+                rr.write_png(Path(images) / f"morph_animation_frame_{row['frame']}.png", strip)
         result["rows"] = rows
     return result
 

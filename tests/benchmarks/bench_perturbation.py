@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import animation_runs  # noqa: E402  (same folder: the animation runs shared with bench_morph_animation.py)
 import bench_draw  # noqa: E402  (same folder: machine facts with the GPU)
 import bench_sbc  # noqa: E402  (same folder: package import)
 
@@ -208,8 +209,7 @@ def _subset(projection, groups):
 def measure_animation(width: int, height: int, frames: int, degrees: float, sampled: int, samples: int) -> dict:
     import bpy
 
-    from curved_reflections.addon import metrics
-    from curved_reflections.operators import demo_scenes, reference_render as rr
+    from curved_reflections.operators import demo_scenes
     from curved_reflections.operators.gpu_init import ensure_gpu
     from curved_reflections.operators.render_image import render_scene
 
@@ -232,44 +232,25 @@ def measure_animation(width: int, height: int, frames: int, degrees: float, samp
         camera.location = centre + np.array([np.cos(angle) * base[0] - np.sin(angle) * base[1],
                                              np.sin(angle) * base[0] + np.cos(angle) * base[1], base[2]])
         camera.keyframe_insert("location", frame=frame)
-    palette = demo_scenes.palette(scene)
-    reflectors = demo_scenes.reflectors(scene)
     result = {"width": width, "height": height, "frames": frames, "degrees": degrees, "samples": samples,
               "radius": radius}
+    settings = mirror.curved_reflections
     with tempfile.TemporaryDirectory() as folder:
         folder = Path(folder)
         scene.frame_set(1)
         check = render_scene(scene, bpy.context.evaluated_depsgraph_get())
         assert check.stats["methods"] == {MIRROR: "PERTURBATION"} and "n_rays" not in check.stats, check.stats
-        start = time.perf_counter()
-        assert bpy.ops.curved_reflections.render_image(filepath=str(folder / "ours_###"), animation=True) == {
-            'FINISHED'}
-        result["ours"] = (time.perf_counter() - start) / frames
-        engine = scene.render.engine
-        scene.render.engine = 'BLENDER_WORKBENCH'
-        scene.render.filepath = str(folder / "workbench_")
-        start = time.perf_counter()
-        bpy.ops.render.render(animation=True)
-        result["workbench"] = (time.perf_counter() - start) / frames
-        scene.render.engine = engine
-        rows = []
-        for frame in np.linspace(1, frames, sampled).round().astype(int):
-            scene.frame_set(int(frame))
-            depsgraph = bpy.context.evaluated_depsgraph_get()
-            mask, _ = rr.render_mask(scene, folder / f"mask_{frame}.png", reflectors)
-            cycles = rr.render_cycles(scene, folder / f"cycles_{frame}.png", samples=samples)
-            row = {"frame": int(frame), "mirror_px": int(mask.sum())}
-            for name, mode, shape in (("EXACT", 'PERTURBATION', 'SPHERE'), ("MESH", 'PERTURBATION', 'NONE'),
-                                      ("RUNTIME", 'RUNTIME', 'NONE')):
-                mirror.curved_reflections.mode, mirror.curved_reflections.analytic_shape = mode, shape
-                start = time.perf_counter()
-                ours = render_scene(scene, depsgraph)
-                row[f"{name}_seconds"] = time.perf_counter() - start
-                path = rr.write_png(folder / f"{name}_{frame}.png", ours.display)
-                row[name] = metrics.label_disagreement(rr.read_png(path), cycles.image, mask, palette)
-            mirror.curved_reflections.mode, mirror.curved_reflections.analytic_shape = 'PERTURBATION', 'SPHERE'
-            rows.append(row)
-        result["rows"] = rows
+        result["ours"], result["workbench"] = animation_runs.time_against_workbench(scene, folder, frames)
+
+        def use(mode, shape):
+            def set_up():
+                settings.mode, settings.analytic_shape = mode, shape
+            return set_up
+
+        result["rows"] = animation_runs.sampled_frames(scene, folder, frames, sampled, samples, [
+            ("EXACT", use('PERTURBATION', 'SPHERE'), {}), ("MESH", use('PERTURBATION', 'NONE'), {}),
+            ("RUNTIME", use('RUNTIME', 'NONE'), {})])
+        settings.mode, settings.analytic_shape = 'PERTURBATION', 'SPHERE'
     return result
 
 

@@ -1,0 +1,66 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""What the animation benchmarks share: Render Image's animation timed against
+Workbench's on the same frames, and sampled frames against Cycles.
+
+Used by bench_morph_animation.py (Morphing mode) and bench_perturbation.py
+(Perturbation mode); each sets its scene and camera path up, then calls these.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def time_against_workbench(scene, folder: Path, frames: int) -> tuple[float, float]:
+    """Seconds per frame of ``render_image(animation=True)`` and of Workbench's
+    ``render.render(animation=True)`` over the scene's frames, both writing PNGs."""
+    import bpy
+
+    start = time.perf_counter()
+    assert bpy.ops.curved_reflections.render_image(filepath=str(folder / "ours_###"), animation=True) == {
+        'FINISHED'}
+    ours = (time.perf_counter() - start) / frames
+    engine = scene.render.engine
+    scene.render.engine = 'BLENDER_WORKBENCH'
+    scene.render.filepath = str(folder / "workbench_")
+    start = time.perf_counter()
+    bpy.ops.render.render(animation=True)
+    workbench = (time.perf_counter() - start) / frames
+    scene.render.engine = engine
+    return ours, workbench
+
+
+def sampled_frames(scene, folder: Path, frames: int, sampled: int, samples: int, variants) -> list:
+    """On ``sampled`` frames spread over the animation: the mirrors' mask, Cycles
+    (``samples``) and every variant, as one row per frame with ``mirror_px`` and, per
+    variant name, its label disagreement with Cycles on the mask and ``<name>_seconds``.
+    ``variants``: (name, set_up, render keyword arguments); ``set_up()`` prepares the
+    scene for the variant (modes, settings) before its single-frame render."""
+    import bpy
+
+    from curved_reflections.addon import metrics
+    from curved_reflections.operators import demo_scenes, reference_render as rr
+    from curved_reflections.operators.render_image import render_scene
+
+    palette = demo_scenes.palette(scene)
+    reflectors = demo_scenes.reflectors(scene)
+    rows = []
+    for frame in np.linspace(1, frames, sampled).round().astype(int):
+        scene.frame_set(int(frame))
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        mask, _ = rr.render_mask(scene, folder / f"mask_{frame}.png", reflectors)
+        cycles = rr.render_cycles(scene, folder / f"cycles_{frame}.png", samples=samples)
+        row = {"frame": int(frame), "mirror_px": int(mask.sum())}
+        for name, set_up, options in variants:
+            set_up()
+            start = time.perf_counter()
+            ours = render_scene(scene, depsgraph, **options)
+            row[f"{name}_seconds"] = time.perf_counter() - start
+            path = rr.write_png(folder / f"{name}_{frame}.png", ours.display)
+            row[name] = metrics.label_disagreement(rr.read_png(path), cycles.image, mask, palette)
+            row[f"{name}_methods"] = ours.stats["methods"]
+        rows.append(row)
+    return rows
