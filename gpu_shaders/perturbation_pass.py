@@ -1,12 +1,12 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Perturbation (Chen & Arvo 2000) drawn like the other per-frame methods.
 
-Per new view, ``addon.methods.perturbation`` traces the seed paths and takes every
-diffuse vertex's Taylor step (numpy); each reflector's images are then uploaded as
-answer textures (one per image rank: a non-convex mirror shows a point several times),
-which :class:`.reflected_meshes.ReflectedMeshes` draws with the iterative search's and
-morphing's vertex stage. An unchanged view reuses the textures: an orbit costs one
-projection per frame, a still viewport none.
+Per new view, ``addon.methods.perturbation`` traces the seed paths; every diffuse
+vertex's Taylor step then runs on the GPU (``perturbation_gpu.py``; in numpy for an
+orthographic view) into answer textures, one per image rank (a non-convex mirror shows
+a point several times), which :class:`.reflected_meshes.ReflectedMeshes` draws with the
+iterative search's and morphing's vertex stage. An unchanged view reuses the textures:
+an orbit costs one projection per frame, a still viewport none.
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ class PerturbationPass:
         self.methods = list(methods)
         self.meshes = meshes
         self._engine = None
+        self._step = None
         self._reflectors = list(reflectors)
         self._accuracy = float(accuracy_px)
         self._view_key = None
@@ -55,10 +56,38 @@ class PerturbationPass:
                view.width, view.height)
         if key == self._view_key:
             return
+        self._answers = self._on_gpu(view) if view.is_perspective else self._in_numpy(view)
+        self.last_stats = self.engine.stats
+        self._view_key = key
+        self.counts["projections"] += 1
+
+    def _on_gpu(self, view) -> list:
+        """Seeds traced here, every vertex's step on the GPU (``perturbation_gpu.py``). An
+        exact sphere or ellipsoid shows a point once: one image rank is drawn; and the
+        shader's adaptive seeds on it assume no other mirror blocks their rays."""
+        from ..addon.methods.perturbation import PerturbationStats
+        from .perturbation_gpu import RANKS, PerturbationStep
+
+        if self._step is None:
+            self._step = PerturbationStep(self.meshes)
+        self.engine.stats = PerturbationStats()
+        methods = {(m.index,): m for m in self.methods}
+        answers = []
+        for group in self.engine.grid_groups(view):
+            method = methods.get(group.history)
+            if method is None:
+                continue
+            alone = method.surface if len(self._reflectors) == 1 else None
+            textures = self._step.answer(view, group, self._accuracy, alone)
+            ranks = 1 if method.surface is not None else RANKS
+            answers += [(method.index, texture) for texture in textures[:ranks]]
+        return answers
+
+    def _in_numpy(self, view) -> list:
+        """Every vertex's step in numpy, uploaded (orthographic views; the reference)."""
         from .gpu_data import data_texture
 
         projection = self.engine.project(view, self.geometry.vertices, [(m.index,) for m in self.methods])
-        self.last_stats = self.engine.stats
         answers = []
         for g, history in enumerate(projection.groups):
             texels = np.zeros((self.meshes.n_vertices, 4), np.float32)
@@ -66,9 +95,7 @@ class PerturbationPass:
             texels[valid, :3] = projection.reflector_points[g, valid] - self.geometry.shift
             texels[valid, 3] = FOUND_CODE
             answers.append((history[0], data_texture(texels, self.meshes.width)))
-        self._answers = answers
-        self._view_key = key
-        self.counts["projections"] += 1
+        return answers
 
     @property
     def folded_reflectors(self) -> list:

@@ -70,6 +70,9 @@ class PerturbationSettings:
     seed_stride_px: int = 8
     accuracy_px: float = 0.5
     max_order: int = 1
+    #: Trace seeds where a step's estimate exceeds the accuracy (off: answer from the
+    #: grid alone, what the GPU twin does on a mesh, where it traces no rays).
+    adaptive_seeds: bool = True
 
 
 @dataclass
@@ -93,8 +96,9 @@ class PerturbationReflector:
 
 
 @dataclass(frozen=True)
-class _Group:
-    """The grid seeds of one reflection history: their paths, quadrics, grid."""
+class SeedGroup:
+    """The grid seeds of one reflection history: their paths, quadrics, grid (what the
+    GPU twin, ``gpu_shaders/perturbation_gpu.py``, uploads)."""
 
     history: tuple
     seeds: SeedPaths
@@ -122,7 +126,7 @@ class PerturbationMethod:
         reflection histories (tuples of reflector indices; default all up to the order)."""
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         self.stats = PerturbationStats()
-        groups = self._grid_groups(view)
+        groups = self.grid_groups(view)
         if histories is not None:
             wanted = {tuple(h) for h in histories}
             groups = [g for g in groups if g.history in wanted]
@@ -135,7 +139,7 @@ class PerturbationMethod:
                 rows.append((answers[0][rank], answers[1][rank]))
         return _as_projection(view, points, histories, rows)
 
-    def _grid_groups(self, view: View) -> list:
+    def grid_groups(self, view: View) -> list:
         """The seeds of every history: the view's grid, refined (halving the spacing) over
         the footprint of a history with fewer than MIN_GROUP_SEEDS seeds: a small image,
         such as a second-order one, needs denser paths than the first-order footprints."""
@@ -159,15 +163,15 @@ class PerturbationMethod:
                 groups.append(group)
         return groups
 
-    def _group(self, history: tuple, seeds: SeedPaths, stride: int) -> _Group:
+    def _group(self, history: tuple, seeds: SeedPaths, stride: int) -> SeedGroup:
         cell = np.floor(seeds.pixels / stride).astype(np.int64)
         lo = cell.min(axis=0)
         grid = np.full(tuple((cell.max(axis=0) - lo + 1)[::-1]), -1, dtype=np.int64)
         grid[cell[:, 1] - lo[1], cell[:, 0] - lo[0]] = np.arange(len(cell))
         quadrics = seed_quadrics(self.reflector_set, seeds, self.analytic)
-        return _Group(history, seeds, quadrics, grid, tuple(lo), _model_errors(seeds, quadrics, grid), stride)
+        return SeedGroup(history, seeds, quadrics, grid, tuple(lo), _model_errors(seeds, quadrics, grid), stride)
 
-    def _finer(self, view: View, group: _Group) -> _Group | None:
+    def _finer(self, view: View, group: SeedGroup) -> SeedGroup | None:
         """The group traced again at half its spacing over its footprint (one old cell
         around); None when that finds no more seeds."""
         stride = group.stride // 2
@@ -181,7 +185,7 @@ class PerturbationMethod:
             return None
         return self._group(group.history, traced.select(same), stride)
 
-    def _answer_group(self, view, group: _Group, points):
+    def _answer_group(self, view, group: SeedGroup, points):
         """Per image rank: (P, 3) first reflector points (NaN: none) and (P, 3) last ones."""
         point_of, seed_of = _candidate_images(group, points)
         seed_of = self._hop(view, group, points, point_of, seed_of)
@@ -204,14 +208,15 @@ class PerturbationMethod:
         keep[shortest] = True
         point_of, seed_of, model_error = point_of[keep], seed_of[keep], model_error[keep]
         first, last, estimate, pixel = first[keep], last[keep], estimate[keep], pixel[keep]
-        self._refine(view, group, points[point_of], group.seeds.pixels[seed_of], model_error,
-                     (first, last, estimate, pixel))
+        if self.settings.adaptive_seeds:
+            self._refine(view, group, points[point_of], group.seeds.pixels[seed_of], model_error,
+                         (first, last, estimate, pixel))
         ok = (estimate <= max(self.settings.accuracy_px, 1e-9)) & _in_footprint(group, pixel) \
             & view.in_view(np.nan_to_num(first))
         self.stats.refused += int((~ok).sum())
         return _ranked(len(points), point_of[ok], first[ok], last[ok], pixel[ok])
 
-    def _refine(self, view, group: _Group, targets, seed_pixel, model_error, answer) -> None:
+    def _refine(self, view, group: SeedGroup, targets, seed_pixel, model_error, answer) -> None:
         """Adaptive seeds (in place on ``answer``: first, last, estimate, pixel): where the
         estimate is above the accuracy, a seed is traced toward the predicted pixel, at
         most REACH seed spacings from the last seed (a damped step: near the silhouette a
@@ -345,7 +350,7 @@ def _rows(quadrics, rows):
     return type(quadrics)(quadrics.hessian[rows], quadrics.linear[rows], quadrics.constant[rows])
 
 
-def _candidate_images(group: _Group, points):
+def _candidate_images(group: SeedGroup, points):
     """(point, seed) pairs: the local minima over the coarse sub-grid of the distance
     from each point to each seed's outgoing ray (behind its start: to the start)."""
     coarse = group.grid[COARSE // 2::COARSE, COARSE // 2::COARSE]
@@ -399,7 +404,7 @@ def _local_minima(distance: np.ndarray) -> np.ndarray:
     return minimum
 
 
-def _in_footprint(group: _Group, pixel) -> np.ndarray:
+def _in_footprint(group: SeedGroup, pixel) -> np.ndarray:
     """(K,) bool: a grid seed of the history lies within one cell of the pixel."""
     cell = np.floor(np.nan_to_num(pixel, nan=-1e9) / group.stride).astype(np.int64) - np.array(group.origin)
     rows, columns = group.grid.shape
