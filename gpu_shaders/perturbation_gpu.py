@@ -7,7 +7,7 @@ Per view the seed paths are traced on the CPU (``PerturbationMethod.grid_groups`
 few thousand rays) and uploaded, one texture of seeds and one of the grid per
 reflector; one dispatch then answers every vertex: candidates, hops, the Taylor step
 and its estimate, and on an exact surface the adaptive seeds (the eye ray meets the
-quadric in the shader). On a mesh the shader traces no rays: a vertex whose step from
+quadric in the shader). Images grazing the mirror are left out (``projector.grazing``). On a mesh the shader traces no rays: a vertex whose step from
 the grid is not within the accuracy gets no answer there (the numpy path traces more
 seeds for it); the renderer's silhouette band is ray traced either way.
 """
@@ -39,7 +39,8 @@ def step_defines() -> dict:
     return {"SEED_TEXELS": SEED_TEXELS, "COARSE": p.COARSE, "MAX_COLUMNS": MAX_COLUMNS,
             "MAX_CANDIDATES": MAX_CANDIDATES, "CANDIDATE_SPREAD": f"{p.CANDIDATE_SPREAD:.9e}", "HOPS": p.HOPS,
             "REACH": f"{p.REACH:.9e}", "MAX_RELATIVE_STEP": f"{p.MAX_RELATIVE_STEP:.9e}",
-            "BEHIND_START": f"{p.BEHIND_START:.9e}", "MODEL_SAFETY": f"{p.MODEL_SAFETY:.9e}",
+            "BEHIND_START": f"{p.BEHIND_START:.9e}", "GRAZING_COSINE": f"{p.GRAZING_COSINE:.9e}",
+            "MODEL_SAFETY": f"{p.MODEL_SAFETY:.9e}",
             "REFINE_ROUNDS": p.REFINE_ROUNDS, "MAX_MISSES": p.MAX_MISSES,
             "SAME_IMAGE_PX": f"{p.SAME_IMAGE_PX:.9e}", "FOUND_CODE": f"{float(FOUND_CODE):.1f}"}
 

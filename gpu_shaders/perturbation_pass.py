@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..addon.methods.perturbation import PerturbationMethod, PerturbationSettings
+from ..addon.methods.perturbation.projector import grazing
 from ..addon.raytrace import ReflectorSet
 from .reflected_meshes import FOUND_CODE, ReflectedMeshes
 
@@ -84,14 +85,16 @@ class PerturbationPass:
         return answers
 
     def _in_numpy(self, view) -> list:
-        """Every vertex's step in numpy, uploaded (orthographic views; the reference)."""
+        """Every vertex's step in numpy, uploaded (orthographic views; the reference);
+        images grazing the mirror are not drawn (``projector.grazing``), as on the GPU."""
         from .gpu_data import data_texture
 
         projection = self.engine.project(view, self.geometry.vertices, [(m.index,) for m in self.methods])
         answers = []
         for g, history in enumerate(projection.groups):
             texels = np.zeros((self.meshes.n_vertices, 4), np.float32)
-            valid = projection.valid[g]
+            valid = projection.valid[g].copy()
+            valid[valid] = ~grazing(view, self.geometry.vertices[valid], projection.reflector_points[g, valid])
             texels[valid, :3] = projection.reflector_points[g, valid] - self.geometry.shift
             texels[valid, 3] = FOUND_CODE
             answers.append((history[0], data_texture(texels, self.meshes.width)))

@@ -14,13 +14,15 @@
  *      path_derivatives.py with N = 1: a 3 x 3 inverse and a Schur complement) and its
  *      error estimate: e2^2 / e1, twice the seed's model error times e1, infinite when
  *      the step is not local (REACH seed spacings in the image, MAX_RELATIVE_STEP of the
- *      path in the scene) or the target lies beyond the next reflector on the ray;
+ *      path in the scene), lands on the surface's far side, or the target lies beyond
+ *      the next reflector on the ray;
  *   4. on an exact surface (`analytic`), adaptive seeds as in the numpy twin: the eye ray
  *      through a damped target pixel meets the quadric, and the step is taken again
  *      from there (REFINE_ROUNDS);
  *   5. answers within the accuracy and the history's footprint, one per image rank
  *      (images closer than SAME_IMAGE_PX merged), into result0 ... result2:
- *      (reflector point relative to the shift, FOUND_CODE), else 0.
+ *      (reflector point relative to the shift, FOUND_CODE), else 0; an image grazing
+ *      the mirror is left out (it is drawn by the renderer's traced rim).
  * Seeds (`seeds`, SEED_TEXELS texels each): (tail, head), (outgoing, 0),
  * (Q00, Q01, Q02, Q11), (Q12, Q22, model error, 0), (b, c) of g relative to the shift,
  * (pixel, 0, 0). `grid`: the seed index of each cell of the history's grid (-1 none).
@@ -149,7 +151,11 @@ Step take_step(Seed seed, vec3 target, bool second)
   bool short_step = length(target - foot) <= MAX_RELATIVE_STEP * max(along, 0.0);
   bool reachable = along < seed.head;
   step.point = y + dy + d2;
-  step.estimate = (local && short_step && reachable && !isnan(estimate)) ? estimate : INF;
+  /* A reflection arrives and leaves on one side of the surface: a step carried past the
+   * silhouette lands on its far side. */
+  vec3 normal = seed.q * step.point + seed.b;
+  bool reflects = dot(normal, target - step.point) * dot(normal, eye - step.point) > 0.0;
+  step.estimate = (local && short_step && reachable && reflects && !isnan(estimate)) ? estimate : INF;
   step.pixel = reachable ? at2 : vec2(-INF);
   return step;
 }
@@ -352,6 +358,11 @@ void main()
       }
     }
     if (!(step.estimate <= accuracy) || !in_footprint(step.pixel) || answers >= 3) {
+      continue;
+    }
+    /* A grazing image is not drawn (projector.grazing): the renderer traces the rim. */
+    vec3 to_eye = normalize(eye - step.point);
+    if (dot(normalize(to_eye + normalize(p_vertex - step.point)), to_eye) < GRAZING_COSINE) {
       continue;
     }
     vec4 clip = vp * vec4(step.point, 1.0);

@@ -8,6 +8,7 @@ import pytest
 
 from curved_reflections.addon.exact import solve_reflections
 from curved_reflections.addon.methods.perturbation import AnalyticSurface, PerturbationMethod, PerturbationSettings
+from curved_reflections.addon.methods.perturbation.projector import grazing
 from curved_reflections.addon.raytrace import ReflectorSet
 from curved_reflections.addon.scene import DiffuseMesh
 from curved_reflections.addon.sphere import bumpy_icosphere, ellipsoid
@@ -53,16 +54,19 @@ def test_gpu_step_agrees_with_the_numpy_twin_and_the_exact_solver(gpu_ready, exa
     gpu_pixels = np.stack([view.to_pixels(np.nan_to_num(a))[0] for a in answers])
     gpu_valid = np.stack([np.isfinite(a[:, 0]) for a in answers])
 
-    # Against the numpy twin: the same vertices answered, at the same pixels (float32).
-    numpy_valid = twin.valid.any(axis=0)
-    both = gpu_valid[0] & twin.valid[0]
-    assert gpu_valid[0].sum() >= 0.97 * numpy_valid.sum()
-    assert both.sum() >= 0.95 * twin.valid[0].sum()
+    # Against the numpy twin: the same vertices answered, at the same pixels (float32);
+    # the shader leaves out the images grazing the mirror (the renderer traces the rim).
+    drawn = twin.valid[0].copy()
+    drawn[drawn] = ~grazing(view, points[drawn], twin.reflector_points[0, drawn])
+    assert 0 < (twin.valid[0] & ~drawn).sum() < 0.1 * drawn.sum()
+    both = gpu_valid[0] & drawn
+    assert gpu_valid[0].sum() >= 0.97 * drawn.sum()
+    assert both.sum() >= 0.95 * drawn.sum()
     assert np.percentile(np.linalg.norm(gpu_pixels[0, both] - twin.pixels[0, both], axis=1), 95) < 0.05
 
-    # Against the exact solver on the mesh: every answer near an exact image, most images answered.
+    # Against the exact solver on the mesh: most images answered, each within a fraction of a pixel.
     exact = solve_reflections(engine.reflector_set, view, points)
-    visible = exact.visible
+    visible = exact.visible & ~grazing(view, points[exact.point], exact.position)  # the drawn ones
     errors, covered = [], 0
     for s in np.flatnonzero(visible):
         distance = np.linalg.norm(gpu_pixels[:, exact.point[s]] - exact.pixel[s], axis=1)

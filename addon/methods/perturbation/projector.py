@@ -57,6 +57,9 @@ SAME_IMAGE_PX = 1.0
 POINT_CHUNK = 2048
 #: The longest step trusted, against the distance from the seed's last bounce (radians).
 MAX_RELATIVE_STEP = 0.3
+#: Reflections more grazing than this (cosine to the normal) are not drawn
+#: (:func:`grazing`): the silhouette's last pixel (R / 200 of a mirror R pixels across).
+GRAZING_COSINE = 0.1
 #: A target behind its seed's reflected ray steps from this share of its distance along it.
 BEHIND_START = 0.1
 #: Factor on the mesh model's error term of a step's estimate (``_model_errors``).
@@ -311,9 +314,41 @@ class PerturbationMethod:
         # no image there at all.
         short = np.linalg.norm(targets - foot, axis=1) <= MAX_RELATIVE_STEP * np.maximum(along, 0.0)
         reachable = along < seeds.head[seed_of]
-        estimate = np.where(reachable & local & short, estimate, np.inf)
         moved = step.points(paths)
+        estimate = np.where(reachable & local & short & _reflects(paths, moved, targets), estimate, np.inf)
         return moved[:, -1], moved[:, 0], estimate, np.where(reachable[:, None], at[2], np.nan)
+
+
+def _reflects(paths, moved, targets) -> np.ndarray:
+    """(K,) bool: at every moved bounce the path arrives and leaves on the same side of
+    the surface (its quadric's tangent plane), as a reflection does. A step carried
+    past the silhouette lands on the far side, where the eye cannot see it."""
+    k = len(targets)
+    before = np.concatenate([np.asarray(targets)[:, None], moved[:, :-1]], axis=1)
+    if paths.orthographic:
+        after_direction = np.concatenate([moved[:, 1:] - moved[:, :-1], np.broadcast_to(paths.eye, (k, 1, 3))], axis=1)
+    else:
+        after_direction = np.concatenate([moved[:, 1:], np.broadcast_to(paths.eye, (k, 1, 3))], axis=1) - moved
+    normal = paths.gradients(moved)
+    arrive = np.einsum("kni,kni->kn", normal, before - moved)
+    leave = np.einsum("kni,kni->kn", normal, after_direction)
+    return (arrive * leave > 0).all(axis=1)
+
+
+def grazing(view: View, points: np.ndarray, reflector_points: np.ndarray) -> np.ndarray:
+    """(P,) bool: first-order reflections of ``points`` at ``reflector_points`` that graze
+    the mirror (the cosine between the normal, the bisector of the directions to the eye
+    and to the point, and the direction to the eye below GRAZING_COSINE). Such an image
+    is compressed into the silhouette's last pixel, and a triangle with such corners
+    spans the chord between them, far beyond the image (the floor behind a ball drawn
+    over the sky along its rim): the renderer does not draw it, and traces the rim.
+    The projection still gives it (the exact solver counts it visible)."""
+    to_eye = view.directions_to_eye(np.nan_to_num(reflector_points))
+    to_point = points - reflector_points
+    to_point /= np.maximum(np.linalg.norm(to_point, axis=1), 1e-300)[:, None]
+    bisector = to_eye + to_point
+    cosine = np.einsum("ki,ki->k", bisector, to_eye) / np.maximum(np.linalg.norm(bisector, axis=1), 1e-300)
+    return cosine < GRAZING_COSINE
 
 
 def _model_errors(seeds: SeedPaths, quadrics: list, grid: np.ndarray) -> np.ndarray:
