@@ -2,7 +2,7 @@
 """Perturbation (Chen & Arvo 2000; issue 19) beside Runtime and Iterative, and its
 animations against Workbench and Cycles, in one run.
 
-    .venv/bin/python tests/benchmarks/bench_perturbation.py      # docs/benchmarks/perturbation.md
+    .venv/bin/python tests/benchmarks/bench_perturbation.py --images docs/images  # docs/benchmarks/perturbation.md
     .venv/bin/python tests/benchmarks/bench_perturbation.py --quick --out /tmp/perturbation.md
 
 **Accuracy and time per view change** (the engine, numpy, one interface): on each
@@ -206,7 +206,8 @@ def _subset(projection, groups):
 # --- animation ------------------------------------------------------------------------------
 
 
-def measure_animation(width: int, height: int, frames: int, degrees: float, sampled: int, samples: int) -> dict:
+def measure_animation(width: int, height: int, frames: int, degrees: float, sampled: int, samples: int,
+                      images: Path | None = None) -> dict:
     import bpy
 
     from curved_reflections.operators import demo_scenes
@@ -251,6 +252,13 @@ def measure_animation(width: int, height: int, frames: int, degrees: float, samp
             ("EXACT", use('PERTURBATION', 'SPHERE'), {}), ("MESH", use('PERTURBATION', 'NONE'), {}),
             ("RUNTIME", use('RUNTIME', 'NONE'), {})])
         settings.mode, settings.analytic_shape = 'PERTURBATION', 'SPHERE'
+        if images is not None:
+            from curved_reflections.operators import reference_render as rr
+
+            for row in result["rows"]:
+                strip = np.concatenate([rr.read_png(folder / f"{name}_{row['frame']}.png")[..., :3]
+                                        for name in ("cycles", "EXACT", "MESH", "RUNTIME")], axis=1)
+                rr.write_png(Path(images) / f"perturbation_frame_{row['frame']}.png", strip)
     return result
 
 
@@ -328,6 +336,8 @@ def parse_args(argv):
     parser.add_argument("--sampled", type=int, default=3, help="frames compared with Cycles")
     parser.add_argument("--samples", type=int, default=16, help="Cycles samples")
     parser.add_argument("--no-animation", action="store_true", help="only the accuracy table")
+    parser.add_argument("--images", type=Path, default=None,
+                        help="folder for the sampled frames side by side (Cycles, exact sphere, mesh, Runtime)")
     parser.add_argument("--quick", action="store_true", help="small: 150 points, subdivisions 3, 3 frames at 160x120")
     args = parser.parse_args(argv)
     args.width, args.height = 480, 320
@@ -348,7 +358,8 @@ def main(argv=None) -> int:
         rows += measure_scene(name, reflectors, analytic, eyes, order, args.points, rng)
         print(name, "done", flush=True)
     animation = None if args.no_animation else measure_animation(args.width, args.height, args.frames,
-                                                                 args.orbit_degrees, args.sampled, args.samples)
+                                                                 args.orbit_degrees, args.sampled, args.samples,
+                                                                 args.images)
     return bench_draw.write_report(args.out, report(rows, animation, command))
 
 
