@@ -36,7 +36,7 @@ MAX_CANDIDATES = 6
 def step_defines() -> dict:
     """The engine's constants, as the shader's ``#define`` s."""
     p = projector
-    return {"SEED_TEXELS": SEED_TEXELS, "COARSE": p.COARSE, "MAX_COLUMNS": MAX_COLUMNS,
+    return {"SEED_TEXELS": SEED_TEXELS, "MAX_COLUMNS": MAX_COLUMNS,
             "MAX_CANDIDATES": MAX_CANDIDATES, "CANDIDATE_SPREAD": f"{p.CANDIDATE_SPREAD:.9e}", "HOPS": p.HOPS,
             "REACH": f"{p.REACH:.9e}", "MAX_RELATIVE_STEP": f"{p.MAX_RELATIVE_STEP:.9e}",
             "BEHIND_START": f"{p.BEHIND_START:.9e}", "GRAZING_COSINE": f"{p.GRAZING_COSINE:.9e}",
@@ -95,7 +95,7 @@ def params_texels(view, group, accuracy_px: float, surface, shift: np.ndarray) -
     translate = np.eye(4)
     translate[:3, 3] = shift
     vp = np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix) @ translate
-    rows = np.zeros((14, 4))
+    rows = np.zeros((15, 4))
     rows[0:4] = vp.T  # GLSL matrices are set column by column
     rows[4:8] = np.linalg.inv(vp).T
     rows[8, :3] = view.eye - shift
@@ -107,6 +107,7 @@ def params_texels(view, group, accuracy_px: float, surface, shift: np.ndarray) -
         rows[11] = (q[0, 0], q[0, 1], q[0, 2], q[1, 1])
         rows[12, :2] = (q[1, 2], q[2, 2])
         rows[13] = (*b[0], c[0])
+    rows[14, 0] = group.coarse
     return rows.astype(np.float32)
 
 

@@ -4,7 +4,7 @@
  * addon/methods/perturbation/projector.py for one history of one bounce.
  *
  * One invocation per diffuse vertex (texel of `vertex_positions`):
- *   1. candidates: the local minima, over every COARSE-th grid seed, of the distance
+ *   1. candidates: the local minima, over every coarse-th grid seed, of the distance
  *      from the vertex to the seeds' reflected rays (three rows of distances kept, so
  *      each is computed once); at most MAX_CANDIDATES, none farther than
  *      CANDIDATE_SPREAD times the best;
@@ -27,7 +27,8 @@
  * (Q00, Q01, Q02, Q11), (Q12, Q22, model error, 0), (b, c) of g relative to the shift,
  * (pixel, 0, 0). `grid`: the seed index of each cell of the history's grid (-1 none).
  * `params`: rows of the view-projection, its inverse, the eye, (origin column, origin
- * row, columns, rows), (stride, accuracy, width, height) and the analytic quadric. */
+ * row, columns, rows), (stride, accuracy, width, height), the analytic quadric and
+ * (coarse, 0, 0, 0). */
 
 #define INF 1e30
 
@@ -236,8 +237,9 @@ void main()
   p_vertex = texelFetch(vertex_positions, texel, 0).xyz;
 
   /* 1. Candidates: local minima over the coarse sub-grid, three rows kept. */
-  int columns = min((grid_info.z - COARSE / 2 + COARSE - 1) / COARSE, MAX_COLUMNS);
-  int rows = (grid_info.w - COARSE / 2 + COARSE - 1) / COARSE;
+  int coarse = int(param(14).x);
+  int columns = min((grid_info.z - coarse / 2 + coarse - 1) / coarse, MAX_COLUMNS);
+  int rows = (grid_info.w - coarse / 2 + coarse - 1) / coarse;
   float ring[3 * MAX_COLUMNS];
   int candidate[MAX_CANDIDATES];
   float candidate_distance[MAX_CANDIDATES];
@@ -247,7 +249,7 @@ void main()
     for (int c = 0; c < columns; c++) {
       float d = INF;
       if (r < rows) {
-        int s = grid_seed(COARSE / 2 + COARSE * c, COARSE / 2 + COARSE * r);
+        int s = grid_seed(coarse / 2 + coarse * c, coarse / 2 + coarse * r);
         if (s >= 0) {
           vec4 t0 = seed_texel(s, 0), t1 = seed_texel(s, 1);
           vec3 offset = p_vertex - t0.xyz;
@@ -298,7 +300,7 @@ void main()
         candidate_distance[at] = candidate_distance[at - 1];
         at--;
       }
-      candidate[at] = grid_seed(COARSE / 2 + COARSE * c, COARSE / 2 + COARSE * (r - 1));
+      candidate[at] = grid_seed(coarse / 2 + coarse * c, coarse / 2 + coarse * (r - 1));
       candidate_distance[at] = d;
       found = min(found + 1, MAX_CANDIDATES);
     }

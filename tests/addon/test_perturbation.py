@@ -256,3 +256,16 @@ def test_second_order_projection_against_the_exact_solver():
     coverage, errors = _match(projection, wanted, histories=True)
     assert coverage >= 0.95
     assert np.percentile(errors, 99) <= 1.0
+
+
+def test_a_convex_mirror_is_scanned_coarser_than_a_bumpy_one():
+    """One image per point on a convex mirror: the candidate scan skips more seeds."""
+    from curved_reflections.addon.methods.perturbation import projector
+    from curved_reflections.addon.sphere import bumpy_icosphere
+
+    view = _view()
+    convex = PerturbationMethod(ReflectorSet([_egg_mesh()])).grid_groups(view)
+    exact = PerturbationMethod(ReflectorSet([_egg_mesh()]), {0: _egg_surface()}).grid_groups(view)
+    bumpy = PerturbationMethod(ReflectorSet([bumpy_icosphere(CENTRE, 1.0, 4, 0.05)])).grid_groups(view)
+    assert [g.coarse for g in convex] == [g.coarse for g in exact] == [projector.COARSE_CONVEX]
+    assert [g.coarse for g in bumpy if g.history == (0,)] == [projector.COARSE]

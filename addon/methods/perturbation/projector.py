@@ -8,7 +8,8 @@ Per view (section III):
    and scan line (``seeds.py``, III-B.1), grouped by reflection history.
 2. *Nearest path*: instead of the paper's ray octree (III-B.2) the seeds' image-plane
    grid is searched. The local minima of the distance from the point to the seeds'
-   outgoing rays over a coarse sub-grid (every ``COARSE``-th seed) are the point's
+   outgoing rays over a coarse sub-grid (every ``COARSE``-th seed, ``COARSE_CONVEX``-th
+   on a convex mirror) are the point's
    candidate images (several on a non-convex mirror: the paper's grouping of III-C.1,
    without its thresholds); each then *hops*: the Taylor step from its seed predicts
    the pixel, and the seed at that pixel is taken, until the seed stays.
@@ -39,6 +40,12 @@ from .seeds import SeedPaths, seed_paths_to, seed_quadrics, trace_seed_paths
 MIN_GROUP_SEEDS = 600
 #: Seed spacing of the coarse search for candidate images, in grid seeds.
 COARSE = 2
+#: ... on a mirror whose seeds all bend one way (convex): a point has one image there,
+#: one minimum of the distance, which a coarser scan finds as well (the hops refine it).
+COARSE_CONVEX = 4
+#: Tangential curvatures against the largest, below which a seed counts as bending the
+#: other way (a saddle or a dent).
+CONVEX_TOLERANCE = 0.05
 #: Hops from a candidate seed to the seed at its predicted pixel.
 HOPS = 3
 #: How far (in seed spacings) a Taylor step may move an image from its seed's pixel.
@@ -110,6 +117,7 @@ class SeedGroup:
     origin: tuple  # (column, row) of grid[0, 0] in the view's seed grid
     model_error: np.ndarray  # (S,) per seed, :func:`_model_errors`
     stride: int  # pixels between grid seeds
+    coarse: int  # grid seeds between the candidate scan's (COARSE or COARSE_CONVEX)
 
 
 class PerturbationMethod:
@@ -172,7 +180,10 @@ class PerturbationMethod:
         grid = np.full(tuple((cell.max(axis=0) - lo + 1)[::-1]), -1, dtype=np.int64)
         grid[cell[:, 1] - lo[1], cell[:, 0] - lo[0]] = np.arange(len(cell))
         quadrics = seed_quadrics(self.reflector_set, seeds, self.analytic)
-        return SeedGroup(history, seeds, quadrics, grid, tuple(lo), _model_errors(seeds, quadrics, grid), stride)
+        coarse = COARSE_CONVEX if all(_bends_one_way(seeds.points[:, k], q) for k, q in enumerate(quadrics)) \
+            else COARSE
+        return SeedGroup(history, seeds, quadrics, grid, tuple(lo), _model_errors(seeds, quadrics, grid), stride,
+                         coarse)
 
     def _finer(self, view: View, group: SeedGroup) -> SeedGroup | None:
         """The group traced again at half its spacing over its footprint (one old cell
@@ -351,6 +362,19 @@ def grazing(view: View, points: np.ndarray, reflector_points: np.ndarray) -> np.
     return cosine < GRAZING_COSINE
 
 
+def _bends_one_way(points: np.ndarray, quadrics) -> bool:
+    """Whether every seed's quadric curves the same way about its normal (all tangential
+    curvatures of one sign, up to CONVEX_TOLERANCE of the largest): a convex mirror."""
+    normal = quadrics.gradients(points)
+    normal /= np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
+    tangent = np.eye(3) - normal[:, :, None] * normal[:, None, :]
+    curvatures = np.linalg.eigvalsh(tangent @ np.asarray(quadrics.hessian) @ tangent)
+    scale = np.abs(curvatures).max()
+    if scale == 0:
+        return True
+    return bool((curvatures >= -CONVEX_TOLERANCE * scale).all() or (curvatures <= CONVEX_TOLERANCE * scale).all())
+
+
 def _model_errors(seeds: SeedPaths, quadrics: list, grid: np.ndarray) -> np.ndarray:
     """(S,) how far each seed's quadrics miss the surface next to it: at each grid
     neighbour's reflection point (same history, so the same reflectors), the normal the
@@ -388,7 +412,8 @@ def _rows(quadrics, rows):
 def _candidate_images(group: SeedGroup, points):
     """(point, seed) pairs: the local minima over the coarse sub-grid of the distance
     from each point to each seed's outgoing ray (behind its start: to the start)."""
-    coarse = group.grid[COARSE // 2::COARSE, COARSE // 2::COARSE]
+    step = group.coarse
+    coarse = group.grid[step // 2::step, step // 2::step]
     if not (coarse >= 0).any():
         coarse = group.grid
     seeds = group.seeds
