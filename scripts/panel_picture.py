@@ -11,6 +11,9 @@ and order on the mirror-ball demo scene with a torus mirror added, baked, both i
 default Auto mode: the ball is star-shaped and searched on the GPU (Iterative), the
 torus is not and is drawn in Runtime mode, each line saying why, and the morphing box
 offers to bake a grid for the torus; the widgets' look is a sketch, not Blender's theme.
+With ``--perturbation`` the ball is in Perturbation mode on its declared exact sphere:
+
+    .venv/bin/python scripts/panel_picture.py --perturbation --out docs/images/panel_perturbation.png
 """
 
 from __future__ import annotations
@@ -161,6 +164,8 @@ def draw_rows(rows: list) -> np.ndarray:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=REPO_ROOT / "docs" / "images" / "panel.png")
+    parser.add_argument("--perturbation", action="store_true",
+                        help="the ball in Perturbation mode on its declared exact sphere (panel_perturbation.png)")
     args = parser.parse_args(argv)
     sys.path.insert(0, str(REPO_ROOT / "scripts"))
     import package_link
@@ -183,6 +188,9 @@ def main(argv=None) -> int:
         ring.name = "Ring"
         ring.curved_reflections.is_reflector = True
         mirror = bpy.data.objects["MirrorSphere"]
+        if args.perturbation:
+            mirror.curved_reflections.mode = 'PERTURBATION'
+            mirror.curved_reflections.analytic_shape = 'SPHERE'
         bpy.context.view_layer.objects.active = mirror
         bpy.ops.curved_reflections.bake()
         image = draw_rows(record_panel(scene, mirror))

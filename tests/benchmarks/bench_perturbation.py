@@ -19,7 +19,8 @@ nearest exact visible reflection of its point (answers farther than 1 px count a
 Scenes (none used while the method was written): an exact sphere and an exact
 ellipsoid (Perturbation uses the declared surface), the same ellipsoid as a mesh, a
 superellipsoid (exponent 4) mesh, a bumpy sphere (amplitude 0.03, lobes 3 and 5: not
-convex, several images), and two exact spheres facing each other at order 2. 640x480,
+convex, several images), and two spheres facing each other at order 2 (exact, and as
+meshes from another view). 640x480,
 points uniform in a box of 3 radii around the mirrors, outside them.
 
 **Animation**: the sbc_fig3 demo at 480x320, its ball declared an exact sphere in
@@ -80,6 +81,8 @@ def scenes(subdivisions: int) -> list:
                                         icosphere(pair[1], 0.8, subdivisions, "B")],
          {0: AnalyticSurface("A", "SPHERE", _placed(pair[0]), (1.0,)),
           1: AnalyticSurface("B", "SPHERE", _placed(pair[1]), (0.8,))}, ((0.3, -5.0, 1.2),), 2),
+        ("two sphere meshes, order 2", [icosphere(pair[0], 1.0, subdivisions, "A"),
+                                        icosphere(pair[1], 0.8, subdivisions, "B")], {}, ((-0.4, -4.8, -0.9),), 2),
     ]
 
 
