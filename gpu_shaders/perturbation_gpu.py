@@ -38,6 +38,7 @@ def step_defines() -> dict:
     p = projector
     return {"SEED_TEXELS": SEED_TEXELS, "MAX_COLUMNS": MAX_COLUMNS,
             "MAX_CANDIDATES": MAX_CANDIDATES, "CANDIDATE_SPREAD": f"{p.CANDIDATE_SPREAD:.9e}", "HOPS": p.HOPS,
+            "HOP_SAMPLES": p.HOP_SAMPLES,
             "REACH": f"{p.REACH:.9e}", "MAX_RELATIVE_STEP": f"{p.MAX_RELATIVE_STEP:.9e}",
             "BEHIND_START": f"{p.BEHIND_START:.9e}", "GRAZING_COSINE": f"{p.GRAZING_COSINE:.9e}",
             "MODEL_SAFETY": f"{p.MODEL_SAFETY:.9e}",

@@ -8,8 +8,8 @@
  *      from the vertex to the seeds' reflected rays (three rows of distances kept, so
  *      each is computed once); at most MAX_CANDIDATES, none farther than
  *      CANDIDATE_SPREAD times the best;
- *   2. hops: a first-order step predicts the pixel, the grid seed there is taken, until
- *      it stays;
+ *   2. hops: a first-order step predicts the pixel, the grid seed there (else the last
+ *      on the way) is taken, until it stays;
  *   3. the second-order Taylor step (path Jacobian and Hessian of the Lagrange system,
  *      path_derivatives.py with N = 1: a 3 x 3 inverse and a Schur complement) and its
  *      error estimate: e2^2 / e1, twice the seed's model error times e1, infinite when
@@ -320,9 +320,19 @@ void main()
     }
     int s = candidate[k];
     for (int hop = 0; hop < HOPS; hop++) {
-      Step guess = take_step(load_seed(s), p_vertex, false);
-      ivec2 cell = cell_of(guess.pixel);
-      int moved = guess.pixel.x > -INF ? grid_seed(cell.x, cell.y) : -1;
+      Seed from = load_seed(s);
+      Step guess = take_step(from, p_vertex, false);
+      if (guess.pixel.x <= -INF) {
+        break;
+      }
+      /* The seed at the predicted pixel, else the last one on the way there. */
+      vec2 start = floor(from.pixel / stride) - vec2(grid_info.xy) + 0.5;
+      vec2 aim = guess.pixel / stride - vec2(grid_info.xy);
+      int moved = -1;
+      for (int j = 0; j < HOP_SAMPLES && moved < 0; j++) {
+        ivec2 cell = ivec2(floor(start + (1.0 - float(j) / float(HOP_SAMPLES)) * (aim - start)));
+        moved = grid_seed(cell.x, cell.y);
+      }
       if (moved < 0 || moved == s) {
         break;
       }

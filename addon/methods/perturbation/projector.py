@@ -48,6 +48,8 @@ COARSE_CONVEX = 4
 CONVEX_TOLERANCE = 0.05
 #: Hops from a candidate seed to the seed at its predicted pixel.
 HOPS = 3
+#: Cells tried along the way when no seed is at the predicted pixel (the last with one is taken).
+HOP_SAMPLES = 8
 #: How far (in seed spacings) a Taylor step may move an image from its seed's pixel.
 REACH = 1.5
 #: Rounds of adaptive seeds through predicted pixels.
@@ -265,14 +267,21 @@ class PerturbationMethod:
             first[rows], last[rows], estimate[rows], pixel[rows] = f[better], l[better], e[better], p[better]
 
     def _hop(self, view, group, points, point_of, seed_of):
-        """Move each candidate to the grid seed at its predicted pixel, until it stays."""
+        """Move each candidate to the grid seed at its predicted pixel, until it stays.
+        Where no seed is there (the image predicted past the footprint's edge), to the
+        last seed on the way (HOP_SAMPLES cells along the line): the edge seed nearest
+        the image, which the adaptive seeds then have little left to walk."""
+        origin = np.array(group.origin)
+        current = np.floor(group.seeds.pixels / group.stride).astype(np.int64) - origin
         for _ in range(HOPS):
             pixel = self._first_order_pixels(view, group.seeds, group.quadrics, points[point_of], seed_of)
-            cell = np.floor(np.nan_to_num(pixel, nan=-1e9) / group.stride).astype(np.int64) - np.array(group.origin)
-            rows, columns = group.grid.shape
-            inside = (cell[:, 0] >= 0) & (cell[:, 0] < columns) & (cell[:, 1] >= 0) & (cell[:, 1] < rows)
+            aim = np.nan_to_num(pixel / group.stride, nan=-1e9) - origin
+            start = current[seed_of]
             moved = np.full(len(seed_of), -1, dtype=np.int64)
-            moved[inside] = group.grid[cell[inside, 1], cell[inside, 0]]
+            for t in np.linspace(1.0, 0.0, HOP_SAMPLES, endpoint=False):
+                waiting = np.flatnonzero(moved < 0)
+                cell = np.floor(start[waiting] + 0.5 + t * (aim[waiting] - start[waiting] - 0.5)).astype(np.int64)
+                moved[waiting] = _grid_at(group.grid, cell)
             moved = np.where(moved >= 0, moved, seed_of)
             if (moved == seed_of).all():
                 break
@@ -462,6 +471,15 @@ def _local_minima(distance: np.ndarray) -> np.ndarray:
             before = di < 0 or (di == 0 and dj < 0)
             minimum &= (distance < neighbour) if before else (distance <= neighbour)
     return minimum
+
+
+def _grid_at(grid: np.ndarray, cell: np.ndarray) -> np.ndarray:
+    """(K,) the seed index at grid cells (column, row), -1 outside the grid or where none."""
+    rows, columns = grid.shape
+    inside = (cell[:, 0] >= 0) & (cell[:, 0] < columns) & (cell[:, 1] >= 0) & (cell[:, 1] < rows)
+    found = np.full(len(cell), -1, dtype=np.int64)
+    found[inside] = grid[cell[inside, 1], cell[inside, 0]]
+    return found
 
 
 def _in_footprint(group: SeedGroup, pixel) -> np.ndarray:
