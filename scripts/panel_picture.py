@@ -76,10 +76,10 @@ class Recorder:
             shown = "[x]" if value else "[ ]"
         elif rna.type == 'ENUM':
             shown = rna.enum_items[value].name
+        elif hasattr(value, "__len__") and not isinstance(value, str):
+            shown = " x ".join(f"{v:.3g}" if isinstance(v, float) else str(v) for v in value)
         elif rna.type == 'FLOAT':
             shown = f"{value:.3g}"
-        elif hasattr(value, "__len__") and not isinstance(value, str):
-            shown = " x ".join(str(v) for v in value)
         else:
             shown = str(value)
         self._emit("prop", f"{text or rna.name}:  {shown}")

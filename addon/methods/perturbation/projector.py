@@ -5,23 +5,28 @@ appear, reflected, in this view?
 Per view (section III):
 
 1. *Seeds*: exact paths traced from the eye through every ``seed_stride_px``-th pixel
-   and scan line (``seeds.py``, III-B.1), grouped by reflection history.
+   and scan line (``seeds.py``, III-B.1), grouped by reflection history; a history
+   with fewer than MIN_GROUP_SEEDS is traced again at half the spacing.
 2. *Nearest path*: instead of the paper's ray octree (III-B.2) the seeds' image-plane
    grid is searched. The local minima of the distance from the point to the seeds'
-   outgoing rays over a coarse sub-grid (every ``COARSE``-th seed, ``COARSE_CONVEX``-th
-   on a convex mirror) are the point's
-   candidate images (several on a non-convex mirror: the paper's grouping of III-C.1,
-   without its thresholds); each then *hops*: the Taylor step from its seed predicts
-   the pixel, and the seed at that pixel is taken, until the seed stays.
+   outgoing rays over a coarse sub-grid (every COARSE-th seed, COARSE_CONVEX-th on a
+   convex mirror) are the point's candidate images (several on a non-convex mirror:
+   the paper's grouping of III-C.1, without its thresholds); each then *hops*: a
+   first-order step from its seed predicts the pixel, and the seed there (else the
+   last one on the way) is taken, until the seed stays.
 3. *Perturbation*: from the point p on the seed's outgoing ray closest to the vertex
    p', the path Jacobian and Hessian give the reflector points of the path to p'
    (eq. 4, ``path_derivatives.py``; orders 2 and more in one system).
-4. *Adaptive seeds*: the Taylor series' next term is estimated from the last two
-   (e3 ~ e2^2 / e1, in pixels); where it exceeds ``accuracy_px`` a new seed is traced
-   through the predicted pixel and the step is taken again from it (up to
-   ``REFINE_ROUNDS`` times). An answer still above the bound, or whose pixel falls
-   outside the seeds' footprint of its history (an image beyond the mirror's
-   silhouette), is not given: never drawn at a wrong place.
+4. *Error estimate*: the series' next term from the last two (e2^2 / e1, in pixels),
+   and on a mesh twice the seed's model error (:func:`_model_errors`) times e1. A step
+   is trusted only when local (REACH spacings in the image, MAX_RELATIVE_STEP of the
+   path in the scene), in front of the next reflector on the ray, and not landing on
+   the surface's far side (:func:`_reflects`).
+5. *Adaptive seeds*: where the estimate exceeds ``accuracy_px`` a new seed is traced
+   toward the predicted pixel (damped to REACH spacings) and the step is taken again
+   from it (up to REFINE_ROUNDS times). An answer still above the bound, or whose
+   pixel falls outside the seeds' footprint of its history (an image beyond the
+   mirror's silhouette), is not given: never drawn at a wrong place.
 """
 
 from __future__ import annotations
