@@ -8,8 +8,10 @@ off the surface itself, which the mesh only approximates; measured against the m
 a method that uses the true surface would be charged with the tessellation's error.
 Here each of the mesh's solutions (found, with its visibility, by the mesh solvers) is
 polished onto the true surface by Newton's method on the Lagrange system of Chen & Arvo
-(2000, eq. 5; ``path_derivatives.newton``), which converges quadratically from the
-mesh's nearby answer. Visibility stays the mesh's.
+(2000, eq. 5; ``path_derivatives.newton``, each bounce's quadric osculating the surface
+at the current point: exact for spheres and ellipsoids, refreshed every step on a
+superquadric), which converges quadratically from the mesh's nearby answer.
+Visibility stays the mesh's.
 """
 
 from __future__ import annotations
@@ -18,6 +20,10 @@ import numpy as np
 
 from .methods.perturbation.path_derivatives import Paths, newton, optimal_multipliers
 from .view import View
+
+#: Newton steps of the polish (quadratic convergence from the mesh's answer; a
+#: superquadric's osculating quadric is refreshed at each).
+POLISH_ITERATIONS = 12
 
 
 def polish_on_surfaces(surfaces: dict, view: View, points: np.ndarray, reflector_points: np.ndarray,
@@ -31,17 +37,25 @@ def polish_on_surfaces(surfaces: dict, view: View, points: np.ndarray, reflector
     reflector_points = np.asarray(reflector_points, dtype=np.float64).reshape(len(points), -1, 3)
     histories = np.asarray(histories).reshape(len(points), -1)
     n = histories.shape[1]
-    hessian, linear, constant = np.zeros((len(points), n, 3, 3)), np.zeros((len(points), n, 3)), np.zeros((len(points), n))
-    for index, surface in surfaces.items():
-        q, b, c = surface.quadric()
-        on = histories == index
-        hessian[on], linear[on], constant[on] = q, b, c
     reverse = slice(None, None, -1)  # Chen-Arvo order: y_1 next to the scene point
-    paths = Paths(points, reflector_points[:, reverse], np.zeros((len(points), n)), hessian[:, reverse],
-                  linear[:, reverse], constant[:, reverse], view.eye if view.is_perspective else view.backward,
-                  not view.is_perspective)
+    owners = histories[:, reverse]
+
+    def osculate(paths: Paths) -> Paths:
+        hessian, linear = np.zeros((len(points), n, 3, 3)), np.zeros((len(points), n, 3))
+        constant = np.zeros((len(points), n))
+        for index, surface in surfaces.items():
+            on = owners == index
+            if on.any():
+                rows = surface.osculating(paths.reflector_points[on])
+                hessian[on], linear[on], constant[on] = rows.hessian, rows.linear, rows.constant
+        return Paths(paths.scene_points, paths.reflector_points, paths.multipliers, hessian, linear, constant,
+                     paths.eye, paths.orthographic)
+
+    paths = osculate(Paths(points, reflector_points[:, reverse], np.zeros((len(points), n)),
+                           np.zeros((len(points), n, 3, 3)), np.zeros((len(points), n, 3)), np.zeros((len(points), n)),
+                           view.eye if view.is_perspective else view.backward, not view.is_perspective))
     paths = paths.with_points(multipliers=optimal_multipliers(paths))
-    solved, converged = newton(paths)
+    solved, converged = newton(paths, iterations=POLISH_ITERATIONS, osculate=osculate)
     polished = solved.reflector_points[:, reverse]
     pixels, _ = view.to_pixels(polished[:, 0]) if len(points) else (np.zeros((0, 2)), None)
     return polished, pixels, converged

@@ -64,8 +64,9 @@ class PerturbationPass:
 
     def _on_gpu(self, view) -> list:
         """Seeds traced here, every vertex's step on the GPU (``perturbation_gpu.py``). An
-        exact sphere or ellipsoid shows a point once: one image rank is drawn; and the
-        shader's adaptive seeds on it assume no other mirror blocks their rays."""
+        exact surface (convex) shows a point once: one image rank is drawn. The shader's
+        adaptive seeds meet a sphere or ellipsoid (a quadric) in closed form and assume no
+        other mirror blocks their rays; on a superquadric it traces none, as on a mesh."""
         from ..addon.methods.perturbation import PerturbationStats
         from .perturbation_gpu import RANKS, PerturbationStep
 
@@ -78,7 +79,8 @@ class PerturbationPass:
             method = methods.get(group.history)
             if method is None:
                 continue
-            alone = method.surface if len(self._reflectors) == 1 else None
+            exact = method.surface is not None and method.surface.is_quadric
+            alone = method.surface if exact and len(self._reflectors) == 1 else None
             textures = self._step.answer(view, group, self._accuracy, alone)
             ranks = 1 if method.surface is not None else RANKS
             answers += [(method.index, texture) for texture in textures[:ranks]]

@@ -202,7 +202,7 @@ def perturbation_reflector(scene, index: int, reflector) -> tuple:
         return (PerturbationReflector(index, reflector.name),
                 "Perturbation of traced paths on the mesh's osculating quadrics (Chen & Arvo 2000)")
     surface = AnalyticSurface(reflector.name, settings.analytic_shape, np.array(obj.matrix_world),
-                              tuple(settings.analytic_radii))
+                              tuple(settings.analytic_radii), settings.analytic_exponent)
     deviation = surface.mesh_deviation(reflector)
     shape = settings.analytic_shape.lower()
     if deviation > ANALYTIC_TOLERANCE:

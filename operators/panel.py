@@ -35,6 +35,8 @@ def _reflector_settings(layout, obj) -> None:
         radii = details.row()
         radii.active = settings.analytic_shape != 'NONE'
         radii.prop(settings, "analytic_radii")
+        if settings.analytic_shape == 'SUPERQUADRIC':
+            details.prop(settings, "analytic_exponent")
 
 
 #: Characters per line of a reflector's reason in the panel.

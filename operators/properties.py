@@ -80,8 +80,16 @@ class CurvedReflectionsObjectSettings(bpy.types.PropertyGroup):
             ('NONE', "Mesh", "Reflect off the mesh (its interpolated normals)"),
             ('SPHERE', "Sphere", "A sphere of radius Radii X around the object's origin, in its local axes"),
             ('ELLIPSOID', "Ellipsoid", "An ellipsoid with the radii along the object's local axes"),
+            ('SUPERQUADRIC', "Superquadric", "|x/a|^p + |y/b|^p + |z/c|^p = 1 with the radii a, b, c along the "
+                                             "object's local axes and the exponent p: a rounded box"),
         ),
         default='NONE',
+        update=_reflector_toggled,
+    )
+    analytic_exponent: FloatProperty(
+        name="Exponent",
+        description="The superquadric's exponent p: 2 is an ellipsoid, 4 a rounded box, larger a boxier one",
+        default=4.0, min=2.0, max=64.0,
         update=_reflector_toggled,
     )
     analytic_radii: FloatVectorProperty(

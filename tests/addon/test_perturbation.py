@@ -269,3 +269,56 @@ def test_a_convex_mirror_is_scanned_coarser_than_a_bumpy_one():
     bumpy = PerturbationMethod(ReflectorSet([bumpy_icosphere(CENTRE, 1.0, 4, 0.05)])).grid_groups(view)
     assert [g.coarse for g in convex] == [g.coarse for g in exact] == [projector.COARSE_CONVEX]
     assert [g.coarse for g in bumpy if g.history == (0,)] == [projector.COARSE]
+
+
+# --- superquadrics -----------------------------------------------------------------------
+
+
+def _box_surface(exponent=4.0):
+    return AnalyticSurface("Box", "SUPERQUADRIC", _placed(CENTRE), (1.0, 0.8, 0.65), exponent)
+
+
+def test_superquadric_derivatives_match_finite_differences():
+    surface = _box_surface()
+    rng = np.random.default_rng(9)
+    points = CENTRE + rng.uniform(-1.0, 1.0, (40, 3))
+    step = 1e-6
+    for axis in range(3):
+        shift = np.zeros(3)
+        shift[axis] = step
+        value_slope = (surface.values(points + shift) - surface.values(points - shift)) / (2 * step)
+        gradient_slope = (surface.gradients(points + shift) - surface.gradients(points - shift)) / (2 * step)
+        assert np.abs(value_slope - surface.gradients(points)[:, axis]).max() < 1e-6
+        assert np.abs(gradient_slope - surface.hessians(points)[:, :, axis]).max() < 1e-5
+    rows = surface.osculating(points)
+    assert np.abs(rows.gradients(points) - surface.gradients(points)).max() < 1e-12
+    with pytest.raises(SceneInputError, match="Box.*exponent"):
+        _box_surface(1.5)
+
+
+def test_perturbation_on_an_exact_superquadric_against_the_polished_reference():
+    """A rounded box declared exactly (exponent 4): seeds move onto it, its osculating
+    quadric bends each path, and the reference is the mesh's answer polished onto it."""
+    from curved_reflections.addon.sphere import superellipsoid
+
+    surface = _box_surface()
+    mesh = superellipsoid(CENTRE, (1.0, 0.8, 0.65), 4.0, 4, name="Box")
+    assert surface.mesh_deviation(mesh) < 1e-9
+    rs = ReflectorSet([mesh])
+    view = _view(eye=(2.9, 2.6, -1.7))
+    points = _points_around(rs, 500, np.random.default_rng(31))
+    exact = solve_reflections(rs, view, points)
+    exact = exact.select(exact.visible)
+    polished, reference, converged = polish_on_surfaces({0: surface}, view, points[exact.point],
+                                                        exact.position[:, None], exact.reflector[:, None])
+    assert converged.mean() > 0.99
+    x = polished[converged, 0]
+    assert np.abs(surface.values(x)).max() < 1e-9
+    bisector = _unit(_unit(view.eye - x) + _unit(points[exact.point[converged]] - x))
+    assert np.abs(np.abs(np.einsum("ij,ij->i", bisector, surface.normals(x))) - 1.0).max() < 1e-9
+    method = PerturbationMethod(rs, {0: surface}, PerturbationSettings(accuracy_px=0.5))
+    projection = method.project(view, points)
+    wanted = [(exact.point[s], reference[s], None) for s in np.flatnonzero(converged)]
+    coverage, errors = _match(projection, wanted)
+    assert coverage >= 0.98
+    assert np.percentile(errors, 99) <= 0.5

@@ -16,9 +16,9 @@ charged with its own error and not the tessellation's. *Coverage*: the share of 
 exact visible reflections answered within 1 px; errors: each answer's distance to the
 nearest exact visible reflection of its point (answers farther than 1 px count as
 *false*). Perturbation's seeds per view are the grid's and the adaptive ones.
-Scenes (none used while the method was written): an exact sphere and an exact
-ellipsoid (Perturbation uses the declared surface), the same ellipsoid as a mesh, a
-superellipsoid (exponent 4) mesh, a bumpy sphere (amplitude 0.03, lobes 3 and 5: not
+Scenes (none used while the method was written): an exact sphere, an exact
+ellipsoid and an exact superquadric (exponent 4; Perturbation uses the declared
+surface), the same ellipsoid and superquadric as meshes, a bumpy sphere (amplitude 0.03, lobes 3 and 5: not
 convex, several images), and two spheres facing each other at order 2 (exact, and as
 meshes from another view). 640x480,
 points uniform in a box of 3 radii around the mirrors, outside them.
@@ -73,6 +73,8 @@ def scenes(subdivisions: int) -> list:
         ("exact ellipsoid", [ellipsoid(centre, radii, subdivisions, "ellipsoid")],
          {0: AnalyticSurface("ellipsoid", "ELLIPSOID", _placed(centre), radii)}, eyes, 1),
         ("ellipsoid mesh", [ellipsoid(centre, radii, subdivisions, "ellipsoid")], {}, eyes, 1),
+        ("exact superquadric", [superellipsoid(centre, (1.0, 0.8, 0.65), 4.0, subdivisions + 1, "superellipsoid")],
+         {0: AnalyticSurface("superellipsoid", "SUPERQUADRIC", _placed(centre), (1.0, 0.8, 0.65), 4.0)}, eyes, 1),
         ("superellipsoid mesh", [superellipsoid(centre, (1.0, 0.8, 0.65), 4.0, subdivisions + 1, "superellipsoid")],
          {}, eyes, 1),
         ("bumpy sphere mesh", [bumpy_icosphere(centre, 1.0, subdivisions + 1, 0.03, lobes=(3, 5), name="bumpy")],

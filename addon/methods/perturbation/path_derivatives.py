@@ -186,15 +186,19 @@ def _solve(a: np.ndarray, rhs: np.ndarray) -> np.ndarray:
         return out
 
 
-def newton(paths: Paths, iterations: int = 8, tolerance: float = 1e-10) -> tuple[Paths, np.ndarray]:
+def newton(paths: Paths, iterations: int = 8, tolerance: float = 1e-10, osculate=None) -> tuple[Paths, np.ndarray]:
     """Solve F = 0 by Newton's method from the given paths (scene points and eye fixed):
-    the exact paths on the quadrics. Returns the solved paths and (K,) bool converged."""
+    the exact paths on the quadrics, or with ``osculate`` (paths -> paths with each
+    bounce's quadric osculating its surface at the current points) on any smooth
+    implicit surfaces. Returns the solved paths and (K,) bool converged."""
     k, n = len(paths.scene_points), paths.bounces
     for _ in range(iterations):
+        if osculate is not None:
+            paths = osculate(paths)
         residual, a, _, _ = system(paths)
         step = _solve(a, residual).reshape(k, n, 4)
         step = np.nan_to_num(step)
         paths = paths.with_points(reflector_points=paths.reflector_points - step[:, :, :3],
                                   multipliers=paths.multipliers - step[:, :, 3])
-    residual, _, _, _ = system(paths)
+    residual, _, _, _ = system(paths if osculate is None else osculate(paths))
     return paths, np.abs(residual).max(axis=1) < tolerance

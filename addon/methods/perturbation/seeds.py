@@ -104,7 +104,7 @@ def seed_quadrics(reflector_set: ReflectorSet, seeds: SeedPaths, analytic: dict 
         for index, surface in analytic.items():
             on = seeds.histories[:, k] == index
             if on.any():
-                exact = surface.rows(int(on.sum()))
+                exact = surface.osculating(seeds.points[on, k])
                 hessian[on], linear[on], constant[on] = exact.hessian, exact.linear, exact.constant
         rows.append(QuadricRows(hessian, linear, constant))
     return rows
