@@ -6,10 +6,12 @@ projector for first-order histories in perspective views.
 Per view the seed paths are traced on the CPU (``PerturbationMethod.grid_groups``: a
 few thousand rays) and uploaded, one texture of seeds and one of the grid per
 reflector; one dispatch then answers every vertex: candidates, hops, the Taylor step
-and its estimate, and on an exact surface the adaptive seeds (the eye ray meets the
-quadric in the shader). Images grazing the mirror are left out (``projector.grazing``). On a mesh the shader traces no rays: a vertex whose step from
-the grid is not within the accuracy gets no answer there (the numpy path traces more
-seeds for it); the renderer's silhouette band is ray traced either way.
+and its estimate, and on an exact sphere or ellipsoid the adaptive seeds (the eye ray
+meets the quadric in the shader). Images grazing the mirror are left out
+(``projector.grazing``). On a mesh or a superquadric the shader traces no rays: a
+vertex whose step from the grid is not within the accuracy gets no answer there (the
+numpy path traces more seeds for it); the renderer's silhouette band is ray traced
+either way.
 """
 
 from __future__ import annotations

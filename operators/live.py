@@ -178,7 +178,8 @@ def _capture(state: LiveScene, scene, depsgraph, reflectors: bool) -> None:
     # reflectors are searched on the GPU every frame (their maps come from the plan).
     state.renderer = ReflectionRenderer(captured.reflectors, captured.meshes, polish=False,
                                         iterative=state.plan.iterative, morph=state.grids,
-                                        perturbation=state.plan.perturbation, perturbation_accuracy_px=state.settings[2],
+                                        perturbation=state.plan.perturbation,
+                                        perturbation_accuracy_px=state.settings[2],
                                         morph_budget_mb=scene.curved_reflections.morph_gpu_budget_mb,
                                         **reflector_properties(captured.reflectors, scene))
     state.captured = captured
@@ -208,8 +209,8 @@ def _covering_grids(state: LiveScene, view: View) -> list:
 
 def _needs_camera(state: LiveScene, covering: list, settings: tuple) -> bool:
     """Whether a sample-based camera must be built: a reflector drawn neither from a grid
-    nor by the iterative search nor by perturbation, or reflections of a higher order (grids and the search
-    give first-order ones only)."""
+    nor by the iterative search nor by perturbation, or reflections of a higher order
+    (those three give first-order ones only)."""
     drawn = len(covering) + len(state.plan.iterative) + len(state.plan.perturbation)
     return drawn < len(state.reflector_set.reflectors) or settings[0] > 1
 

@@ -18,10 +18,10 @@ nearest exact visible reflection of its point (answers farther than 1 px count a
 *false*). Perturbation's seeds per view are the grid's and the adaptive ones.
 Scenes (none used while the method was written): an exact sphere, an exact
 ellipsoid and an exact superquadric (exponent 4; Perturbation uses the declared
-surface), the same ellipsoid and superquadric as meshes, a bumpy sphere (amplitude 0.03, lobes 3 and 5: not
-convex, several images), and two spheres facing each other at order 2 (exact, and as
-meshes from another view). 640x480,
-points uniform in a box of 3 radii around the mirrors, outside them.
+surface), the same ellipsoid and superquadric as meshes, a bumpy sphere (amplitude
+0.03, lobes 3 and 5: not convex, several images), and two spheres facing each other
+at order 2 (exact, and as meshes from another view). 640x480, points uniform in a box
+of 3 radii around the mirrors, outside them.
 
 **Animation**: the sbc_fig3 demo at 480x320, its ball declared an exact sphere in
 Perturbation mode, the camera orbiting it every frame: ``render_image(animation=True)``

@@ -12,9 +12,9 @@ osculating quadric at the path's point (:mod:`.quadrics`).
 
 from .path_derivatives import Paths, newton, perturb
 from .projector import PerturbationMethod, PerturbationReflector, PerturbationSettings, PerturbationStats
-from .quadrics import ELLIPSOID, SHAPES, SPHERE, AnalyticSurface, osculating_quadrics
+from .quadrics import ELLIPSOID, SHAPES, SPHERE, SUPERQUADRIC, AnalyticSurface, osculating_quadrics
 from .seeds import SeedPaths, trace_seed_paths
 
-__all__ = ["AnalyticSurface", "ELLIPSOID", "Paths", "PerturbationMethod", "PerturbationReflector", "PerturbationSettings",
-           "PerturbationStats", "SHAPES", "SPHERE", "SeedPaths", "newton", "osculating_quadrics", "perturb",
-           "trace_seed_paths"]
+__all__ = ["AnalyticSurface", "ELLIPSOID", "Paths", "PerturbationMethod", "PerturbationReflector",
+           "PerturbationSettings", "PerturbationStats", "SHAPES", "SPHERE", "SUPERQUADRIC", "SeedPaths", "newton",
+           "osculating_quadrics", "perturb", "trace_seed_paths"]

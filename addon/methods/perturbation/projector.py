@@ -322,7 +322,8 @@ class PerturbationMethod:
         paths = seed_paths_to(seeds.select(seed_of), [_rows(q, seed_of) for q in quadrics], view, foot)
         step = perturb(paths, targets)
         seen = paths.reflector_points[:, -1]
-        at = [view.to_pixels(seen + move)[0] for move in (0.0, step.first[:, -1], step.first[:, -1] + step.second[:, -1])]
+        moves = (0.0, step.first[:, -1], step.first[:, -1] + step.second[:, -1])
+        at = [view.to_pixels(seen + move)[0] for move in moves]
         e1 = np.linalg.norm(at[1] - at[0], axis=1)
         e2 = np.linalg.norm(at[2] - at[1], axis=1)
         with np.errstate(invalid="ignore", divide="ignore"):
