@@ -322,3 +322,45 @@ def test_perturbation_on_an_exact_superquadric_against_the_polished_reference():
     coverage, errors = _match(projection, wanted)
     assert coverage >= 0.98
     assert np.percentile(errors, 99) <= 0.5
+
+
+def test_third_order_answers_lie_on_traced_paths():
+    """Order 3 (no exact solver): each answer's pixel is checked by tracing its eye ray
+    through three bounces; the point must lie on the last reflected ray (within the
+    width a pixel spans there)."""
+    centres = [np.array((-1.2, 0.0, 0.0)), np.array((1.2, 0.2, 0.1)), np.array((0.0, 1.6, -0.2))]
+    radii = [0.9, 0.8, 0.7]
+    spheres = {k: AnalyticSurface(name, "SPHERE", _placed(c), (r,)) for k, (c, r, name) in
+               enumerate(zip(centres, radii, "ABC"))}
+    rs = ReflectorSet([icosphere(c, r, 4, name) for c, r, name in zip(centres, radii, "ABC")])
+    view = look_at_view((0.2, -5.0, 1.3), (0.0, 0.3, 0.0), width=480, height=360)
+    rng = np.random.default_rng(23)
+    points = rng.uniform((-3.0, -2.0, -2.0), (3.0, 3.5, 2.0), (3000, 3))
+    outside = np.all([np.linalg.norm(points - c, axis=1) > 1.1 * r for c, r in zip(centres, radii)], axis=0)
+    points = points[outside][:1500]
+    method = PerturbationMethod(rs, spheres, PerturbationSettings(accuracy_px=0.5, max_order=3))
+    projection = method.project(view, points)
+    third = [g for g, h in enumerate(projection.groups) if len(h) == 3]
+    assert third
+    checked = 0
+    for g in third:
+        answered = np.flatnonzero(projection.valid[g])
+        traced = trace_seed_paths(rs, view, projection.pixels[g, answered], 3, spheres)[2]
+        same = (traced.histories == np.array(projection.groups[g])).all(axis=1)
+        rows = answered[traced.ray[same]]
+        tail, direction = traced.points[same, -1], traced.outgoing[same]
+        offset = points[rows] - tail
+        along = np.einsum("ij,ij->i", offset, direction)
+        miss = np.linalg.norm(offset - along[:, None] * direction, axis=1)
+        # The spread of the reflected rays across one pixel at the point's distance.
+        neighbour = trace_seed_paths(rs, view, projection.pixels[g, rows] + (1.0, 0.0), 3, spheres)[2]
+        assert len(rows) > 0 and (same.mean() > 0.95)
+        spread = np.full(len(rows), np.inf)
+        keep = (neighbour.histories == np.array(projection.groups[g])).all(axis=1)
+        spread[neighbour.ray[keep]] = np.linalg.norm(
+            (neighbour.points[keep, -1] + along[neighbour.ray[keep], None] * neighbour.outgoing[keep])
+            - (tail[neighbour.ray[keep]] + along[neighbour.ray[keep], None] * direction[neighbour.ray[keep]]), axis=1)
+        measured = np.isfinite(spread)
+        assert np.percentile(miss[measured] / spread[measured], 99) < 0.5  # within half a pixel
+        checked += int(measured.sum())
+    assert checked > 50
