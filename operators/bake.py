@@ -38,7 +38,10 @@ def viewport_views(context) -> dict:
 def _summary(state) -> str:
     stats = state.stats
     searched = ", ".join(m.name for m in state.plan.iterative)
-    searched = f"{searched} searched on the GPU every frame" if searched else ""
+    perturbed = ", ".join(m.name for m in state.plan.perturbation)
+    searched = "; ".join(part for part in (f"{searched} searched on the GPU every frame" if searched else "",
+                                           f"{perturbed} by perturbation of paths traced each view" if perturbed
+                                           else "") if part)
     if "rays" not in stats:
         return searched or "building in the background"
     if not stats["rays"] and searched:

@@ -320,15 +320,18 @@ def _update_stats(state: LiveScene, sbc, covering: list) -> None:
         "reflected_triangles": int(len(geometry.triangles)),
         "morphing": ", ".join(grid.reflector_name for grid, _ in covering),
         "iterative": ", ".join(m.name for m in state.plan.iterative),
+        "perturbation": ", ".join(m.name for m in state.plan.perturbation),
     })
 
 
 def _report_visibility(state: LiveScene, sbc, covering: list) -> None:
     """Reflectors the view does not see: a warning when none is seen (nothing to draw).
-    A reflector drawn from its grid counts as seen (its grid decides per vertex)."""
+    A reflector drawn from its grid, searched or perturbed counts as seen (its method
+    decides per vertex)."""
     names = [r.name for r in state.captured.reflectors]
     seen = {int(history[0]) for history in ([] if sbc is None else sbc.groups)}
-    seen |= {grid.reflector_index for grid, _ in covering} | state.plan.iterative_indices
+    seen |= {grid.reflector_index for grid, _ in covering} | state.plan.iterative_indices | {
+        m.index for m in state.plan.perturbation}
     unseen = [name for k, name in enumerate(names) if k not in seen]
     quoted = ", ".join(repr(n) for n in unseen)
     if not seen:

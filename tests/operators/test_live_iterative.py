@@ -141,13 +141,16 @@ def test_a_new_capture_of_the_reflectors_makes_older_cameras_stale(fig3):
     assert (state.generation, state.counts["bakes"]) == (generation + 1, bakes + 1)
 
 
-def test_perturbation_mode_draws_live_with_no_camera_and_the_torus_too(fig3):
+def test_perturbation_mode_draws_live_with_no_camera_and_the_torus_too(fig3, capfd):
     """Perturbation (Chen & Arvo 2000) draws the ball and a torus in the viewport with no
     sample-based camera; a new view is projected again, the same view is not."""
     bpy.data.objects["MirrorSphere"].curved_reflections.mode = 'PERTURBATION'
     torus = _torus(fig3)
     torus.curved_reflections.mode = 'PERTURBATION'
-    state = live.bake(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
+    assert bpy.ops.curved_reflections.bake() == {'FINISHED'}
+    assert ("Info: Baked reflections: MirrorSphere, Ring by perturbation of paths traced each view"
+            in capfd.readouterr().out)
+    state = live.state_of(fig3)
     choices = {c.reflector: c for c in methods.last_choices(fig3)}
     assert {name: c.method for name, c in choices.items()} == {"MirrorSphere": methods.PERTURBATION,
                                                                "Ring": methods.PERTURBATION}
