@@ -37,6 +37,7 @@ import numpy as np
 
 from ...projection import NOT_PROJECTED, PERTURBATION_ANSWER, Projection
 from ...raytrace import ReflectorSet
+from ...vectors import dot, normalized
 from ...view import View
 from .path_derivatives import perturb
 from .seeds import SeedPaths, seed_paths_to, seed_quadrics, trace_seed_paths
@@ -295,21 +296,8 @@ class PerturbationMethod:
 
     def _first_order_pixels(self, view, seeds: SeedPaths, quadrics: list, targets, seed_of) -> np.ndarray:
         """(K, 2) where a first-order step from seeds ``seed_of`` puts ``targets`` (hops)."""
-        paths = seed_paths_to(seeds.select(seed_of), [_rows(q, seed_of) for q in quadrics], view,
-                              self._feet(seeds, targets, seed_of)[0])
+        paths, _, _ = _paths_toward(view, seeds, quadrics, targets, seed_of)
         return view.to_pixels(paths.reflector_points[:, -1] + perturb(paths, targets, order=1).first[:, -1])[0]
-
-    @staticmethod
-    def _feet(seeds: SeedPaths, targets, seed_of):
-        """The points on the seeds' reflected rays the steps start from, and the targets'
-        distances along the rays."""
-        tail, direction = seeds.points[seed_of, -1], seeds.outgoing[seed_of]
-        along = np.einsum("ki,ki->k", targets - tail, direction)
-        # A target behind the ray's start (a fast-spreading fan: a small second-order
-        # image) steps from a point a little way along the ray: a long step, not trusted,
-        # but it points the adaptive seeds the right way.
-        reach = np.maximum(along, BEHIND_START * np.linalg.norm(targets - tail, axis=1))
-        return tail + reach[:, None] * direction, along
 
     def _step(self, view, seeds: SeedPaths, quadrics: list, targets, seed_of, model_error, reach_px):
         """The Taylor step from seeds ``seed_of`` to ``targets``: first and last reflector
@@ -318,8 +306,7 @@ class PerturbationMethod:
         cannot lead to an image). ``model_error`` (K,):
         how far each seed's quadrics miss the surface (:func:`_model_errors`); ``reach_px``:
         the longest step trusted (REACH seed spacings)."""
-        foot, along = self._feet(seeds, targets, seed_of)
-        paths = seed_paths_to(seeds.select(seed_of), [_rows(q, seed_of) for q in quadrics], view, foot)
+        paths, foot, along = _paths_toward(view, seeds, quadrics, targets, seed_of)
         step = perturb(paths, targets)
         seen = paths.reflector_points[:, -1]
         moves = (0.0, step.first[:, -1], step.first[:, -1] + step.second[:, -1])
@@ -343,6 +330,21 @@ class PerturbationMethod:
         moved = step.points(paths)
         estimate = np.where(reachable & local & short & _reflects(paths, moved, targets), estimate, np.inf)
         return moved[:, -1], moved[:, 0], estimate, np.where(reachable[:, None], at[2], np.nan)
+
+
+def _paths_toward(view, seeds: SeedPaths, quadrics: list, targets, seed_of):
+    """The seeds ``seed_of`` as paths to the points on their reflected rays nearest the
+    ``targets`` (the feet the steps start from), the feet and the targets' distances
+    along the rays."""
+    tail, direction = seeds.points[seed_of, -1], seeds.outgoing[seed_of]
+    along = np.einsum("ki,ki->k", targets - tail, direction)
+    # A target behind the ray's start (a fast-spreading fan: a small second-order
+    # image) steps from a point a little way along the ray: a long step, not trusted,
+    # but it points the adaptive seeds the right way.
+    reach = np.maximum(along, BEHIND_START * np.linalg.norm(targets - tail, axis=1))
+    foot = tail + reach[:, None] * direction
+    paths = seed_paths_to(seeds.select(seed_of), [q.take(seed_of) for q in quadrics], view, foot)
+    return paths, foot, along
 
 
 def _reflects(paths, moved, targets) -> np.ndarray:
@@ -370,18 +372,14 @@ def grazing(view: View, points: np.ndarray, reflector_points: np.ndarray) -> np.
     over the sky along its rim): the renderer does not draw it, and traces the rim.
     The projection still gives it (the exact solver counts it visible)."""
     to_eye = view.directions_to_eye(np.nan_to_num(reflector_points))
-    to_point = points - reflector_points
-    to_point /= np.maximum(np.linalg.norm(to_point, axis=1), 1e-300)[:, None]
-    bisector = to_eye + to_point
-    cosine = np.einsum("ki,ki->k", bisector, to_eye) / np.maximum(np.linalg.norm(bisector, axis=1), 1e-300)
-    return cosine < GRAZING_COSINE
+    bisector = normalized(to_eye + normalized(points - reflector_points))
+    return dot(bisector, to_eye) < GRAZING_COSINE
 
 
 def _bends_one_way(points: np.ndarray, quadrics) -> bool:
     """Whether every seed's quadric curves the same way about its normal (all tangential
     curvatures of one sign, up to CONVEX_TOLERANCE of the largest): a convex mirror."""
-    normal = quadrics.gradients(points)
-    normal /= np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
+    normal = normalized(quadrics.gradients(points))
     tangent = np.eye(3) - normal[:, :, None] * normal[:, None, :]
     curvatures = np.linalg.eigvalsh(tangent @ np.asarray(quadrics.hessian) @ tangent)
     scale = np.abs(curvatures).max()
@@ -406,22 +404,14 @@ def _model_errors(seeds: SeedPaths, quadrics: list, grid: np.ndarray) -> np.ndar
         for s, t in ((a, b), (b, a)):
             for bounce, q in enumerate(quadrics):
                 x_t = seeds.points[t, bounce]
-                own_s = _unit(_rows(q, s).gradients(seeds.points[s, bounce]))
-                own_t = _unit(_rows(q, t).gradients(x_t))
-                predicted = _unit(_rows(q, s).gradients(x_t))
+                own_s = normalized(q.take(s).gradients(seeds.points[s, bounce]))
+                own_t = normalized(q.take(t).gradients(x_t))
+                predicted = normalized(q.take(s).gradients(x_t))
                 turned = np.linalg.norm(own_t - own_s, axis=1)
                 ratio = np.linalg.norm(predicted - own_t, axis=1) / np.maximum(turned, 1e-12)
                 np.maximum.at(error, s, np.where(turned > 1e-12, ratio, 0.0))
             seen[s] = True
     return np.where(seen, error, 1.0)
-
-
-def _unit(v):
-    return v / np.maximum(np.linalg.norm(v, axis=1), 1e-300)[:, None]
-
-
-def _rows(quadrics, rows):
-    return type(quadrics)(quadrics.hessian[rows], quadrics.linear[rows], quadrics.constant[rows])
 
 
 def _candidate_images(group: SeedGroup, points):
@@ -491,15 +481,7 @@ def _grid_at(grid: np.ndarray, cell: np.ndarray) -> np.ndarray:
 def _in_footprint(group: SeedGroup, pixel) -> np.ndarray:
     """(K,) bool: a grid seed of the history lies within one cell of the pixel."""
     cell = np.floor(np.nan_to_num(pixel, nan=-1e9) / group.stride).astype(np.int64) - np.array(group.origin)
-    rows, columns = group.grid.shape
-    occupied = np.pad(group.grid >= 0, 1)
-    near = np.zeros(len(pixel), dtype=bool)
-    for di in (-1, 0, 1):
-        for dj in (-1, 0, 1):
-            r, c = cell[:, 1] + di + 1, cell[:, 0] + dj + 1
-            inside = (r >= 0) & (r < rows + 2) & (c >= 0) & (c < columns + 2)
-            near[inside] |= occupied[r[inside], c[inside]]
-    return near
+    return np.any([_grid_at(group.grid, cell + (dj, di)) >= 0 for di in (-1, 0, 1) for dj in (-1, 0, 1)], axis=0)
 
 
 def _ranked(n_points, point_of, first, last, pixel):

@@ -50,6 +50,10 @@ class QuadricRows:
     def gradients(self, points: np.ndarray) -> np.ndarray:
         return np.einsum("kij,kj->ki", self.hessian, points) + self.linear
 
+    def take(self, rows) -> "QuadricRows":
+        """The quadrics of ``rows`` (indices or a mask)."""
+        return QuadricRows(self.hessian[rows], self.linear[rows], self.constant[rows])
+
 
 @dataclass(frozen=True)
 class AnalyticSurface:
