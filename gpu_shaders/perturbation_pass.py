@@ -21,16 +21,19 @@ from .reflected_meshes import FOUND_CODE, ReflectedMeshes
 
 class PerturbationPass:
     """The perturbation reflectors of one renderer (``reflectors``: every reflector of
-    the scene, which may block or carry the paths; ``methods``: the
-    ``addon.methods.perturbation.PerturbationReflector`` s drawn here)."""
+    the scene, which may block or carry the paths, ``reflector_set`` their BVH when the
+    caller keeps one; ``methods``: the ``addon.methods.perturbation.PerturbationReflector``
+    s drawn here)."""
 
-    def __init__(self, geometry, reflectors, methods, meshes: ReflectedMeshes, accuracy_px: float = 0.5):
+    def __init__(self, geometry, reflectors, methods, meshes: ReflectedMeshes, accuracy_px: float = 0.5,
+                 reflector_set: ReflectorSet | None = None):
         self.geometry = geometry
         self.methods = list(methods)
         self.meshes = meshes
         self._engine = None
         self._step = None
         self._reflectors = list(reflectors)
+        self._reflector_set = reflector_set
         self._accuracy = float(accuracy_px)
         self._view_key = None
         self._answers: list = []
@@ -45,7 +48,8 @@ class PerturbationPass:
     def engine(self) -> PerturbationMethod:
         if self._engine is None:
             analytic = {m.index: m.surface for m in self.methods if m.surface is not None}
-            self._engine = PerturbationMethod(ReflectorSet(self._reflectors), analytic,
+            reflector_set = self._reflector_set if self._reflector_set is not None else ReflectorSet(self._reflectors)
+            self._engine = PerturbationMethod(reflector_set, analytic,
                                               PerturbationSettings(accuracy_px=self._accuracy))
         return self._engine
 

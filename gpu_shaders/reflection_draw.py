@@ -181,7 +181,7 @@ class ReflectionRenderer:
                  edge_fraction: float | None = subdivision.EDGE_FRACTION, *, fresnel_f0=None,
                  attenuation_distance=None, mixed_subdivisions: int = MIXED_SUBDIVISIONS, cull: bool = True,
                  polish: bool = True, iterative=(), morph=(), morph_budget_mb: float = DEFAULT_BUDGET_MB,
-                 perturbation=(), perturbation_accuracy_px: float = 0.5):
+                 perturbation=(), perturbation_accuracy_px: float = 0.5, reflector_set=None):
         self.geometry = prepare_geometry(reflectors, meshes, reflector_colors, reflectivity, edge_fraction,
                                          fresnel_f0, attenuation_distance)
         #: The diffuse meshes on the GPU, placed by the per-frame passes' answers.
@@ -193,7 +193,7 @@ class ReflectionRenderer:
         self.morph = MorphPass(self.geometry, morph, self.meshes, morph_budget_mb)
         #: The reflectors drawn by perturbation (Chen & Arvo 2000), projected per new view.
         self.perturbation = PerturbationPass(self.geometry, reflectors, perturbation, self.meshes,
-                                             perturbation_accuracy_px)
+                                             perturbation_accuracy_px, reflector_set)
         self.stats = dict(self.geometry.stats)
         self.counts = {"projections": 0, "frames": 0}
         #: The sample-based cameras' reflected triangles, made once per camera.

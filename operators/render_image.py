@@ -87,13 +87,15 @@ def captured_key(captured) -> tuple:
 class FrameState:
     """What frames of one render keep between them: the capture's key, the method plan,
     the loaded morphing grids and the renderer (shaders, uploaded meshes, reflector maps,
-    the grids' node images). Only what changed is made again: moved reflectors are
-    planned again, moved meshes get a new renderer."""
+    the grids' node images) and the reflectors' BVH. Only what changed is made again:
+    moved reflectors are planned (and their BVH built) again, moved meshes get a new
+    renderer."""
 
     key: tuple = ()
     plan: object = None
     grids: list = field(default_factory=list)
     renderer: object = None
+    reflector_set: object = None  # ReflectorSet of the captured reflectors (key[0])
     frames: int = 0
     reused: int = 0
 
@@ -135,6 +137,8 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
     looks = hashlib.sha1(b"".join(np.ascontiguousarray(v).tobytes() for v in properties.values())).hexdigest()
     modes = tuple(methods.mode_of(scene, r.name) for r in captured.reflectors)
     key = captured_key(captured) + (modes, float(accuracy_px), looks)
+    if state.reflector_set is None or key[0] != state.key[0]:
+        state.reflector_set = ReflectorSet(list(captured.reflectors))
     if state.plan is None or key[0] != state.key[0] or key[2:4] != state.key[2:4]:
         from .morph_bake import load_grids
 
@@ -145,7 +149,8 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
     if state.renderer is None or key != state.key:
         state.renderer = ReflectionRenderer(captured.reflectors, captured.meshes, iterative=state.plan.iterative,
                                             morph=state.grids, perturbation=state.plan.perturbation,
-                                            perturbation_accuracy_px=accuracy_px, **properties)
+                                            perturbation_accuracy_px=accuracy_px,
+                                            reflector_set=state.reflector_set, **properties)
     else:
         state.reused += 1
     state.key = key
@@ -153,7 +158,7 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
     sbc = None
     per_frame = state.renderer.per_frame_reflectors(view)
     if per_frame:
-        check_view_outside_reflectors(ReflectorSet(list(captured.reflectors)), view)
+        check_view_outside_reflectors(state.reflector_set, view)
     if len(per_frame) < len(captured.reflectors) or max_order > 1:
         lo, hi = scene_bounds(captured.reflectors, captured.meshes)
         bounds = scene_bounds(captured.reflectors, captured.meshes, BOUNDS_MARGIN * float(np.linalg.norm(hi - lo)))
