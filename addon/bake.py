@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import bake_cache
-from .morph_grid import NODE_OK, MorphSettings, bake_reflector, build_node, reflector_in_frame, rigid_frame
+from .morph_grid import NODE_OK, MorphSettings, bake_reflector, reflector_in_frame, rigid_frame
 from .scene import Reflector
 
 try:
@@ -81,8 +81,9 @@ def _bake_node(node: int):
     parent (and pickling them to it) took a core's worth of time away from the workers.
     """
     work = _WORK
-    camera = build_node(work["reflector_set"], work["positions"][node], work["bounds"], work["settings"])
-    arrays = bake_cache.node_arrays(camera) if camera.status == NODE_OK else None
+    kind = bake_cache.GRID_KINDS[work["settings"].kind]
+    camera = kind.build(work["reflector_set"], work["positions"][node], work["bounds"], work["settings"])
+    arrays = kind.to_arrays(camera) if camera.status == NODE_OK else None
     bake_cache.write_node(work["directory"], node, work["key"], arrays)
     return node, (camera.seconds, camera.cpu_seconds), camera.nbytes
 

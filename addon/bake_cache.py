@@ -6,7 +6,8 @@ Layout under the cache directory (the Blender layer passes one folder per .blend
 grids)::
 
     <reflector name>-<key[:16]>/grid.npz            manifest: key, box, settings, geometry
-    <reflector name>-<key[:16]>/node_00012.npz      one panoramic camera (six faces' SBC arrays)
+    <reflector name>-<key[:16]>/node_00012.npz      one node: a panoramic camera (six faces' SBC
+                                                    arrays) or a ray octree (its rays and leaves)
     <reflector name>-<key[:16]>/node_00013.inside   a node inside the mirror (no camera)
 
 Every file is plain arrays (``np.savez``; node files compressed), read with
@@ -40,13 +41,15 @@ import re
 import shutil
 import zipfile
 from collections import OrderedDict
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from .errors import SceneInputError
+from .methods.octree import OctreeGrid, build_octree_node, octree_node_arrays, octree_node_from_arrays
 from .morphing import ENGINE_VERSION, MorphingGrid
-from .morph_grid import NODE_INSIDE, MorphSettings, NodeCamera, TetrahedralGrid
+from .morph_grid import NODE_INSIDE, OCTREE, TETRAHEDRAL, MorphSettings, NodeCamera, TetrahedralGrid, build_node
 from .scene import Reflector
 from .sbc_arrays import sbc_from_arrays, sbc_to_arrays
 
@@ -76,8 +79,9 @@ def engine_fingerprint() -> str:
     """SHA-256 of every engine module (``addon/*.py``): a cache baked by other engine code is
     stale. Conservative: a change anywhere in the engine asks for a new bake."""
     digest = hashlib.sha256()
-    for path in sorted(Path(__file__).resolve().parent.glob("*.py")):
-        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    root = Path(__file__).resolve().parent
+    for path in sorted(root.rglob("*.py")):
+        digest.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes())
     return digest.hexdigest()
 
 
@@ -210,6 +214,20 @@ def node_from_arrays(data) -> NodeCamera:
     return NodeCamera(int(data["status"]), faces, float(data["seconds"]))
 
 
+@dataclass(frozen=True)
+class GridKind:
+    """How one kind of grid (``MorphSettings.kind``) builds, stores and reads its nodes."""
+
+    build: object  # (reflector_set, eye, bounds, settings) -> node
+    to_arrays: object  # node -> dict of arrays
+    from_arrays: object  # arrays -> node
+    grid: type  # the grid class that blends them
+
+
+GRID_KINDS = {TETRAHEDRAL: GridKind(build_node, node_arrays, node_from_arrays, MorphingGrid),
+              OCTREE: GridKind(build_octree_node, octree_node_arrays, octree_node_from_arrays, OctreeGrid)}
+
+
 def write_manifest(directory: Path, key: str, local_reflector: Reflector, grid: TetrahedralGrid,
                    settings: MorphSettings) -> None:
     """The grid's manifest, atomically (the same bytes from every process baking it)."""
@@ -224,7 +242,8 @@ def write_manifest(directory: Path, key: str, local_reflector: Reflector, grid: 
                      settings=np.array(repr(settings.as_tuple())), margin=np.array(settings.margin),
                      face_resolution=np.array(settings.face_resolution), downsample=np.array(settings.downsample),
                      accuracy_px=np.array(settings.accuracy_px), overlap_cells=np.array(settings.overlap_cells),
-                     extension=np.array(settings.extension), reflector_size=np.array(reflector_size))
+                     extension=np.array(settings.extension), kind=np.array(settings.kind),
+                     octree_depth=np.array(settings.octree_depth), reflector_size=np.array(reflector_size))
 
     _atomic(Path(directory) / MANIFEST, write)
 
@@ -244,8 +263,9 @@ class _LazyNodes:
     cannot be read, or that belongs to another grid, is renamed ``*.damaged`` (the next
     bake builds the node again) and raises :class:`CacheError` naming it."""
 
-    def __init__(self, directory: Path, object_name: str, key: str):
+    def __init__(self, directory: Path, object_name: str, key: str, from_arrays=node_from_arrays):
         self.directory, self.object_name, self.key = directory, object_name, key
+        self.from_arrays = from_arrays
         self._cache: OrderedDict = OrderedDict()
 
     def __getitem__(self, node: int) -> NodeCamera:
@@ -259,7 +279,7 @@ class _LazyNodes:
             if str(data.get("key", "")) != self.key:
                 raise CacheError(self.object_name, "corrupt", f"the morphing cache file {path.name} belongs to "
                                  "another grid")
-            camera = node_from_arrays(data)
+            camera = self.from_arrays(data)
         except (KeyError, ValueError, IndexError, CacheError) as error:
             if path.is_file():
                 os.replace(path, path.with_name(path.name + DAMAGED_SUFFIX))
@@ -290,7 +310,8 @@ def load_grid(cache_dir, local_reflector: Reflector, key: str, reflector_index: 
         settings = MorphSettings(grid=shape, margin=float(manifest["margin"]),
                                  face_resolution=int(manifest["face_resolution"]),
                                  downsample=int(manifest["downsample"]), accuracy_px=float(manifest["accuracy_px"]),
-                                 overlap_cells=int(manifest["overlap_cells"]), extension=float(manifest["extension"]))
+                                 overlap_cells=int(manifest["overlap_cells"]), extension=float(manifest["extension"]),
+                                 kind=str(manifest["kind"]), octree_depth=int(manifest["octree_depth"]))
         grid = TetrahedralGrid(np.asarray(manifest["lo"], float), np.asarray(manifest["hi"], float), shape)
         size = float(manifest["reflector_size"])
         geometry = same_geometry(local_reflector, np.asarray(manifest["vertices"], float),
@@ -306,8 +327,9 @@ def load_grid(cache_dir, local_reflector: Reflector, key: str, reflector_index: 
         raise CacheError(reflector_name, "incomplete", f"the morphing cache has {int(present.sum())} of "
                          f"{grid.n_nodes} nodes (first missing: node {int(np.argmin(present))}); bake again to "
                          "finish it (runtime mode until then)")
-    return MorphingGrid(reflector_name, reflector_index, grid, settings, status,
-                        _LazyNodes(directory, reflector_name, key), size)
+    kind = GRID_KINDS[settings.kind]
+    return kind.grid(reflector_name, reflector_index, grid, settings, status,
+                     _LazyNodes(directory, reflector_name, key, kind.from_arrays), size)
 
 
 def cache_state(cache_dir, local_reflector: Reflector, key: str) -> str:

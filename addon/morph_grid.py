@@ -28,6 +28,8 @@ CUBE_FACES = (
 #: points whose local coordinates satisfy f[p0] >= f[p1] >= f[p2] for PERMUTATIONS[k].
 PERMUTATIONS = np.array([(0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0)])
 
+#: MorphSettings.kind values
+TETRAHEDRAL, OCTREE = "tetrahedral", "octree"
 #: node status codes
 NODE_OK, NODE_INSIDE = 0, 1
 
@@ -43,6 +45,11 @@ class MorphSettings:
     accuracy_px: float = 0.5  # leaf accuracy, in cube-face pixels
     overlap_cells: int = 2  # cube faces overlap by this many ray-map cells
     extension: float = 0.05  # open edges extended by this many reflector sizes
+    #: What sits at the nodes: "tetrahedral", panoramic sample-based cameras blended over
+    #: the tetrahedron holding the eye (SBC paper VI); "octree", ray octrees blended
+    #: trilinearly over the cell holding it (Martin & Popescu 2004, ``methods/octree``).
+    kind: str = TETRAHEDRAL
+    octree_depth: int = 6  # the ray octrees' leaves are 2**-depth of their root cube
 
     def __post_init__(self):
         grid = tuple(int(n) for n in self.grid)
@@ -53,10 +60,15 @@ class MorphSettings:
             raise SceneInputError("morph_margin", f"must be positive, got {self.margin}")
         if int(self.face_resolution) // int(self.downsample) < 4:
             raise SceneInputError("morphing", "cube faces need at least 4 ray-map cells a side")
+        if self.kind not in (TETRAHEDRAL, OCTREE):
+            raise SceneInputError("morphing", f"grid kind must be {TETRAHEDRAL!r} or {OCTREE!r}, got {self.kind!r}")
+        if not 1 <= int(self.octree_depth) <= 10:
+            raise SceneInputError("morphing", f"octree depth must be 1 to 10, got {self.octree_depth}")
 
     def as_tuple(self) -> tuple:
         return (self.grid, float(self.margin), int(self.face_resolution), int(self.downsample),
-                float(self.accuracy_px), int(self.overlap_cells), float(self.extension))
+                float(self.accuracy_px), int(self.overlap_cells), float(self.extension), self.kind,
+                int(self.octree_depth))
 
 
 
@@ -322,14 +334,16 @@ class NodesOnDemand(dict):
     reflector with, and what tests and benchmarks measure morphing with (a view only
     ever uses the four nodes of its tetrahedron). ``cpu_seconds`` sums the builds."""
 
-    def __init__(self, reflector_set: ReflectorSet, positions: np.ndarray, bounds, settings: MorphSettings):
+    def __init__(self, reflector_set: ReflectorSet, positions: np.ndarray, bounds, settings: MorphSettings,
+                 build=None):
         super().__init__()
         self.args = reflector_set, positions, bounds, settings
+        self.build = build or build_node  # (reflector_set, eye, bounds, settings) -> node
         self.cpu_seconds = 0.0
 
     def __missing__(self, node) -> NodeCamera:
         reflector_set, positions, bounds, settings = self.args
-        self[node] = camera = build_node(reflector_set, positions[int(node)], bounds, settings)
+        self[node] = camera = self.build(reflector_set, positions[int(node)], bounds, settings)
         self.cpu_seconds += camera.cpu_seconds
         return camera
 

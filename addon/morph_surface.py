@@ -41,8 +41,9 @@ def refine_on_local_surface(images, present, eyes, points, eye, weights):
     (two give as many equations as unknowns: measured, their fits are often wrong);
     where it fails or leaves the images' neighbourhood, ``ok`` is False.
 
-    images (Q, 4, 3), present (Q, 4) bool, eyes (4, 3) node positions, points (Q, 3),
-    eye (3,), weights (Q, 4) (zero where absent). Returns (Q, 3) points, (Q,) ok, (Q, 3) the
+    images (Q, N, 3), present (Q, N) bool, eyes (N, 3) node positions, points (Q, 3),
+    eye (3,), weights (Q, N) (zero where absent); N nodes: 4 of a tetrahedron, 8 of a
+    cube (``methods/octree``). Returns (Q, 3) points, (Q,) ok, (Q, 3) the
     mirror normal there (fitted where ok, else the weighted one) and (Q, 3) the weighted
     normal of the images (the normal at the linear blend).
     """

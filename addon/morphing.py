@@ -204,7 +204,7 @@ class MorphingGrid:
         if not parts:
             return np.full((len(points), 0, 3), np.nan)
         images = np.concatenate(parts, axis=0).transpose(1, 0, 2)
-        return _compact(images, self._duplicate_tolerance(node, images))
+        return compact_images(images, self._duplicate_tolerance(node, images))
 
     def node_slots(self, node: int, points: np.ndarray, slots: int, face_images=None) -> np.ndarray:
         """(P, 2 slots, 3): the first ``slots`` distinct images of each point (frame
@@ -214,7 +214,7 @@ class MorphingGrid:
         that it serves every tetrahedron the node belongs to. ``face_images`` as for
         :meth:`_node_images` (``project_face``: numpy, for a thread without the GPU)."""
         parts = [self._node_images(node, points, face_images), self._extended_images(node, points)]
-        return np.concatenate([_pad(part[:, :slots], slots) for part in parts], axis=1)
+        return np.concatenate([pad_images(part[:, :slots], slots) for part in parts], axis=1)
 
     def _duplicate_tolerance(self, node: int, images: np.ndarray) -> np.ndarray:
         """(P, M): one image seen in two overlapping faces differs by up to about the
@@ -239,22 +239,23 @@ class MorphingGrid:
         if not parts:
             return np.full((len(points), 0, 3), np.nan)
         images = np.stack(parts, axis=1)
-        return _compact(images, self._duplicate_tolerance(node, images))
+        return compact_images(images, self._duplicate_tolerance(node, images))
 
     def _matched_images(self, points, nodes, weights):
-        """(4, P, K, 3) images matched across the four nodes and (4, P, K) int8 how each was found."""
+        """(N, P, K, 3) images matched across the N nodes of the eye's cell (4 for a
+        tetrahedron) and (N, P, K) int8 how each was found."""
         images = [self._node_images(int(n), points) for n in nodes]
         k_max = max(im.shape[1] for im in images)
         if k_max == 0:
-            return np.full((4, len(points), 0, 3), np.nan), np.zeros((4, len(points), 0), np.int8)
-        images = np.stack([_pad(im, k_max) for im in images])  # (4, P, K, 3)
-        has = np.isfinite(images[..., 0]).any(axis=2)  # (4, P)
+            return np.full((len(nodes), len(points), 0, 3), np.nan), np.zeros((len(nodes), len(points), 0), np.int8)
+        images = np.stack([pad_images(im, k_max) for im in images])  # (N, P, K, 3)
+        has = np.isfinite(images[..., 0]).any(axis=2)  # (N, P)
         reference_node = np.argmax(np.where(has, weights[:, None], -1.0), axis=0)  # (P,)
         reference = images[reference_node, np.arange(len(points))]  # (P, K, 3)
         threshold = MATCH_FRACTION * self.reflector_size
-        matched = np.full((4, len(points), k_max, 3), np.nan)
-        how = np.zeros((4, len(points), k_max), np.int8)
-        for n in range(4):
+        matched = np.full((len(nodes), len(points), k_max, 3), np.nan)
+        how = np.zeros((len(nodes), len(points), k_max), np.int8)
+        for n in range(len(nodes)):
             found = _match(reference, images[n], threshold)
             missing = np.isfinite(reference[..., 0]) & ~np.isfinite(found[..., 0])
             rows = np.flatnonzero(missing.any(axis=1))
@@ -270,7 +271,7 @@ class MorphingGrid:
 
     def _blend(self, matched, how, weights, frame, points_world, view, tet, nodes) -> MorphProjection:
         n_points, k_max = matched.shape[1], matched.shape[2]
-        present = how > 0  # (4, P, K)
+        present = how > 0  # (N, P, K)
         w = np.where(present, weights[:, None, None], 0.0)
         total = w.sum(axis=0)  # (P, K)
         all_present = present.all(axis=0)
@@ -280,10 +281,11 @@ class MorphingGrid:
             eyes = self.grid.node_positions()[np.asarray(nodes)]
             local_points = np.repeat(to_frame(frame, points_world), k_max, axis=0)
             local_eye = to_frame(frame, view.eye[None])[0]
+            n_nodes = len(nodes)
             refined, ok, normal, weighted_normal = refine_on_local_surface(
-                np.nan_to_num(matched).transpose(1, 2, 0, 3).reshape(-1, 4, 3),
-                present.transpose(1, 2, 0).reshape(-1, 4), eyes, local_points, local_eye,
-                w.transpose(1, 2, 0).reshape(-1, 4))
+                np.nan_to_num(matched).transpose(1, 2, 0, 3).reshape(-1, n_nodes, 3),
+                present.transpose(1, 2, 0).reshape(-1, n_nodes), eyes, local_points, local_eye,
+                w.transpose(1, 2, 0).reshape(-1, n_nodes))
             if self.blend == "surface":
                 ok = ok.reshape(n_points, k_max)
                 blended = np.where(ok[..., None], refined.reshape(n_points, k_max, 3), blended)
@@ -342,7 +344,7 @@ def _extended_tails(tree, points: np.ndarray) -> np.ndarray:
     return result
 
 
-def _compact(images: np.ndarray, tolerance: np.ndarray) -> np.ndarray:
+def compact_images(images: np.ndarray, tolerance: np.ndarray) -> np.ndarray:
     """(P, M, 3) with NaN rows -> (P, K, 3): valid images first, duplicates (closer than
     ``tolerance`` (P, M) to an earlier image) removed."""
     valid = np.isfinite(images[..., 0])
@@ -357,7 +359,7 @@ def _compact(images: np.ndarray, tolerance: np.ndarray) -> np.ndarray:
     return np.where(keep[..., None], out, np.nan)
 
 
-def _pad(images: np.ndarray, k: int) -> np.ndarray:
+def pad_images(images: np.ndarray, k: int) -> np.ndarray:
     return np.concatenate([images, np.full((images.shape[0], k - images.shape[1], 3), np.nan)], axis=1)
 
 

@@ -44,35 +44,39 @@ DEFAULT_BUDGET_MB = 256.0
 #: The float32 blend's bound on the reflection law's residual on the fitted surface (the
 #: numpy twin asks 1e-8 of float64 Newton steps; float32 reaches about 1e-7).
 SURFACE_RESIDUAL = 1e-5
-#: The per-frame parameters (``glsl/morph_blend.glsl``'s uniform block ``frame``), std140.
+#: The per-frame parameters (``glsl/morph_blend.glsl``'s uniform block ``frame``), std140,
+#: for a cell of NODES nodes: per node, its eye (xyz) and weight (w), then how many
+#: regular (x) and widened-chart (y) image slots hold any image.
 FRAME_STRUCT = """
 struct MorphFrame {
   mat4 frame_from_shifted;
   mat4 shifted_from_frame;
   mat4 view_projection;
-  mat4 node_eyes;
-  vec4 weights;
   vec4 eye_match;
-  vec4 regular_slots;
-  vec4 widened_slots;
+  vec4 nodes[NODES];
+  vec4 node_slots[NODES];
 };
 """
-#: Floats of one MorphFrame.
-FRAME_FLOATS = 4 * 16 + 4 * 4
 
 
-def blend_defines() -> dict:
-    """The engine's constants, as the blend shader's ``#define`` s."""
+def frame_floats(n_nodes: int) -> int:
+    """Floats of one MorphFrame for cells of ``n_nodes`` nodes."""
+    return 3 * 16 + 4 + 8 * n_nodes
+
+
+def blend_defines(n_nodes: int = 4) -> dict:
+    """The engine's constants, as the blend shader's ``#define`` s, for cells of
+    ``n_nodes`` nodes (4: a tetrahedron of the SBC grid; 8: a cube of the octree grid)."""
     m = morph_surface
-    return {"SLOTS": SLOTS, "PARTIAL_WEIGHT": f"{morphing.PARTIAL_WEIGHT:.9e}",
+    return {"SLOTS": SLOTS, "NODES": n_nodes, "PARTIAL_WEIGHT": f"{morphing.PARTIAL_WEIGHT:.9e}",
             "SURFACE_NORMAL_MIN": f"{m.SURFACE_NORMAL_MIN:.9e}", "MIN_SURFACE_NODES": m.MIN_SURFACE_NODES,
             "SURFACE_ITERATIONS": m.SURFACE_ITERATIONS, "SURFACE_REACH": f"{m.SURFACE_REACH:.9e}",
             "SURFACE_RESIDUAL": f"{SURFACE_RESIDUAL:.9e}", "FOUND_CODE": FOUND_CODE}
 
 
 @functools.cache
-def blend_shader():
-    """The compute shader of the blend, built on first use."""
+def blend_shader(n_nodes: int = 4):
+    """The compute shader of the blend for cells of ``n_nodes`` nodes, built on first use."""
     import gpu
 
     info = gpu.types.GPUShaderCreateInfo()
@@ -80,15 +84,15 @@ def blend_shader():
     info.push_constant('INT', "positions_width")
     info.push_constant('INT', "slot_rows")
     info.push_constant('INT', "active_slots")
-    info.typedef_source(FRAME_STRUCT)
+    info.typedef_source(FRAME_STRUCT.replace("NODES", str(n_nodes)))
     info.uniform_buf(0, "MorphFrame", "frame")
     info.sampler(0, 'FLOAT_2D', "vertex_positions")
-    for n in range(4):
+    for n in range(n_nodes):
         info.sampler(1 + n, 'FLOAT_2D', f"node{n}")
     for k in range(SLOTS):
         info.image(k, 'RGBA32F', 'FLOAT_2D', f"result{k}", qualifiers={'WRITE'})
     info.local_group_size(LOCAL_SIZE, 1)
-    info.compute_source(glsl_source("morph_blend.glsl", blend_defines()))
+    info.compute_source(glsl_source("morph_blend.glsl", blend_defines(n_nodes)))
     return gpu.shader.create_from_info(info)
 
 
@@ -169,7 +173,7 @@ class MorphPass:
         self.nodes = NodeTextures(budget_mb)
         self._frames = [None] * len(self.grids)  # the rigid frame each grid's node images were made in
         self._results: dict = {}  # grid index -> [answer texture per slot]
-        self._frame = None  # the uniform buffer of the blend's per-frame parameters
+        self._uniforms: dict = {}  # nodes per cell -> the uniform buffer of the blend's per-frame parameters
         self._active: dict = {}  # grid index -> slots written by its last blend (the rest are empty)
         self._pending: dict = {}  # (grid index, node) -> (frame, Future of its node_slots), prefetching
         self._drawn: list = []  # grid indices blended by the last blend()
@@ -236,12 +240,9 @@ class MorphPass:
         self._drawn = []
         if self.meshes.n_vertices == 0 or not self.grids:
             return []
-        if self._frame is None:
-            self._frame = gpu.types.GPUUniformBuf(gpu.types.Buffer('FLOAT', FRAME_FLOATS))
         shift = self.geometry.shift
         view_projection = (np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix)
                            @ _translation(shift))
-        shader = blend_shader()
         for k, (_, nodes, weights, frame) in self.covering(view):
             grid = self.grids[k][0]
             if grid.reflector_index in skip:
@@ -250,16 +251,18 @@ class MorphPass:
             textures, used = zip(*[self._node_texture(k, n, frame, keep) for n in nodes])
             if k not in self._results:
                 self._results[k] = [self.meshes.answer_texture() for _ in range(SLOTS)]
-            eyes = np.eye(4)
-            eyes[:3, :] = grid.grid.node_positions()[np.asarray(nodes)].T
             eye = morph_grid.to_frame(frame, view.eye[None])[0]
-            matrices = [np.linalg.inv(frame) @ _translation(shift), _translation(-shift) @ frame, view_projection, eyes]
+            matrices = [np.linalg.inv(frame) @ _translation(shift), _translation(-shift) @ frame, view_projection]
+            node_rows = np.c_[grid.grid.node_positions()[np.asarray(nodes)], np.asarray(weights, np.float64)]
+            slot_rows = np.c_[np.asarray(used, np.float64), np.zeros((len(nodes), 2))]
             values = np.concatenate([m.T.reshape(-1) for m in matrices] + [
-                np.asarray(weights, np.float64), np.r_[eye, morphing.MATCH_FRACTION * grid.reflector_size],
-                [u[0] for u in used], [u[1] for u in used]]).astype(np.float32)
-            self._frame.update(gpu.types.Buffer('FLOAT', FRAME_FLOATS, values))
+                np.r_[eye, morphing.MATCH_FRACTION * grid.reflector_size], node_rows.reshape(-1),
+                slot_rows.reshape(-1)]).astype(np.float32)
+            shader = blend_shader(len(nodes))
+            uniforms = self._frame_buffer(len(nodes))
+            uniforms.update(gpu.types.Buffer('FLOAT', len(values), values))
             shader.bind()
-            shader.uniform_block("frame", self._frame)
+            shader.uniform_block("frame", uniforms)
             shader.uniform_int("n_vertices", self.meshes.n_vertices)
             shader.uniform_int("positions_width", self.meshes.width)
             shader.uniform_int("slot_rows", self.meshes.height)
@@ -274,6 +277,15 @@ class MorphPass:
             self._drawn.append(k)
         self.counts["blends"] += 1
         return [self.grids[k][0].reflector_index for k in self._drawn]
+
+    def _frame_buffer(self, n_nodes: int):
+        """The uniform buffer of the blend's parameters for cells of ``n_nodes`` nodes."""
+        import gpu
+
+        if n_nodes not in self._uniforms:
+            size = frame_floats(n_nodes)
+            self._uniforms[n_nodes] = gpu.types.GPUUniformBuf(gpu.types.Buffer('FLOAT', size))
+        return self._uniforms[n_nodes]
 
     def prefetch(self, view, submit, max_pending: int = 1) -> int:
         """Start projecting nodes not yet on the GPU around each covering grid's eye (the

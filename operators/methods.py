@@ -10,6 +10,8 @@ Per reflector, ``obj.curved_reflections.mode``:
 - ``ITERATIVE``: the iterative search, or Runtime with the reason when the reflector is
   not star-shaped;
 - ``MORPHING`` and ``RUNTIME``: the sample-based camera's modes (SBC paper VI and IV);
+- ``OCTREE``: reflection morphing with ray octrees at the grid's nodes (Martin & Popescu
+  2004), baked and drawn like Morphing;
 - ``PERTURBATION``: Chen & Arvo (2000), on the reflector's declared exact surface
   (``analytic_shape``) when its mesh matches it, else on the mesh.
 
@@ -47,7 +49,9 @@ FACE_SIZE = 256
 #: Reflector geometries whose verdict and map are kept.
 CACHED_MAPS = 16
 
-ITERATIVE, MORPHING, RUNTIME, PERTURBATION = 'ITERATIVE', 'MORPHING', 'RUNTIME', 'PERTURBATION'
+ITERATIVE, MORPHING, RUNTIME, PERTURBATION, OCTREE = 'ITERATIVE', 'MORPHING', 'RUNTIME', 'PERTURBATION', 'OCTREE'
+#: The modes drawn from a baked grid (``morph_bake``; the renderer's ``MorphPass`` draws both).
+GRID_MODES = (MORPHING, OCTREE)
 #: A declared exact surface is used when the mesh's vertices lie this close to it
 #: (share of its radius); farther, the mesh itself reflects and the panel says why.
 ANALYTIC_TOLERANCE = 0.02
@@ -58,7 +62,7 @@ class MethodChoice:
     """What draws one reflector, and why (one panel line)."""
 
     reflector: str
-    method: str  # ITERATIVE, MORPHING (where the view allows) or RUNTIME
+    method: str  # ITERATIVE, MORPHING or OCTREE (where the view allows), PERTURBATION or RUNTIME
     reason: str
 
 
@@ -181,10 +185,11 @@ def plan(scene, reflectors, accuracy_px: float | None = None, baked=frozenset())
             chosen, reason = perturbation_reflector(scene, index, reflector)
             result.perturbation.append(chosen)
             result.choices.append(MethodChoice(reflector.name, PERTURBATION, reason))
-        elif mode == MORPHING:
-            result.choices.append(MethodChoice(reflector.name, MORPHING if reflector.name in baked else RUNTIME,
-                                               "Morphing mode" if reflector.name in baked
-                                               else "Morphing mode without a baked grid: Runtime"))
+        elif mode in GRID_MODES:
+            label = {MORPHING: "Morphing mode", OCTREE: "Octree mode (ray octrees, Martin & Popescu 2004)"}[mode]
+            result.choices.append(MethodChoice(reflector.name, mode if reflector.name in baked else RUNTIME,
+                                               label if reflector.name in baked
+                                               else f"{label} without a baked grid: Runtime"))
         else:
             result.choices.append(MethodChoice(reflector.name, RUNTIME, "Runtime mode: a camera per view"))
     for method in result.iterative:  # the other searched mirrors may block its reflected segments
@@ -214,10 +219,10 @@ def perturbation_reflector(scene, index: int, reflector) -> tuple:
 
 
 def wants_grid(scene, reflector) -> bool:
-    """Whether a morphing grid is baked and loaded for this reflector: Morphing mode, or
-    Auto mode where it is not star-shaped."""
+    """Whether a morphing grid is baked and loaded for this reflector: Morphing or Octree
+    mode, or Auto mode where it is not star-shaped."""
     mode = mode_of(scene, reflector.name)
-    return mode == MORPHING or (mode == 'AUTO' and star_map(reflector)[1] is None)
+    return mode in GRID_MODES or (mode == 'AUTO' and star_map(reflector)[1] is None)
 
 
 def last_choices(scene) -> list:
@@ -227,9 +232,9 @@ def last_choices(scene) -> list:
 
 def grid_wanted_by_last_plan(scene, obj) -> bool:
     """:func:`wants_grid` from what is known without checking any geometry (for the
-    panel, which must not wait): Morphing mode, or Auto mode not planned as Iterative."""
+    panel, which must not wait): Morphing or Octree mode, or Auto mode not planned as Iterative."""
     mode = obj.curved_reflections.mode
-    if mode == MORPHING:
+    if mode in GRID_MODES:
         return True
     chosen = next((c.method for c in last_choices(scene) if c.reflector == obj.name), None)
     return mode == 'AUTO' and chosen in (MORPHING, RUNTIME)

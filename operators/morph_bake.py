@@ -26,7 +26,7 @@ from bpy.app.handlers import persistent
 
 from ..addon import bake, bake_cache
 from ..addon.errors import SceneInputError
-from ..addon.morph_grid import MorphSettings
+from ..addon.morph_grid import OCTREE, TETRAHEDRAL, MorphSettings
 from . import methods, scene_changes
 from .capture import capture_scene
 
@@ -105,11 +105,18 @@ def on_save_post(*_args) -> None:
 FACE_RESOLUTION = MorphSettings.face_resolution
 
 
-def morph_settings(scene) -> MorphSettings:
-    """The grid settings of ``scene.curved_reflections`` (grid nodes and margin)."""
+def morph_settings(scene, mode: str = methods.MORPHING) -> MorphSettings:
+    """The grid settings of ``scene.curved_reflections`` (grid nodes and margin) for a
+    reflector in ``mode``: Octree mode puts ray octrees at the nodes (Martin & Popescu
+    2004), the others panoramic sample-based cameras (SBC paper VI)."""
     settings = scene.curved_reflections
     return MorphSettings(grid=tuple(settings.morph_grid), margin=float(settings.morph_margin),
-                         face_resolution=FACE_RESOLUTION)
+                         face_resolution=FACE_RESOLUTION, kind=OCTREE if mode == methods.OCTREE else TETRAHEDRAL)
+
+
+def reflector_settings(scene, name: str) -> MorphSettings:
+    """:func:`morph_settings` for the grid the reflector ``name``'s mode needs."""
+    return morph_settings(scene, methods.mode_of(scene, name))
 
 
 def morph_status(scene, per_reflector: bool = True) -> str:
@@ -142,7 +149,8 @@ def morphing_reflectors(context):
 def load_morphing(reflector, matrix, scene, reflector_index: int = 0):
     """The baked grid for this reflector as it is now, or None (runtime mode) with the reason recorded."""
     try:
-        grid = bake.load_for(reflector, matrix, morph_settings(scene), cache_directory(scene), reflector_index)
+        grid = bake.load_for(reflector, matrix, reflector_settings(scene, reflector.name), cache_directory(scene),
+                             reflector_index)
     except SceneInputError as error:
         _REFLECTOR_STATUS[reflector.name] = f"{error.problem}"
         return None
@@ -166,7 +174,7 @@ def load_grids(scene, reflectors, bake_missing: bool = False) -> list:
             continue
         matrix = np.array(obj.matrix_world, dtype=np.float64)
         grid = load_morphing(reflector, matrix, scene, index)
-        if grid is None and bake_missing and obj.curved_reflections.mode == methods.MORPHING \
+        if grid is None and bake_missing and obj.curved_reflections.mode in methods.GRID_MODES \
                 and _bake_if_missing(reflector, matrix, scene):
             grid = load_morphing(reflector, matrix, scene, index)
         if grid is not None:
@@ -179,7 +187,7 @@ def _bake_if_missing(reflector, matrix, scene) -> bool:
     """Bake this reflector's grid where none matching it is whole (the nodes already baked
     are kept); returns whether it baked. A damaged node file is found, and rebuilt by the
     next bake, when it is read."""
-    settings, directory = morph_settings(scene), cache_directory(scene)
+    settings, directory = reflector_settings(scene, reflector.name), cache_directory(scene)
     try:
         bake.load_for(reflector, matrix, settings, directory)
     except SceneInputError as error:
@@ -270,12 +278,13 @@ class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
             return None
         return jobs
 
-    def _run(self, scene_name, jobs, settings, directory, cancel):
-        """Bake each reflector in turn (on the bake thread, or inline from execute)."""
+    def _run(self, scene_name, jobs, directory, cancel):
+        """Bake each reflector in turn (on the bake thread, or inline from execute):
+        ``jobs`` are (reflector, object matrix, the settings of the grid its mode needs)."""
         state = _STATE[scene_name]
         outcome = []
         try:
-            for reflector, matrix in jobs:
+            for reflector, matrix, settings in jobs:
                 state.update(reflector=reflector.name, done=0, total=int(np.prod(settings.grid)))
 
                 def progress(done, total, state=state):
@@ -309,14 +318,15 @@ class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
         if jobs is None:
             return None
         try:
-            settings = morph_settings(context.scene)
-            bake.parse_node_range(self.nodes, int(np.prod(settings.grid)))
+            jobs = [(reflector, matrix, reflector_settings(context.scene, reflector.name))
+                    for reflector, matrix in jobs]
+            bake.parse_node_range(self.nodes, int(np.prod(jobs[0][2].grid)))
         except (SceneInputError, ValueError) as error:
             self.report({'ERROR'}, str(error))
             return None
         _STATE[context.scene.name] = {"running": True, "done": 0, "total": 0, "reflector": jobs[0][0].name,
                                       "message": ""}
-        return jobs, settings, cache_directory(context.scene)
+        return jobs, cache_directory(context.scene)
 
     def execute(self, context):
         started = self._start(context)

@@ -42,7 +42,7 @@ def _reflector_settings(layout, obj) -> None:
 #: Characters per line of a reflector's reason in the panel.
 REASON_WIDTH = 52
 _METHOD_ICONS = {methods.ITERATIVE: 'SHADERFX', methods.MORPHING: 'LIGHTPROBE_VOLUME', methods.RUNTIME: 'CAMERA_DATA',
-                 methods.PERTURBATION: 'FORCE_HARMONIC'}
+                 methods.PERTURBATION: 'FORCE_HARMONIC', methods.OCTREE: 'LIGHTPROBE_VOLUME'}
 
 
 def _reflector_methods(box, scene, reflectors) -> None:

@@ -65,6 +65,8 @@ class CurvedReflectionsObjectSettings(bpy.types.PropertyGroup):
             ('RUNTIME', "Runtime", "Rebuild the sample-based camera for every new view (SBC paper IV)"),
             ('MORPHING', "Morphing", "Bake a grid of panoramic cameras around the reflector and blend them "
                                      "as the view moves (SBC paper VI)"),
+            ('OCTREE', "Octree Morphing", "Bake a grid of ray octrees around the reflector and blend the eight "
+                                          "nodes around the view trilinearly as it moves (Martin & Popescu 2004)"),
             ('PERTURBATION', "Perturbation", "Trace a sparse grid of reflection paths per view and move every "
                                              "vertex's reflection from the nearest one by its path Jacobian and "
                                              "Hessian (Chen & Arvo 2000); any smooth reflector"),

@@ -3,14 +3,16 @@
  * twin of MorphingGrid._matched_images and MorphingGrid._blend (addon/morphing.py), one
  * invocation per diffuse vertex, every frame.
  *
- * SBC paper (Popescu, Sacks, Mei 2006) section VI: the four nodes of the tetrahedron
- * holding the eye have each projected the vertex once (their first reflector points,
- * `node0` .. `node3`, kept while the diffuse geometry stays: SLOTS regular images, then
- * SLOTS images of the widened leaf charts, in the grid's rigid frame). Per frame:
+ * The NODES nodes of the cell holding the eye (SBC paper, Popescu, Sacks, Mei 2006,
+ * section VI: the 4 of a tetrahedron; Martin & Popescu 2004, section 6: the 8 of a cube,
+ * addon/methods/octree) have each projected the vertex once (their first reflector
+ * points, `node0` .. `node<NODES - 1>`, kept while the diffuse geometry stays: SLOTS
+ * regular images, then SLOTS images of the widened leaf charts, in the grid's rigid
+ * frame). Per frame:
  *   1. the reference images are those of the heaviest node that has any; every node's
  *      image nearest to each reference image within `match_distance` is its match, from
  *      its widened charts where its regular images have none (remedy 2);
- *   2. the matches are blended with the eye's barycentric weights (`weights`), the
+ *   2. the matches are blended with the eye's barycentric or trilinear weights, the
  *      weights of missing nodes left out where the others weigh PARTIAL_WEIGHT or more;
  *   3. our refinement: a quadratic height field fitted to the nodes' reflector points and
  *      the normals the law of reflection gives them (refine_on_local_surface), and
@@ -26,10 +28,10 @@
  * texture) and active_slots (the most regular images any of the four nodes has of any
  * vertex: the slots past it are empty this frame, neither written nor drawn). The view's parameters, in the uniform block `frame` (struct MorphFrame,
  * gpu_shaders/morph_pass.py): frame_from_shifted and shifted_from_frame (the grid's rigid
- * frame and the renderer's shift), view_projection (of shifted points), node_eyes (columns:
- * the four nodes' positions in the frame), weights, the eye in the frame and
- * match_distance, and per node how many regular and widened-chart slots hold any image
- * (the others are not read). */
+ * frame and the renderer's shift), view_projection (of shifted points), the eye in the
+ * frame and match_distance, per node its position in the frame and weight (`nodes`), and
+ * how many regular and widened-chart slots hold any image (`node_slots`; the others are
+ * not read). */
 vec4 node_image(int n, int slot, ivec2 texel)
 {
   ivec2 at = ivec2(texel.x, texel.y + slot * slot_rows);
@@ -42,7 +44,23 @@ vec4 node_image(int n, int slot, ivec2 texel)
   if (n == 2) {
     return texelFetch(node2, at, 0);
   }
+#if NODES > 4
+  if (n == 3) {
+    return texelFetch(node3, at, 0);
+  }
+  if (n == 4) {
+    return texelFetch(node4, at, 0);
+  }
+  if (n == 5) {
+    return texelFetch(node5, at, 0);
+  }
+  if (n == 6) {
+    return texelFetch(node6, at, 0);
+  }
+  return texelFetch(node7, at, 0);
+#else
   return texelFetch(node3, at, 0);
+#endif
 }
 
 vec3 unit(vec3 v)
@@ -136,23 +154,22 @@ void main()
   }
   ivec2 texel = ivec2(gl_GlobalInvocationID.xy);
   mat4 frame_from_shifted = frame.frame_from_shifted;
-  vec4 weights = frame.weights;
   vec3 eye = frame.eye_match.xyz;
   vec3 p = (frame_from_shifted * vec4(texelFetch(vertex_positions, texel, 0).xyz, 1.0)).xyz;
 
-  vec4 images[4][2 * SLOTS];
+  vec4 images[NODES][2 * SLOTS];
   int reference = -1;
   float heaviest = -1.0;
-  for (int n = 0; n < 4; n++) {
+  for (int n = 0; n < NODES; n++) {
     bool has = false;
-    int regular = int(frame.regular_slots[n]), widened = int(frame.widened_slots[n]);
+    int regular = int(frame.node_slots[n].x), widened = int(frame.node_slots[n].y);
     for (int s = 0; s < SLOTS; s++) {
       images[n][s] = s < regular ? node_image(n, s, texel) : vec4(0.0);
       images[n][SLOTS + s] = s < widened ? node_image(n, SLOTS + s, texel) : vec4(0.0);
       has = has || images[n][s].w > 0.5;
     }
-    if (has && weights[n] > heaviest) {
-      heaviest = weights[n];
+    if (has && frame.nodes[n].w > heaviest) {
+      heaviest = frame.nodes[n].w;
       reference = n;
     }
   }
@@ -161,20 +178,20 @@ void main()
     vec4 answer = vec4(0.0);
     vec4 own = reference >= 0 ? images[reference][k] : vec4(0.0);
     if (own.w > 0.5) {
-      vec3 matched[4];
-      float w[4];
-      bool present[4];
+      vec3 matched[NODES];
+      float w[NODES];
+      bool present[NODES];
       bool all_present = true;
       float total = 0.0;
       vec3 blended = vec3(0.0);
-      for (int n = 0; n < 4; n++) {
+      for (int n = 0; n < NODES; n++) {
         vec4 found = nearest(images[n], 0, own.xyz);
         if (found.w < 0.5) {
           found = nearest(images[n], SLOTS, own.xyz);
         }
         matched[n] = found.xyz;
         present[n] = found.w > 0.5;
-        w[n] = present[n] ? weights[n] : 0.0;
+        w[n] = present[n] ? frame.nodes[n].w : 0.0;
         all_present = all_present && found.w > 0.5;
         total += w[n];
         blended += w[n] * found.xyz;
@@ -184,16 +201,16 @@ void main()
 
       /* refine_on_local_surface */
       vec3 origin = blended;
-      vec3 normals[4];
+      vec3 normals[NODES];
       vec3 normal = vec3(0.0);
-      for (int n = 0; n < 4; n++) {
-        normals[n] = unit(unit(frame.node_eyes[n].xyz - matched[n]) + unit(p - matched[n]));
+      for (int n = 0; n < NODES; n++) {
+        normals[n] = unit(unit(frame.nodes[n].xyz - matched[n]) + unit(p - matched[n]));
         normal += w[n] * normals[n];
       }
       normal = unit(normal);
       int n_usable = 0;
-      bool use[4];
-      for (int n = 0; n < 4; n++) {
+      bool use[NODES];
+      for (int n = 0; n < NODES; n++) {
         use[n] = present[n] && dot(normals[n], normal) > SURFACE_NORMAL_MIN;
         n_usable += use[n] ? 1 : 0;
       }
@@ -204,7 +221,7 @@ void main()
         vec3 t1 = unit(cross(normal, helper));
         vec3 t2 = cross(normal, t1);
         float spread = 0.0;
-        for (int n = 0; n < 4; n++) {
+        for (int n = 0; n < NODES; n++) {
           vec3 o = matched[n] - origin;
           if (present[n]) {
             spread = max(spread, dot(o, t1) * dot(o, t1) + dot(o, t2) * dot(o, t2));
@@ -219,7 +236,7 @@ void main()
         for (int i = 0; i < 6; i++) {
           c[i] = 0.0;
         }
-        for (int n = 0; n < 4; n++) {
+        for (int n = 0; n < NODES; n++) {
           if (!use[n]) {
             continue;
           }

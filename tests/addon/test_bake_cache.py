@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Baking morphing grids in worker processes, and their .npz cache (SBC paper VI)."""
 
+import dataclasses
 import os
 import threading
 
@@ -91,7 +92,8 @@ def test_nodes_are_built_and_written_in_worker_processes(sphere, tmp_path, monke
     pids, writers = tmp_path / "pids", tmp_path / "writers"
     pids.mkdir()
     writers.mkdir()
-    original, original_write = bake.build_node, bake_cache.write_node
+    kind = bake_cache.GRID_KINDS["tetrahedral"]
+    original, original_write = kind.build, bake_cache.write_node
 
     def recording(*args):
         (pids / str(os.getpid())).touch()
@@ -101,7 +103,8 @@ def test_nodes_are_built_and_written_in_worker_processes(sphere, tmp_path, monke
         (writers / str(os.getpid())).touch()
         return original_write(*args)
 
-    monkeypatch.setattr(bake, "build_node", recording)  # inherited by the forked workers
+    monkeypatch.setitem(bake_cache.GRID_KINDS, "tetrahedral",  # inherited by the forked workers
+                        dataclasses.replace(kind, build=recording))
     monkeypatch.setattr(bake_cache, "write_node", recording_write)
     settings = G.MorphSettings(grid=(2, 2, 2), margin=0.8, face_resolution=16)
     result = bake.bake_grid(sphere, np.eye(4), settings, tmp_path / "cache", processes=2)

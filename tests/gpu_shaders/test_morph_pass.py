@@ -35,6 +35,17 @@ def mirror(gpu_ready):
     return sphere, grid
 
 
+@pytest.fixture(scope="module")
+def octree_mirror(gpu_ready):
+    """The same sphere and grid with ray octrees at the nodes (Martin & Popescu 2004)."""
+    from dataclasses import replace
+
+    from curved_reflections.addon.methods.octree import octree_grid_on_demand
+
+    sphere = icosphere((0.0, 0.0, 0.0), 1.0, 4, name="Mirror")
+    return sphere, octree_grid_on_demand(sphere, replace(SETTINGS, face_resolution=96))
+
+
 def _run_now(function, *args):
     """An executor's ``submit`` that runs the function at once."""
     from concurrent.futures import Future
@@ -57,13 +68,17 @@ def _pass(mirror, meshes, budget_mb=256.0):
     return MorphPass(geometry, [(grid, np.eye(4))], budget_mb=budget_mb), geometry
 
 
+@pytest.mark.parametrize("grid", ["mirror", "octree_mirror"])
 @pytest.mark.parametrize("eye", [(0.4, -2.3, 0.3), (-1.9, 1.2, -0.8)])
-def test_gpu_blend_is_the_numpy_blend(mirror, eye):
+def test_gpu_blend_is_the_numpy_blend(request, grid, eye):
     """Same vertices answered, same pixels within 0.05 px: the float32 match, blend and
-    surface refinement (analytic Newton) against the float64 engine."""
+    surface refinement (analytic Newton) against the float64 engine, for the four nodes
+    of a tetrahedron and the eight of an octree grid's cube."""
+    mirror = request.getfixturevalue(grid)
     morph, geometry = _pass(mirror, [_cloud()])
     view = _view(eye)
     assert morph.blend(view) == [0]
+    assert morph.counts["node_projections"] == (8 if grid == "octree_mirror" else 4)
     found = morph.read(0)
     expected = mirror[1].project(geometry.vertices, view)
     compared = 0

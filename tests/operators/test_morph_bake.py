@@ -223,3 +223,27 @@ def test_render_image_in_morphing_mode_bakes_a_missing_grid_first(empty_scene, m
     files = {p: p.stat().st_mtime_ns for p in morph_ops.cache_directory(empty_scene).rglob("node_*")}
     render_scene(empty_scene, bpy.context.evaluated_depsgraph_get())
     assert {p: p.stat().st_mtime_ns for p in morph_ops.cache_directory(empty_scene).rglob("node_*")} == files
+
+
+
+def test_render_image_in_octree_mode_bakes_ray_octrees_first(empty_scene, morph_ops, gpu_ready, capfd):
+    """Octree mode (Martin & Popescu 2004): Render Image bakes the grid of ray octrees
+    (the manifest says so) and draws the mirror from it, with no camera per view; Bake
+    replaces the tetrahedral grid of the same reflector when its mode changes."""
+    from curved_reflections.addon import bake_cache
+    from curved_reflections.operators.render_image import render_scene
+
+    _mirror_scene(empty_scene, mode='OCTREE')
+    empty_scene.curved_reflections.max_order = 1
+    bpy.ops.object.camera_add(location=(0.9, -1.5, 1.4))
+    camera = bpy.context.active_object
+    camera.rotation_euler = (np.radians(70.0), 0.0, np.radians(15.0))
+    empty_scene.camera = camera
+    empty_scene.render.resolution_x, empty_scene.render.resolution_y = 64, 48
+    result = render_scene(empty_scene, bpy.context.evaluated_depsgraph_get())
+    assert "baking the morphing grid of 'Ball' first: none baked yet" in capfd.readouterr().out
+    assert result.stats["methods"] == {"Ball": "OCTREE"} and "n_rays" not in result.stats
+    (manifest,) = morph_ops.cache_directory(empty_scene).rglob(bake_cache.MANIFEST)
+    with np.load(manifest, allow_pickle=False) as data:
+        assert str(data["kind"]) == "octree"
+    assert len(_baked_node_files(morph_ops, empty_scene)) == 8

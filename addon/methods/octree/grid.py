@@ -1,0 +1,85 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Reflection morphing with ray octrees (Martin & Popescu 2004, sections 3 and 6).
+
+A regular grid of *sampling locations* around the reflector, a ray octree at each
+(:mod:`.node`, :mod:`.ray_octree`); a desired eye inside a *sampling cell* sees a point
+where the trilinear blend of the eight locations' first reflector points lies (MORPH_VERTEX,
+section 6). The grid, its rigid frame, the matching of images across nodes, the
+renderer's GPU pass and the bake cache are those of the tetrahedral grid (SBC paper VI,
+:mod:`...morphing`), which succeeded this method: only the cell (a cube of eight nodes, not a
+tetrahedron of four), the weights (trilinear, not barycentric) and what a node holds differ.
+Like the tetrahedral grid, the blend is refined on the quadratic surface fitted to the
+eight images (``morph_surface``): the paper's blend alone errs quadratically in the cell size.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ...morph_grid import NODE_OK, OCTREE, MorphSettings, NodesOnDemand, _StatusOnDemand, bake_reflector, rigid_frame, to_frame
+from ...morphing import MorphingGrid, ViewOutsideGrid, compact_images
+from ...scene import Reflector
+from .node import build_octree_node
+
+#: The eight corners of a cell, as (x, y, z) steps from its lowest node.
+CORNERS = np.array([(i, j, k) for k in (0, 1) for j in (0, 1) for i in (0, 1)])
+#: Images a node keeps of one point (a convex mirror shows it once, a concave one more).
+IMAGES = 3
+
+
+def locate_cell(grid, point):
+    """The cell of ``grid`` holding ``point``: (cell id, its 8 nodes, their trilinear
+    weights, whether the point is inside the grid)."""
+    shape = np.asarray(grid.shape)
+    f = (np.asarray(point, dtype=np.float64) - grid.lo) / grid.spacing
+    tolerance = 1e-9 * shape
+    inside = bool(np.all((f >= -tolerance) & (f <= shape - 1 + tolerance)))
+    cell = np.clip(np.floor(f).astype(np.int64), 0, shape - 2)
+    local = np.clip(f - cell, 0.0, 1.0)
+    weights = np.prod(np.where(CORNERS == 1, local, 1.0 - local), axis=1)
+    nodes = grid.node_index(cell + CORNERS)
+    cell_id = int(cell[0] + (shape[0] - 1) * (cell[1] + (shape[1] - 1) * cell[2]))
+    return cell_id, nodes, weights, inside
+
+
+class OctreeGrid(MorphingGrid):
+    """A baked (or on-demand) grid of ray octrees for one reflector: the interface of
+    :class:`...morphing.MorphingGrid` (``project``, ``check_view``, ``node_slots``), which
+    the renderer's GPU pass and the operators use for both kinds of grid."""
+
+    def locate_view(self, eye_world, matrix):
+        """Cell, its eight nodes and the eye's trilinear weights; ViewOutsideGrid where unusable."""
+        frame = rigid_frame(matrix)
+        eye = to_frame(frame, np.asarray(eye_world, dtype=np.float64)[None])[0]
+        cell, nodes, weights, inside = locate_cell(self.grid, eye)
+        if not inside:
+            raise ViewOutsideGrid(self.reflector_name, "the view is outside the octree grid")
+        if np.any(self.node_status[nodes] != NODE_OK):
+            raise ViewOutsideGrid(self.reflector_name, "the view's grid cell touches the inside of the mirror")
+        return cell, nodes, weights, frame
+
+    def _node_images(self, node: int, points: np.ndarray, face_images=None):
+        """(P, K, 3) distinct first reflector points of each point at one node (its ray
+        octree; ``face_images`` is the tetrahedral grid's and unused here)."""
+        images = self.nodes[node].octree.images(points, IMAGES)
+        return compact_images(images, self._duplicate_tolerance(node, images))
+
+    def _extended_images(self, node: int, points: np.ndarray):
+        """A ray octree has no leaf charts to widen (the tetrahedral grid's remedy 2)."""
+        return np.full((len(points), 0, 3), np.nan)
+
+
+def octree_grid_on_demand(reflector: Reflector, settings: MorphSettings, reflector_index: int = 0,
+                          nodes: NodesOnDemand | None = None) -> OctreeGrid:
+    """An :class:`OctreeGrid` of ``reflector`` (in its rigid frame) whose nodes are built
+    when a view first needs them (tests, benchmarks, trying a reflector)."""
+    settings = dataclasses.replace(settings, kind=OCTREE)
+    reflector_set, grid, bounds = bake_reflector(reflector, settings)
+    if nodes is None:
+        nodes = NodesOnDemand(reflector_set, grid.node_positions(), bounds, settings, build=build_octree_node)
+    lo, hi = reflector.bounds
+    return OctreeGrid(reflector.name, reflector_index, grid, settings, _StatusOnDemand(nodes), nodes,
+                      float(np.max(hi - lo)))
+
