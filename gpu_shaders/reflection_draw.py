@@ -346,6 +346,16 @@ class ReflectionRenderer:
         targets.traced = None
         return targets
 
+    def answered(self) -> dict:
+        """{reflector index: (K, N, 3)}: the first reflector points (world space, NaN where
+        none) of every vertex in the last frame's per-frame passes (iterative search,
+        baked grids, perturbation), one row per image slot, read back from the GPU: what
+        the live view's accuracy check (``addon/spot_check.py``) measures."""
+        found: dict = {}
+        for index, texture in self.iterative.answers() + self.morph.answers() + self.perturbation.answers():
+            found.setdefault(index, []).append(self.meshes.read(texture)[0])
+        return {index: np.stack(slots) for index, slots in found.items()}
+
     def projection(self, textures, camera_view, camera=None) -> CachedProjection:
         """The reflected triangles of ``textures``'s camera, built in ``camera_view``:
         the cached ones when they were made from these textures (the last

@@ -66,7 +66,7 @@ from ..addon.raytrace import ReflectorSet
 from ..addon.sbc_build import build_sample_based_camera
 from ..addon.scene import scene_bounds
 from ..addon.view import View
-from . import methods, morph_bake
+from . import accuracy, methods, morph_bake
 from .capture import capture_scene, view_from_camera
 from .render_inputs import BOUNDS_MARGIN, reflector_properties, world_color
 
@@ -128,7 +128,10 @@ class LiveScene:
     level: str = 'INFO'  # 'INFO', 'WARNING' or 'ERROR'
     stats: dict = field(default_factory=dict)
     counts: dict = field(default_factory=lambda: {"bakes": 0, "remeshes": 0, "builds": 0, "draws": 0,
-                                                  "projections": 0})
+                                                  "projections": 0, "checks": 0})
+    #: The last view drawn, when it was first drawn, the camera it was drawn with, and
+    #: whether its accuracy has been checked (``accuracy.measure`` once it settles).
+    last_view: tuple | None = None
 
     def report(self, level: str, message: str) -> None:
         self.level, self.status = level, message
@@ -167,6 +170,7 @@ def _capture(state: LiveScene, scene, depsgraph, reflectors: bool) -> None:
         state.grids = morph_bake.load_grids(scene, captured.reflectors)
         state.plan = methods.plan(scene, captured.reflectors, state.settings[2],
                                   baked={grid.reflector_name for grid, _ in state.grids})
+        state.grids = state.plan.drawn_grids(state.grids)
         state.generation += 1
         state.counts["bakes"] += 1
     else:
@@ -377,7 +381,9 @@ def bake(scene, depsgraph, views: dict | None = None, wait: bool = False) -> Liv
 
 
 def refresh(scene, depsgraph, views: dict | None = None, wait: bool = False) -> LiveScene:
-    """Re-capture the scene and rebuild every view's camera now (what **Refresh** does)."""
+    """Re-capture the scene and rebuild every view's camera now (what **Refresh** does);
+    Auto tries again the methods a live check passed over."""
+    methods.forget_measurements(scene)
     return bake(scene, depsgraph, views, wait)
 
 
@@ -437,8 +443,28 @@ def process(scene, depsgraph, wait: bool = False, now: float | None = None) -> b
     morph = None if state.renderer is None else state.renderer.morph
     if _collect(state) or (morph is not None and morph.prefetched):
         tag_redraw()
+    checking = _check_when_settled(state, scene, now, wait)
     return bool(state.jobs or state.requests or state.dirty_meshes or state.dirty_reflectors
-                or (morph is not None and morph.prefetching))
+                or (morph is not None and morph.prefetching) or checking)
+
+
+def _check_when_settled(state: LiveScene, scene, now: float, wait: bool) -> bool:
+    """Measure the drawn methods' accuracy in the last view once it has not changed for
+    ``accuracy.SETTLE_SECONDS`` (at once with ``wait``); Auto plans again when a method
+    measured outside the Accuracy (``methods.note_measured``). Returns whether a check is
+    still to come."""
+    if state.last_view is None or state.last_view[3] or state.renderer is None:
+        return False
+    view, since, camera, _ = state.last_view
+    if not wait and now - since < accuracy.SETTLE_SECONDS:
+        return True
+    state.last_view = (view, since, camera, True)
+    found = accuracy.measure(state.plan, state.reflector_set, state.renderer, view, camera)
+    state.counts["checks"] += 1
+    if methods.note_measured(scene, found):
+        state.dirty_reflectors = True  # plan again: the replaced method's reflector changes hands
+    tag_redraw()
+    return state.dirty_reflectors
 
 
 def draw(scene, key, view: View) -> bool:
@@ -496,6 +522,9 @@ def _draw_with(state: LiveScene, view: View, source, sbc) -> bool:
     start = time.perf_counter()
     projections = state.renderer.counts["projections"]
     state.renderer.draw(view, source, state.world, reflectors_only=True, camera=sbc)
+    if state.last_view is None or not _same_view(state.last_view[0], view) or state.last_view[2] is not sbc:
+        state.last_view = (view, time.monotonic(), sbc, False)
+        ensure_timer()  # the timer checks it once it settles
     morph = state.renderer.morph
     if morph.grids:
         morph.collect()

@@ -6,7 +6,10 @@ Per reflector, ``obj.curved_reflections.mode``:
 - ``AUTO`` (the default): the iterative search (Roger & Holzschuch 2006) where the
   reflector is star-shaped (``addon/methods/iterative/star.py``), else Morphing where
   a baked grid exists (the live view and the renderer then check per view that the eye
-  is inside it), else Runtime;
+  is inside it), else Runtime. The live view checks each drawn method's answers against
+  exactly traced rays when the view settles (``operators/accuracy.py``); a method found
+  outside the scene's Accuracy there is passed over for the next until Refresh
+  (:func:`note_measured`);
 - ``ITERATIVE``: the iterative search, or Runtime with the reason when the reflector is
   not star-shaped;
 - ``MORPHING`` and ``RUNTIME``: the sample-based camera's modes (SBC paper VI and IV);
@@ -78,9 +81,20 @@ class MethodPlan:
     def iterative_indices(self) -> frozenset:
         return frozenset(m.index for m in self.iterative)
 
+    def drawn_grids(self, grids: list) -> list:
+        """The (grid, matrix) pairs of ``grids`` whose reflector the plan draws from its
+        grid (Auto may have passed a loaded grid over: :func:`note_measured`)."""
+        chosen = {choice.reflector: choice.method for choice in self.choices}
+        return [(grid, matrix) for grid, matrix in grids if chosen.get(grid.reflector_name) in GRID_MODES]
+
 
 _maps: list = []  # _Entry, most recently used last
 _last_choices: dict = {}
+#: {scene name: {reflector: {method: what was measured}}}: methods Auto replaced after the
+#: live check measured them outside the scene's Accuracy (kept until Refresh).
+_outside_accuracy: dict = {}
+#: {scene name: {reflector: accuracy.Measured}}: the live view's last checks, for the panel.
+_measured: dict = {}
 
 
 def _bake(reflector, centre, face_size: int):
@@ -167,17 +181,25 @@ def plan(scene, reflectors, accuracy_px: float | None = None, baked=frozenset())
     result = MethodPlan()
     for index, reflector in enumerate(reflectors):
         mode = mode_of(scene, reflector.name)
+        outside = _outside_accuracy.get(scene.name, {}).get(reflector.name, {}) if mode == 'AUTO' else {}
         if mode in ('AUTO', ITERATIVE):
             shape, rmap = star_map(reflector)
+            if rmap is not None and ITERATIVE in outside:
+                shape = dataclasses.replace(shape, reason=f"the iterative search measured {outside[ITERATIVE]} in "
+                                            f"a view (Accuracy {accuracy:g} px)")
+                rmap = None
             if rmap is not None:
                 result.iterative.append(IterativeReflector(index, reflector.name, rmap, accuracy))
                 centre = ", ".join(f"{round(float(c), 2) + 0.0:.2f}" for c in shape.centre)  # no "-0.00"
                 result.choices.append(MethodChoice(reflector.name, ITERATIVE,
                                                    f"star-shaped around ({centre}): iterative search on the GPU"))
                 continue
-            if mode == 'AUTO' and reflector.name in baked:
+            if mode == 'AUTO' and reflector.name in baked and MORPHING not in outside:
                 result.choices.append(MethodChoice(reflector.name, MORPHING,
                                                    f"{shape.reason}; its baked morphing grid draws it"))
+            elif mode == 'AUTO' and reflector.name in baked:
+                fallback = f"its baked grid measured {outside[MORPHING]} in a view (Accuracy {accuracy:g} px): Runtime"
+                result.choices.append(MethodChoice(reflector.name, RUNTIME, f"{shape.reason}; {fallback}"))
             else:
                 fallback = "no baked morphing grid, so Runtime" if mode == 'AUTO' else "drawn in Runtime mode"
                 result.choices.append(MethodChoice(reflector.name, RUNTIME, f"{shape.reason}; {fallback}"))
@@ -196,6 +218,37 @@ def plan(scene, reflectors, accuracy_px: float | None = None, baked=frozenset())
         method.occluders = tuple(other.reflector_map for other in result.iterative if other is not method)
     _last_choices[scene.name] = result.choices
     return result
+
+
+def note_measured(scene, measured: dict) -> bool:
+    """Keep the live view's checks (``accuracy.measure``: {reflector: Measured}) for the
+    panel; an Auto reflector whose method measured outside the scene's Accuracy (95 % of
+    its checked answers within it, ``SpotCheck.within``) is drawn by the next method
+    from then on (Iterative, then its baked grid, then Runtime) until Refresh. Returns
+    whether that happened now (the caller plans again)."""
+    _measured[scene.name] = dict(measured)
+    accuracy = float(scene.curved_reflections.accuracy_px)
+    replaced = False
+    for name, found in measured.items():
+        if mode_of(scene, name) != 'AUTO' or found.method == RUNTIME or found.check.within(accuracy):
+            continue
+        failed = _outside_accuracy.setdefault(scene.name, {}).setdefault(name, {})
+        if found.method not in failed:
+            failed[found.method] = f"p95 {found.check.percentile(95):.2f} px" if found.check.confirmed else \
+                "no answer confirmed"
+            replaced = True
+    return replaced
+
+
+def measured(scene) -> dict:
+    """The live view's last checks of ``scene`` ({reflector: accuracy.Measured})."""
+    return _measured.get(scene.name, {})
+
+
+def forget_measurements(scene) -> None:
+    """Drop the checks and give Auto's replaced methods another chance (Refresh)."""
+    _measured.pop(scene.name, None)
+    _outside_accuracy.pop(scene.name, None)
 
 
 def perturbation_reflector(scene, index: int, reflector) -> tuple:
@@ -244,3 +297,5 @@ def forget() -> None:
     """Drop the cached maps and choices (another file is being loaded, or unregister)."""
     _maps.clear()
     _last_choices.clear()
+    _measured.clear()
+    _outside_accuracy.clear()

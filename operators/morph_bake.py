@@ -2,7 +2,9 @@
 """Bake and clear morphing grids (SBC paper VI), and the morphing status for the panel.
 
 ``curved_reflections.bake_morphing`` bakes the grid of every visible reflector whose
-mode is Morphing (``addon/bake.py``: worker processes, one node each). Invoked from the
+mode is Morphing (panoramic sample-based cameras at the nodes) or Octree (ray octrees at
+the nodes, Martin & Popescu 2004): the grid each mode needs (``addon/bake.py``: worker
+processes, one node each). Invoked from the
 UI it is modal: the bake runs on a thread that drives the worker processes, the window
 manager's progress bar and the panel's status line follow it, and Esc cancels between
 nodes (the previous cache stays as it was). ``execute`` (scripts, background mode)
@@ -134,7 +136,8 @@ def morph_status(scene, per_reflector: bool = True) -> str:
 
 
 def morphing_reflectors(context):
-    """(captured reflector, object matrix) of every visible reflector in Morphing mode."""
+    """(captured reflector, object matrix) of every visible reflector that wants a grid
+    (Morphing or Octree mode, or Auto where it is not star-shaped)."""
     depsgraph = context.evaluated_depsgraph_get()
     captured = capture_scene(depsgraph)
     chosen = []
@@ -159,10 +162,10 @@ def load_morphing(reflector, matrix, scene, reflector_index: int = 0):
 
 
 def load_grids(scene, reflectors, bake_missing: bool = False) -> list:
-    """(grid, object matrix) of each reflector in Morphing mode (or Auto, where it is not
-    star-shaped) whose baked grid matches it; the others are drawn in runtime mode
+    """(grid, object matrix) of each reflector in Morphing or Octree mode (or Auto, where
+    it is not star-shaped) whose baked grid matches it; the others are drawn in runtime mode
     (:func:`load_morphing` records why). With ``bake_missing`` (Render Image) a reflector
-    set to Morphing mode whose grid is missing, stale or unfinished is baked first, in
+    set to Morphing or Octree mode whose grid is missing, stale or unfinished is baked first, in
     this process, on every core. The grids' nodes project on the GPU."""
     from ..gpu_shaders.morph_source import GPUFaceImages
 
@@ -238,7 +241,7 @@ def _refresh_live(context) -> None:
 
 
 class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
-    """Bake the morphing grids of the reflectors in Morphing mode (Esc cancels; the nodes baked so far are kept)"""
+    """Bake the grids of the reflectors in Morphing or Octree mode (Esc cancels; the nodes baked so far are kept)"""
 
     bl_idname = "curved_reflections.bake_morphing"
     bl_label = "Bake Morphing Grid"
@@ -247,7 +250,8 @@ class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
     processes: bpy.props.IntProperty(name="Processes", description="Worker processes (0: every core)",
                                      default=0, min=0, max=256)
     object_name: bpy.props.StringProperty(
-        name="Object", description="Bake only this reflector (empty: every reflector in Morphing mode)", default="")
+        name="Object", description="Bake only this reflector (empty: every reflector in Morphing or Octree mode)",
+        default="")
     nodes: bpy.props.StringProperty(
         name="Nodes", description="Bake only these grid nodes, 'first-last' (e.g. 0-99) or 'first-': one range of a "
         "render farm's job; nodes already baked are skipped (empty: every node)", default="")
@@ -271,10 +275,11 @@ class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
         if self.object_name:
             jobs = [job for job in jobs if job[0].name == self.object_name]
             if not jobs:
-                self.report({'ERROR'}, f"{self.object_name!r}: not a visible reflector in Morphing mode")
+                self.report({'ERROR'}, f"{self.object_name!r}: not a visible reflector in Morphing or Octree mode")
                 return None
         if not jobs:
-            self.report({'ERROR'}, "No visible reflector is in Morphing mode (set Mode in the Reflections tab)")
+            self.report({'ERROR'}, "No visible reflector is in Morphing or Octree mode (set Mode in the Reflections "
+                        "tab)")
             return None
         return jobs
 

@@ -11,7 +11,7 @@ import textwrap
 
 import bpy
 
-from . import live, methods, morph_bake
+from . import accuracy, live, methods, morph_bake
 from .capture import SURFACE_TYPES
 
 _STATUS_ICONS = {'INFO': 'INFO', 'WARNING': 'ERROR', 'ERROR': 'CANCEL'}
@@ -46,8 +46,10 @@ _METHOD_ICONS = {methods.ITERATIVE: 'SHADERFX', methods.MORPHING: 'LIGHTPROBE_VO
 
 
 def _reflector_methods(box, scene, reflectors) -> None:
-    """Each reflector with the method drawing it and why (the last plan: Bake or Render)."""
+    """Each reflector with the method drawing it and why (the last plan: Bake or Render),
+    and its accuracy measured in the live view once the view settled."""
     choices = {c.reflector: c for c in methods.last_choices(scene)}
+    measured = methods.measured(scene)
     for reflector in reflectors:
         choice = choices.get(reflector.name)
         if choice is None:
@@ -57,6 +59,10 @@ def _reflector_methods(box, scene, reflectors) -> None:
         box.label(text=f"{reflector.name}: {choice.method.title()}", icon=_METHOD_ICONS[choice.method])
         for line in textwrap.wrap(choice.reason, REASON_WIDTH):  # labels do not wrap by themselves
             box.label(text=line)
+        found = measured.get(reflector.name)
+        if found is not None:
+            for k, line in enumerate(textwrap.wrap(accuracy.panel_line(found), REASON_WIDTH)):
+                box.label(text=line, icon='DRIVER_DISTANCE' if k == 0 else 'BLANK1')
 
 
 def _live_section(layout, scene) -> None:

@@ -57,6 +57,7 @@ class ReflectionRender:
     view: View
     seconds: dict = field(default_factory=dict)
     stats: dict = field(default_factory=dict)
+    camera: object = None  # the sample-based camera built for the frame, if one was (accuracy checks)
 
     @property
     def display(self) -> np.ndarray:
@@ -145,6 +146,7 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
         state.grids = load_grids(scene, captured.reflectors, bake_missing=True)
         state.plan = methods.plan(scene, captured.reflectors, accuracy_px,
                                   baked={grid.reflector_name for grid, _ in state.grids})
+        state.grids = state.plan.drawn_grids(state.grids)
         state.renderer = None
     if state.renderer is None or key != state.key:
         state.renderer = ReflectionRenderer(captured.reflectors, captured.meshes, iterative=state.plan.iterative,
@@ -173,7 +175,7 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
                "trace": sbc.stats.get("trace_seconds", float("nan")) if sbc is not None else 0.0}
     stats = {**(sbc.stats if sbc is not None else {}), **state.renderer.stats,
              "methods": {c.reflector: c.method for c in state.plan.choices}}
-    return ReflectionRender(image, view, seconds, stats)
+    return ReflectionRender(image, view, seconds, stats, sbc)
 
 
 def output_path(filepath: str) -> Path:

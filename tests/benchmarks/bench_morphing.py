@@ -105,9 +105,11 @@ def draw_views(morphing, mirror, matrix, settings, count, min_distance, rng):
     return views
 
 
-def measure_grid(morphing, mirror, matrix, settings, views, view_points, exact, args) -> dict:
-    """Error, coverage and rates of one grid shape over all views, for both blends."""
-    from curved_reflections.addon import morph_grid
+def measure_grid(grid_on_demand, mirror, matrix, settings, views, view_points, exact, args) -> dict:
+    """Error, coverage and rates of one grid shape over all views, for both blends;
+    ``grid_on_demand(local reflector, settings, blend=, nodes=)`` makes the grid
+    (``morphing.grid_on_demand``, or the octree grid's of ``bench_octree.py``)."""
+    from curved_reflections.addon import morph_grid, morphing
     from curved_reflections.addon.raytrace import ReflectorSet
 
     frame = morph_grid.rigid_frame(matrix)
@@ -118,7 +120,7 @@ def measure_grid(morphing, mirror, matrix, settings, views, view_points, exact, 
     cell = {"grid": list(settings.grid), "spacing": [float(x) for x in grid.spacing], "blends": {}}
     fallbacks = 0
     for blend in ("linear", "surface"):
-        morph = morphing.grid_on_demand(local, settings, blend=blend, nodes=nodes)
+        morph = grid_on_demand(local, settings, blend=blend, nodes=nodes)
         nodes = morph.nodes
         errors, covered, n_exact, projected, false, remedies, rates, static_rates = [], 0, 0, 0, 0, {}, [], []
         covered_facing, n_facing, false_on_mirror, off_image = 0, 0, 0, 0
@@ -370,7 +372,7 @@ def main(argv=None) -> int:
         "sweep": [],
     }
     for g in args.grids:
-        cell = measure_grid(morphing, mirror, matrix, settings_for[g], views, view_points, exact, args)
+        cell = measure_grid(morphing.grid_on_demand, mirror, matrix, settings_for[g], views, view_points, exact, args)
         results["sweep"].append(cell)
         s = cell["blends"]["surface"]
         _log(f"grid {g}: surface p50/p95/p99 {s['error_p50']:.2f}/{s['error_p95']:.2f}/{s['error_p99']:.2f} px, "

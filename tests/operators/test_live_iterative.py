@@ -168,3 +168,53 @@ def test_perturbation_mode_draws_live_with_no_camera_and_the_torus_too(fig3, cap
     moved = look_at_view(centre + (3.0, -4.0, 1.5), centre, fov_y_deg=40.0, width=WIDTH, height=HEIGHT)
     drawn, other = _draw(fig3, moved, key="another region")
     assert drawn and passes.counts["projections"] == 2 and np.abs(other - image).max() > 0.1
+
+
+def test_the_drawn_methods_accuracy_is_measured_when_the_view_settles(fig3):
+    """Once the view has not changed for a moment, the live view checks the drawn
+    answers against exactly traced rays (addon/spot_check.py); the panel shows it. The
+    ball's iterative search: sub-pixel. A torus beside it, drawn by a Runtime camera,
+    is measured too."""
+    from curved_reflections.operators import accuracy
+
+    _torus(fig3)
+    state = live.bake(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
+    view = _camera_view(fig3)
+    assert _draw(fig3, view)[0]
+    checks = state.counts["checks"]
+    live.process(fig3, bpy.context.evaluated_depsgraph_get(), now=state.last_view[1] + 0.1)
+    assert state.counts["checks"] == checks  # not settled yet
+    live.process(fig3, bpy.context.evaluated_depsgraph_get(), now=state.last_view[1] + accuracy.SETTLE_SECONDS + 0.01)
+    assert state.counts["checks"] == checks + 1
+    found = methods.measured(fig3)
+    ball, ring = found["MirrorSphere"], found["Ring"]
+    assert ball.method == methods.ITERATIVE and ball.check.confirmed >= 0.95 * ball.check.checked > 50
+    assert ball.check.percentile(95) < 0.5 and ball.check.within(1.0)
+    assert ring.method == methods.RUNTIME and ring.check.checked > 20 and ring.check.percentile(50) < 1.0
+    assert accuracy.panel_line(ball).startswith("In this view (Iterative): p95 0.")
+    _draw(fig3, view)  # the same view again: not checked again
+    live.process(fig3, bpy.context.evaluated_depsgraph_get(), now=state.last_view[1] + 10.0)
+    assert state.counts["checks"] == checks + 1
+
+
+def test_auto_passes_over_a_method_measured_outside_the_accuracy_until_refresh(fig3, monkeypatch):
+    """A check that finds the Auto ball's search outside the scene's Accuracy (made to,
+    here) has it drawn by Runtime from then on, and the panel says why; Refresh tries
+    the search again."""
+    from curved_reflections.addon.spot_check import SpotCheck
+    from curved_reflections.operators import accuracy
+
+    state = live.bake(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
+    view = _camera_view(fig3)
+    assert _draw(fig3, view)[0] and methods.last_choices(fig3)[0].method == methods.ITERATIVE
+    monkeypatch.setattr(accuracy, "spot_check", lambda *args, **kwargs: SpotCheck(96, np.full(96, 3.0)))
+    live.process(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
+    live.process(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)  # plans again
+    [choice] = methods.last_choices(fig3)
+    assert choice.method == methods.RUNTIME
+    assert "the iterative search measured p95 3.00 px in a view (Accuracy 1 px)" in choice.reason
+    assert not state.plan.iterative
+    assert _draw(fig3, view)[0] or state.requests  # a camera is built for it now
+    monkeypatch.undo()
+    live.refresh(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
+    assert methods.last_choices(fig3)[0].method == methods.ITERATIVE

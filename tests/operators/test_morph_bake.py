@@ -86,7 +86,7 @@ def test_bake_load_stale_and_clear(empty_scene, morph_ops):
 
 def test_bake_without_a_morphing_reflector_reports_an_error(empty_scene, morph_ops):
     _mirror_scene(empty_scene, mode='RUNTIME')
-    with pytest.raises(RuntimeError, match="No visible reflector is in Morphing mode"):
+    with pytest.raises(RuntimeError, match="No visible reflector is in Morphing or Octree mode"):
         bpy.ops.curved_reflections.bake_morphing()
     assert not morph_ops._STATE.get(empty_scene.name, {}).get("running")
 
@@ -150,7 +150,7 @@ def test_a_range_of_nodes_bakes_only_those_and_reports_what_is_left(empty_scene,
     for bad, message in (("5-2", "nodes 0 to 7"), ("x", "write first-last")):
         with pytest.raises(RuntimeError, match=message):
             bpy.ops.curved_reflections.bake_morphing(nodes=bad)
-    with pytest.raises(RuntimeError, match="'Cube': not a visible reflector in Morphing mode"):
+    with pytest.raises(RuntimeError, match="'Cube': not a visible reflector in Morphing or Octree mode"):
         bpy.ops.curved_reflections.bake_morphing(object_name="Cube")
 
 

@@ -72,14 +72,15 @@ class OctreeGrid(MorphingGrid):
 
 
 def octree_grid_on_demand(reflector: Reflector, settings: MorphSettings, reflector_index: int = 0,
-                          nodes: NodesOnDemand | None = None) -> OctreeGrid:
+                          blend: str = "surface", nodes: NodesOnDemand | None = None) -> OctreeGrid:
     """An :class:`OctreeGrid` of ``reflector`` (in its rigid frame) whose nodes are built
-    when a view first needs them (tests, benchmarks, trying a reflector)."""
+    when a view first needs them (tests, benchmarks, trying a reflector); ``blend`` and
+    ``nodes`` as for ``morphing.grid_on_demand``."""
     settings = dataclasses.replace(settings, kind=OCTREE)
     reflector_set, grid, bounds = bake_reflector(reflector, settings)
     if nodes is None:
         nodes = NodesOnDemand(reflector_set, grid.node_positions(), bounds, settings, build=build_octree_node)
     lo, hi = reflector.bounds
     return OctreeGrid(reflector.name, reflector_index, grid, settings, _StatusOnDemand(nodes), nodes,
-                      float(np.max(hi - lo)))
+                      float(np.max(hi - lo)), blend=blend)
 

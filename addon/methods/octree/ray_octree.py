@@ -46,6 +46,10 @@ REFINE_ITERATIONS = 10
 MAX_STEP_CELLS = 3.0
 #: A refined ray passes this close to its point (in reflector sizes) to be an image.
 CONVERGED = 1e-6
+#: Cells a complete ray-map cell is extrapolated beyond, toward the mirror's silhouette.
+EXTRAPOLATE_CELLS = 0.25
+#: The cell holding a point first, then those beside it (edges, then corners).
+_CELL_OFFSETS = np.array([(0, 0), (-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (1, -1), (-1, 1), (1, 1)])
 #: Two refined images closer than this (reflector sizes) are one.
 SAME_IMAGE = 1e-3
 #: Samples per leaf edge along each ray when listing the leaves it crosses.
@@ -61,8 +65,9 @@ CHUNK_PAIRS = 2_000_000
 class RayOctree:
     """One node's reflected rays and the octree over them, in the grid's rigid frame."""
 
-    lo: np.ndarray  # (3,) the root cube's lowest corner
+    lo: np.ndarray  # (3,) the root cube's lowest corner, and of the box where rays end
     size: float  # the root cube's edge
+    hi: np.ndarray  # (3,) the box's highest corner (the cube is the box made cubic)
     depth: int  # the finest leaves are cubes of size / 2**depth
     reflector_size: float
     eye: np.ndarray  # (3,) the node the rays were traced from
@@ -102,17 +107,21 @@ class RayOctree:
         """(P,) code of the leaf of ``level`` (default: the finest) holding each point (:func:`leaf_code`)."""
         return leaf_code(points, self.lo, self.size, self.depth if level is None else level)
 
-    def lookup_positions(self, points: np.ndarray) -> np.ndarray:
-        """Where each point is looked up in the octree: itself inside the root cube; a
-        point beyond it, where the segment from it to the mirror's centre enters the cube
-        (the point's reflected rays cross the cube there, near enough for the seeds'
-        refinement to walk the rest of the way)."""
-        hi = self.lo + self.size
-        outside = np.flatnonzero(np.any((points < self.lo) | (points >= hi), axis=1))
+    def beyond(self, points: np.ndarray) -> np.ndarray:
+        """(P,) bool: the points outside the box where the rays end."""
+        return np.any((points < self.lo) | (points >= self.hi), axis=1)
+
+    def lookup_positions(self, points: np.ndarray, targets: np.ndarray) -> np.ndarray:
+        """Where each point is looked up in the octree: itself inside the box where rays
+        end; a point beyond it, where the segment from it to its ``targets`` row (a point
+        of the mirror) enters the box: the reflected ray from that mirror point to the
+        point crosses the box there."""
+        hi = self.hi
+        outside = np.flatnonzero(self.beyond(points))
         if len(outside) == 0:
             return points
         start = points[outside]
-        direction = self.centre - start
+        direction = targets[outside] - start
         with np.errstate(divide="ignore", invalid="ignore"):
             t1, t2 = (self.lo - start) / direction, (hi - start) / direction
         enter = np.nanmax(np.minimum(t1, t2), axis=1)
@@ -126,7 +135,14 @@ class RayOctree:
         (nearest seed first), NaN where fewer images."""
         points = np.asarray(points, dtype=np.float64)
         found = np.full((len(points), count, 3), np.nan)
-        owner, ray = self._candidates(points)
+        owner, ray = self._candidates(points, np.broadcast_to(self.centre, points.shape))
+        beyond = self.beyond(points)
+        if beyond[owner].any():
+            # A point beyond the box, aimed first at the mirror's centre, is looked up
+            # again aimed at its nearest candidate's mirror point (nearer its image's).
+            first_owner, first_ray, _ = self._seeds(points, owner[beyond[owner]], ray[beyond[owner]], 1)
+            again_owner, again_ray = self._candidates(points[first_owner], self.origins[first_ray])
+            owner, ray = np.r_[owner, first_owner[again_owner]], np.r_[ray, again_ray]
         if len(owner) == 0:
             return found
         seed_owner, seed_ray, slot = self._seeds(points, owner, ray, count)
@@ -138,11 +154,12 @@ class RayOctree:
         order = np.argsort(np.isnan(found[..., 0]), axis=1, kind="stable")  # images first
         return np.take_along_axis(found, order[..., None], axis=1)
 
-    def _candidates(self, points: np.ndarray):
-        """(point, ray) rows: every ray listed in the finest occupied leaf of every point."""
+    def _candidates(self, points: np.ndarray, targets: np.ndarray):
+        """(point, ray) rows: every ray listed in the finest occupied leaf of every point
+        (of its :meth:`lookup_positions`)."""
         if len(self.leaf_codes) == 0:
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
-        positions = self.lookup_positions(points)
+        positions = self.lookup_positions(points, targets)
         leaf = np.full(len(points), -1)
         for level in range(self.depth, max(self.depth - COARSER_LEVELS, 0) - 1, -1):
             rows = np.flatnonzero(leaf < 0)
@@ -229,18 +246,28 @@ class RayOctree:
         return cached
 
     def _corners(self, face, uv):
-        """The four rays around (u, v) of each face's grid, the fractions, and whether
-        all four exist and leave from one smooth piece."""
+        """The four rays of the cell holding (u, v) in each face's grid, the fractions,
+        and whether all four exist and leave from one smooth piece. Where that cell is
+        incomplete (the mirror's silhouette, as seen from the node, crosses it), the
+        nearest complete cell beside it is extrapolated, up to EXTRAPOLATE_CELLS cells
+        beyond it: points reflected between the last ray and the silhouette."""
         n = self.ray_grid.shape[1]
-        base = np.clip(np.floor(uv).astype(np.int64), 0, n - 2)
-        frac = uv - base
-        i, j = base[:, 0], base[:, 1]
-        corners = np.stack([self.ray_grid[face, j, i], self.ray_grid[face, j, i + 1],
-                            self.ray_grid[face, j + 1, i], self.ray_grid[face, j + 1, i + 1]], axis=1)
-        ok = np.all(corners >= 0, axis=1)
-        pieces = self.pieces[np.maximum(corners, 0)]
-        ok &= np.all(pieces == pieces[:, :1], axis=1)
-        return np.maximum(corners, 0), frac, ok
+        cell = np.floor(uv).astype(np.int64)
+        corners = np.zeros((len(uv), 4), np.int64)
+        frac = np.zeros((len(uv), 2))
+        ok = np.zeros(len(uv), bool)
+        for offset in _CELL_OFFSETS if EXTRAPOLATE_CELLS > 0 else _CELL_OFFSETS[:1]:
+            rows = np.flatnonzero(~ok)
+            base = np.clip(cell[rows] + offset, 0, n - 2)
+            i, j, f = base[:, 0], base[:, 1], face[rows]
+            found = np.stack([self.ray_grid[f, j, i], self.ray_grid[f, j, i + 1], self.ray_grid[f, j + 1, i],
+                              self.ray_grid[f, j + 1, i + 1]], axis=1)
+            pieces = self.pieces[np.maximum(found, 0)]
+            fraction = uv[rows] - base
+            good = (np.all(found >= 0, axis=1) & np.all(pieces == pieces[:, :1], axis=1)
+                    & np.all((fraction >= -EXTRAPOLATE_CELLS) & (fraction <= 1 + EXTRAPOLATE_CELLS), axis=1))
+            corners[rows[good]], frac[rows[good]], ok[rows[good]] = found[good], fraction[good], True
+        return corners, frac, ok
 
     @staticmethod
     def _bilinear(values, frac):
@@ -285,7 +312,7 @@ class RayOctree:
         return error, np.stack(columns, axis=2), ok
 
 
-_FIELDS = ("lo", "size", "depth", "reflector_size", "eye", "origins", "directions", "lengths", "blocked", "centre",
+_FIELDS = ("lo", "size", "hi", "depth", "reflector_size", "eye", "origins", "directions", "lengths", "blocked", "centre",
            "pieces", "ray_grid", "leaf_codes", "leaf_start", "leaf_rays")
 
 
@@ -313,7 +340,7 @@ def build_ray_octree(eye, faces: list, resolution: int, box, depth: int, reflect
     centre = origins.mean(axis=0) if len(origins) else (lo + hi) / 2
     size = float(np.max(hi - lo))
     codes, start, rays = _leaf_lists(origins, directions, lengths, lo, size, int(depth))
-    return RayOctree(lo, size, int(depth), float(reflector_size), np.asarray(eye, dtype=np.float64), origins,
+    return RayOctree(lo, size, hi, int(depth), float(reflector_size), np.asarray(eye, dtype=np.float64), origins,
                      directions, lengths, blocked, centre, pieces.astype(np.int32), ray_grid, codes, start, rays)
 
 
