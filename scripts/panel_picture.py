@@ -10,7 +10,9 @@ module (``blf``) into an offscreen image. The picture shows the panel's real con
 and order on the mirror-ball demo scene with a torus mirror added, baked, both in the
 default Auto mode: the ball is star-shaped and searched on the GPU (Iterative), the
 torus is not and is drawn in Runtime mode, each line saying why, and the morphing box
-offers to bake a grid for the torus; the widgets' look is a sketch, not Blender's theme.
+offers to bake a grid for the torus; the scene camera's view is drawn and checked, so each
+mirror's line also shows its accuracy measured in that view. The widgets' look is a
+sketch, not Blender's theme.
 With ``--perturbation`` the ball is in Perturbation mode on its declared exact sphere:
 
     .venv/bin/python scripts/panel_picture.py --perturbation --out docs/images/panel_perturbation.png
@@ -161,6 +163,26 @@ def draw_rows(rows: list) -> np.ndarray:
     return np.array(buffer, dtype=np.uint8).reshape(height, WIDTH, 4)
 
 
+def draw_and_check(scene) -> None:
+    """Draw the scene camera's view as the viewport would, then let it settle: the live
+    view checks each mirror's drawn reflections (the panel's "In this view" lines)."""
+    import bpy
+    import gpu
+
+    from curved_reflections.operators import live
+    from curved_reflections.operators.capture import view_from_camera
+
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    view = view_from_camera(scene.camera, scene, depsgraph)
+    offscreen = gpu.types.GPUOffScreen(view.width, view.height, format='RGBA32F')
+    try:
+        with offscreen.bind():
+            live.draw_safely(scene, live.CAMERA_KEY, view)
+    finally:
+        offscreen.free()
+    live.process(scene, depsgraph, wait=True)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=REPO_ROOT / "docs" / "images" / "panel.png")
@@ -193,6 +215,7 @@ def main(argv=None) -> int:
             mirror.curved_reflections.analytic_shape = 'SPHERE'
         bpy.context.view_layer.objects.active = mirror
         bpy.ops.curved_reflections.bake()
+        draw_and_check(scene)
         image = draw_rows(record_panel(scene, mirror))
     finally:
         package.unregister()

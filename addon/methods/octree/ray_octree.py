@@ -57,8 +57,8 @@ SAMPLES_PER_LEAF = 2
 #: Levels above the finest whose leaves are listed too (a point in an empty finest leaf
 #: looks there).
 COARSER_LEVELS = 3
-#: Pair rows handled at once while projecting (bounds temporary memory).
-CHUNK_PAIRS = 2_000_000
+#: Points projected at once (bounds the temporary (point, candidate ray) rows).
+CHUNK_POINTS = 16384
 
 
 @dataclass(frozen=True)
@@ -73,7 +73,7 @@ class RayOctree:
     eye: np.ndarray  # (3,) the node the rays were traced from
     origins: np.ndarray  # (R, 3) first reflector point of each ray
     directions: np.ndarray  # (R, 3) unit reflected direction
-    lengths: np.ndarray  # (R,) length of the ray inside the root box (or up to the mirror)
+    lengths: np.ndarray  # (R,) length of the ray inside the box (or up to the mirror)
     blocked: np.ndarray  # (R,) bool: the ray ends on the mirror (else it leaves the box, and goes on)
     centre: np.ndarray  # (3,) the centre of the rays' first reflector points
     pieces: np.ndarray  # (R,) smooth piece of the mirror the ray leaves from
@@ -88,9 +88,7 @@ class RayOctree:
 
     @property
     def nbytes(self) -> int:
-        return int(sum(a.nbytes for a in (self.origins, self.directions, self.lengths, self.blocked, self.pieces,
-                                          self.ray_grid,
-                                          self.leaf_codes, self.leaf_start, self.leaf_rays)))
+        return int(sum(np.asarray(getattr(self, k)).nbytes for k in _FIELDS))
 
     def to_arrays(self, prefix: str = "") -> dict:
         return {prefix + k: np.asarray(getattr(self, k)) for k in _FIELDS}
@@ -116,14 +114,13 @@ class RayOctree:
         end; a point beyond it, where the segment from it to its ``targets`` row (a point
         of the mirror) enters the box: the reflected ray from that mirror point to the
         point crosses the box there."""
-        hi = self.hi
         outside = np.flatnonzero(self.beyond(points))
         if len(outside) == 0:
             return points
         start = points[outside]
         direction = targets[outside] - start
         with np.errstate(divide="ignore", invalid="ignore"):
-            t1, t2 = (self.lo - start) / direction, (hi - start) / direction
+            t1, t2 = (self.lo - start) / direction, (self.hi - start) / direction
         enter = np.nanmax(np.minimum(t1, t2), axis=1)
         inset = 1e-6 * self.size / np.maximum(np.linalg.norm(direction, axis=1), 1e-300)
         result = points.copy()
@@ -134,6 +131,10 @@ class RayOctree:
         """(P, count, 3) first reflector points where ``points`` are seen from this node
         (nearest seed first), NaN where fewer images."""
         points = np.asarray(points, dtype=np.float64)
+        return np.concatenate([self._images(points[k:k + CHUNK_POINTS], count)
+                               for k in range(0, len(points), CHUNK_POINTS)] or [np.zeros((0, count, 3))])
+
+    def _images(self, points: np.ndarray, count: int) -> np.ndarray:
         found = np.full((len(points), count, 3), np.nan)
         owner, ray = self._candidates(points, np.broadcast_to(self.centre, points.shape))
         beyond = self.beyond(points)
