@@ -76,8 +76,9 @@ class CacheError(SceneInputError):
 
 @functools.lru_cache(maxsize=1)
 def engine_fingerprint() -> str:
-    """SHA-256 of every engine module (``addon/*.py``): a cache baked by other engine code is
-    stale. Conservative: a change anywhere in the engine asks for a new bake."""
+    """SHA-256 of every engine module (``addon/**/*.py``, the methods' sub-packages too): a
+    cache baked by other engine code is stale. Conservative: a change anywhere in the
+    engine asks for a new bake."""
     digest = hashlib.sha256()
     root = Path(__file__).resolve().parent
     for path in sorted(root.rglob("*.py")):

@@ -2,8 +2,9 @@
 """What the animation benchmarks share: Render Image's animation timed against
 Workbench's on the same frames, and sampled frames against Cycles.
 
-Used by bench_morph_animation.py (Morphing mode) and bench_perturbation.py
-(Perturbation mode); each sets its scene and camera path up, then calls these.
+Used by bench_morph_animation.py (Morphing and Octree mode), bench_perturbation.py
+(Perturbation mode) and bench_methods.py (every mode); each sets its scene up, the camera
+path often with :func:`orbit`, then calls these.
 """
 
 from __future__ import annotations
@@ -12,6 +13,24 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+
+def orbit(scene, target, frames: int, degrees: float) -> None:
+    """The scene camera on a circle of 2.3 radii of ``target`` (an object) around it,
+    0.7 radii up, turning ``degrees`` a frame and tracking it, with a 70-degree lens
+    (near the mirror, its surroundings stay in view), keyframed over ``frames``."""
+    centre = np.array(target.matrix_world.translation)
+    radius = 0.5 * float(max(target.dimensions))
+    camera = scene.camera
+    camera.data.angle = np.radians(70.0)
+    camera.constraints.clear()
+    track = camera.constraints.new('TRACK_TO')
+    track.target = target
+    scene.frame_start, scene.frame_end = 1, frames
+    for frame in range(1, frames + 1):
+        angle = np.radians(-100.0 + degrees * (frame - 1))
+        camera.location = centre + radius * np.array([2.3 * np.cos(angle), 2.3 * np.sin(angle), 0.7])
+        camera.keyframe_insert("location", frame=frame)
 
 
 def time_against_workbench(scene, folder: Path, frames: int) -> tuple[float, float]:

@@ -47,25 +47,6 @@ LABELS = {"MORPHING": "Morphing", "OCTREE": "Octree"}
 MIRROR = "MirrorSphere"
 
 
-def _orbit_inside_grid(scene, frames: int, degrees: float) -> None:
-    """The scene camera on a circle of 2.3 ball radii around the ball, tracking it."""
-    import bpy
-
-    ball = bpy.data.objects[MIRROR]
-    centre = np.array(ball.matrix_world.translation)
-    radius = 0.5 * float(max(ball.dimensions))
-    camera = scene.camera
-    camera.data.angle = np.radians(70.0)  # near the ball: a wide lens keeps its surroundings in view
-    camera.constraints.clear()
-    track = camera.constraints.new('TRACK_TO')
-    track.target = ball
-    scene.frame_start, scene.frame_end = 1, frames
-    for frame in range(1, frames + 1):
-        angle = np.radians(-100.0 + degrees * (frame - 1))
-        camera.location = centre + radius * np.array([2.3 * np.cos(angle), 2.3 * np.sin(angle), 0.7])
-        camera.keyframe_insert("location", frame=frame)
-
-
 def measure(width: int, height: int, grid: tuple, frames: int, degrees: float, sampled: int, samples: int,
             images: Path | None = None, mode: str = "MORPHING") -> dict:
     import bpy
@@ -79,7 +60,7 @@ def measure(width: int, height: int, grid: tuple, frames: int, degrees: float, s
     scene = demo_scenes.build("sbc_fig3", bpy.context.scene, width, height)
     scene.curved_reflections.max_order = 1
     scene.curved_reflections.morph_grid = grid
-    _orbit_inside_grid(scene, frames, degrees)
+    animation_runs.orbit(scene, bpy.data.objects[MIRROR], frames, degrees)  # inside the grid
     settings = bpy.data.objects[MIRROR].curved_reflections
     result = {"width": width, "height": height, "grid": grid, "frames": frames, "degrees": degrees, "samples": samples,
               "mode": mode}

@@ -15,7 +15,8 @@ grid answer the same views and points. Error: desired-view px from each projecte
 to the exact visible reflection; coverage as in ``bench_morphing.py`` (in parentheses:
 reflections seen at most 72.5 degrees off the normal). Blends: the paper's (*linear*:
 barycentric over a tetrahedron, trilinear over a cube) and ours (*surface*: refined on
-the quadratic fitted to the nodes' images).
+the quadratic fitted to the nodes' images). ``--finer`` grids (default 17x17x9) answer the
+same views, to show how the error falls with the cell size.
 
 Bake: each kind's whole default grid, ``--processes`` worker processes, into a temporary
 folder: wall and CPU time, per node, and the nodes' arrays in memory and on disk.
@@ -94,6 +95,13 @@ def measure_scene(name, mirror, matrix, sample, settings, args) -> dict:
         s = out["kinds"][kind]["blends"]["surface"]
         _log(f"{name} {kind}: p50/p95/p99 {s['error_p50']:.2f}/{s['error_p95']:.2f}/{s['error_p99']:.2f} px, "
              f"coverage {100 * s['coverage']:.1f} %")
+    out["finer"] = []
+    for grid in args.finer:  # the same views: the finer grid spans the same box
+        finer = replace(settings, grid=grid)
+        out["finer"].append({"grid": list(grid), "kinds": {
+            kind: BM.measure_grid(grid_maker(kind), mirror, matrix, replace(finer, kind=kind), views, view_points,
+                                  exact, args)["blends"]["surface"] for kind in KINDS}})
+        _log(f"{name} grid {grid}: octree p99 {out['finer'][-1]['kinds']['octree']['error_p99']:.2f} px")
     return out
 
 
@@ -139,6 +147,15 @@ def report(results: dict) -> str:
                     f"| {_f(100 * b['coverage'], 1)} ({_f(100 * b['coverage_facing'], 1)}) "
                     f"| {_f(100 * b['false_rate'], 2)} | {_f(b['points_per_second'] / 1e3, 0)} "
                     f"| {_f(b['static_points_per_second'] / 1e3, 0)} |")
+    finer = [(scene["scene"], row) for scene in results["scenes"] for row in scene.get("finer", [])]
+    if finer:
+        lines += ["", "## Finer grids, the same views (surface blend)", "",
+                  "| scene | grid | kind | p50 / p95 / p99 / max px | coverage % (facing) |", "|---|---|---|---:|---:|"]
+        for name, row in finer:
+            for kind, b in row["kinds"].items():
+                lines.append(f"| {name} | {'x'.join(map(str, row['grid']))} | {LABEL[kind]} "
+                             f"| {_f(b['error_p50'])} / {_f(b['error_p95'])} / {_f(b['error_p99'])} / "
+                             f"{_f(b['error_max'])} | {_f(100 * b['coverage'], 1)} ({_f(100 * b['coverage_facing'], 1)}) |")
     lines += ["", "## Bake of the whole grid, per kind", "",
               "| grid | nodes | processes | wall s | CPU s | node CPU s p50 / max | arrays MB (per node) "
               "| disk MB (per node) | peak RSS MB |",
@@ -161,7 +178,10 @@ def summary(results: dict) -> list:
         out.append(f"- {scene['scene']}: the octree grid's p99 is {_f(octree['error_p99'])} px at views between "
                    f"nodes (target <= 1 px: {'met' if octree['error_p99'] <= 1 else '**not met**'}), the "
                    f"tetrahedral grid's {_f(tetra['error_p99'])} px on the same views; coverage "
-                   f"{_f(100 * octree['coverage'], 1)} % against {_f(100 * tetra['coverage'], 1)} %.")
+                   f"{_f(100 * octree['coverage'], 1)} % against {_f(100 * tetra['coverage'], 1)} %."
+                   + "".join(f" With a {'x'.join(map(str, row['grid']))} grid: p99 "
+                             f"{_f(row['kinds']['octree']['error_p99'])} px (tetrahedral "
+                             f"{_f(row['kinds']['tetrahedral']['error_p99'])} px)." for row in scene.get("finer", [])))
     bakes = results["bakes"]
     o, t = bakes["octree"], bakes["tetrahedral"]
     out.append(f"- Bake: the octree grid in {_f(o['seconds'], 1)} s ({_f(o['cpu_seconds'] / o['n_nodes'], 3)} CPU s "
@@ -178,11 +198,14 @@ def parse_args(argv=None):
     parser.add_argument("--points", type=int, default=6000)
     parser.add_argument("--min-eye-distance", type=float, default=1.5)
     parser.add_argument("--processes", type=int, default=2)
+    parser.add_argument("--finer", nargs="*", default=["17,17,9"], help="finer grids measured on the same views "
+                        "(nodes along x,y,z; none with an empty list)")
     parser.add_argument("--quick", action="store_true", help="smallest run: sbc_fig3 only, 2 views, 1500 points, "
-                        "a 3x3x2 grid of 32-px faces")
+                        "a 3x3x2 grid of 32-px faces (and a 4x4x3 one)")
     args = parser.parse_args(argv)
+    args.finer = [tuple(int(n) for n in grid.split(",")) for grid in args.finer]
     if args.quick:
-        args.views, args.points = 2, 1500
+        args.views, args.points, args.finer = 2, 1500, [(4, 4, 3)]
     return args
 
 

@@ -16,7 +16,8 @@ def test_quick_benchmark_runs_every_mode_and_plots_them(run_quick, tmp_path):
     report = out.read_text()
     assert "bench_methods.py --quick --out" in report
     rows = re.findall(r"^\| sbc_fig3 \| (\w+) \| (\w+) \| ([\d.]+) \| ([\d.]+) \| ([\d.]+) \| ([\d.]+) \| "
-                      r"([\d.]+) / ([\d.]+) / ([\d.]+) \| ([\d.]+) \| ([\d.]+) \|$", report, flags=re.MULTILINE)
+                      r"([\d.]+) / ([\d.]+) / ([\d.]+) \| ([\d.]+) \| ([\d.]+) \| ([\d.]+) \|$", report,
+                      flags=re.MULTILINE)
     assert [(mode, drew) for mode, drew, *_ in rows] == [
         ("Runtime", "Runtime"), ("Morphing", "Morphing"), ("Octree", "Octree"), ("Iterative", "Iterative"),
         ("Perturbation", "Perturbation")]

@@ -39,6 +39,16 @@ def _mirror_scene(scene, mode='MORPHING'):
     return ball
 
 
+def _render_camera(scene):
+    """First order only, and a 64x48 scene camera inside the ball's grid, looking at it."""
+    scene.curved_reflections.max_order = 1
+    bpy.ops.object.camera_add(location=(0.9, -1.5, 1.4))
+    camera = bpy.context.active_object
+    camera.rotation_euler = (np.radians(70.0), 0.0, np.radians(15.0))
+    scene.camera = camera
+    scene.render.resolution_x, scene.render.resolution_y = 64, 48
+
+
 def _captured(context, morph_bake):
     (reflector, matrix), = morph_bake.morphing_reflectors(context)
     return reflector, matrix
@@ -209,12 +219,7 @@ def test_render_image_in_morphing_mode_bakes_a_missing_grid_first(empty_scene, m
     from curved_reflections.operators.render_image import render_scene
 
     _mirror_scene(empty_scene)
-    empty_scene.curved_reflections.max_order = 1
-    bpy.ops.object.camera_add(location=(0.9, -1.5, 1.4))
-    camera = bpy.context.active_object
-    camera.rotation_euler = (np.radians(70.0), 0.0, np.radians(15.0))
-    empty_scene.camera = camera
-    empty_scene.render.resolution_x, empty_scene.render.resolution_y = 64, 48
+    _render_camera(empty_scene)
     assert _baked_node_files(morph_ops, empty_scene) == []
     result = render_scene(empty_scene, bpy.context.evaluated_depsgraph_get())
     assert len(_baked_node_files(morph_ops, empty_scene)) == 8
@@ -225,21 +230,15 @@ def test_render_image_in_morphing_mode_bakes_a_missing_grid_first(empty_scene, m
     assert {p: p.stat().st_mtime_ns for p in morph_ops.cache_directory(empty_scene).rglob("node_*")} == files
 
 
-
 def test_render_image_in_octree_mode_bakes_ray_octrees_first(empty_scene, morph_ops, gpu_ready, capfd):
     """Octree mode (Martin & Popescu 2004): Render Image bakes the grid of ray octrees
-    (the manifest says so) and draws the mirror from it, with no camera per view; Bake
-    replaces the tetrahedral grid of the same reflector when its mode changes."""
+    (the manifest says so) and draws the mirror from it, with no camera per view. Set
+    back to Morphing, the next bake replaces it with the tetrahedral grid."""
     from curved_reflections.addon import bake_cache
     from curved_reflections.operators.render_image import render_scene
 
-    _mirror_scene(empty_scene, mode='OCTREE')
-    empty_scene.curved_reflections.max_order = 1
-    bpy.ops.object.camera_add(location=(0.9, -1.5, 1.4))
-    camera = bpy.context.active_object
-    camera.rotation_euler = (np.radians(70.0), 0.0, np.radians(15.0))
-    empty_scene.camera = camera
-    empty_scene.render.resolution_x, empty_scene.render.resolution_y = 64, 48
+    ball = _mirror_scene(empty_scene, mode='OCTREE')
+    _render_camera(empty_scene)
     result = render_scene(empty_scene, bpy.context.evaluated_depsgraph_get())
     assert "baking the morphing grid of 'Ball' first: none baked yet" in capfd.readouterr().out
     assert result.stats["methods"] == {"Ball": "OCTREE"} and "n_rays" not in result.stats
@@ -247,3 +246,8 @@ def test_render_image_in_octree_mode_bakes_ray_octrees_first(empty_scene, morph_
     with np.load(manifest, allow_pickle=False) as data:
         assert str(data["kind"]) == "octree"
     assert len(_baked_node_files(morph_ops, empty_scene)) == 8
+    ball.curved_reflections.mode = 'MORPHING'
+    assert bpy.ops.curved_reflections.bake_morphing(processes=1) == {'FINISHED'}
+    (manifest,) = morph_ops.cache_directory(empty_scene).rglob(bake_cache.MANIFEST)
+    with np.load(manifest, allow_pickle=False) as data:
+        assert str(data["kind"]) == "tetrahedral"

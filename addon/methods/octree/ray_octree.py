@@ -44,6 +44,8 @@ SEPARATION = 0.1
 #: Gauss-Newton steps of the refinement over the ray map, and the largest step (cells).
 REFINE_ITERATIONS = 10
 MAX_STEP_CELLS = 3.0
+#: A seed whose step is shorter than this (cells) has converged and stops.
+SETTLED_CELLS = 1e-7
 #: A refined ray passes this close to its point (in reflector sizes) to be an image.
 CONVERGED = 1e-6
 #: Cells a complete ray-map cell is extrapolated beyond, toward the mirror's silhouette.
@@ -222,6 +224,7 @@ class RayOctree:
             step = -np.linalg.solve(jtj, np.einsum("qdi,qd->qi", jacobian, error)[..., None])[..., 0]
             step *= np.minimum(1.0, MAX_STEP_CELLS / np.maximum(np.abs(step).max(axis=1), 1e-300))[:, None]
             uv[rows] = np.clip(uv[rows] + step, 0.0, n - 1.0)
+            live[rows[np.abs(step).max(axis=1) < SETTLED_CELLS]] = False
         x, error, ok = self._at(face, uv, points)
         ok &= np.linalg.norm(error, axis=1) <= CONVERGED * self.reflector_size
         return x, ok
