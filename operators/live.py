@@ -459,7 +459,11 @@ def _check_when_settled(state: LiveScene, scene, now: float, wait: bool) -> bool
     if not wait and now - since < accuracy.SETTLE_SECONDS:
         return True
     state.last_view = (view, since, camera, True)
-    found = accuracy.measure(state.plan, state.reflector_set, state.renderer, view, camera)
+    try:
+        found = accuracy.measure(state.plan, state.reflector_set, state.renderer, view, camera)
+    except Exception as error:  # noqa: BLE001 - a failed check must not stop the live view's timer
+        state.report('WARNING', f"Accuracy check failed: {type(error).__name__}: {error}")
+        return False
     state.counts["checks"] += 1
     if methods.note_measured(scene, found):
         state.dirty_reflectors = True  # plan again: the replaced method's reflector changes hands
