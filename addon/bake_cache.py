@@ -58,7 +58,8 @@ MANIFEST = "grid.npz"
 INSIDE_SUFFIX = ".inside"
 #: Suffix a damaged node file is renamed to when it is read.
 DAMAGED_SUFFIX = ".damaged"
-#: Nodes kept in memory by a loaded grid (a tetrahedron needs four; neighbours come next).
+#: Nodes kept in memory by a loaded grid (a tetrahedron needs four, an octree cell eight;
+#: neighbours come next).
 NODES_IN_MEMORY = 16
 #: Largest difference (in reflector sizes; unit normals: absolute) between the baked and
 #: the current geometry in the rigid frame for a cache to be used.

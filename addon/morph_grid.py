@@ -332,7 +332,7 @@ def bake_reflector(reflector: Reflector, settings: MorphSettings) -> tuple[Refle
 class NodesOnDemand(dict):
     """Node cameras of a grid built on first use, instead of baked: a grid to try a
     reflector with, and what tests and benchmarks measure morphing with (a view only
-    ever uses the four nodes of its tetrahedron). ``cpu_seconds`` sums the builds."""
+    ever uses the nodes of its cell: four, or eight for ray octrees). ``cpu_seconds`` sums the builds."""
 
     def __init__(self, reflector_set: ReflectorSet, positions: np.ndarray, bounds, settings: MorphSettings,
                  build=None):

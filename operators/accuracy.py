@@ -46,12 +46,12 @@ class Drawn(NamedTuple):
 
 def drawn_answers(reflector_set, renderer, camera, sample: int = CAMERA_SAMPLE, seed: int = 0,
                   chosen: np.ndarray | None = None) -> dict:
-    """{reflector index: Drawn}: the first reflector
-    points (world space, NaN where none) the last frame drew for the renderer's vertices:
-    every vertex of the per-frame passes' reflectors, and ``sample`` vertices (seeded)
-    projected by ``camera`` (the sample-based camera the frame was drawn with, or None)
-    for the reflectors it drew (``chosen``: these vertex indices instead). What the live
-    check and ``bench_methods.py`` measure, whichever method drew."""
+    """{reflector index: Drawn}: the first reflector points (world space, NaN where none)
+    the last frame drew for the renderer's vertices: every vertex of the per-frame passes'
+    reflectors, and ``sample`` vertices (seeded) projected by ``camera`` (the sample-based
+    camera the frame was drawn with, or None) for the reflectors it drew (``chosen``:
+    these vertex indices instead). What the live check and ``bench_methods.py`` measure,
+    whichever method drew."""
     vertices = renderer.geometry.vertices
     every = np.arange(len(vertices))
     found = {index: Drawn(every, answers, True) for index, answers in renderer.answered().items()}
@@ -69,20 +69,23 @@ def drawn_answers(reflector_set, renderer, camera, sample: int = CAMERA_SAMPLE, 
     return found
 
 
-def measure(plan, reflector_set, renderer, view, camera, sample: int | None = None) -> dict:
+def measure(plan, reflector_set, renderer, view, camera, sample: int | None = None, drawn: dict | None = None) -> dict:
     """{reflector name: Measured} for the last frame ``renderer`` drew of ``view``;
     ``camera``: the sample-based camera it drew with (None when the per-frame passes
     drew every reflector); ``sample``: answers checked per reflector (default
-    ``spot_check.SAMPLE``)."""
+    ``spot_check.SAMPLE``); ``drawn``: :func:`drawn_answers` when the caller has read
+    them already."""
     vertices = renderer.geometry.vertices
     planned = {choice.reflector: choice.method for choice in plan.choices}
     options = {} if sample is None else {"sample": sample}
+    if drawn is None:
+        drawn = drawn_answers(reflector_set, renderer, camera)
     found = {}
-    for index, drawn in drawn_answers(reflector_set, renderer, camera).items():
+    for index, answered in drawn.items():
         name = reflector_set.reflectors[index].name
-        method = planned.get(name, methods.RUNTIME) if drawn.per_frame else methods.RUNTIME
-        found[name] = Measured(method, spot_check(reflector_set, view, index, vertices[drawn.vertices], drawn.answers,
-                                                  **options))
+        method = planned.get(name, methods.RUNTIME) if answered.per_frame else methods.RUNTIME
+        found[name] = Measured(method, spot_check(reflector_set, view, index, vertices[answered.vertices],
+                                                  answered.answers, **options))
     return found
 
 

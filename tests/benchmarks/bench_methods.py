@@ -105,10 +105,9 @@ def _accuracy(scene, frame: int, points: int) -> dict:
     chosen = np.sort(np.random.default_rng(frame).choice(len(vertices), min(points, len(vertices)), replace=False))
     drawn = accuracy.drawn_answers(state.reflector_set, state.renderer, result.camera, chosen=chosen)
     images = np.full((0, len(chosen), 2), np.nan)
-    for index, found in drawn.items():
-        answers = np.full((found.answers.shape[0], len(vertices), 3), np.nan)
-        answers[:, found.vertices] = found.answers
-        pixels, _ = result.view.to_pixels(answers[:, chosen].reshape(-1, 3))
+    for found in drawn.values():  # answered for every vertex (GPU passes) or for ``chosen`` (the camera)
+        rows = np.searchsorted(found.vertices, chosen)
+        pixels, _ = result.view.to_pixels(found.answers[:, rows].reshape(-1, 3))
         images = np.concatenate([images, pixels.reshape(-1, len(chosen), 2)])
     exact = solve_reflections(state.reflector_set, result.view, vertices[chosen])
     exact = exact.select(exact.visible & (exact.reflector >= 0))
@@ -117,7 +116,7 @@ def _accuracy(scene, frame: int, points: int) -> dict:
         np.full(len(exact.point), np.inf)
     matched = nearest <= MATCH_PX
     checks = accuracy.measure(state.plan, state.reflector_set, state.renderer, result.view, result.camera,
-                              sample=FALSE_SAMPLE).values()
+                              sample=FALSE_SAMPLE, drawn=drawn).values()
     return {"errors": nearest[matched].tolist(), "exact": int(len(nearest)), "covered": int(matched.sum()),
             "checked": sum(m.check.checked for m in checks), "false": sum(m.check.unconfirmed for m in checks),
             "methods": result.stats["methods"]}

@@ -55,9 +55,7 @@ def grid_maker(kind: str):
     from curved_reflections.addon import morphing
     from curved_reflections.addon.methods.octree import octree_grid_on_demand
 
-    if kind == "octree":
-        return lambda local, settings, blend, nodes: octree_grid_on_demand(local, settings, blend=blend, nodes=nodes)
-    return morphing.grid_on_demand
+    return octree_grid_on_demand if kind == "octree" else morphing.grid_on_demand
 
 
 def scenes(n_points: int, quick: bool):

@@ -47,7 +47,7 @@ def build_octree_node(reflector_set: ReflectorSet, eye, bounds, settings: MorphS
     faces = [(k, trace_ray_map(reflector_set, view, (lo, hi), downsample=1, max_order=1))
              for k, view in enumerate(views) if _face_sees_sphere(view, centre, radius)]
     size = float(np.max(reflector_set.vertices.max(axis=0) - reflector_set.vertices.min(axis=0)))
-    octree = build_ray_octree(eye, [(k, rm) for k, rm in faces if rm.n_rays], settings.face_resolution, (lo, hi),
+    octree = build_ray_octree([(k, rm) for k, rm in faces if rm.n_rays], settings.face_resolution, (lo, hi),
                               settings.octree_depth, size)
     return OctreeNode(NODE_OK, octree, time.perf_counter() - start, time.process_time() - cpu)
 

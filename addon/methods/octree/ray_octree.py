@@ -72,7 +72,6 @@ class RayOctree:
     hi: np.ndarray  # (3,) the box's highest corner (the cube is the box made cubic)
     depth: int  # the finest leaves are cubes of size / 2**depth
     reflector_size: float
-    eye: np.ndarray  # (3,) the node the rays were traced from
     origins: np.ndarray  # (R, 3) first reflector point of each ray
     directions: np.ndarray  # (R, 3) unit reflected direction
     lengths: np.ndarray  # (R,) length of the ray inside the box (or up to the mirror)
@@ -209,8 +208,8 @@ class RayOctree:
     def _refine(self, points: np.ndarray, seed_ray: np.ndarray):
         """Move each seed over its face's ray grid until the interpolated ray passes
         through its point: (Q, 3) first reflector points and (Q,) converged."""
-        face = self._ray_face[seed_ray]
-        uv = self._ray_cell[seed_ray].astype(np.float64)
+        faces, cells = self._ray_index()
+        face, uv = faces[seed_ray], cells[seed_ray].astype(np.float64)
         n = self.ray_grid.shape[1]
         live = np.ones(len(points), bool)
         for _ in range(REFINE_ITERATIONS):
@@ -229,16 +228,8 @@ class RayOctree:
         ok &= np.linalg.norm(error, axis=1) <= CONVERGED * self.reflector_size
         return x, ok
 
-    @property
-    def _ray_face(self) -> np.ndarray:
-        return self._ray_index()[0]
-
-    @property
-    def _ray_cell(self) -> np.ndarray:
-        return self._ray_index()[1]
-
     def _ray_index(self):
-        """(R,) face and (R, 2) (column, row) of every ray, from the ray grid."""
+        """(R,) face and (R, 2) (column, row) of every ray, from the ray grid (made once)."""
         cached = self.__dict__.get("_index")
         if cached is None:
             f, j, i = np.nonzero(self.ray_grid >= 0)
@@ -316,12 +307,12 @@ class RayOctree:
         return error, np.stack(columns, axis=2), ok
 
 
-_FIELDS = ("lo", "size", "hi", "depth", "reflector_size", "eye", "origins", "directions", "lengths", "blocked", "centre",
+_FIELDS = ("lo", "size", "hi", "depth", "reflector_size", "origins", "directions", "lengths", "blocked", "centre",
            "pieces", "ray_grid", "leaf_codes", "leaf_start", "leaf_rays")
 
 
-def build_ray_octree(eye, faces: list, resolution: int, box, depth: int, reflector_size: float) -> RayOctree:
-    """The octree of the reflected rays traced from ``eye``.
+def build_ray_octree(faces: list, resolution: int, box, depth: int, reflector_size: float) -> RayOctree:
+    """The octree of one node's reflected rays.
 
     ``faces``: (face index, RayMap) of each cube face that sees the reflector, first-order
     rays; ``resolution``: cells along a face's side; ``box``: (lo, hi) where rays end (the
@@ -344,8 +335,8 @@ def build_ray_octree(eye, faces: list, resolution: int, box, depth: int, reflect
     centre = origins.mean(axis=0) if len(origins) else (lo + hi) / 2
     size = float(np.max(hi - lo))
     codes, start, rays = _leaf_lists(origins, directions, lengths, lo, size, int(depth))
-    return RayOctree(lo, size, hi, int(depth), float(reflector_size), np.asarray(eye, dtype=np.float64), origins,
-                     directions, lengths, blocked, centre, pieces.astype(np.int32), ray_grid, codes, start, rays)
+    return RayOctree(lo, size, hi, int(depth), float(reflector_size), origins, directions, lengths, blocked, centre,
+                     pieces.astype(np.int32), ray_grid, codes, start, rays)
 
 
 def _leaf_lists(origins, directions, lengths, lo, size: float, depth: int):
