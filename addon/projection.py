@@ -2,7 +2,7 @@
 """The one question every method answers: where does this 3D point appear, reflected,
 in this view?
 
-Every method (the sample-based camera of ``addon/sbc.py``, its morphing grid, the
+Every method (the sample-based camera of ``addon/methods/sbc/sbc.py``, its morphing grid, the
 iterative search of ``addon/methods/iterative``) answers with a :class:`Projection`:
 for each reflection group (a reflection history; a history repeats where one method
 needs several sheets of it) and each point, whether it appears, its first reflector

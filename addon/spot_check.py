@@ -21,8 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .raytrace import ReflectorSet
-from .true_rays import polish_on_true_rays
+from .geometry.raytrace import ReflectorSet
+from .reference.true_rays import polish_on_true_rays
 from .view import View
 
 #: Answers checked per reflector and view.

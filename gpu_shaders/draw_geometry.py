@@ -12,7 +12,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..addon import sheet_bounds, subdivision
+from ..addon.methods.sbc import sheet_bounds
+from ..addon.geometry import subdivision
 
 #: Float targets hold vertex indices exactly below 2^24.
 MAX_VERTICES = 1 << 24

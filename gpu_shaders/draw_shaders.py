@@ -10,12 +10,10 @@ Push constants stay far below the 128 bytes Vulkan guarantees
 from __future__ import annotations
 
 import functools
-from pathlib import Path
 
-from ..addon import band_trace
-from . import projection
-
-_GLSL = Path(__file__).resolve().parent / "glsl"
+from ..addon.geometry import band_trace
+from .methods import projection
+from .shader_sources import glsl_source
 
 #: Bytes of push constants per shader (Vulkan guarantees 128): the pre-pass's matrix is
 #: the largest; everything bigger (the cameras, the pre-pass images) is in textures.
@@ -36,9 +34,6 @@ void main()
 """
 
 
-def _source(name: str) -> str:
-    return (_GLSL / name).read_text(encoding="utf-8")
-
 
 def shader(name: str):
     """The renderer's shader ``name`` (prepass, project, reflected, composite), built on
@@ -48,7 +43,7 @@ def shader(name: str):
 
 def shading_source() -> str:
     """``glsl/reflection_shading.glsl`` behind its ``#define``."""
-    return f"#define SHADE_AMBIENT {band_trace.SHADE_AMBIENT:.9e}\n" + _source("reflection_shading.glsl")
+    return f"#define SHADE_AMBIENT {band_trace.SHADE_AMBIENT:.9e}\n" + glsl_source("reflection_shading.glsl")
 
 
 @functools.cache
@@ -75,8 +70,8 @@ def _build_prepass():
     info.vertex_out(interface)
     info.fragment_out(0, 'VEC4', "color_out")
     info.fragment_out(1, 'VEC4', "label_out")
-    info.vertex_source(_source("reflection_prepass_vert.glsl"))
-    info.fragment_source(shading_source() + _source("reflection_prepass_frag.glsl"))
+    info.vertex_source(glsl_source("reflection_prepass_vert.glsl"))
+    info.fragment_source(shading_source() + glsl_source("reflection_prepass_frag.glsl"))
     return gpu.shader.create_from_info(info)
 
 
@@ -101,8 +96,8 @@ def _build_project():
     info.vertex_out(interface)
     info.fragment_out(0, 'VEC4', "projected_out")
     info.fragment_out(1, 'VEC4', "eye_out")
-    info.vertex_source(projection.library_source() + shading_source() + _source("reflection_project_vert.glsl"))
-    info.fragment_source(_source("reflection_project_frag.glsl"))
+    info.vertex_source(projection.library_source() + shading_source() + glsl_source("reflection_project_vert.glsl"))
+    info.fragment_source(glsl_source("reflection_project_frag.glsl"))
     return gpu.shader.create_from_info(info)
 
 
@@ -126,7 +121,7 @@ def reflected_interface(name: str, searched: bool = False):
 
 def reflected_fragment_source(defines: str = "") -> str:
     """``glsl/reflection_mesh_frag.glsl`` behind ``defines`` and the shading functions."""
-    return defines + shading_source() + _source("reflection_mesh_frag.glsl")
+    return defines + shading_source() + glsl_source("reflection_mesh_frag.glsl")
 
 
 @functools.cache
@@ -149,7 +144,7 @@ def _build_reflected():
     info.vertex_in(5, 'VEC2', "uv")
     info.vertex_out(interface)
     info.fragment_out(0, 'VEC4', "color_out")
-    info.vertex_source(_source("reflection_mesh_vert.glsl"))
+    info.vertex_source(glsl_source("reflection_mesh_vert.glsl"))
     info.fragment_source(reflected_fragment_source())
     return gpu.shader.create_from_info(info)
 
@@ -170,7 +165,7 @@ def _build_composite():
     info.vertex_in(0, 'VEC2', "position")
     info.fragment_out(0, 'VEC4', "color_out")
     info.vertex_source(_COMPOSITE_VERTEX)
-    info.fragment_source(_source("reflection_composite_frag.glsl"))
+    info.fragment_source(glsl_source("reflection_composite_frag.glsl"))
     return gpu.shader.create_from_info(info)
 
 

@@ -13,7 +13,7 @@ import contextlib
 
 import numpy as np
 
-from . import sbc_pack
+from .methods import sbc_pack
 
 
 def vertex_buffer(attributes: dict):

@@ -15,13 +15,12 @@ with an unanswered corner discarded) and the sample-based camera's fragment stag
 from __future__ import annotations
 
 import functools
-from pathlib import Path
 
 import numpy as np
 
 from ..addon.methods.iterative import search as search_module
+from .shader_sources import glsl_source
 
-_GLSL = Path(__file__).resolve().parent / "glsl"
 #: Texels per row of the vertex and answer textures.
 TEXTURE_WIDTH = 4096
 #: A reflected fragment is kept only where the interpolated validity of its triangle's
@@ -35,11 +34,6 @@ FOUND_CODE = search_module.FOUND + 8
 #: corners disagree spans a fold and is not drawn. Above 16 times any step count.
 FLIPPED_CODE = 2048
 
-
-def glsl_source(name: str, defines: dict) -> str:
-    """``glsl/<name>`` behind ``#define`` lines of ``defines``."""
-    lines = [f"#define {key} {value}" for key, value in defines.items()]
-    return "\n".join(lines) + "\n" + (_GLSL / name).read_text(encoding="utf-8")
 
 
 @functools.cache

@@ -81,15 +81,16 @@ import time
 
 import numpy as np
 
-from ..addon import band_trace, subdivision
-from . import draw_shaders, projection
+from ..addon.geometry import band_trace, subdivision
+from . import draw_shaders
+from .methods import projection
 from .draw_geometry import prepare_geometry
 from .gpu_data import data_texture, read_texture, saved_state, vertex_buffer
-from .iterative_draw import IterativePass
-from .morph_pass import DEFAULT_BUDGET_MB, MorphPass
-from .perturbation_pass import PerturbationPass
+from .methods.iterative_draw import IterativePass
+from .methods.morph_pass import DEFAULT_BUDGET_MB, MorphPass
+from .methods.perturbation_pass import PerturbationPass
 from .reflected_meshes import ReflectedMeshes
-from .sbc_triangles import MIXED_SUBDIVISIONS, CachedProjection, CameraProjections, _same_view
+from .methods.sbc_triangles import MIXED_SUBDIVISIONS, CachedProjection, CameraProjections, _same_view
 
 #: Depth range of the iterative search's first-order reflections (as SBC V-A's g for
 #: max order 1); they never share pixels with another method's, the pre-pass ids keep
@@ -188,12 +189,14 @@ class ReflectionRenderer:
         self.meshes = ReflectedMeshes(self.geometry)
         #: The star-shaped reflectors drawn by the iterative search every frame
         #: (``addon.methods.iterative.IterativeReflector`` each); the others by ``textures``.
-        self.iterative = IterativePass(self.geometry, iterative, self.meshes)
+        self.iterative = IterativePass(self.geometry, iterative, self.meshes, len(reflectors))
         #: The reflectors drawn from their morphing grids every frame (views inside a grid).
         self.morph = MorphPass(self.geometry, morph, self.meshes, morph_budget_mb)
         #: The reflectors drawn by perturbation (Chen & Arvo 2000), projected per new view.
         self.perturbation = PerturbationPass(self.geometry, reflectors, perturbation, self.meshes,
                                              perturbation_accuracy_px, reflector_set)
+        #: Every per-frame pass, which the frame code treats alike (:class:`.frame_pass.FramePass`).
+        self.passes = (self.iterative, self.morph, self.perturbation)
         self.stats = dict(self.geometry.stats)
         self.counts = {"projections": 0, "frames": 0}
         #: The sample-based cameras' reflected triangles, made once per camera.
@@ -238,8 +241,7 @@ class ReflectionRenderer:
     def per_frame_reflectors(self, view) -> frozenset:
         """The reflectors whose first-order reflections of ``view`` the per-frame passes
         draw: the searched ones, and those whose grid covers the view."""
-        return frozenset(self.iterative.reflector_indices) | frozenset(self.perturbation.reflector_indices) | frozenset(
-            self.morph.grids[k][0].reflector_index for k, _ in self.morph.covering(view))
+        return frozenset().union(*(frame_pass.drawn_in(view) for frame_pass in self.passes))
 
     def invalidate(self) -> None:
         """Forget the cached projections: the next draw projects again."""
@@ -313,12 +315,11 @@ class ReflectionRenderer:
                         shader.uniform_int("use_image", int(image >= 0))
                         shader.uniform_sampler("image", self._image(image))
                         batch.draw(shader)
-            self.iterative.search(view, warm)
-            # A grid's reflector is blended here unless the camera's projection draws it.
-            self.morph.blend(view, skip=set() if cached is None else
-                             set(self.morph.reflector_indices) - cached.per_frame)
-            self.perturbation.project(view)
-            answers = self.iterative.answers() + self.morph.answers() + self.perturbation.answers()
+            # A pass's reflector is drawn here unless the camera's projection draws it.
+            for frame_pass in self.passes:
+                frame_pass.update(view, warm, skip=frozenset() if cached is None else
+                                  frozenset(frame_pass.reflector_indices) - cached.per_frame)
+            answers = self._answers()
             with targets.reflection.bind():
                 gpu.state.viewport_set(0, 0, width, height)
                 targets.reflection.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
@@ -352,9 +353,16 @@ class ReflectionRenderer:
         baked grids, perturbation), one row per image slot, read back from the GPU: what
         the live view's accuracy check (``addon/spot_check.py``) measures."""
         found: dict = {}
-        for index, texture in self.iterative.answers() + self.morph.answers() + self.perturbation.answers():
+        for index, texture in self._answers():
             found.setdefault(index, []).append(self.meshes.read(texture)[0])
         return {index: np.stack(slots) for index, slots in found.items()}
+
+    def _answers(self) -> list:
+        return [answer for frame_pass in self.passes for answer in frame_pass.answers()]
+
+    def _reflectors_of(self, kind: str) -> list:
+        """The union over the passes of one of their :class:`.frame_pass.FramePass` lists."""
+        return [index for frame_pass in self.passes for index in getattr(frame_pass, kind)]
 
     def projection(self, textures, camera_view, camera=None) -> CachedProjection:
         """The reflected triangles of ``textures``'s camera, built in ``camera_view``:
@@ -418,7 +426,7 @@ class ReflectionRenderer:
         if self._tracer is None:
             self._tracer = band_trace.BandTracer(self._reflectors, self._meshes)
         labels = read_texture(targets.prepass_labels, targets.width, targets.height)[..., 0]
-        searched = np.isin(np.rint(labels) - 1, self.iterative.reflector_indices + self.perturbation.reflector_indices)
+        searched = np.isin(np.rint(labels) - 1, self._reflectors_of("searched_reflectors"))
         drawn = read_texture(targets.reflection_colors, targets.width, targets.height)[..., 3] > 0.5
         # The searched reflectors' pixels are traced by their own rule, below.
         searched_labels, labels = np.where(searched, labels, 0.0), np.where(searched, 0.0, labels)
@@ -442,9 +450,7 @@ class ReflectionRenderer:
             # silhouette, and in those two cases next to a drawn reflection, are traced
             # (those farther from both show the world).
             reach = max(radius, SEARCHED_BAND_PX)
-            folded = np.isin(np.rint(searched_labels) - 1, [
-                m.index for m in self.iterative.methods if not m.reflector_map.convex or len(self._reflectors) > 1]
-                + self.perturbation.folded_reflectors)
+            folded = np.isin(np.rint(searched_labels) - 1, self._reflectors_of("folded_reflectors"))
             pixels = np.unique(np.concatenate([
                 pixels, band_trace.band_pixels(searched_labels, drawn, reach),
                 band_trace.band_pixels(np.where(folded, searched_labels, 0.0), drawn, reach, edges_of_drawn=True)]),
@@ -502,9 +508,9 @@ class ReflectionRenderer:
             self.sbc.last.camera = camera
         drawn = time.perf_counter()
         traced = 0
-        morphed = self.morph.drawn_reflectors if trace_gaps else []
-        if trace and ((textures is not None and textures.groups) or morphed or self.iterative.methods
-                      or self.perturbation.methods):
+        morphed = self._reflectors_of("gap_reflectors") if trace_gaps else []
+        if trace and ((textures is not None and textures.groups) or morphed
+                      or any(frame_pass.traces_band for frame_pass in self.passes)):
             max_order = max((len(h) for h in textures.groups), default=1) if textures is not None else 1
             traced = self.trace_band(view, targets, max_order, world_color, downsample, trace_edges,
                                      getattr(sbc_or_textures, "ray_map", None), camera, holes_of=morphed)
@@ -517,7 +523,8 @@ class ReflectionRenderer:
             self.composite(targets, world_color, False, fill_radius)
         image = read_texture(texture, targets.width, targets.height)
         end = time.perf_counter()
-        self.stats["iterative"] = self.iterative.status_counts()
+        for frame_pass in self.passes:
+            self.stats.update(frame_pass.frame_stats())
         self.stats.update({"upload_seconds": uploaded - start, "pass_seconds": drawn - uploaded,
                            "band_seconds": band - drawn, "composite_seconds": end - band,
                            "draw_seconds": end - start, "traced_pixels": traced})

@@ -26,9 +26,9 @@ import numpy as np
 from bpy.props import EnumProperty, IntProperty
 from mathutils import Vector
 
-from ..addon import shapes
+from ..addon.geometry import shapes
 from ..addon.metrics import srgb_to_linear
-from ..addon.sphere import bumpy_icosphere
+from ..addon.geometry.sphere import bumpy_icosphere
 
 #: Display-sRGB label colours, channels in {0, 0.5, 1} with at least one 1 and not white:
 #: any two differ by >= 0.5 in some channel and all lie >= 1 away from black. Ordered so

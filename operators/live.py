@@ -24,7 +24,7 @@ projection runs per draw on the GPU):
   or the meshes changed, not on every redraw.
 - **morphing** (reflectors in Morphing mode with a baked grid, SBC paper VI): their
   grids are loaded with the capture of the reflectors and drawn by the renderer on
-  every redraw whose view is inside the grid (``gpu_shaders/morph_pass.py``): the four
+  every redraw whose view is inside the grid (``gpu_shaders/methods/morph_pass.py``): the four
   nodes around the eye are blended on the GPU from their images of the vertices, which
   stay on the GPU once projected, so a view change builds nothing for that reflector.
   The runtime camera, when another reflector or a higher order still needs one, leaves
@@ -61,9 +61,9 @@ import bpy
 import numpy as np
 
 from ..addon.errors import SceneInputError
-from ..addon.morphing import ViewOutsideGrid
-from ..addon.raytrace import ReflectorSet
-from ..addon.sbc_build import build_sample_based_camera
+from ..addon.methods.morphing.morphing import ViewOutsideGrid
+from ..addon.geometry.raytrace import ReflectorSet
+from ..addon.methods.sbc.sbc_build import build_sample_based_camera
 from ..addon.scene import scene_bounds
 from ..addon.view import View
 from . import accuracy, methods, morph_bake
@@ -482,7 +482,7 @@ def draw(scene, key, view: View) -> bool:
     after a mesh change) and is reused by later draws. Returns whether anything was
     drawn. Raises what drawing raises (the callers catch it).
     """
-    from ..gpu_shaders.projection import SBCTextures
+    from ..gpu_shaders.methods.projection import SBCTextures
 
     state = state_of(scene)
     if state is None or state.renderer is None or not state.drawing:

@@ -22,7 +22,7 @@ The star-shape verdict and the cube map are made once per reflector shape (compa
 translation with the ones kept, :data:`CACHED_MAPS` of them): a viewport orbit,
 an animation frame in which the mirror did not change, or a mirror moved without
 turning reuses them (the map moves with its centre). The map is baked on the GPU when
-it is initialised (``gpu_shaders/iterative_bake.py``, milliseconds), else traced on the
+it is initialised (``gpu_shaders/methods/iterative_bake.py``, milliseconds), else traced on the
 CPU. :func:`plan` is what the live view, Render Image and the panel use; its choices
 say per reflector which method and why, and the last ones are kept for the panel.
 
@@ -45,7 +45,7 @@ from ..addon.methods.iterative import IterativeReflector, StarShape, check_star_
 from ..addon.methods.iterative.star import verdict
 from ..addon.methods.iterative.reflector_map import bake_reflector_map
 from ..addon.methods.perturbation import AnalyticSurface, PerturbationReflector
-from ..addon.raytrace import ReflectorSet
+from ..addon.geometry.raytrace import ReflectorSet
 
 #: Cube-map face size of the iterative search's reflector maps (texels along a side).
 FACE_SIZE = 256
@@ -99,7 +99,7 @@ _measured: dict = {}
 
 def _bake(reflector, centre, face_size: int):
     """The full-resolution map: on the GPU when it is ready, else traced on the CPU."""
-    from ..gpu_shaders.iterative_bake import bake_reflector_map_gpu
+    from ..gpu_shaders.methods.iterative_bake import bake_reflector_map_gpu
     from .gpu_init import gpu_ready
 
     if gpu_ready():

@@ -3,7 +3,7 @@
 
 ``curved_reflections.bake_morphing`` bakes the grid of every visible reflector whose
 mode is Morphing (panoramic sample-based cameras at the nodes) or Octree (ray octrees at
-the nodes, Martin & Popescu 2004): the grid each mode needs (``addon/bake.py``: worker
+the nodes, Martin & Popescu 2004): the grid each mode needs (``addon/baking/bake.py``: worker
 processes, one node each). Invoked from the
 UI it is modal: the bake runs on a thread that drives the worker processes, the window
 manager's progress bar and the panel's status line follow it, and Esc cancels between
@@ -26,9 +26,9 @@ import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
-from ..addon import bake, bake_cache
+from ..addon.baking import bake, bake_cache
 from ..addon.errors import SceneInputError
-from ..addon.morph_grid import OCTREE, TETRAHEDRAL, MorphSettings
+from ..addon.methods.morphing.morph_grid import OCTREE, TETRAHEDRAL, MorphSettings
 from . import methods, scene_changes
 from .capture import capture_scene
 
@@ -167,7 +167,7 @@ def load_grids(scene, reflectors, bake_missing: bool = False) -> list:
     (:func:`load_morphing` records why). With ``bake_missing`` (Render Image) a reflector
     set to Morphing or Octree mode whose grid is missing, stale or unfinished is baked first, in
     this process, on every core. The grids' nodes project on the GPU."""
-    from ..gpu_shaders.morph_source import GPUFaceImages
+    from ..gpu_shaders.methods.morph_source import GPUFaceImages
 
     faces = GPUFaceImages()
     grids = []

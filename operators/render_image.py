@@ -3,7 +3,7 @@
 
 The whole pipeline of ``docs/overview.md`` for one frame: capture the evaluated scene
 (:mod:`.capture`), build the camera view's sample-based camera (SBC paper, Popescu,
-Sacks, Mei 2006, sections III-IV; ``addon/sbc.py``), and draw the scene with its
+Sacks, Mei 2006, sections III-IV; ``addon/methods/sbc/sbc.py``), and draw the scene with its
 reflections on the GPU (section V; ``gpu_shaders/reflection_draw.py``) at the scene's
 render resolution. It works in background mode too (``blender -b``, ``import bpy``):
 the GPU is initialised first when needed (:mod:`.gpu_init`).
@@ -34,8 +34,8 @@ from bpy.props import BoolProperty, StringProperty
 
 from ..addon.errors import SceneInputError
 from ..addon.metrics import linear_to_srgb
-from ..addon.raytrace import ReflectorSet
-from ..addon.sbc_build import build_sample_based_camera, check_view_outside_reflectors
+from ..addon.geometry.raytrace import ReflectorSet
+from ..addon.methods.sbc.sbc_build import build_sample_based_camera, check_view_outside_reflectors
 from ..addon.scene import scene_bounds
 from ..addon.view import View
 from . import methods

@@ -87,10 +87,11 @@ def _graph() -> dict:
 
 def test_the_graph_sees_the_known_imports():
     graph = _graph()
-    assert "gpu_shaders.sbc_triangles" in graph["gpu_shaders.reflection_draw"]
-    assert "addon.sbc" in graph["addon.sbc_build"]
+    assert "gpu_shaders.methods.sbc_triangles" in graph["gpu_shaders.reflection_draw"]
+    assert "addon.methods.sbc.sbc" in graph["addon.methods.sbc.sbc_build"]
     assert "operators.live" in graph["operators.live_handlers"]
-    assert "addon.morph_grid" in graph["addon.morphing"]
+    assert "addon.methods.morphing.morph_grid" in graph["addon.methods.morphing.morphing"]
+    assert "addon.geometry.raytrace" in graph["addon.reference.exact"]
 
 
 def test_no_import_circle():

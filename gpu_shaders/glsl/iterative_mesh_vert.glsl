@@ -1,5 +1,5 @@
 /* SPDX-License-Identifier: GPL-3.0-or-later */
-/* Reflected meshes of the iterative search, vertex stage (gpu_shaders/iterative_draw.py),
+/* Reflected meshes of the iterative search, vertex stage (gpu_shaders/methods/iterative_draw.py),
  * every frame after iterative_search.glsl.
  *
  * Roger & Holzschuch 2006, section 3.2 step 3: each vertex is placed where the current

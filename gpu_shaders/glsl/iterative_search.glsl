@@ -244,7 +244,7 @@ int newton(vec2 x, inout int steps, out vec3 p)
     evaluate(x + vec2(DERIVATIVE_STEP, 0.0), fu, pu, nu, ht);
     evaluate(x + vec2(0.0, DERIVATIVE_STEP), fv, pv, nv, ht);
     /* The map surface's own normal: the ray from the eye must meet its front and the
-     * reflected ray leave it (as addon/exact.py asks of the facet). */
+     * reflected ray leave it (as addon/reference/exact.py asks of the facet). */
     vec3 facet = cross(pu - p, pv - p);
     face = dot(facet, p) < 0.0 ? -facet : facet;
     vec2 ju = (fu - f) / DERIVATIVE_STEP;

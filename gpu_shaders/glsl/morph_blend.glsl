@@ -1,6 +1,6 @@
 /* SPDX-License-Identifier: GPL-3.0-or-later */
-/* Reflection morphing on the GPU, compute stage (gpu_shaders/morph_pass.py): the float32
- * twin of MorphingGrid._matched_images and MorphingGrid._blend (addon/morphing.py), one
+/* Reflection morphing on the GPU, compute stage (gpu_shaders/methods/morph_pass.py): the float32
+ * twin of MorphingGrid._matched_images and MorphingGrid._blend (addon/methods/morphing/morphing.py), one
  * invocation per diffuse vertex, every frame.
  *
  * The NODES nodes of the cell holding the eye (SBC paper, Popescu, Sacks, Mei 2006,
@@ -27,7 +27,7 @@
 /* Push constants: n_vertices, positions_width, slot_rows (rows of one slot in a node
  * texture) and active_slots (the most regular images any of the four nodes has of any
  * vertex: the slots past it are empty this frame, neither written nor drawn). The view's parameters, in the uniform block `frame` (struct MorphFrame,
- * gpu_shaders/morph_pass.py): frame_from_shifted and shifted_from_frame (the grid's rigid
+ * gpu_shaders/methods/morph_pass.py): frame_from_shifted and shifted_from_frame (the grid's rigid
  * frame and the renderer's shift), view_projection (of shifted points), the eye in the
  * frame and match_distance, per node its position in the frame and weight (`nodes`), and
  * how many regular and widened-chart slots hold any image (`node_slots`; the others are

@@ -10,7 +10,7 @@
  * (a viewport overlay over Blender's own drawing).
  *
  * The band along the footprint's edge: a sample-based camera projects a point only
- * between four rays of its group (addon/sbc.py), so no reflection can land in the last
+ * between four rays of its group (addon/methods/sbc/sbc.py), so no reflection can land in the last
  * ray-map cell (up to the down-sampling factor d, in pixels) before the reflector's
  * silhouette or an object in front of it. Where the caller traced those pixels
  * (gpu_shaders/band_trace.py), `traced_colors` holds them (alpha 1). Without tracing

@@ -1,6 +1,6 @@
 /* SPDX-License-Identifier: GPL-3.0-or-later */
 /* Shading shared by the pre-pass, the reflected meshes and the mixed-triangle pass
- * (gpu_shaders/reflection_draw.py; numpy twin in addon/band_trace.py, `shade`).
+ * (gpu_shaders/reflection_draw.py; numpy twin in addon/geometry/band_trace.py, `shade`).
  *
  * SBC paper (Popescu, Sacks, Mei 2006), section V-C: a reflected vertex keeps the data
  * of the unreflected mesh (colour, normal, texture coordinates) and is lit with the

@@ -2,8 +2,8 @@
 /* Sample-based camera projection in a vertex shader (SBC paper, Popescu, Sacks, Mei 2006,
  * section V-A: scene vertices are projected by the sample-based camera on the GPU).
  *
- * GLSL twin of addon/sbc.py SampleBasedCamera.project for one reflection group, reading
- * the textures packed by gpu_shaders/sbc_pack.py (layout documented there):
+ * GLSL twin of addon/methods/sbc/sbc.py SampleBasedCamera.project for one reflection group, reading
+ * the textures packed by gpu_shaders/methods/sbc_pack.py (layout documented there):
  *   1. descend the group's BSP tree to a leaf;
  *   2. camera leaf: Newton on the leaf's ray patch t(a, b) + s r(a, b) = p (ray_patch._newton),
  *      accepted on a small residual and a cell within the leaf's cells +- 0.5; a banded
@@ -17,8 +17,8 @@
  * Float32 instead of float64: Newton runs on p - origin with tails stored relative to
  * the patch's origin (see sbc_pack.py); tolerances are float32-sized where the engine's
  * float64 ones would be below float32 resolution (SBC_STEP_TOLERANCE, and the floor
- * SBC_ROUNDING_TOLERANCE of the residual test; see gpu_shaders/projection.py).
- * The SBC_* constants are #defined by gpu_shaders/projection.py from the engine's own
+ * SBC_ROUNDING_TOLERANCE of the residual test; see gpu_shaders/methods/projection.py).
+ * The SBC_* constants are #defined by gpu_shaders/methods/projection.py from the engine's own
  * constants. Samplers: sbc_groups, sbc_nodes, sbc_leaves, sbc_patches,
  * sbc_scalars, sbc_rays (RGBA32F, read with texelFetch only). */
 

@@ -56,7 +56,7 @@ def test_scene_bounds_cover_everything_with_margin():
 def test_smooth_pieces_follow_shared_vertices_not_positions():
     """Two quads meeting along an edge are one piece where they share its vertices and
     two where the edge is sharp (its vertices split, same positions)."""
-    from curved_reflections.addon import shapes
+    from curved_reflections.addon.geometry import shapes
     from curved_reflections.addon.scene import smooth_pieces
 
     shared = np.array([[0, 1, 2], [1, 3, 2], [2, 3, 4], [3, 5, 4]])

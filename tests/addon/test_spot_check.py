@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from curved_reflections.addon import look_at_view
-from curved_reflections.addon.exact import solve_reflections
-from curved_reflections.addon.raytrace import ReflectorSet
+from curved_reflections.addon.reference.exact import solve_reflections
+from curved_reflections.addon.geometry.raytrace import ReflectorSet
 from curved_reflections.addon.spot_check import MAX_ERROR_PX, SpotCheck, spot_check
-from curved_reflections.addon.sphere import icosphere
+from curved_reflections.addon.geometry.sphere import icosphere
 
 CENTRE = np.array([0.0, 0.0, 1.0])
 

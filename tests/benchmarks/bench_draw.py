@@ -165,9 +165,9 @@ def measure(kind: str, width: int, height: int, target_vertices: int, repeats: i
             projection_repeats: int) -> dict:
     import gpu
 
-    from curved_reflections.addon.sbc_build import build_sample_based_camera
+    from curved_reflections.addon.methods.sbc import build_sample_based_camera
     from curved_reflections.addon.scene import scene_bounds
-    from curved_reflections.gpu_shaders.projection import SBCTextures
+    from curved_reflections.gpu_shaders.methods.projection import SBCTextures
     from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
     from curved_reflections.operators.capture import view_from_camera
     from curved_reflections.operators.render_inputs import BOUNDS_MARGIN, reflector_appearance, world_color

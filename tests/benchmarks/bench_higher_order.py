@@ -8,7 +8,7 @@ order-2 groups against the exact second-order solver, and rendered labels agains
 Scene: the two_spheres demo (two mirror spheres 0.18 apart), built with bpy and
 captured from the evaluated depsgraph exactly as ``bench_sbc.py`` does (480x320 camera
 view, scene box = bounds + 0.1, the same shuffled points: in the box, on the diffuse
-meshes, within 0.5 of the mirrors). The exact solver (``addon/exact_paths.py``) finds
+meshes, within 0.5 of the mirrors). The exact solver (``addon/reference/exact_paths.py``) finds
 every visible path eye -> x1 -> x2 -> p once.
 
 Per down-sampling d (accuracy 1 px, ``max_order=2``), for the histories (A, B) and
@@ -49,8 +49,8 @@ RENDER_WIDTH, RENDER_HEIGHT = 320, 240
 
 
 def prepare(n_points: int) -> dict:
-    from curved_reflections.addon.exact_paths import solve_second_order
-    from curved_reflections.addon.raytrace import ReflectorSet
+    from curved_reflections.addon.reference.exact_paths import solve_second_order
+    from curved_reflections.addon.geometry.raytrace import ReflectorSet
 
     _, _, reflectors, view, bounds, points, counts = bench_sbc.demo_scene("two_spheres", n_points)
     reflector_set = ReflectorSet(reflectors)
@@ -63,7 +63,7 @@ def prepare(n_points: int) -> dict:
 
 
 def measure_cell(scene: dict, downsample: int, accuracy_px: float = 1.0) -> dict:
-    from curved_reflections.addon import build_sample_based_camera
+    from curved_reflections.addon.methods.sbc import build_sample_based_camera
 
     sbc = build_sample_based_camera(scene["reflector_set"], scene["view"], scene["bounds"], max_order=2,
                                     downsample=downsample, accuracy_px=accuracy_px)
@@ -134,8 +134,8 @@ def render_check(images: Path, cycles_samples: int, bounces: int) -> dict:
     import bpy
 
     from curved_reflections.addon import metrics
-    from curved_reflections.addon.raymap import trace_ray_map
-    from curved_reflections.addon.raytrace import ReflectorSet
+    from curved_reflections.addon.methods.sbc.raymap import trace_ray_map
+    from curved_reflections.addon.geometry.raytrace import ReflectorSet
     from curved_reflections.addon.scene import scene_bounds
     from curved_reflections.operators import capture, demo_scenes, reference_render as rr, render_image
 
@@ -219,7 +219,7 @@ def report(results: dict) -> str:
             f"- Started {results['started']}, total {results['total_seconds'] / 60:.1f} min."]),
         "## Scene and reference",
         f"two_spheres demo, 480x320 camera view, {scene['n_points']} points ({scene['point_counts']}). "
-        f"The exact second-order solver (`addon/exact_paths.py`) found {scene['exact_visible']} visible paths "
+        f"The exact second-order solver (`addon/reference/exact_paths.py`) found {scene['exact_visible']} visible paths "
         f"({scene['exact_by_history']}) in {scene['exact_seconds']:.1f} s.",
         "## Sample-based camera, order-2 groups (accuracy 1 px, max_order 2)",
     ]

@@ -9,7 +9,7 @@ Scenes (engine only, no Blender): two facing mirror spheres (radii 1 and 0.8, 1.
 and a mirror sphere in front of a flat wall mirror (a 6 x 4 plane, 24 x 24 quads). A
 320x240 view sees both reflectors; points are drawn uniformly (fixed seed) in the box of
 the reflectors grown by 2, outside the spheres. The exact solver
-(``addon/exact_paths.py``) gives every visible path eye -> x1 -> x2 -> p (a path
+(``addon/reference/exact_paths.py``) gives every visible path eye -> x1 -> x2 -> p (a path
 it finds twice, through an edge two of a flat mirror's triangles share, counts once).
 
 Per scene and down-sampling d (``max_order`` 2, accuracy 1 px), per history:
@@ -54,7 +54,7 @@ def _wall(x: float, y_range, z_range, quads: int = 24):
 
 def scenes() -> dict:
     """{name: (reflectors, view, spheres as (centre, radius))}."""
-    from curved_reflections.addon.sphere import icosphere
+    from curved_reflections.addon.geometry.sphere import icosphere
     from curved_reflections.addon.view import look_at_view
 
     return {
@@ -68,9 +68,9 @@ def scenes() -> dict:
 
 
 def measure(name: str, reflectors, view, spheres, n_points: int, downsamples) -> dict:
-    from curved_reflections.addon.exact_paths import solve_second_order
-    from curved_reflections.addon.raytrace import ReflectorSet
-    from curved_reflections.addon.sbc_build import build_sample_based_camera
+    from curved_reflections.addon.reference.exact_paths import solve_second_order
+    from curved_reflections.addon.geometry.raytrace import ReflectorSet
+    from curved_reflections.addon.methods.sbc import build_sample_based_camera
 
     reflector_set = ReflectorSet(reflectors)
     lo, hi = reflector_set.vertices.min(axis=0) - 2.0, reflector_set.vertices.max(axis=0) + 2.0

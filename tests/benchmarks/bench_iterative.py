@@ -13,13 +13,13 @@ star-shaped, not convex), none of them used while the search was written (its te
 other views, points and amplitudes). Per reflector two views, 640x480, 40 degrees, from
 about 3.5 radii, and points drawn uniformly (fixed seed) in a box of 3 radii around it,
 outside it; every face size sees the same points. The cube map is baked on the CPU at
-each face size. The exact solver (``addon/exact.py``) gives
+each face size. The exact solver (``addon/reference/exact.py``) gives
 every visible reflection of every point; a point counts as *covered* when the search
 answers within 1 px of one of them (the search gives one reflection per point: on the
 bumpy spheres some points have several). *False*: answers with no exact visible
 reflection within 1 px. Errors: pixel distance from each answer to the nearest exact
 visible reflection of its point. The numpy twin is measured; the GLSL search agrees with
-it to 0.05 px (tests/gpu_shaders/test_iterative_draw.py).
+it to 0.05 px (tests/gpu_shaders/methods/test_iterative_draw.py).
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ EYES = ((3.5, -2.0, 1.5), (-1.2, 3.3, -1.4))
 
 
 def reflectors(subdivisions: int) -> list:
-    from curved_reflections.addon.sphere import bumpy_icosphere, ellipsoid, icosphere, superellipsoid
+    from curved_reflections.addon.geometry.sphere import bumpy_icosphere, ellipsoid, icosphere, superellipsoid
 
     return [icosphere((0.0, 0.0, 0.0), 1.0, subdivisions, name="sphere"),
             ellipsoid((0.0, 0.0, 0.0), (1.2, 0.7, 0.5), subdivisions, name="ellipsoid"),
@@ -65,8 +65,8 @@ def points_outside(reflector_set, count: int, rng) -> np.ndarray:
 
 def exact_cases(reflector, n_points: int, rng) -> list:
     """Per view: the view, its points and their exact reflections (shared by the face sizes)."""
-    from curved_reflections.addon.exact import solve_reflections
-    from curved_reflections.addon.raytrace import ReflectorSet
+    from curved_reflections.addon.reference.exact import solve_reflections
+    from curved_reflections.addon.geometry.raytrace import ReflectorSet
     from curved_reflections.addon.view import look_at_view
 
     reflector_set = ReflectorSet([reflector])

@@ -22,7 +22,7 @@ never asks which method it runs:
   change every frame: for Runtime a camera per frame);
 - *accuracy*: on ``--sampled`` frames, the answers the frame drew (every vertex's, read
   back from the GPU passes, or the sample-based camera's for 3000 vertices: the live
-  check's ``accuracy.drawn_answers``) against the exact solver (``addon/exact.py``) on a
+  check's ``accuracy.drawn_answers``) against the exact solver (``addon/reference/exact.py``) on a
   sample of ``--points`` vertices: desired-view px from each exact visible reflection to
   the nearest drawn image of its vertex, within 12 px (p50 / p95 / p99); coverage, the
   share of exact reflections with a drawn image within 12 px; *false*, the share of
@@ -94,7 +94,7 @@ def _accuracy(scene, frame: int, points: int) -> dict:
     """The drawn answers of one frame against the exact solver, on sampled vertices."""
     import bpy
 
-    from curved_reflections.addon.exact import solve_reflections
+    from curved_reflections.addon.reference.exact import solve_reflections
     from curved_reflections.operators import accuracy
     from curved_reflections.operators.render_image import FrameState, render_scene
 

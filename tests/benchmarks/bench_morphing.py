@@ -15,7 +15,7 @@ Error sweep: grids of several node counts over the same box (the mirror's box gr
 ``morph_margin`` = 1 mirror size, the default), so the spacing varies. Views: eyes drawn
 at random (fixed seed) inside the grid, above the floor and at least ``--min-eye-distance``
 from the sphere's centre, looking at the centre (jittered), 480x320, 45 degrees; the same
-views for every grid. Per view, fresh points; the exact solver (``addon/exact.py``) gives
+views for every grid. Per view, fresh points; the exact solver (``addon/reference/exact.py``) gives
 the visible reflections. Only the nodes of the views' tetrahedra are built (lazily; the
 error does not depend on the others). Both blends: the paper's barycentric blend of the
 four first reflector points (``linear``) and ours (``surface``: the blend refined on a
@@ -89,7 +89,8 @@ def sphere_scene(n_points: int):
 
 def draw_views(morphing, mirror, matrix, settings, count, min_distance, rng):
     """Eyes inside the default grid (in world space), above the floor, away from the mirror."""
-    from curved_reflections.addon import look_at_view, morph_grid
+    from curved_reflections.addon import look_at_view
+    from curved_reflections.addon.methods.morphing import morph_grid
 
     frame = morph_grid.rigid_frame(matrix)
     local = morph_grid.reflector_in_frame(mirror, frame)
@@ -109,8 +110,8 @@ def measure_grid(grid_on_demand, mirror, matrix, settings, views, view_points, e
     """Error, coverage and rates of one grid shape over all views, for both blends;
     ``grid_on_demand(local reflector, settings, blend=, nodes=)`` makes the grid
     (``morphing.grid_on_demand``, or the octree grid's of ``bench_octree.py``)."""
-    from curved_reflections.addon import morph_grid, morphing
-    from curved_reflections.addon.raytrace import ReflectorSet
+    from curved_reflections.addon.methods.morphing import morph_grid, morphing
+    from curved_reflections.addon.geometry.raytrace import ReflectorSet
 
     frame = morph_grid.rigid_frame(matrix)
     local = morph_grid.reflector_in_frame(mirror, frame)
@@ -239,7 +240,7 @@ def report(results: dict) -> str:
         "blend of the four "
         "first reflector points; *surface*: ours, the blend refined on a quadratic fitted to the four nodes' images "
         "and normals (`refine_on_local_surface`). Error: desired-view px from each projected image to the exact "
-        "visible reflection (`addon/exact.py`). Coverage: exact visible reflections that are projected; "
+        "visible reflection (`addon/reference/exact.py`). Coverage: exact visible reflections that are projected; "
         "in parentheses, those seen less than 72.5 degrees off the mirror's normal (the rim of the sphere, a cell or "
         "two wide in every node's ray map, reflects much of the scene at grazing angles and is not projected). "
         "False: projected images inside the image with no exact visible reflection; in parentheses those whose "
@@ -332,9 +333,10 @@ def main(argv=None) -> int:
     started = time.perf_counter()
     args.out.mkdir(parents=True, exist_ok=True)
     B.import_package()
-    from curved_reflections.addon import bake, morph_grid, morphing
-    from curved_reflections.addon.exact import solve_reflections
-    from curved_reflections.addon.raytrace import ReflectorSet
+    from curved_reflections.addon.baking import bake
+    from curved_reflections.addon.methods.morphing import morph_grid, morphing
+    from curved_reflections.addon.reference.exact import solve_reflections
+    from curved_reflections.addon.geometry.raytrace import ReflectorSet
 
     face = args.face_resolution or morph_grid.MorphSettings.face_resolution
     accuracy = args.accuracy or morph_grid.MorphSettings.accuracy_px

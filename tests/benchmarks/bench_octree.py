@@ -52,7 +52,7 @@ def _log(text: str) -> None:
 
 def grid_maker(kind: str):
     """``grid_on_demand(local, settings, blend=, nodes=)`` of one kind."""
-    from curved_reflections.addon import morphing
+    from curved_reflections.addon.methods.morphing import morphing
     from curved_reflections.addon.methods.octree import octree_grid_on_demand
 
     return octree_grid_on_demand if kind == "octree" else morphing.grid_on_demand
@@ -73,8 +73,8 @@ def scenes(n_points: int, quick: bool):
 
 
 def measure_scene(name, mirror, matrix, sample, settings, args) -> dict:
-    from curved_reflections.addon.exact import solve_reflections
-    from curved_reflections.addon.raytrace import ReflectorSet
+    from curved_reflections.addon.reference.exact import solve_reflections
+    from curved_reflections.addon.geometry.raytrace import ReflectorSet
 
     rng = np.random.default_rng(SEED)
     views = BM.draw_views(None, mirror, matrix, settings, args.views, args.min_eye_distance, rng)
@@ -104,7 +104,8 @@ def measure_scene(name, mirror, matrix, sample, settings, args) -> dict:
 
 
 def measure_bakes(mirror, matrix, settings, processes) -> dict:
-    from curved_reflections.addon import bake, morphing
+    from curved_reflections.addon.baking import bake
+    from curved_reflections.addon.methods.morphing import morphing
 
     bakes = {}
     for kind in KINDS:
@@ -212,7 +213,7 @@ def main(argv=None) -> int:
     args = parse_args(argv)
     started = time.perf_counter()
     B.import_package()
-    from curved_reflections.addon import morph_grid
+    from curved_reflections.addon.methods.morphing import morph_grid
 
     settings = morph_grid.MorphSettings(grid=(3, 3, 2), face_resolution=32) if args.quick \
         else morph_grid.MorphSettings()

@@ -10,8 +10,8 @@ scene and view, the same points projected by Perturbation (``PERTURBATION``), th
 sample-based camera (``RUNTIME``: its build and projection, down-sampling 2) and the
 iterative search (``ITERATIVE``: its numpy twin, first order on star-shaped mirrors,
 cube maps baked beforehand and not timed), against the exact reference: on meshes the
-mesh solvers (``addon/exact.py``, ``exact_paths.py``), on declared exact surfaces their
-solutions polished onto the surface (``addon/exact_analytic.py``), so that a method is
+mesh solvers (``addon/reference/exact.py``, ``exact_paths.py``), on declared exact surfaces their
+solutions polished onto the surface (``addon/reference/exact_analytic.py``), so that a method is
 charged with its own error and not the tessellation's. *Coverage*: the share of the
 exact visible reflections answered within 1 px; errors: each answer's distance to the
 nearest exact visible reflection of its point (answers farther than 1 px count as
@@ -62,7 +62,7 @@ def _placed(centre):
 def scenes(subdivisions: int) -> list:
     """(name, reflectors, {index: AnalyticSurface}, eyes, max_order) of every scene."""
     from curved_reflections.addon.methods.perturbation import AnalyticSurface
-    from curved_reflections.addon.sphere import bumpy_icosphere, ellipsoid, icosphere, superellipsoid
+    from curved_reflections.addon.geometry.sphere import bumpy_icosphere, ellipsoid, icosphere, superellipsoid
 
     centre, radii = np.array([0.1, -0.2, 0.05]), (1.1, 0.75, 0.6)
     eyes = ((3.4, -2.3, 1.3), (-1.5, 3.1, -1.2))
@@ -91,7 +91,7 @@ def scenes(subdivisions: int) -> list:
 def points_outside(reflector_set, count: int, rng) -> np.ndarray:
     """``count`` points uniform in the box of 3 radii around the mirrors, outside each
     (farther from its centre, along the direction, than its mesh)."""
-    from curved_reflections.addon.raytrace import ReflectorSet
+    from curved_reflections.addon.geometry.raytrace import ReflectorSet
 
     lo, hi = reflector_set.vertices.min(axis=0), reflector_set.vertices.max(axis=0)
     size = float(np.max(hi - lo))
@@ -108,9 +108,9 @@ def points_outside(reflector_set, count: int, rng) -> np.ndarray:
 
 def exact_reference(reflector_set, view, points, analytic: dict, order: int):
     """(point, pixel, history) of every exact visible reflection of the order."""
-    from curved_reflections.addon.exact import solve_reflections
-    from curved_reflections.addon.exact_analytic import polish_on_surfaces
-    from curved_reflections.addon.exact_paths import solve_second_order
+    from curved_reflections.addon.reference.exact import solve_reflections
+    from curved_reflections.addon.reference.exact_analytic import polish_on_surfaces
+    from curved_reflections.addon.reference.exact_paths import solve_second_order
 
     if order == 1:
         exact = solve_reflections(reflector_set, view, points)
@@ -157,8 +157,8 @@ def history_rows(history, h) -> np.ndarray:
 def measure_scene(name, reflectors, analytic, eyes, order, n_points, rng) -> list:
     from curved_reflections.addon.methods.iterative import IterativeReflector, prepare_iterative
     from curved_reflections.addon.methods.perturbation import PerturbationMethod, PerturbationSettings
-    from curved_reflections.addon.raytrace import ReflectorSet
-    from curved_reflections.addon.sbc_build import build_sample_based_camera
+    from curved_reflections.addon.geometry.raytrace import ReflectorSet
+    from curved_reflections.addon.methods.sbc import build_sample_based_camera
     from curved_reflections.addon.scene import scene_bounds
     from curved_reflections.addon.view import look_at_view
 

@@ -195,7 +195,7 @@ def demo_scene(kind: str, n_points: int):
 def ellipsoid_reflector(rng):
     """Held-out: an ellipsoid (radii 1.5, 0.75, 0.95) turned about z and x, exact normals."""
     from curved_reflections.addon import Reflector
-    from curved_reflections.addon.sphere import icosphere
+    from curved_reflections.addon.geometry.sphere import icosphere
 
     unit = icosphere([0, 0, 0], 1.0, 5)
     radii = np.array([1.5, 0.75, 0.95])
@@ -208,7 +208,7 @@ def ellipsoid_reflector(rng):
 def superellipsoid_reflector(rng, exponent: float = 3.0):
     """Held-out: |x/a|^p + |y/b|^p + |z/c|^p = 1 (p = 3, convex, flattish faces), exact normals."""
     from curved_reflections.addon import Reflector
-    from curved_reflections.addon.sphere import icosphere
+    from curved_reflections.addon.geometry.sphere import icosphere
 
     unit = icosphere([0, 0, 0], 1.0, 5)
     radii = np.array([1.1, 0.9, 0.8])
@@ -245,8 +245,8 @@ def held_out_scene(name: str, n_points: int):
 
 
 def prepare_scene(name: str, n_points: int) -> BenchScene:
-    from curved_reflections.addon.exact import solve_reflections
-    from curved_reflections.addon.raytrace import ReflectorSet
+    from curved_reflections.addon.reference.exact import solve_reflections
+    from curved_reflections.addon.geometry.raytrace import ReflectorSet
 
     parts = demo_scene(name, n_points) if name in DEMO_SCENES else held_out_scene(name, n_points)
     name, source, reflectors, view, bounds, points, counts = parts
@@ -262,7 +262,7 @@ def prepare_scene(name: str, n_points: int) -> BenchScene:
 
 def mirror_distance(reflector_set, points: np.ndarray, radius: float) -> np.ndarray:
     """(P,) distance from each point to the nearest mirror triangle; inf where it exceeds ``radius``."""
-    from curved_reflections.addon.bvh import descend
+    from curved_reflections.addon.geometry.bvh import descend
 
     bvh = reflector_set.bvh
 
@@ -307,7 +307,7 @@ def sphere_check(reflectors, view, points, exact, distance) -> dict | None:
     tessellated and the smooth silhouettes may disagree), but for which the exact solver
     (on the tessellated sphere) finds no visible reflection, split by distance to the mirror.
     """
-    from curved_reflections.addon.sphere import sphere_reflection
+    from curved_reflections.addon.geometry.sphere import sphere_reflection
 
     if len(reflectors) != 1:
         return None
@@ -435,7 +435,7 @@ def _as_dict(projection) -> dict:
 def project_timed(sbc, points, repeats: int, repeat_limit: float, budget: float):
     """(projection dict, points measured, points/s, runs): see the module docstring.
 
-    Ours polishes ray-list and fold-cell answers on the true rays (``addon/true_rays.py``);
+    Ours polishes ray-list and fold-cell answers on the true rays (``addon/reference/true_rays.py``);
     the paper's pinhole model is measured as the paper has it, interpolated only."""
     polish = sbc.model_name != "pinhole"
     probe = min(len(points), 2048)
@@ -478,7 +478,7 @@ def throughput_points(scene: BenchScene, count: int) -> np.ndarray:
 
 def run_cell(scene: BenchScene, downsample: int, accuracy: float, model: str, args, send) -> None:
     """Build, time, project and measure one configuration (in a child process)."""
-    from curved_reflections.addon.sbc_build import build_from_ray_map, build_sample_based_camera
+    from curved_reflections.addon.methods.sbc.sbc_build import build_from_ray_map, build_sample_based_camera
 
     sbc = build_sample_based_camera(scene.reflector_set, scene.view, scene.bounds, max_order=1,
                                     downsample=downsample, accuracy_px=accuracy, leaf_model=model)
@@ -760,13 +760,13 @@ def report(results: dict) -> str:
         "Views are 480x320; the headline uses down-sampling d = "
         f"{s['downsample']} (a {WIDTH // s['downsample']}x{HEIGHT // s['downsample']} ray map) and accuracy 1 px. "
         "*Ours* is the ray-patch leaf model (`leaf_model=\"ray_patch\"`) with the answers of ray-list "
-        "leaves and fold cells polished on the true reflected rays (`addon/true_rays.py`), *paper* the "
+        "leaves and fold cells polished on the true reflected rays (`addon/reference/true_rays.py`), *paper* the "
         "pinhole camera leaves of Popescu, Sacks & Mei 2006 (`\"pinhole\"`), answers interpolated as the "
         "paper has them (`project(polish=False)`). First-order reflections only (`max_order=1`). "
         "A group (one reflection history) may be split into several trees, *sheets*, where its rays "
         "cross; each projects one image of a point. Errors are desired-view pixel distances from each "
         "projected image to the nearest visible exact solution on the group's reflector "
-        "(`addon/exact.py`). Coverage: share of points whose exact visible reflection lies at least "
+        "(`addon/reference/exact.py`). Coverage: share of points whose exact visible reflection lies at least "
         f"{FOOTPRINT_EROSION} ray-map cells inside the group's footprint that some sheet of the group "
         "projects. False: share of projected images with no exact visible reflection on "
         f"that reflector; the next column counts only points at least {SURFACE_LAYER:g} from every mirror "

@@ -15,7 +15,7 @@ does after the view changed (``operators/live.py``):
 - **runtime** (SBC paper IV-V): build the view's sample-based camera (ray map and trees),
   then the renderer's projection with it (textures uploaded, every vertex projected on
   the GPU and read back, reflected triangles decided);
-- **morphing** (SBC paper VI, ``gpu_shaders/morph_source.py``): the renderer's projection
+- **morphing** (SBC paper VI, ``gpu_shaders/methods/morph_source.py``): the renderer's projection
   from the grid: in a tetrahedron the eye has just entered, the four nodes project the
   vertices (on the GPU, ``GPUFaceImages``; also timed with numpy) and the images are
   matched and blended; in the same tetrahedron as before, only the blend.
@@ -23,7 +23,7 @@ does after the view changed (``operators/live.py``):
 Medians over the path's views. On this project's machines the GPU is Mesa llvmpipe
 (the CPU): compare the ratios measured in this one run, not absolute times.
 
-**Morphing rows on the GPU** (``gpu_shaders/morph_pass.py``, what the live view draws
+**Morphing rows on the GPU** (``gpu_shaders/methods/morph_pass.py``, what the live view draws
 now): the sbc_fig3 meshes split to about ``--vertices`` drawn vertices, the eye moving
 ``--orbit-degrees`` a frame along an arc inside the ball's grid, every node the path
 uses projected once before the clock runs (as the prefetch does), each frame timed as
@@ -31,7 +31,7 @@ the viewport draws it and, apart, the morph pass alone (blend and reflected mesh
 the blend alone, against the plain draw; the frames that enter a new tetrahedron are
 counted.
 
-**Iterative rows** (Roger & Holzschuch 2006, ``gpu_shaders/iterative_draw.py``): the
+**Iterative rows** (Roger & Holzschuch 2006, ``gpu_shaders/methods/iterative_draw.py``): the
 star-shaped demo scenes with their meshes split to about ``--vertices`` drawn vertices,
 the view orbiting by ``--orbit-degrees`` every frame, each frame timed as the viewport
 draws it (``ReflectionRenderer.draw``: pre-pass, this frame's search from the last
@@ -75,11 +75,12 @@ def eye_path(centre: np.ndarray, radius: float, steps: int, jumps: int) -> list:
 def measure(width: int, height: int, steps: int, jumps: int) -> dict:
     import bpy
 
-    from curved_reflections.addon import look_at_view, morph_grid, morphing
-    from curved_reflections.addon.sbc_build import build_sample_based_camera
+    from curved_reflections.addon import look_at_view
+    from curved_reflections.addon.methods.morphing import morph_grid, morphing
+    from curved_reflections.addon.methods.sbc import build_sample_based_camera
     from curved_reflections.addon.scene import scene_bounds
-    from curved_reflections.gpu_shaders.morph_source import GPUFaceImages, MorphSource
-    from curved_reflections.gpu_shaders.projection import SBCTextures
+    from curved_reflections.gpu_shaders.methods.morph_source import GPUFaceImages, MorphSource
+    from curved_reflections.gpu_shaders.methods.projection import SBCTextures
     from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
     from curved_reflections.operators import demo_scenes
     from curved_reflections.operators.capture import capture_scene
@@ -314,8 +315,9 @@ def measure_morph_frames(width: int, height: int, target_vertices: int, frames: 
     import gpu
     from mathutils import Matrix
 
-    from curved_reflections.addon import look_at_view, morph_grid, morphing
-    from curved_reflections.gpu_shaders.morph_source import GPUFaceImages
+    from curved_reflections.addon import look_at_view
+    from curved_reflections.addon.methods.morphing import morph_grid, morphing
+    from curved_reflections.gpu_shaders.methods.morph_source import GPUFaceImages
     from curved_reflections.gpu_shaders.reflection_draw import ITERATIVE_ORDER_RANGE, ReflectionRenderer
     from curved_reflections.operators.render_inputs import reflector_properties, world_color
 

@@ -15,9 +15,10 @@ import time
 import numpy as np
 import pytest
 
-from curved_reflections.addon import DiffuseMesh, build_sample_based_camera, look_at_view, scene_bounds
-from curved_reflections.addon.sphere import icosphere
-from curved_reflections.addon import band_trace, subdivision
+from curved_reflections.addon import DiffuseMesh, look_at_view, scene_bounds
+from curved_reflections.addon.methods.sbc import build_sample_based_camera
+from curved_reflections.addon.geometry.sphere import icosphere
+from curved_reflections.addon.geometry import band_trace, subdivision
 
 WIDTH, HEIGHT = 128, 96
 #: Measured on sbc_fig3 at 128x96 (d = 2, accuracy 1 px, max order 1): 1.6 % of the
@@ -279,7 +280,7 @@ def test_draw_into_a_bound_offscreen_as_a_draw_handler_would(gpu_ready):
     pixel off the mirrors as it was (an overlay over Blender's own viewport drawing)."""
     import gpu
 
-    from curved_reflections.gpu_shaders.projection import SBCTextures
+    from curved_reflections.gpu_shaders.methods.projection import SBCTextures
     from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
 
     meshes = [_square("Near", 2.5, 1.0, (1.0, 0.0, 0.0)), _square("Far", 4.0, 4.0, (0.0, 1.0, 0.0))]
@@ -327,7 +328,7 @@ def test_redraws_reuse_the_projection_and_a_moved_view_places_the_world_reflecto
     drawn where the moved view sees the *first reflector points* (world space) of the
     reflected geometry: the red square's centre reflects at the moved view's pixel of
     its reflector point, not at its pixel in the old view."""
-    from curved_reflections.gpu_shaders.projection import SBCTextures
+    from curved_reflections.gpu_shaders.methods.projection import SBCTextures
     from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
 
     mirror = icosphere((0.0, 0.0, 0.0), 1.0, 4, name="Mirror")
@@ -361,7 +362,7 @@ def test_redraws_reuse_the_projection_and_a_moved_view_places_the_world_reflecto
 def test_per_sheet_culling_leaves_the_image_identical(gpu_ready):
     """The teapot at 320 x 240 splits its reflection into sheets (per smooth piece, and
     where rays cross); projecting in each
-    sheet only the vertex chunks that meet its bounds (addon/sheet_bounds.py) skips
+    sheet only the vertex chunks that meet its bounds (addon/methods/sbc/sheet_bounds.py) skips
     vertices (about 3 %: the floor is seen by most sheets) and changes no pixel."""
     import bpy
 

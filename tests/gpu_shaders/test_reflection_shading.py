@@ -10,8 +10,9 @@ makes every expected pixel exact: the reflection of p in the plane z = 0 is p mi
 
 import numpy as np
 
-from curved_reflections.addon import DiffuseMesh, Reflector, build_sample_based_camera, look_at_view, scene_bounds
-from curved_reflections.addon.band_trace import SHADE_AMBIENT
+from curved_reflections.addon import DiffuseMesh, Reflector, look_at_view, scene_bounds
+from curved_reflections.addon.methods.sbc import build_sample_based_camera
+from curved_reflections.addon.geometry.band_trace import SHADE_AMBIENT
 
 SIZE = 64
 HALF = 1.5  # the mirror is the square [-HALF, HALF]^2 in z = 0

@@ -6,7 +6,8 @@ import pytest
 
 import bpy
 
-from curved_reflections.addon import metrics, shapes
+from curved_reflections.addon import metrics
+from curved_reflections.addon.geometry import shapes
 from curved_reflections.operators import demo_scenes, reference_render
 
 

@@ -14,7 +14,7 @@ import bpy
 import numpy as np
 import pytest
 
-from curved_reflections.addon import morph_grid, morphing
+from curved_reflections.addon.methods.morphing import morph_grid, morphing
 from curved_reflections.addon.view import look_at_view
 from curved_reflections.operators import demo_scenes, live, morph_bake
 

@@ -69,7 +69,7 @@ def test_bake_load_stale_and_clear(empty_scene, morph_ops):
     assert grid is not None and grid.grid.shape == (2, 2, 2)
     assert "Ball: morphing (baked grid loaded)" in morph_ops.morph_status(empty_scene)
     from curved_reflections.addon import look_at_view
-    from curved_reflections.addon.morphing import ViewOutsideGrid
+    from curved_reflections.addon.methods.morphing.morphing import ViewOutsideGrid
 
     with pytest.raises(ViewOutsideGrid) as outside:
         grid.project(np.zeros((1, 3)), look_at_view([0.0, -20.0, 1.0], [0.5, 0.0, 1.0]), matrix=matrix)
@@ -167,7 +167,8 @@ def test_a_range_of_nodes_bakes_only_those_and_reports_what_is_left(empty_scene,
 def test_a_damaged_node_costs_only_its_reflector_and_a_bake_repairs_it(empty_scene, morph_ops, gpu_ready):
     """The live view: a damaged node file met while drawing turns its reflector to runtime
     mode with a line naming the file; another reflector keeps drawing; Bake repairs it."""
-    from curved_reflections.addon import bake_cache, look_at_view
+    from curved_reflections.addon.baking import bake_cache
+    from curved_reflections.addon import look_at_view
     from curved_reflections.operators import live
 
     from test_live import _draw, _touched
@@ -234,7 +235,7 @@ def test_render_image_in_octree_mode_bakes_ray_octrees_first(empty_scene, morph_
     """Octree mode (Martin & Popescu 2004): Render Image bakes the grid of ray octrees
     (the manifest says so) and draws the mirror from it, with no camera per view. Set
     back to Morphing, the next bake replaces it with the tetrahedral grid."""
-    from curved_reflections.addon import bake_cache
+    from curved_reflections.addon.baking import bake_cache
     from curved_reflections.operators.render_image import render_scene
 
     ball = _mirror_scene(empty_scene, mode='OCTREE')

@@ -11,7 +11,7 @@ component); we use the cube map.
 Our surface model (DESIGN.md) has flat triangles with interpolated normals, so each texel
 stores r and the *interpolated* normal where the ray from O along the texel's direction
 meets the mesh, rather than the gradient of r: the reflection law is then solved with
-the same normals as the exact reference solver (``addon/exact.py``). Values between
+the same normals as the exact reference solver (``addon/reference/exact.py``). Values between
 texel centres are bilinear (four fetches, not the hardware filter, so the GLSL twin and
 numpy agree exactly). Each face is one texel wider on every side than its [-1, 1]
 square (texels taken along directions just past the face's edge), so a bilinear lookup
@@ -32,8 +32,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...raytrace import ReflectorSet
-from ...vectors import cross, dot, lengths, normalized
+from ...geometry.raytrace import ReflectorSet
+from ...geometry.vectors import cross, dot, lengths, normalized
 
 #: Texels along a cube face's side (without the border): about 0.35 degree per texel.
 DEFAULT_FACE_SIZE = 256

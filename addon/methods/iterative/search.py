@@ -51,7 +51,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...projection import NOT_PROJECTED, SEARCH_ANSWER, Projection
-from ...vectors import cross, dot, lengths, normalized
+from ...geometry.vectors import cross, dot, lengths, normalized
 from ...view import View
 from .reflector_map import ReflectorMap
 

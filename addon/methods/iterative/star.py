@@ -23,9 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...raytrace import ReflectorSet
+from ...geometry.raytrace import ReflectorSet
 from ...scene import Reflector, triangle_areas
-from ...vectors import lengths
+from ...geometry.vectors import lengths
 from .reflector_map import DEFAULT_FACE_SIZE, MapBake, bake_reflector_map
 
 #: Smallest cosine allowed between a ray from O and the face it meets: below it r(d)

@@ -2,7 +2,7 @@
 """Reflection morphing with ray octrees (Martin & Popescu 2004): a ray octree at every
 node of a regular grid around the reflector (:mod:`.node`, :mod:`.ray_octree`), the eight
 nodes of the eye's cell blended trilinearly (:mod:`.grid`). Baked, cached and drawn on
-the GPU like the tetrahedral grid (``addon/morphing.py``), whose interface it shares."""
+the GPU like the tetrahedral grid (``addon/methods/morphing/morphing.py``), whose interface it shares."""
 
 from .grid import OctreeGrid, locate_cell, octree_grid_on_demand
 from .node import OctreeNode, build_octree_node, octree_node_arrays, octree_node_from_arrays

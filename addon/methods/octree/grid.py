@@ -18,8 +18,9 @@ import dataclasses
 
 import numpy as np
 
-from ...morph_grid import NODE_OK, OCTREE, MorphSettings, NodesOnDemand, _StatusOnDemand, bake_reflector, rigid_frame, to_frame
-from ...morphing import MorphingGrid, ViewOutsideGrid, compact_images
+from ..morphing.morph_grid import (NODE_OK, OCTREE, MorphSettings, NodesOnDemand, _StatusOnDemand, bake_reflector,
+                                   rigid_frame, to_frame)
+from ..morphing.morphing import MorphingGrid, ViewOutsideGrid, compact_images
 from ...scene import Reflector
 from .node import build_octree_node
 

@@ -11,10 +11,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...errors import SceneInputError
-from ...morph_grid import NODE_INSIDE, NODE_OK, MorphSettings, _face_sees_sphere, cube_face_views
-from ...raymap import trace_ray_map
-from ...raytrace import ReflectorSet
-from ...sbc_build import check_view_outside_reflectors
+from ..morphing.morph_grid import NODE_INSIDE, NODE_OK, MorphSettings, _face_sees_sphere, cube_face_views
+from ..sbc.raymap import trace_ray_map
+from ...geometry.raytrace import ReflectorSet
+from ..sbc.sbc_build import check_view_outside_reflectors
 from .ray_octree import RayOctree, build_ray_octree
 
 
@@ -53,7 +53,7 @@ def build_octree_node(reflector_set: ReflectorSet, eye, bounds, settings: MorphS
 
 
 def octree_node_arrays(node: OctreeNode) -> dict:
-    """A node as arrays for the bake cache (``addon/bake_cache.py``)."""
+    """A node as arrays for the bake cache (``addon/baking/bake_cache.py``)."""
     return {"status": np.array(node.status), "seconds": np.array(node.seconds), **node.octree.to_arrays("octree_")}
 
 

@@ -36,8 +36,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...projection import NOT_PROJECTED, PERTURBATION_ANSWER, Projection
-from ...raytrace import ReflectorSet
-from ...vectors import dot, normalized
+from ...geometry.raytrace import ReflectorSet
+from ...geometry.vectors import dot, normalized
 from ...view import View
 from .path_derivatives import perturb
 from .seeds import SeedPaths, seed_paths_to, seed_quadrics, trace_seed_paths
@@ -116,7 +116,7 @@ class PerturbationReflector:
 @dataclass(frozen=True)
 class SeedGroup:
     """The grid seeds of one reflection history: their paths, quadrics, grid (what the
-    GPU twin, ``gpu_shaders/perturbation_gpu.py``, uploads)."""
+    GPU twin, ``gpu_shaders/methods/perturbation_gpu.py``, uploads)."""
 
     history: tuple
     seeds: SeedPaths

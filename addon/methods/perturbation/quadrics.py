@@ -14,7 +14,7 @@ second derivatives for it too, the third for the path Hessian.
   true surface (:meth:`AnalyticSurface.intersect`), and the exact reference can be
   polished onto it too (``path_derivatives.newton``).
 - :func:`osculating_quadrics`: on a mesh (flat triangles with interpolated normals, the
-  surface model of ``addon/exact.py``), the quadric through the hit point whose gradient
+  surface model of ``addon/reference/exact.py``), the quadric through the hit point whose gradient
   is the interpolated normal and whose second derivatives are the normal field's
   derivative along the facet (symmetrised). Its third derivatives are taken as zero:
   the Taylor step is exact to second order on the quadric, and the adaptive seeds
@@ -29,7 +29,7 @@ import numpy as np
 
 from ...errors import SceneInputError
 from ...scene import Reflector
-from ...vectors import dot
+from ...geometry.vectors import dot
 
 SPHERE, ELLIPSOID, SUPERQUADRIC = "SPHERE", "ELLIPSOID", "SUPERQUADRIC"
 SHAPES = (SPHERE, ELLIPSOID, SUPERQUADRIC)

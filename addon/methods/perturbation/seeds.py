@@ -11,7 +11,7 @@ grid is not accurate enough (``projector.py``).
 
 A hit on a reflector declared analytic (:class:`.quadrics.AnalyticSurface`) is moved
 along its ray onto the true surface and reflected about the true normal; elsewhere the
-mesh's interpolated normal reflects (the surface model of ``addon/exact.py``).
+mesh's interpolated normal reflects (the surface model of ``addon/reference/exact.py``).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...raytrace import ReflectorSet, reflect, reflection_valid
+from ...geometry.raytrace import ReflectorSet, reflect, reflection_valid
 from ...view import View
 from .path_derivatives import Paths, optimal_multipliers
 from .quadrics import QuadricRows, osculating_quadrics

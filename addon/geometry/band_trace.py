@@ -1,0 +1,233 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Ray tracing of the thin band along a reflector's visible edge (numpy only).
+
+A sample-based camera projects a point only between four neighbouring rays of its
+reflection group (``addon/methods/sbc/sbc.py``, after SBC paper section IV: the rays' frustums),
+so no reflection can be drawn in the last ray-map cell before the reflector's
+silhouette, or before an object in front of it: there the neighbour rays do not exist
+(they miss the reflector). That band is up to the down-sampling factor d pixels wide,
+and on small images it is a large share of a mirror (the whole rim of a sphere).
+
+The reflected rays of those few pixels are traced instead, as the ray map itself is
+traced (``addon/methods/sbc/raymap.py``, SBC section III-B), but against the diffuse meshes too:
+the view ray's first hit, then reflections off the reflectors up to the highest order
+drawn; the colour is the diffuse mesh's, shaded as the GPU shades it (:func:`shade`,
+``gpu_shaders/glsl/reflection_shading.glsl``: interpolated vertex colour times its image
+texture, lit along the true eye vector, the reversed reflected ray, SBC section V-C),
+where a reflected ray meets one, and the world's where it leaves the scene (or would
+need a higher order). The work is proportional to the perimeter of the footprint, not
+its area.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .raytrace import ReflectorSet, reflect, reflection_valid
+from ..scene import Reflector, vertex_normals
+
+#: Ambient share of the headlight Lambert shading (SBC V-C; glsl/reflection_shading.glsl).
+SHADE_AMBIENT = 0.3
+
+
+def shade(albedo: np.ndarray, lit: np.ndarray, normals: np.ndarray, to_eye: np.ndarray) -> np.ndarray:
+    """Headlight Lambert, two-sided: albedo (K, C) times AMBIENT + (1 - AMBIENT) |n . e|
+    where ``lit``, the albedo itself elsewhere (emission); the GLSL ``shade`` in numpy."""
+    lengths = np.linalg.norm(normals, axis=1) * np.linalg.norm(to_eye, axis=1)
+    cosine = np.divide(np.abs(np.einsum("ij,ij->i", normals, to_eye)), lengths, out=np.ones(len(lengths)),
+                       where=lengths > 1e-30)
+    factor = np.where(np.asarray(lit) > 0.5, SHADE_AMBIENT + (1.0 - SHADE_AMBIENT) * cosine, 1.0)
+    return albedo * factor[:, None]
+
+
+def sample_image(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Bilinear lookup of an (H, W, 4) image at texture coordinates (K, 2), repeating,
+    texel centres at (k + 0.5) / size (as the GPU's linear filter)."""
+    height, width = image.shape[:2]
+    x = np.asarray(uv[:, 0]) * width - 0.5
+    y = np.asarray(uv[:, 1]) * height - 0.5
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+    x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
+    x1, y1 = (x0 + 1) % width, (y0 + 1) % height
+    x0, y0 = x0 % width, y0 % height
+    return ((1 - fy) * ((1 - fx) * image[y0, x0] + fx * image[y0, x1])
+            + fy * ((1 - fx) * image[y1, x0] + fx * image[y1, x1]))
+
+
+class BandTracer:
+    """Reflectors and diffuse meshes in one BVH (``addon.raytrace.ReflectorSet``).
+
+    The diffuse meshes join the set as pseudo-reflectors (their normals are never
+    used: a hit on one ends the path), after the reflectors, so a hit's owner below
+    the number of reflectors is a mirror.
+    """
+
+    def __init__(self, reflectors, meshes):
+        self.n_reflectors = len(reflectors)
+        pseudo = []
+        for m in meshes:
+            normals = m.normals if getattr(m, "normals", None) is not None else vertex_normals(m.vertices, m.triangles)
+            normals = np.where((np.linalg.norm(normals, axis=1) > 1e-8)[:, None], normals, [0.0, 0.0, 1.0])
+            pseudo.append(Reflector(f"{m.name} (diffuse)", m.vertices, m.triangles, normals))
+        self.everything = ReflectorSet(list(reflectors) + pseudo)
+        self.meshes = list(meshes)
+        self.offsets = np.cumsum([0] + [len(r.vertices) for r in list(reflectors) + pseudo])
+        self.mesh_colors = (np.concatenate([np.asarray(m.colors, dtype=np.float64) for m in meshes])
+                            if meshes else np.zeros((0, 4)))
+        self.mesh_uvs = (np.concatenate([np.zeros((len(m.vertices), 2)) if m.uvs is None else m.uvs for m in meshes])
+                         if meshes else np.zeros((0, 2)))
+        self.vertex_mesh = np.repeat(np.arange(len(meshes)), [len(m.vertices) for m in meshes])
+
+    def trace(self, view, pixels: np.ndarray, max_order: int, world_color) -> np.ndarray:
+        """Linear RGB seen through pixel centres ``pixels`` (K, 2), mirrors included, and in
+        the fourth column the distance from the last mirror to the diffuse point (0 for a
+        point seen directly, inf where the world shows): (K, 4).
+
+        Paths stop at the first diffuse hit, when they leave the scene (world colour), at
+        an invalid reflection (a grazing ray turned into the mirror: world colour), or
+        on a reflector after ``max_order`` reflections (world colour, as the drawing
+        shows where no reflection group of that order exists).
+        """
+        pixels = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
+        out = np.tile(np.asarray(world_color, dtype=np.float64)[:4], (len(pixels), 1))
+        out[:, 3] = np.inf
+        if len(pixels) == 0:
+            return out
+        origins, directions = view.pixel_rays(pixels)
+        alive = np.arange(len(pixels))
+        hits = self.everything.intersect(origins, directions)
+        for order in range(max_order + 1):
+            hit = hits.hit
+            owner = np.where(hit, hits.reflector, -1)
+            diffuse = hit & (owner >= self.n_reflectors)
+            if diffuse.any():
+                out[alive[diffuse], :3] = self._color(hits.triangle[diffuse], hits.barycentric[diffuse],
+                                                      hits.normal[diffuse], -directions[diffuse])
+                out[alive[diffuse], 3] = hits.t[diffuse] if order > 0 else 0.0
+            mirror = hit & (owner >= 0) & (owner < self.n_reflectors)
+            if order == max_order:
+                break
+            valid = mirror & reflection_valid(directions, np.nan_to_num(hits.normal), np.nan_to_num(hits.face_normal))
+            keep = np.flatnonzero(valid)
+            if len(keep) == 0:
+                break
+            alive = alive[keep]
+            origins = hits.position[keep]
+            directions = reflect(directions[keep], hits.normal[keep])
+            hits = self.everything.intersect(origins, directions, source_triangles=hits.triangle[keep])
+        return out
+
+    def _color(self, triangles: np.ndarray, barycentric: np.ndarray, normals: np.ndarray,
+               to_eye: np.ndarray) -> np.ndarray:
+        """Shaded RGB of diffuse hits: barycentric mix of the triangle's vertex colours, times
+        its mesh's image at the interpolated UVs, lit along ``to_eye`` (:func:`shade`)."""
+        corners = self.everything.triangles[triangles] - self.offsets[self.n_reflectors]
+        albedo = np.einsum("ij,ijk->ik", barycentric, self.mesh_colors[corners])[:, :3]
+        mesh = self.vertex_mesh[corners[:, 0]]
+        for index in np.unique(mesh):
+            image = getattr(self.meshes[index], "image", None)
+            if image is None:
+                continue
+            rows = mesh == index
+            uv = np.einsum("ij,ijk->ik", barycentric[rows], self.mesh_uvs[corners[rows]])
+            albedo[rows] *= sample_image(np.asarray(image, dtype=np.float64), uv)[:, :3]
+        lit = np.array([0.0 if m.emissive else 1.0 for m in self.meshes])[mesh]
+        return shade(albedo, lit, normals, to_eye)
+
+
+def history_boundary(ray_map, width: int, height: int, max_order: int) -> np.ndarray:
+    """(H, W) bool: pixels between ray-map cells whose deepest ray (of order <= max_order)
+    has different surface histories (``RayMap.surfaces``: reflectors and their smooth
+    pieces), or where one of those cells has no ray.
+
+    A pixel is drawn from the four cells around its centre (a projection needs four rays
+    of one tree's grid). Where those cells end in different histories (inside a
+    footprint: the silhouette of another reflector seen in this one, where the rays go
+    on to a second order; or a sharp edge of the mirror, where the trees of its two
+    sides end: sbc_build.surface_sets) no tree has all four rays there, so neither side's
+    reflection reaches the pixel: the same band as along a footprint's edge, inside it
+    (SBC section IV).
+    """
+    d = ray_map.downsample
+    columns, rows = ray_map.columns, ray_map.rows
+    n_groups = max(1, len(ray_map.surfaces))
+    keep = ray_map.order <= max_order
+    key = np.full((rows, columns), -1, dtype=np.int64)
+    cells = ray_map.cell[keep]
+    np.maximum.at(key, (cells[:, 1], cells[:, 0]), ray_map.order[keep] * n_groups + ray_map.surface[keep])
+    final = np.where(key >= 0, key % n_groups, -1)
+
+    def brackets(n_pixels, n_cells):
+        low = np.clip(np.floor((np.arange(n_pixels) + 0.5) / d - 0.5).astype(np.int64), 0, n_cells - 1)
+        return low, np.minimum(low + 1, n_cells - 1)
+
+    i0, i1 = brackets(width, columns)
+    j0, j1 = brackets(height, rows)
+    corners = [final[np.ix_(j, i)] for j in (j0, j1) for i in (i0, i1)]
+    return ~((corners[0] == corners[1]) & (corners[0] == corners[2]) & (corners[0] == corners[3]))
+
+
+def band_pixels(labels: np.ndarray, drawn: np.ndarray, radius: int, edges_of_drawn: bool = False,
+                boundary: np.ndarray | None = None) -> np.ndarray:
+    """(K, 2) integer pixels (x, y) of reflector pixels without a drawn reflection that lie
+    within ``radius`` pixels (Chebyshev) of a pixel with another id (or the image edge),
+    or in ``boundary`` (:func:`history_boundary`), and with ``edges_of_drawn`` also those
+    within ``radius`` of a drawn reflection.
+
+    ``labels`` (H, W) ids of the pre-pass (0 none or diffuse, reflector index + 1);
+    ``drawn`` (H, W) bool where the reflection pass drew.
+    """
+    ids = np.rint(labels).astype(np.int64)
+    height, width = ids.shape
+    radius = max(0, int(radius))
+    padded = np.pad(ids, radius, constant_values=-1)
+    padded_drawn = np.pad(np.asarray(drawn, dtype=bool), radius, constant_values=False)
+    near_edge = np.zeros(ids.shape, dtype=bool)
+    for dy in range(-radius, radius + 1):
+        for dx in range(-radius, radius + 1):
+            window = (slice(radius + dy, radius + dy + height), slice(radius + dx, radius + dx + width))
+            near_edge |= padded[window] != ids
+            if edges_of_drawn:
+                near_edge |= padded_drawn[window]
+    if boundary is not None:
+        near_edge |= boundary
+    rows, columns = np.nonzero((ids > 0) & ~drawn & near_edge)
+    return np.stack([columns, rows], axis=1)
+
+
+def unreliable_cells(ray_map, trees, mixed=None, folds=None) -> np.ndarray:
+    """(rows, columns) bool: ray-map cells (by their lower-left corner ray) where the
+    sample-based camera itself knows its projection is unreliable: cells of ray-list
+    leaves (no plane split the rays, SBC section IV-C) and of banded camera leaves' ray
+    lists (their rays focus, ``bsp._depth_bands``), fold cells (the rays cross: a
+    caustic, ``sbc_cells.FoldCells``) and mixed cells (an occluder's silhouette crosses the
+    cell, ``sbc_cells.MixedCells``). Reflections there may be missing although the mirror
+    shows an object (thin, strongly curved parts: a teapot's spout). A ray-list leaf's
+    rays (``BSPTree.list_rays``) mark the four cells around each: a leaf one ray wide
+    along a sharp edge of the mirror has no complete cell of its own."""
+    out = np.zeros((ray_map.rows, ray_map.columns), dtype=bool)
+    for tree in trees:
+        if tree.cells is not None and len(tree.cells.lo):
+            corner = np.rint(tree.cells.lo).astype(np.int64)
+            out[corner[:, 1], corner[:, 0]] = True
+        if tree.list_rays is not None and len(tree.list_rays):
+            i, j = ray_map.cell[tree.list_rays, 0], ray_map.cell[tree.list_rays, 1]
+            for di in (0, 1):
+                for dj in (0, 1):
+                    out[np.maximum(j - dj, 0), np.maximum(i - di, 0)] = True
+    for cells in list(mixed or []) + list(folds or []):
+        if cells is not None:
+            out |= cells.index >= 0
+    return out
+
+
+def cell_pixels_mask(cells: np.ndarray, downsample: int, width: int, height: int) -> np.ndarray:
+    """(H, W) bool: pixels whose centre lies in a marked ray-map cell square (the four
+    rays around the centre, lower-left corner marked), as :func:`history_boundary` reads them."""
+    rows, columns = cells.shape
+
+    def lower(n_pixels, n_cells):
+        return np.clip(np.floor((np.arange(n_pixels) + 0.5) / downsample - 0.5).astype(np.int64), 0, n_cells - 1)
+
+    return cells[np.ix_(lower(height, rows), lower(width, columns))]

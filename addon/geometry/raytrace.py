@@ -1,0 +1,266 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""CPU ray tracing of the reflectors: nearest hits, occlusion, mirror reflection.
+
+All reflectors of a scene are traced together through one :class:`ReflectorSet`, so a
+ray's nearest hit is the nearest over every reflector and occlusion by the other
+reflectors comes for free. Rays are processed in chunks, each chunk as whole arrays
+(breadth-first BVH descent, batched Moller-Trumbore), so full-resolution ray maps are
+practical in numpy.
+
+Surface model (DESIGN.md): flat triangles carrying interpolated vertex normals. Mirrors
+are two-sided, as in Cycles: at a hit, the geometric and the interpolated normal are
+turned toward the side the ray comes from. A reflection is *valid* where the incoming
+ray is in front of the interpolated normal and the reflected ray leaves the front of
+the triangle; near silhouettes, interpolated normals can break either condition.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+
+from .bvh import build_bvh, descend, ray_box_test
+from ..errors import SceneInputError
+from ..scene import Reflector, smooth_pieces
+from .segments import expand_ranges
+from .vectors import cross, cross_rows, dot_rows
+
+RAY_CHUNK = 1 << 16
+#: Relative (to the scene size) distance below which a hit is taken as the ray's own origin.
+SELF_HIT_EPSILON = 1e-9
+
+
+@dataclass(frozen=True)
+class RayHits:
+    """Nearest hits of R rays; entries of rays that hit nothing are -1 / inf / NaN."""
+
+    t: np.ndarray  # (R,) distance along the unit ray, inf for a miss
+    triangle: np.ndarray  # (R,) index into ReflectorSet triangles, -1 for a miss
+    reflector: np.ndarray  # (R,) reflector index, -1 for a miss
+    barycentric: np.ndarray  # (R, 3) weights of the triangle's three corners
+    position: np.ndarray  # (R, 3)
+    normal: np.ndarray  # (R, 3) interpolated normal, turned toward the ray's origin
+    face_normal: np.ndarray  # (R, 3) geometric normal, turned toward the ray's origin
+
+    @property
+    def hit(self) -> np.ndarray:
+        return self.triangle >= 0
+
+
+def reflect(directions: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """Mirror directions about unit normals: d - 2 (d . n) n."""
+    return directions - 2.0 * np.einsum("ij,ij->i", directions, normals)[:, None] * normals
+
+
+def reflection_valid(directions: np.ndarray, normals: np.ndarray, face_normals: np.ndarray) -> np.ndarray:
+    """Incoming ray in front of the (oriented) interpolated normal, reflected ray leaving the face."""
+    reflected = reflect(directions, normals)
+    return (np.einsum("ij,ij->i", directions, normals) < 0) & (np.einsum("ij,ij->i", reflected, face_normals) > 0)
+
+
+def _nearest_per_ray(rays, triangles, t, u, v):
+    """Of (ray, triangle) hits, each ray's nearest: its rays (sorted), t, triangles and (u, v)."""
+    order = np.lexsort((t, rays))
+    rays, triangles, t, u, v = rays[order], triangles[order], t[order], u[order], v[order]
+    first = np.ones(len(rays), dtype=bool)
+    first[1:] = rays[1:] != rays[:-1]
+    return rays[first], t[first], triangles[first], np.stack([u[first], v[first]], axis=1)
+
+
+class ReflectorSet:
+    """All reflectors of a scene, concatenated, with one BVH for tracing and solving."""
+
+    def __init__(self, reflectors: list[Reflector], leaf_size: int = 4):
+        if not reflectors:
+            raise SceneInputError("scene", "has no reflector: mark at least one object as a reflector")
+        self.reflectors = list(reflectors)
+        offsets = np.cumsum([0] + [len(r.vertices) for r in reflectors])
+        self.vertices = np.concatenate([r.vertices for r in reflectors])
+        self.normals = np.concatenate([r.normals for r in reflectors])
+        self.triangles = np.concatenate([r.triangles + o for r, o in zip(reflectors, offsets)])
+        self.owner = np.concatenate(
+            [np.full(len(r.triangles), i, dtype=np.int64) for i, r in enumerate(reflectors)]
+        )
+        corners = self.vertices[self.triangles]
+        self.v0 = corners[:, 0]
+        self.e1 = corners[:, 1] - corners[:, 0]
+        self.e2 = corners[:, 2] - corners[:, 0]
+        face = cross(self.e1, self.e2)
+        self.area2 = np.linalg.norm(face, axis=1)
+        self.face_normals = face / np.maximum(self.area2, 1e-300)[:, None]
+        # v0, e1 and e2 as nine rows: one gather gives a batch's corners coordinate by coordinate.
+        self.corner_rows = np.concatenate([self.v0, self.e1, self.e2], axis=1).T.copy()
+        lo, hi = self.vertices.min(axis=0), self.vertices.max(axis=0)
+        self.scale = float(max(np.linalg.norm(hi - lo), 1e-12))
+        # Split vertices (sharp edges, custom normals) share positions: weld them so that
+        # triangles meeting at a split still count as neighbours.
+        _, welded = np.unique(self.vertices, axis=0, return_inverse=True)
+        self.welded_triangles = welded.reshape(-1)[self.triangles]
+        # Smooth pieces never span reflectors: each reflector's vertices are its own.
+        self.piece = smooth_pieces(self.triangles, len(self.vertices))
+        self.bvh = build_bvh(self.vertices, self.triangles, self.normals, leaf_size=leaf_size)
+
+    @property
+    def nbytes(self) -> int:
+        arrays = (self.vertices, self.normals, self.triangles, self.owner, self.v0, self.e1, self.e2,
+                  self.face_normals, self.welded_triangles, self.piece)
+        return int(sum(a.nbytes for a in arrays)) + self.bvh.nbytes
+
+    def surface(self, triangles: np.ndarray, barycentric: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Positions and unit interpolated normals at barycentric coordinates of triangles."""
+        corners = self.triangles[triangles]
+        positions = np.einsum("ij,ijk->ik", barycentric, self.vertices[corners])
+        normals = np.einsum("ij,ijk->ik", barycentric, self.normals[corners])
+        normals /= np.maximum(np.linalg.norm(normals, axis=1), 1e-300)[:, None]
+        return positions, normals
+
+    def neighbours(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """(K,) bool: triangles a and b share a (welded) vertex; -1 never does."""
+        shared = (self.welded_triangles[a][:, :, None] == self.welded_triangles[b][:, None, :]).any(axis=(1, 2))
+        return shared & (a >= 0) & (b >= 0)
+
+    def intersect(self, origins, directions, t_max=np.inf, source_triangles=None) -> RayHits:
+        """Nearest reflector hit of each ray (unit ``directions``) with t in (eps, t_max].
+
+        ``source_triangles`` (R,) excludes hits on the triangle a ray starts from and its
+        one-ring neighbours (facet self-hits of reflected rays), -1 for none.
+        """
+        origins = np.asarray(origins, dtype=np.float64)
+        directions = np.asarray(directions, dtype=np.float64)
+        n_rays = len(origins)
+        t_max = np.broadcast_to(np.asarray(t_max, dtype=np.float64), (n_rays,))
+        sources = (np.full(n_rays, -1, dtype=np.int64) if source_triangles is None
+                   else np.asarray(source_triangles, dtype=np.int64))
+        best_t = np.full(n_rays, np.inf)
+        best_triangle = np.full(n_rays, -1, dtype=np.int64)
+        best_uv = np.full((n_rays, 2), np.nan)
+        for start in range(0, n_rays, RAY_CHUNK):
+            chunk = slice(start, min(start + RAY_CHUNK, n_rays))
+            rays, t, triangles, uv = self._chunk_hits(
+                origins[chunk], directions[chunk], t_max[chunk], sources[chunk]
+            )
+            best_t[chunk][rays] = t
+            best_triangle[chunk][rays] = triangles
+            best_uv[chunk][rays] = uv
+        return self._hits(origins, directions, best_t, best_triangle, best_uv)
+
+    def intersect_near(self, origins, directions, near_triangles) -> RayHits:
+        """Hits of rays expected to land next to known triangles (``near_triangles`` (R,),
+        -1 where unknown): the nearest hit among each ray's triangle and those sharing a
+        vertex with it (``ring``); rays that hit none of them, or have no guess, get the
+        nearest hit over all triangles (``intersect``).
+
+        Not always the nearest hit: another part of the mesh, not in the ring, may lie in
+        front. For rays iterated in small steps over one surface (true_rays.py), whose
+        final answer is then checked with ``intersect``, it avoids a BVH descent per step.
+        """
+        origins = np.asarray(origins, dtype=np.float64)
+        directions = np.asarray(directions, dtype=np.float64)
+        near_triangles = np.asarray(near_triangles, dtype=np.int64)
+        start, ring = self.ring
+        guess = np.flatnonzero(near_triangles >= 0)
+        owner, member = expand_ranges(start[near_triangles[guess]], np.diff(start)[near_triangles[guess]])
+        rays, triangles = guess[owner], ring[member]
+        t, u, v, _ = self.hit_triangles(origins[rays], directions[rays], triangles)
+        with np.errstate(invalid="ignore"):
+            keep = t > SELF_HIT_EPSILON * self.scale
+        rays, t, triangles, uv = _nearest_per_ray(rays[keep], triangles[keep], t[keep], u[keep], v[keep])
+        best_t = np.full(len(origins), np.inf)
+        best_triangle = np.full(len(origins), -1, dtype=np.int64)
+        best_uv = np.full((len(origins), 2), np.nan)
+        best_t[rays], best_triangle[rays], best_uv[rays] = t, triangles, uv
+        missed = np.flatnonzero(best_triangle < 0)
+        if len(missed):
+            hits = self.intersect(origins[missed], directions[missed])
+            best_t[missed] = hits.t
+            best_triangle[missed] = hits.triangle
+            best_uv[missed] = hits.barycentric[:, 1:]
+        return self._hits(origins, directions, best_t, best_triangle, best_uv)
+
+    @functools.cached_property
+    def bounding_sphere(self) -> tuple[np.ndarray, float]:
+        """(centre, radius): the sphere around the vertices' box centre through the
+        farthest vertex; every triangle lies inside it."""
+        centre = 0.5 * (self.vertices.min(axis=0) + self.vertices.max(axis=0))
+        offset = self.vertices - centre
+        return centre, float(np.sqrt(np.max(np.einsum("vd,vd->v", offset, offset))))
+
+    @functools.cached_property
+    def ring(self) -> tuple[np.ndarray, np.ndarray]:
+        """CSR (start (T + 1,), triangles) of each triangle and those sharing a (welded)
+        vertex with it, itself included."""
+        n = len(self.triangles)
+        corner_vertex = self.welded_triangles.reshape(-1)
+        corner_triangle = np.repeat(np.arange(n), 3)
+        order = np.argsort(corner_vertex, kind="stable")
+        vertex, triangle = corner_vertex[order], corner_triangle[order]
+        bounds = np.flatnonzero(np.r_[True, vertex[1:] != vertex[:-1], True])
+        valence = np.diff(bounds)
+        # Every pair of triangles around one vertex: (a, b) for a, b in its fan.
+        fan, local = expand_ranges(np.zeros(len(valence), dtype=np.int64), valence * valence)
+        a = triangle[bounds[fan] + local // valence[fan]]
+        b = triangle[bounds[fan] + local % valence[fan]]
+        pairs = np.unique(a * n + b)
+        a, b = pairs // n, pairs % n
+        return np.searchsorted(a, np.arange(n + 1)), b
+
+    def occluded(self, origins, directions, distances, source_triangles=None) -> np.ndarray:
+        """(R,) bool: a reflector lies on the segment of length ``distances`` along each ray."""
+        distances = np.asarray(distances, dtype=np.float64) * (1.0 - 1e-9)
+        return self.intersect(origins, directions, distances, source_triangles).hit
+
+    def _chunk_hits(self, origins, directions, t_max, sources):
+        t_min = np.full(len(origins), SELF_HIT_EPSILON * self.scale)
+        test = ray_box_test(self.bvh, origins, directions, t_min, t_max)
+        rays, triangles = descend(self.bvh, np.arange(len(origins)), test)
+        t, u, v, _ = self.hit_triangles(origins[rays], directions[rays], triangles)
+        with np.errstate(invalid="ignore"):
+            keep = (t > t_min[rays]) & (t <= t_max[rays])
+        # Rays from a reflector skip the triangle they start from and its one-ring.
+        from_surface = np.flatnonzero(keep & (sources[rays] >= 0))
+        keep[from_surface] &= (~self.neighbours(sources[rays[from_surface]], triangles[from_surface])
+                               & (triangles[from_surface] != sources[rays[from_surface]]))
+        return _nearest_per_ray(rays[keep], triangles[keep], t[keep], u[keep], v[keep])
+
+    def hit_triangles(self, origins, directions, triangles):
+        """Batched Moller-Trumbore of ray i against triangle i.
+
+        Returns (t, u, v, det): t is NaN where the pair misses (outside the triangle, or
+        the ray parallel to its plane); u, v weigh corners 1 and 2; det is the test's
+        determinant, -(d . face normal) times twice the area.
+        """
+        rows = self.corner_rows[:, triangles]
+        v0, e1, e2 = rows[0:3], rows[3:6], rows[6:9]
+        d = np.ascontiguousarray(directions.T)
+        p = cross_rows(d, e2)
+        det = dot_rows(e1, p)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / det
+            s = origins.T - v0
+            u = dot_rows(s, p) * inv
+            q = cross_rows(s, e1)
+            v = dot_rows(d, q) * inv
+            t = dot_rows(e2, q) * inv
+            tolerance = 1e-12
+            # A ray parallel to the plane has NaN or infinite u, v: not inside.
+            inside = (np.abs(det) > 1e-300) & (u >= -tolerance) & (v >= -tolerance) & (u + v <= 1 + tolerance)
+        return np.where(inside, t, np.nan), u, v, det
+
+    def _hits(self, origins, directions, t, triangles, uv) -> RayHits:
+        hit = triangles >= 0
+        barycentric = np.full((len(t), 3), np.nan)
+        barycentric[hit] = np.stack([1 - uv[hit, 0] - uv[hit, 1], uv[hit, 0], uv[hit, 1]], axis=1)
+        position = np.full((len(t), 3), np.nan)
+        normal = np.full((len(t), 3), np.nan)
+        face = np.full((len(t), 3), np.nan)
+        # Positions from the ray (exactly on it), normals from the surface, both-sided.
+        position[hit] = origins[hit] + t[hit, None] * directions[hit]
+        _, normal[hit] = self.surface(triangles[hit], barycentric[hit])
+        face[hit] = self.face_normals[triangles[hit]]
+        flip = np.einsum("ij,ij->i", face[hit], directions[hit]) > 0
+        face[hit] = np.where(flip[:, None], -face[hit], face[hit])
+        normal[hit] = np.where(flip[:, None], -normal[hit], normal[hit])
+        reflector = np.where(hit, self.owner[np.maximum(triangles, 0)], -1)
+        return RayHits(t, triangles, reflector, barycentric, position, normal, face)

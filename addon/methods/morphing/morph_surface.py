@@ -1,0 +1,138 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Refinement of a morphing blend on the local surface the nodes' images lie on.
+
+The four nodes' first reflector points of one image, blended with the eye's weights,
+lie near the mirror but not on it, and the reflection law does not hold there. A
+quadratic surface is fitted through the nodes' images (with their normals), and the
+reflection point of the desired eye is solved on it by Newton's method; the refined
+point replaces the blend where it stays within reach of the nodes' images
+(:mod:`.morphing`, ``MorphingGrid._blend``; the GLSL twin is ``glsl/morph_blend.glsl``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...geometry.vectors import cross
+
+#: Nodes with an image (and a usable normal) a local surface is fitted to, at least.
+MIN_SURFACE_NODES = 3
+#: Newton iterations of the reflection law on the local quadratic surface.
+SURFACE_ITERATIONS = 8
+#: The refined point may lie this far (in units of the nodes' images' spread) from the blend.
+SURFACE_REACH = 2.0
+#: A node's image joins the surface fit where its normal is within about 78 degrees of
+#: the nodes' weighted normal (cosine above this).
+SURFACE_NORMAL_MIN = 0.2
+
+
+def refine_on_local_surface(images, present, eyes, points, eye, weights):
+    """The reflection point of ``eye`` on a quadratic fitted to the nodes' images.
+
+    Our refinement of the paper's blend (SBC VI blends the four first reflector points
+    linearly, an error quadratic in the grid spacing). Each node's image x_i of point p
+    seen from node eye n_i comes with the mirror normal there: by the law of reflection
+    it bisects the directions to n_i and to p. Around the blend, in the frame of the
+    blended normal, a height field h(a, b) = c0 + c1 a + c2 b + c3 a^2/2 + c4 ab + c5 b^2/2
+    is fitted (least squares) to the images' heights and slopes (3 equations per node),
+    and Newton's method finds the point of that surface where its normal bisects the
+    directions to the desired eye and to p. The result is exact for a quadratic mirror
+    and third order in the spread of the images elsewhere. Needs MIN_SURFACE_NODES nodes
+    (two give as many equations as unknowns: measured, their fits are often wrong);
+    where it fails or leaves the images' neighbourhood, ``ok`` is False.
+
+    images (Q, N, 3), present (Q, N) bool, eyes (N, 3) node positions, points (Q, 3),
+    eye (3,), weights (Q, N) (zero where absent); N nodes: 4 of a tetrahedron, 8 of a
+    cube (``methods/octree``). Returns (Q, 3) points, (Q,) ok, (Q, 3) the
+    mirror normal there (fitted where ok, else the weighted one) and (Q, 3) the weighted
+    normal of the images (the normal at the linear blend).
+    """
+    q = len(images)
+    total = np.maximum(weights.sum(axis=1), 1e-300)
+    origin = np.einsum("qn,qnd->qd", weights, images) / total[:, None]
+    to_eye = _unit(eyes[None] - images)
+    to_point = _unit(points[:, None] - images)
+    normals = _unit(to_eye + to_point)
+    normal = _unit(np.einsum("qn,qnd->qd", weights, normals))
+    nz = np.einsum("qnd,qd->qn", normals, normal)
+    usable = present & (nz > SURFACE_NORMAL_MIN)
+    x, ok, fitted_normal = origin.copy(), np.zeros(q, bool), normal.copy()
+    # Only rows with enough usable nodes are fitted (a point's empty image slots and
+    # images seen by too few nodes are most rows of a drawn mesh's projection).
+    rows = np.flatnonzero(usable.sum(axis=1) >= MIN_SURFACE_NODES)
+    if len(rows):
+        x[rows], ok[rows], fitted_normal[rows] = _fit_and_reflect(
+            images[rows], present[rows], usable[rows], normals[rows], normal[rows], nz[rows], origin[rows],
+            points[rows], eye)
+    # Where the fit is not used, the weighted normal of the nodes' images stands for the
+    # mirror's normal at the linear blend.
+    return x, ok, np.where(ok[:, None], fitted_normal, normal), normal
+
+
+def _fit_and_reflect(images, present, usable, normals, normal, nz, origin, points, eye):
+    """:func:`refine_on_local_surface` for rows that have enough usable nodes: the
+    height-field fit and Newton on it; returns (x, ok, fitted normal). Newton runs on the
+    rows not yet converged only."""
+    q = len(images)
+    helper = np.where(np.abs(normal[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
+    t1 = _unit(cross(normal, helper))
+    t2 = cross(normal, t1)
+    offset = images - origin[:, None]
+    a, b, h = (np.einsum("qnd,qd->qn", offset, axis) for axis in (t1, t2, normal))
+    spread = np.maximum(np.sqrt(np.max(np.where(present, a * a + b * b, 0.0), axis=1)), 1e-12)
+    a, b, h = a / spread[:, None], b / spread[:, None], h / spread[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slope_a = -np.einsum("qnd,qd->qn", normals, t1) / nz
+        slope_b = -np.einsum("qnd,qd->qn", normals, t2) / nz
+    zero, one = np.zeros_like(a), np.ones_like(a)
+    rows = np.concatenate([
+        np.stack([one, a, b, 0.5 * a * a, a * b, 0.5 * b * b], axis=2),
+        np.stack([zero, one, zero, a, b, zero], axis=2),
+        np.stack([zero, zero, one, zero, a, b], axis=2)], axis=1)  # (Q, 12, 6)
+    rhs = np.concatenate([h, slope_a, slope_b], axis=1)
+    mask = np.tile(usable, 3).astype(np.float64)
+    rows, rhs = rows * mask[..., None], np.nan_to_num(rhs) * mask
+    normal_matrix = np.einsum("qri,qrj->qij", rows, rows) + 1e-10 * np.eye(6)
+    coefficients = np.linalg.solve(normal_matrix, np.einsum("qri,qr->qi", rows, rhs)[..., None])[..., 0]
+
+    def surface(k, u, v):
+        c = coefficients[k]
+        height = c[:, 0] + c[:, 1] * u + c[:, 2] * v + 0.5 * c[:, 3] * u * u + c[:, 4] * u * v + 0.5 * c[:, 5] * v * v
+        du = c[:, 1] + c[:, 3] * u + c[:, 4] * v
+        dv = c[:, 2] + c[:, 4] * u + c[:, 5] * v
+        x = origin[k] + spread[k, None] * (u[:, None] * t1[k] + v[:, None] * t2[k] + height[:, None] * normal[k])
+        return x, t1[k] + du[:, None] * normal[k], t2[k] + dv[:, None] * normal[k]
+
+    def residual(k, u, v):
+        x, ta, tb = surface(k, u, v)
+        bisector = _unit(eye[None] - x) + _unit(points[k] - x)
+        return np.stack([np.einsum("qd,qd->q", bisector, ta), np.einsum("qd,qd->q", bisector, tb)], axis=1)
+
+    u, v = np.zeros(q), np.zeros(q)
+    active = np.arange(q)
+    step = 1e-6
+    for _ in range(SURFACE_ITERATIONS):
+        ua, va = u[active], v[active]
+        f = residual(active, ua, va)
+        ju = (residual(active, ua + step, va) - f) / step
+        jv = (residual(active, ua, va + step) - f) / step
+        det = ju[:, 0] * jv[:, 1] - jv[:, 0] * ju[:, 1]
+        det = np.where(np.abs(det) > 1e-300, det, 1e-300)
+        du = (f[:, 0] * jv[:, 1] - jv[:, 0] * f[:, 1]) / det
+        dv = (ju[:, 0] * f[:, 1] - f[:, 0] * ju[:, 1]) / det
+        u[active], v[active] = np.clip(ua - du, -4.0, 4.0), np.clip(va - dv, -4.0, 4.0)
+        # A step below 1e-13 (in units of the images' spread) changes nothing further.
+        active = active[~((np.abs(du) < 1e-13) & (np.abs(dv) < 1e-13))]
+        if len(active) == 0:
+            break
+    every = np.arange(q)
+    x, ta, tb = surface(every, u, v)
+    fitted_normal = _unit(cross(ta, tb))
+    fitted_normal *= np.where(np.einsum("qd,qd->q", fitted_normal, normal) < 0, -1.0, 1.0)[:, None]
+    ok = ((np.abs(residual(every, u, v)).max(axis=1) < 1e-8) & (u * u + v * v <= SURFACE_REACH ** 2)
+          & np.isfinite(x).all(axis=1))
+    return x, ok, fitted_normal
+
+
+def _unit(v):
+    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-300)

@@ -1,0 +1,65 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""What the renderer asks of a method that answers every vertex on the GPU each frame.
+
+The iterative search (``methods/iterative_draw.py``), the morphing grids, tetrahedral and
+octree (``methods/morph_pass.py``), and perturbation (``methods/perturbation_pass.py``)
+each write one answer texture per reflector (and image slot) that
+:class:`.reflected_meshes.ReflectedMeshes` draws. The renderer (``reflection_draw.py``)
+holds them as a tuple of :class:`FramePass` and never asks which method one is: it
+updates them for the view, draws their answers, and traces the pixels each says its
+method cannot be trusted on.
+"""
+
+from __future__ import annotations
+
+
+class FramePass:
+    """One method's per-frame GPU work for one renderer. Subclasses implement
+    :attr:`reflector_indices`, :meth:`update` and :meth:`answers`; the rest says how the
+    renderer's band trace treats the pass's reflectors and defaults to *not at all*."""
+
+    @property
+    def reflector_indices(self) -> list:
+        """Every reflector this pass may draw."""
+        raise NotImplementedError
+
+    def update(self, view, warm: bool = False, skip=frozenset()) -> None:
+        """This frame's answers for ``view``. ``warm``: start from the last frame's (a
+        viewport moving a little); a render is cold, so that its image depends on its
+        view alone. ``skip``: reflectors a sample-based camera draws this frame instead."""
+        raise NotImplementedError
+
+    def answers(self) -> list:
+        """(reflector index, answer texture) of the last update, for ``ReflectedMeshes.draw``."""
+        raise NotImplementedError
+
+    def drawn_in(self, view) -> frozenset:
+        """The reflectors whose first-order reflections this pass draws in ``view`` (a
+        camera made for the view leaves them out)."""
+        return frozenset(self.reflector_indices)
+
+    @property
+    def searched_reflectors(self) -> list:
+        """Reflectors answered by a search per vertex: vertices go unanswered along their
+        silhouette, so the band there is traced."""
+        return []
+
+    @property
+    def folded_reflectors(self) -> list:
+        """Reflectors whose images may crowd or fold (not convex, or not alone): the
+        pixels next to their drawn reflections are traced too."""
+        return []
+
+    @property
+    def gap_reflectors(self) -> list:
+        """Reflectors the last update drew with gaps a render may trace (``trace_gaps``)."""
+        return []
+
+    @property
+    def traces_band(self) -> bool:
+        """Whether a render traces the band of this pass's reflectors at all."""
+        return bool(self.searched_reflectors)
+
+    def frame_stats(self) -> dict:
+        """What a render reports about this pass's last frame (read back from the GPU)."""
+        return {}

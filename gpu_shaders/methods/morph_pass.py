@@ -1,0 +1,373 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Reflection morphing every frame on the GPU (SBC paper VI).
+
+Popescu, Sacks, Mei (2006), section VI: the projections of the scene's (static) vertices
+by the panoramic sample-based cameras at the grid's nodes are computed once, and each
+frame blends those of the four nodes of the tetrahedron holding the eye. Here that split
+is literal:
+
+- **once per node** (while the diffuse geometry and the reflector's rigid frame stay): a
+  node's images of every vertex, its first :data:`SLOTS` regular ones and as many from
+  its widened leaf charts (``MorphingGrid.node_slots``; the cube faces project on the
+  GPU, ``morph_source.GPUFaceImages``), kept on the GPU as one texture per node
+  (:class:`NodeTextures`, least recently used first out beyond a budget in MB); the
+  nodes around the eye are projected ahead on a worker thread (:meth:`MorphPass.prefetch`,
+  numpy) and uploaded when done (:meth:`MorphPass.collect`);
+- **every frame**: where the eye is (``MorphingGrid.check_view``: a lookup in the grid),
+  then one compute dispatch per grid (``glsl/morph_blend.glsl``, the float32 twin of
+  ``MorphingGrid._matched_images`` and ``_blend``) matches and blends the four nodes'
+  images and refines them on the local surface, into one answer texture per image slot,
+  and the reflected meshes are drawn from those (``reflected_meshes.ReflectedMeshes``,
+  as the iterative search's). Entering a tetrahedron whose nodes are on the GPU costs
+  the CPU nothing but the uniforms; a node neither on the GPU nor prefetched is projected
+  when first needed.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections import OrderedDict
+
+import numpy as np
+
+from ...addon.methods.morphing import morph_grid, morph_surface, morphing
+from ...addon.baking.bake_cache import CacheError
+from ..frame_pass import FramePass
+from ..reflected_meshes import FOUND_CODE, ReflectedMeshes
+from ..shader_sources import glsl_source
+
+#: Image slots per vertex and grid: a convex mirror shows a point once, a concave one
+#: two or three times.
+SLOTS = 3
+#: Invocations per work group of the blend (along x).
+LOCAL_SIZE = 64
+#: GPU memory for node images, by default (the scene's ``morph_gpu_budget_mb``).
+DEFAULT_BUDGET_MB = 256.0
+#: The float32 blend's bound on the reflection law's residual on the fitted surface (the
+#: numpy twin asks 1e-8 of float64 Newton steps; float32 reaches about 1e-7).
+SURFACE_RESIDUAL = 1e-5
+#: The per-frame parameters (``glsl/morph_blend.glsl``'s uniform block ``frame``), std140,
+#: for a cell of NODES nodes: per node, its eye (xyz) and weight (w), then how many
+#: regular (x) and widened-chart (y) image slots hold any image.
+FRAME_STRUCT = """
+struct MorphFrame {
+  mat4 frame_from_shifted;
+  mat4 shifted_from_frame;
+  mat4 view_projection;
+  vec4 eye_match;
+  vec4 nodes[NODES];
+  vec4 node_slots[NODES];
+};
+"""
+
+
+def frame_floats(n_nodes: int) -> int:
+    """Floats of one MorphFrame for cells of ``n_nodes`` nodes."""
+    return 3 * 16 + 4 + 8 * n_nodes
+
+
+def blend_defines(n_nodes: int = 4) -> dict:
+    """The engine's constants, as the blend shader's ``#define`` s, for cells of
+    ``n_nodes`` nodes (4: a tetrahedron of the SBC grid; 8: a cube of the octree grid)."""
+    m = morph_surface
+    return {"SLOTS": SLOTS, "NODES": n_nodes, "PARTIAL_WEIGHT": f"{morphing.PARTIAL_WEIGHT:.9e}",
+            "SURFACE_NORMAL_MIN": f"{m.SURFACE_NORMAL_MIN:.9e}", "MIN_SURFACE_NODES": m.MIN_SURFACE_NODES,
+            "SURFACE_ITERATIONS": m.SURFACE_ITERATIONS, "SURFACE_REACH": f"{m.SURFACE_REACH:.9e}",
+            "SURFACE_RESIDUAL": f"{SURFACE_RESIDUAL:.9e}", "FOUND_CODE": FOUND_CODE}
+
+
+@functools.cache
+def blend_shader(n_nodes: int = 4):
+    """The compute shader of the blend for cells of ``n_nodes`` nodes, built on first use."""
+    import gpu
+
+    info = gpu.types.GPUShaderCreateInfo()
+    info.push_constant('INT', "n_vertices")
+    info.push_constant('INT', "positions_width")
+    info.push_constant('INT', "slot_rows")
+    info.push_constant('INT', "active_slots")
+    info.typedef_source(FRAME_STRUCT.replace("NODES", str(n_nodes)))
+    info.uniform_buf(0, "MorphFrame", "frame")
+    info.sampler(0, 'FLOAT_2D', "vertex_positions")
+    for n in range(n_nodes):
+        info.sampler(1 + n, 'FLOAT_2D', f"node{n}")
+    for k in range(SLOTS):
+        info.image(k, 'RGBA32F', 'FLOAT_2D', f"result{k}", qualifiers={'WRITE'})
+    info.local_group_size(LOCAL_SIZE, 1)
+    info.compute_source(glsl_source("morph_blend.glsl", blend_defines(n_nodes)))
+    return gpu.shader.create_from_info(info)
+
+
+def _translation(offset) -> np.ndarray:
+    matrix = np.eye(4)
+    matrix[:3, 3] = offset
+    return matrix
+
+
+def node_texels(slots: np.ndarray, width: int, rows: int) -> np.ndarray:
+    """(2 SLOTS rows, width, 4) float32 image of a node's (P, 2 SLOTS, 3) images: slot s
+    in rows s * rows .. (s + 1) * rows - 1, texel (x, y, z, 1) where the image exists."""
+    n_points, n_slots = slots.shape[:2]
+    texels = np.zeros((n_slots, rows * width, 4), np.float32)
+    present = np.isfinite(slots[..., 0]).T  # (slots, P)
+    texels[:, :n_points, :3] = np.nan_to_num(slots.transpose(1, 0, 2))
+    texels[:, :n_points, 3] = present
+    return texels.reshape(n_slots * rows, width, 4)
+
+
+class NodeTextures:
+    """Node images of one renderer's vertices on the GPU, for every grid of a
+    :class:`MorphPass`: key (grid, node) -> texture, the least recently used dropped
+    first once they pass ``budget_mb``."""
+
+    def __init__(self, budget_mb: float = DEFAULT_BUDGET_MB):
+        self.budget_bytes = int(budget_mb * 2 ** 20)
+        self._textures: OrderedDict = OrderedDict()  # key -> (texture, bytes, (regular, widened) slots used)
+        self.nbytes = 0
+        self.evictions = 0
+
+    def __contains__(self, key) -> bool:
+        return key in self._textures
+
+    def __len__(self) -> int:
+        return len(self._textures)
+
+    def get(self, key) -> tuple:
+        """(texture, (regular, widened) slots that hold any image) of ``key``."""
+        entry = self._textures.pop(key)
+        self._textures[key] = entry  # most recently used last
+        return entry[0], entry[2]
+
+    def put(self, key, slots: np.ndarray, width: int, rows: int, keep=()) -> None:
+        """Upload a node's (P, 2 SLOTS, 3) images under ``key`` (:func:`node_texels`);
+        drop the least recently used (but ``keep``) while over the budget."""
+        from ..gpu_data import data_texture
+
+        texels = node_texels(slots, width, rows)
+        used = np.isfinite(slots[..., 0]).any(axis=0)
+        counts = tuple(int(np.max(np.flatnonzero(part), initial=-1)) + 1 for part in (used[:SLOTS], used[SLOTS:]))
+        self._textures[key] = (data_texture(texels), texels.nbytes, counts)
+        self.nbytes += texels.nbytes
+        for old in list(self._textures):
+            if self.nbytes <= self.budget_bytes:
+                break
+            if old == key or old in keep:
+                continue
+            self.nbytes -= self._textures.pop(old)[1]
+            self.evictions += 1
+
+    def drop(self, grid_index: int) -> None:
+        """Forget one grid's nodes (its reflector moved: its images are stale)."""
+        for key in [k for k in self._textures if k[0] == grid_index]:
+            self.nbytes -= self._textures.pop(key)[1]
+
+
+class MorphPass(FramePass):
+    """The morphing grids' GPU side for one renderer's reflected geometry: ``grids`` are
+    (``MorphingGrid``, the reflector's object matrix) pairs, ``meshes`` the renderer's
+    :class:`.reflected_meshes.ReflectedMeshes` (made here when not given)."""
+
+    def __init__(self, geometry, grids, meshes: ReflectedMeshes | None = None,
+                 budget_mb: float = DEFAULT_BUDGET_MB):
+        self.geometry = geometry
+        self.grids = list(grids)
+        self.meshes = meshes if meshes is not None else ReflectedMeshes(geometry)
+        self.nodes = NodeTextures(budget_mb)
+        self._frames = [None] * len(self.grids)  # the rigid frame each grid's node images were made in
+        self._results: dict = {}  # grid index -> [answer texture per slot]
+        self._uniforms: dict = {}  # nodes per cell -> the uniform buffer of the blend's per-frame parameters
+        self._active: dict = {}  # grid index -> slots written by its last blend (the rest are empty)
+        self._pending: dict = {}  # (grid index, node) -> (frame, Future of its node_slots), prefetching
+        self._drawn: list = []  # grid indices blended by the last blend()
+        self.counts = {"blends": 0, "node_projections": 0}
+
+    @property
+    def reflector_indices(self) -> list:
+        return [grid.reflector_index for grid, _ in self.grids]
+
+    @property
+    def drawn_reflectors(self) -> list:
+        """The reflectors the last :meth:`blend` drew from their grids."""
+        return [self.grids[k][0].reflector_index for k in self._drawn]
+
+    @property
+    def gap_reflectors(self) -> list:
+        """The reflectors drawn from their grids: the blend leaves pixels without an
+        answer where not every node of the cell sees the mirror."""
+        return self.drawn_reflectors
+
+    def drawn_in(self, view) -> frozenset:
+        """The reflectors whose grid covers ``view``."""
+        return frozenset(self.grids[k][0].reflector_index for k, _ in self.covering(view))
+
+    def update(self, view, warm: bool = False, skip=frozenset()) -> None:
+        """:meth:`blend` (a blend depends on the view alone: ``warm`` changes nothing)."""
+        self.blend(view, skip)
+
+    def covering(self, view) -> list:
+        """(grid index, (tetrahedron, nodes, weights, frame)) of each grid whose
+        reflector ``view`` can be drawn from (``MorphingGrid.check_view``), its four
+        nodes' images on the GPU (projected now where missing). A grid whose cache turns
+        out damaged records the fault (``MorphingGrid.failure``) and is left out from
+        then on: its reflector is drawn in runtime mode."""
+        found = []
+        for k, (grid, matrix) in enumerate(self.grids):
+            if grid.failure is not None:
+                continue
+            try:
+                located = grid.check_view(view, matrix)
+                keep = {(k, int(n)) for n in located[1]}
+                for node in located[1]:
+                    self._node_texture(k, int(node), located[3], keep)
+            except morphing.ViewOutsideGrid:
+                continue
+            except CacheError as error:
+                grid.failure = error
+                continue
+            found.append((k, located))
+        return found
+
+    def _points_in_frame(self, frame: np.ndarray) -> np.ndarray:
+        return morph_grid.to_frame(frame, self.geometry.vertices)
+
+    def _node_texture(self, k: int, node: int, frame: np.ndarray, keep=()):
+        """Grid ``k``'s node ``node`` images on the GPU, projected now when missing:
+        (texture, (regular, widened) slots used)."""
+        if self._frames[k] is None or not np.array_equal(self._frames[k], frame):
+            self.nodes.drop(k)
+            self._frames[k] = frame
+        key = (k, int(node))
+        if key not in self.nodes:
+            pending = self._pending.pop(key, None)
+            if pending is not None and np.array_equal(pending[0], frame):
+                slots = pending[1].result()  # being prefetched: wait for it rather than start again
+            else:
+                slots = self.grids[k][0].node_slots(int(node), self._points_in_frame(frame), SLOTS)
+            self.nodes.put(key, slots, self.meshes.width, self.meshes.height, keep)
+            self.counts["node_projections"] += 1
+        return self.nodes.get(key)
+
+    def blend(self, view, skip=frozenset()) -> list:
+        """This frame's blend for every grid covering ``view`` (one dispatch each) but
+        those of the reflectors in ``skip``; returns the reflector indices drawn from a
+        grid in this view."""
+        import gpu
+
+        self._drawn = []
+        if self.meshes.n_vertices == 0 or not self.grids:
+            return []
+        shift = self.geometry.shift
+        view_projection = (np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix)
+                           @ _translation(shift))
+        for k, (_, nodes, weights, frame) in self.covering(view):
+            grid = self.grids[k][0]
+            if grid.reflector_index in skip:
+                continue
+            keep = {(k, int(n)) for n in nodes}
+            textures, used = zip(*[self._node_texture(k, n, frame, keep) for n in nodes])
+            if k not in self._results:
+                self._results[k] = [self.meshes.answer_texture() for _ in range(SLOTS)]
+            eye = morph_grid.to_frame(frame, view.eye[None])[0]
+            matrices = [np.linalg.inv(frame) @ _translation(shift), _translation(-shift) @ frame, view_projection]
+            node_rows = np.c_[grid.grid.node_positions()[np.asarray(nodes)], np.asarray(weights, np.float64)]
+            slot_rows = np.c_[np.asarray(used, np.float64), np.zeros((len(nodes), 2))]
+            values = np.concatenate([m.T.reshape(-1) for m in matrices] + [
+                np.r_[eye, morphing.MATCH_FRACTION * grid.reflector_size], node_rows.reshape(-1),
+                slot_rows.reshape(-1)]).astype(np.float32)
+            shader = blend_shader(len(nodes))
+            uniforms = self._frame_buffer(len(nodes))
+            uniforms.update(gpu.types.Buffer('FLOAT', len(values), values))
+            shader.bind()
+            shader.uniform_block("frame", uniforms)
+            shader.uniform_int("n_vertices", self.meshes.n_vertices)
+            shader.uniform_int("positions_width", self.meshes.width)
+            shader.uniform_int("slot_rows", self.meshes.height)
+            self._active[k] = max(u[0] for u in used)
+            shader.uniform_int("active_slots", self._active[k])
+            shader.uniform_sampler("vertex_positions", self.meshes.positions)
+            for n, texture in enumerate(textures):
+                shader.uniform_sampler(f"node{n}", texture)
+            for slot, texture in enumerate(self._results[k]):
+                shader.image(f"result{slot}", texture)
+            gpu.compute.dispatch(shader, *self.meshes.work_groups(LOCAL_SIZE))
+            self._drawn.append(k)
+        self.counts["blends"] += 1
+        return [self.grids[k][0].reflector_index for k in self._drawn]
+
+    def _frame_buffer(self, n_nodes: int):
+        """The uniform buffer of the blend's parameters for cells of ``n_nodes`` nodes."""
+        import gpu
+
+        if n_nodes not in self._uniforms:
+            size = frame_floats(n_nodes)
+            self._uniforms[n_nodes] = gpu.types.GPUUniformBuf(gpu.types.Buffer('FLOAT', size))
+        return self._uniforms[n_nodes]
+
+    def prefetch(self, view, submit, max_pending: int = 1) -> int:
+        """Start projecting nodes not yet on the GPU around each covering grid's eye (the
+        4 x 4 x 4 nodes of its cell and the cells beside it, nearest first), so that
+        moving on rarely waits: ``submit(function, *args)`` runs the projection (in numpy,
+        no GPU: on a worker thread) and returns a ``Future``; at most ``max_pending`` run
+        at once, and a prefetch never evicts. :meth:`collect` uploads the finished ones.
+        Returns how many were started."""
+        started = 0
+        for k, (_, _, _, frame) in self.covering(view):
+            grid = self.grids[k][0]
+            for node in grid.grid.nodes_around(morph_grid.to_frame(frame, view.eye[None])[0]):
+                key = (k, int(node))
+                if len(self._pending) >= max_pending:
+                    return started
+                if key in self.nodes or key in self._pending or grid.node_status[node] != morph_grid.NODE_OK:
+                    continue
+                if self.nodes.nbytes + (len(self._pending) + 1) * self._node_bytes() > self.nodes.budget_bytes:
+                    return started
+                self._pending[key] = (frame, submit(grid.node_slots, int(node), self._points_in_frame(frame), SLOTS,
+                                                    morphing.project_face))
+                started += 1
+        return started
+
+    @property
+    def prefetching(self) -> int:
+        """Node projections started by :meth:`prefetch` and not yet collected."""
+        return len(self._pending)
+
+    @property
+    def prefetched(self) -> bool:
+        """Whether a prefetched node is ready for :meth:`collect`."""
+        return any(future.done() for _, future in self._pending.values())
+
+    def collect(self) -> int:
+        """Upload the prefetched nodes that have finished (main thread); returns how many."""
+        uploaded = 0
+        for key, (frame, future) in list(self._pending.items()):
+            if not future.done():
+                continue
+            del self._pending[key]
+            k = key[0]
+            try:
+                slots = future.result()
+            except CacheError as error:
+                self.grids[k][0].failure = error
+                continue
+            if self._frames[k] is not None and np.array_equal(self._frames[k], frame) and key not in self.nodes:
+                self.nodes.put(key, slots, self.meshes.width, self.meshes.height)
+                self.counts["node_projections"] += 1
+                uploaded += 1
+        return uploaded
+
+    def _node_bytes(self) -> int:
+        return 2 * SLOTS * self.meshes.width * self.meshes.height * 16
+
+    def answers(self) -> list:
+        """(reflector index, answer texture) per image slot of the last blend."""
+        return [(self.grids[k][0].reflector_index, texture) for k in self._drawn
+                for texture in self._results[k][:self._active[k]]]
+
+    def read(self, reflector_index: int) -> np.ndarray:
+        """(SLOTS, N, 3) world points of the last blend of a reflector's grid, NaN where
+        a vertex has no image in a slot (tests, benchmarks)."""
+        k = next(k for k in self._drawn if self.grids[k][0].reflector_index == reflector_index)
+        found = np.full((SLOTS, self.meshes.n_vertices, 3), np.nan)
+        for slot, texture in enumerate(self._results[k][:self._active[k]]):
+            found[slot] = self.meshes.read(texture)[0]
+        return found

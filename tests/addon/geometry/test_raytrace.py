@@ -1,0 +1,124 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+import numpy as np
+import pytest
+
+from curved_reflections.addon import Reflector, SceneInputError, look_at_view
+from curved_reflections.addon.geometry.raytrace import ReflectorSet, reflect, reflection_valid
+from curved_reflections.addon.geometry.sphere import icosphere
+
+CENTER = np.array([0.0, 0.0, 1.0])
+
+
+def _sphere_set(subdivisions=5, radius=1.0):
+    return ReflectorSet([icosphere(CENTER, radius, subdivisions)])
+
+
+def _analytic_sphere_t(origins, directions, radius=1.0):
+    oc = origins - CENTER
+    b = np.einsum("ij,ij->i", oc, directions)
+    c = np.einsum("ij,ij->i", oc, oc) - radius ** 2
+    disc = b * b - c
+    return np.where(disc >= 0, -b - np.sqrt(np.maximum(disc, 0)), np.inf)
+
+
+def test_view_rays_hit_the_sphere_where_the_analytic_sphere_is():
+    reflectors = _sphere_set()
+    view = look_at_view([4, -3, 2], CENTER, width=160, height=120, fov_y_deg=40)
+    origins, directions = view.pixel_rays(view.pixel_grid(1))
+    hits = reflectors.intersect(origins, directions)
+    exact_t = _analytic_sphere_t(origins, directions)
+    both = hits.hit & np.isfinite(exact_t)
+    assert both.sum() > 0.95 * np.isfinite(exact_t).sum()
+    # Hits lie on the flat facets: inside the sphere, no deeper than the deepest facet plane.
+    assert np.all(hits.t[both] >= exact_t[both] - 1e-9)
+    deepest_plane = np.einsum("ij,ij->i", reflectors.face_normals, reflectors.v0 - CENTER).min()
+    radius = np.linalg.norm(hits.position[both] - CENTER, axis=1)
+    assert 1 - deepest_plane < 3e-4
+    assert np.all((radius <= 1 + 1e-12) & (radius >= deepest_plane - 1e-12))
+    # On a sphere the interpolated normal is exactly radial at every facet point.
+    radial = hits.position[both] - CENTER
+    radial /= np.linalg.norm(radial, axis=1, keepdims=True)
+    np.testing.assert_allclose(hits.normal[both], radial, atol=1e-12)
+    assert np.all(hits.reflector[hits.hit] == 0) and np.all(hits.reflector[~hits.hit] == -1)
+
+
+def test_nearest_hit_over_several_reflectors_and_occlusion():
+    near = icosphere([0, -2, 1], 0.5, 3, name="Near")
+    far = icosphere([0, 2, 1], 0.5, 3, name="Far")
+    reflectors = ReflectorSet([far, near])
+    origins = np.array([[0.0, -5, 1], [0.0, 5, 1], [3.0, 0, 1]])
+    directions = np.array([[0.0, 1, 0], [0.0, -1, 0], [0.0, 1, 0]])
+    hits = reflectors.intersect(origins, directions)
+    assert hits.reflector.tolist() == [1, 0, -1]
+    np.testing.assert_allclose(hits.t[:2], [2.5, 2.5], atol=2e-3)
+    assert reflectors.occluded(origins[:1], directions[:1], [4.0]).tolist() == [True]
+    assert reflectors.occluded(origins[:1], directions[:1], [2.0]).tolist() == [False]
+
+
+def test_rings_hold_a_triangle_and_every_triangle_sharing_a_vertex_with_it():
+    reflectors = _sphere_set(subdivisions=2)
+    start, ring = reflectors.ring
+    corners = reflectors.welded_triangles
+    for t in (0, 17, len(corners) - 1):
+        shares = np.flatnonzero(np.isin(corners, corners[t]).any(axis=1))
+        np.testing.assert_array_equal(ring[start[t]:start[t + 1]], shares)
+        assert t in shares and len(shares) in (12, 13)  # 13 around valence-6 corners, 12 next to a valence-5 one
+
+
+def test_rays_near_a_known_triangle_hit_as_the_bvh_finds_and_the_others_fall_back_to_it():
+    """``intersect_near`` gives the BVH's answer where the true hit lies in the guess's
+    ring, and falls back to the BVH without a guess or with one far away."""
+    reflectors = ReflectorSet([icosphere(CENTER, 1.0, 4), icosphere(CENTER + [0.0, -2.2, 0.0], 0.3, 3)])
+    view = look_at_view([4, -3, 2], CENTER, width=80, height=60, fov_y_deg=40)
+    origins, directions = view.pixel_rays(view.pixel_grid(1))
+    exact = reflectors.intersect(origins, directions)
+    assert exact.hit.sum() > 500 and (exact.reflector == 1).sum() > 20  # the small ball hides part of the big one
+    start, ring = reflectors.ring
+    rng = np.random.default_rng(3)
+    # A guess one ring away from the true triangle; no guess for a tenth of the rays.
+    guess = np.where(exact.hit, exact.triangle, -1)
+    neighbour = ring[start[np.maximum(guess, 0)] + rng.integers(0, 6, len(guess))]
+    guess = np.where((guess >= 0) & (rng.random(len(guess)) > 0.1), neighbour, -1)
+    near = reflectors.intersect_near(origins, directions, guess)
+    np.testing.assert_array_equal(near.triangle, exact.triangle)
+    np.testing.assert_allclose(near.position[exact.hit], exact.position[exact.hit], atol=1e-12)
+    np.testing.assert_allclose(near.normal[exact.hit], exact.normal[exact.hit], atol=1e-12)
+    # Guessing where the ray leaves the big ball finds that hit, behind the nearest one:
+    # the ring is all it sees (true_rays.py checks its final answer with ``intersect``).
+    front = exact.reflector == 0
+    exits = reflectors.intersect(exact.position[front] + 1e-6 * directions[front], directions[front])
+    back = np.full(len(origins), -1)
+    back[front] = exits.triangle
+    far = reflectors.intersect_near(origins, directions, back)
+    behind = front & (far.triangle == back)
+    assert behind.sum() > 100 and np.all(far.t[behind] > exact.t[behind] + 0.05)
+
+
+def test_back_faces_are_mirrors_too_with_normals_turned_to_the_ray():
+    sheet = Reflector("Sheet", [[-1, -1, 0], [1, -1, 0], [0, 1, 0]], [[0, 1, 2]], np.tile([0, 0, 1.0], (3, 1)))
+    hits = ReflectorSet([sheet]).intersect(np.array([[0, 0, -1.0], [0, 0, 1.0]]), np.array([[0, 0, 1.0], [0, 0, -1.0]]))
+    np.testing.assert_allclose(hits.normal, [[0, 0, -1], [0, 0, 1]])
+    np.testing.assert_allclose(hits.face_normal, [[0, 0, -1], [0, 0, 1]])
+
+
+def test_reflected_rays_leave_from_the_surface_without_hitting_it_again():
+    reflectors = _sphere_set(subdivisions=4)
+    view = look_at_view([4, -3, 2], CENTER, width=64, height=48)
+    origins, directions = view.pixel_rays(view.pixel_grid(1))
+    hits = reflectors.intersect(origins, directions)
+    h = hits.hit
+    reflected = reflect(directions[h], hits.normal[h])
+    valid = reflection_valid(directions[h], hits.normal[h], hits.face_normal[h])
+    assert valid.mean() > 0.97
+    again = reflectors.intersect(hits.position[h][valid], reflected[valid], source_triangles=hits.triangle[h][valid])
+    assert not again.hit.any()  # a convex mirror never sees itself
+
+
+def test_reflect_mirrors_about_the_normal():
+    d = np.array([[1.0, 0, -1]]) / np.sqrt(2)
+    np.testing.assert_allclose(reflect(d, np.array([[0, 0, 1.0]])), [[1 / np.sqrt(2), 0, 1 / np.sqrt(2)]])
+
+
+def test_empty_reflector_list_is_a_clear_error():
+    with pytest.raises(SceneInputError, match="no reflector"):
+        ReflectorSet([])
