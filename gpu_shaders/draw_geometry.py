@@ -42,6 +42,7 @@ class DrawGeometry:
     colors: np.ndarray  # (V, 4) float32
     triangles: np.ndarray  # (T, 3) int64
     diameter: float  # bounding-box diagonal of everything: bounds every reflected ray distance
+    reflector_sizes: np.ndarray = None  # (R,) bounding-box diagonal of each reflector
     normals: np.ndarray = None  # (V, 3) float32 unit (zero where undefined)
     lit: np.ndarray = None  # (V,) float32: 1 lit, 0 emission (unlit)
     uvs: np.ndarray = None  # (V, 2) float32
@@ -166,6 +167,7 @@ def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=Non
         colors=np.ascontiguousarray(packed[:, :4]),
         triangles=mesh_triangles,
         diameter=float(max(np.linalg.norm(hi - lo), 1e-9)),
+        reflector_sizes=np.array([np.linalg.norm(np.subtract(*r.bounds[::-1])) for r in reflectors], np.float64),
         normals=vertex_normals.astype(np.float32),
         lit=np.ascontiguousarray(packed[:, 9]),
         uvs=np.ascontiguousarray(packed[:, 7:9]),

@@ -103,7 +103,7 @@ def _build_project():
 
 def reflected_interface(name: str, searched: bool = False):
     """The varyings of a reflected-mesh vertex stage, read by ``glsl/reflection_mesh_frag.glsl``;
-    ``searched`` adds the iterative search's interpolated validity."""
+    ``searched`` adds the per-frame passes' interpolated validity and reflector-point eye depth."""
     import gpu
 
     interface = gpu.types.GPUStageInterfaceInfo(name)
@@ -116,6 +116,7 @@ def reflected_interface(name: str, searched: bool = False):
     interface.flat('FLOAT', "reflector_interp")
     if searched:
         interface.smooth('FLOAT', "valid_interp")
+        interface.smooth('FLOAT', "mirror_depth_interp")
     return interface
 
 

@@ -42,7 +42,7 @@ def reflected_shader():
     sample-based camera's reflected meshes)."""
     import gpu
 
-    from .draw_shaders import reflected_fragment_source, reflected_interface
+    from .draw_shaders import reflected_fragment_source, reflected_interface, shading_source
 
     interface = reflected_interface("curved_reflections_iterative_interface", searched=True)
     info = gpu.types.GPUShaderCreateInfo()
@@ -52,6 +52,8 @@ def reflected_shader():
     info.push_constant('FLOAT', "order_range")
     info.push_constant('FLOAT', "reflector_id")
     info.push_constant('INT', "use_image")
+    info.push_constant('VEC4', "camera")
+    info.push_constant('FLOAT', "hidden_tolerance")
     info.sampler(0, 'FLOAT_2D', "search_result")
     info.sampler(1, 'FLOAT_2D', "vertex_positions")
     info.sampler(2, 'FLOAT_2D', "prepass_labels")
@@ -62,8 +64,8 @@ def reflected_shader():
     info.vertex_in(3, 'VEC2', "uv")
     info.vertex_out(interface)
     info.fragment_out(0, 'VEC4', "color_out")
-    info.vertex_source(glsl_source("iterative_mesh_vert.glsl", {"FOUND_CODE": FOUND_CODE,
-                                                                "FLIPPED_CODE": FLIPPED_CODE}))
+    info.vertex_source(shading_source() + glsl_source("iterative_mesh_vert.glsl", {"FOUND_CODE": FOUND_CODE,
+                                                                                   "FLIPPED_CODE": FLIPPED_CODE}))
     info.fragment_source(reflected_fragment_source(f"#define SEARCHED\n#define VALID_THRESHOLD {VALID_THRESHOLD}\n"))
     return gpu.shader.create_from_info(info)
 
@@ -117,7 +119,11 @@ class ReflectedMeshes:
         """The reflected meshes of each (reflector index, answer texture) of ``answers``
         into the bound framebuffer (depth test on), placed by ``view_projection`` (a
         ``mathutils.Matrix`` relative to the shift); ``image_of(k)`` is the texture of
-        image ``k`` (-1: none)."""
+        image ``k`` (-1: none); ``setup`` as ``ReflectionRenderer.reflected_setup``, with
+        ``hidden_fraction``: a fragment whose reflector point lies farther from the eye
+        than the mirror surface the pre-pass saw there, by more than this fraction of the
+        reflector's bounding-box diagonal, is hidden by the mirror and dropped
+        (``FramePass.hidden_fraction``)."""
         answers = list(answers)
         self._ensure()
         if self._batch is None or not answers:
@@ -128,11 +134,14 @@ class ReflectedMeshes:
         shader.uniform_int("result_width", self.width)
         shader.uniform_float("inverse_diameter", setup["inverse_diameter"])
         shader.uniform_float("order_range", setup["order_range"])
+        shader.uniform_float("camera", setup["camera"])
         shader.uniform_sampler("vertex_positions", self._positions)
         shader.uniform_sampler("prepass_labels", prepass_labels)
         for reflector_index, texture in answers:
             shader.uniform_sampler("search_result", texture)
             shader.uniform_float("reflector_id", float(reflector_index + 1))
+            shader.uniform_float("hidden_tolerance",
+                                 setup["hidden_fraction"] * float(self.geometry.reflector_sizes[reflector_index]))
             for image, first, count in self.geometry.ranges:
                 shader.uniform_int("use_image", int(image >= 0))
                 shader.uniform_sampler("image", image_of(image))

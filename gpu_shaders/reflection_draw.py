@@ -319,16 +319,15 @@ class ReflectionRenderer:
             for frame_pass in self.passes:
                 frame_pass.update(view, warm, skip=frozenset() if cached is None else
                                   frozenset(frame_pass.reflector_indices) - cached.per_frame)
-            answers = self._answers()
             with targets.reflection.bind():
                 gpu.state.viewport_set(0, 0, width, height)
                 targets.reflection.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
-                if answers:
+                if self._answers():
                     gpu.state.depth_test_set('LESS')
                     gpu.state.depth_mask_set(True)
-                    self.meshes.draw(view_projection, targets.prepass_labels,
-                                     {"inverse_diameter": 1.0 / g.diameter, "order_range": ITERATIVE_ORDER_RANGE},
-                                     self._image, answers)
+                    for frame_pass in self.passes:
+                        self.meshes.draw(view_projection, targets.prepass_labels,
+                                         self.reflected_setup(view, frame_pass), self._image, frame_pass.answers())
                 if cached is not None and cached.batch is not None:
                     gpu.state.depth_test_set('LESS')
                     gpu.state.depth_mask_set(True)
@@ -356,6 +355,11 @@ class ReflectionRenderer:
         for index, texture in self._answers():
             found.setdefault(index, []).append(self.meshes.read(texture)[0])
         return {index: np.stack(slots) for index, slots in found.items()}
+
+    def reflected_setup(self, view, frame_pass) -> dict:
+        """The uniforms of ``frame_pass``'s reflected meshes in ``view`` (``ReflectedMeshes.draw``)."""
+        return {"inverse_diameter": 1.0 / self.geometry.diameter, "order_range": ITERATIVE_ORDER_RANGE,
+                "camera": _camera(view, self.geometry.shift), "hidden_fraction": frame_pass.hidden_fraction}
 
     def _answers(self) -> list:
         return [answer for frame_pass in self.passes for answer in frame_pass.answers()]

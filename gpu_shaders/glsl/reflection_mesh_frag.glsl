@@ -22,10 +22,19 @@ void main()
     discard;
   }
 #endif
-  float id = texelFetch(prepass_labels, ivec2(gl_FragCoord.xy), 0).x;
-  if (abs(id - reflector_interp) > 0.5) {
+  vec4 label = texelFetch(prepass_labels, ivec2(gl_FragCoord.xy), 0);
+  if (abs(label.x - reflector_interp) > 0.5) {
     discard;
   }
+#ifdef SEARCHED
+  /* A reflector point farther from the eye than the mirror surface the pre-pass saw at
+   * this pixel is hidden by the mirror itself (a bump, a handle before the body): the
+   * per-frame methods answer a vertex without tracing the eye's ray, so the image of a
+   * point reflected behind the front surface would be drawn on it. */
+  if (mirror_depth_interp > label.w + hidden_tolerance) {
+    discard;
+  }
+#endif
   vec4 albedo = color_interp;
   if (use_image != 0) {
     albedo *= texture(image, uv_interp);

@@ -3,7 +3,7 @@
  *
  * Target 0, the colour: a diffuse mesh lit as its reflections are (reflection_shading.glsl,
  * with the desired view's eye vector), a reflector at its own flat colour. Target 1, the
- * label: (id, reflection weight, attenuation distance, 1). The weight is the reflector's
+ * label: (id, reflection weight, attenuation distance, eye depth of the surface: `eye_depth`). The weight is the reflector's
  * reflectivity, times Schlick's Fresnel term F0 + (1 - F0)(1 - cos t)^5 with cos t = |n . e|
  * when F0 is given (SBC paper, section V-D: the reflected share grows at grazing angles). */
 
@@ -27,5 +27,5 @@ void main()
     weight *= f0 + (1.0 - f0) * pow(1.0 - cosine, 5.0);
   }
   color_out = vec4(rgb, 1.0);
-  label_out = vec4(label_interp.x, weight, label_interp.w, 1.0);
+  label_out = vec4(label_interp.x, weight, label_interp.w, eye_depth(position_interp, camera));
 }

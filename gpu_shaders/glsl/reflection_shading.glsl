@@ -20,6 +20,15 @@ vec3 shade(vec3 albedo, float lit, vec3 normal, vec3 to_eye)
   return albedo * (SHADE_AMBIENT + (1.0 - SHADE_AMBIENT) * cosine);
 }
 
+/* How far `p` lies from the eye: the distance to it (`camera.w` 1: the eye, perspective), or
+ * its depth along the view (`camera.w` 0: the unit direction toward the viewer,
+ * orthographic). The pre-pass writes it for the visible surface of each pixel; the
+ * per-frame passes' reflected meshes compare their reflector points with it. */
+float eye_depth(vec3 p, vec4 camera)
+{
+  return camera.w > 0.5 ? length(camera.xyz - p) : -dot(p, camera.xyz);
+}
+
 /* The world point at `first_depth` along the desired view's ray through `pixel`
  * (View.pixel_rays: from the near plane, unit direction). */
 vec3 view_ray_point(mat4 inverse_view_projection, vec2 view_size, vec2 pixel, float first_depth)

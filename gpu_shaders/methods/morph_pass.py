@@ -167,6 +167,11 @@ class MorphPass(FramePass):
     (``MorphingGrid``, the reflector's object matrix) pairs, ``meshes`` the renderer's
     :class:`.reflected_meshes.ReflectedMeshes` (made here when not given)."""
 
+    #: No hidden-point test: a blended image lies on the surface fitted to the nodes'
+    #: images, not on the mesh, often more than ``FramePass.hidden_fraction`` off it
+    #: (the test dropped a fifth of a ball's reflection).
+    hidden_fraction = float("inf")
+
     def __init__(self, geometry, grids, meshes: ReflectedMeshes | None = None,
                  budget_mb: float = DEFAULT_BUDGET_MB):
         self.geometry = geometry

@@ -10,8 +10,9 @@ and its estimate, and on an exact sphere or ellipsoid the adaptive seeds (the ey
 meets the quadric in the shader). Images grazing the mirror are left out
 (``projector.grazing``). On a mesh or a superquadric the shader traces no rays: a
 vertex whose step from the grid is not within the accuracy gets no answer there (the
-numpy path traces more seeds for it); the renderer's silhouette band is ray traced
-either way.
+numpy path traces more seeds for it), so the pass traces the grid finer first where the
+seeds' quadrics miss the surface (``PerturbationMethod.fine_enough``); the renderer's
+silhouette band is ray traced either way.
 """
 
 from __future__ import annotations

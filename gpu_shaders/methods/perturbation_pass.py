@@ -79,7 +79,8 @@ class PerturbationPass(FramePass):
         """Seeds traced here, every vertex's step on the GPU (``perturbation_gpu.py``). An
         exact surface (convex) shows a point once: one image rank is drawn. The shader's
         adaptive seeds meet a sphere or ellipsoid (a quadric) in closed form and assume no
-        other mirror blocks their rays; on a superquadric it traces none, as on a mesh."""
+        other mirror blocks their rays; on a superquadric it traces none, as on a mesh, and
+        the seeds are traced finer where their model errs (``PerturbationMethod.fine_enough``)."""
         from ...addon.methods.perturbation import PerturbationStats
         from .perturbation_gpu import RANKS, PerturbationStep
 
@@ -94,6 +95,8 @@ class PerturbationPass(FramePass):
                 continue
             exact = method.surface is not None and method.surface.is_quadric
             alone = method.surface if exact and len(self._reflectors) == 1 else None
+            if alone is None:  # the shader traces no adaptive seeds: a grid fine enough instead
+                group = self.engine.fine_enough(view, group)
             textures = self._step.answer(view, group, self._accuracy, alone)
             ranks = 1 if method.surface is not None else RANKS
             answers += [(method.index, texture) for texture in textures[:ranks]]

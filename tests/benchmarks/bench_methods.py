@@ -139,7 +139,7 @@ def measure_scene(name: str, args, images: Path | None) -> dict:
     out = {"scene": name, "modes": {}}
     with tempfile.TemporaryDirectory() as folder:
         folder = Path(folder)
-        for mode in MODES:
+        for mode in args.modes:
             _set_mode(scene, mode)
             row = {"prepare": _prepare(scene, folder / f"cache_{mode}")}
             row["ours"], row["workbench"] = animation_runs.time_against_workbench(scene, folder, args.frames)
@@ -156,12 +156,12 @@ def measure_scene(name: str, args, images: Path | None) -> dict:
                   f"{100 * row['coverage']:.1f} %, drew {row['drew']}", flush=True)
 
         labels = animation_runs.sampled_frames(scene, folder, args.frames, args.sampled, args.samples,
-                                               [(m, _labels_setup(scene, folder, m), {}) for m in MODES])
-        for mode in MODES:
+                                               [(m, _labels_setup(scene, folder, m), {}) for m in args.modes])
+        for mode in args.modes:
             out["modes"][mode]["labels"] = statistics.mean(r[mode] for r in labels)
         if images is not None:
             frame = labels[len(labels) // 2]["frame"]
-            strip = np.concatenate([rr.read_png(folder / f"{n}_{frame}.png")[..., :3] for n in ("cycles",) + MODES],
+            strip = np.concatenate([rr.read_png(folder / f"{n}_{frame}.png")[..., :3] for n in ["cycles", *args.modes]],
                                    axis=1)
             rr.write_png(images / f"methods_{name}.png", strip)
     return out
@@ -262,7 +262,8 @@ def report(results: dict, command: str, plot_path: str) -> str:
     lines += ["", f"![Accuracy against time per frame]({plot_path})", "",
               "*p99 error against time per frame, one point per mode and scene (dotted: 1 px, 2x Workbench).*", ""]
     if results.get("images"):
-        lines += ["Middle sampled frame per scene, left to right: Cycles, " + ", ".join(LABEL[m] for m in MODES)
+        modes = results["settings"].get("modes", MODES)
+        lines += ["Middle sampled frame per scene, left to right: Cycles, " + ", ".join(LABEL[m] for m in modes)
                   + ":", ""]
         lines += [f"![{name}](../images/methods_{name}.png)" for name in SCENES if name in results["scene_names"]]
         lines.append("")
@@ -276,6 +277,7 @@ def parse_args(argv):
     parser.add_argument("--images", type=Path, default=None, help="folder for a sampled frame per scene, "
                         "every mode side by side")
     parser.add_argument("--scenes", nargs="+", default=list(DEFAULT_SCENES), choices=SCENES)
+    parser.add_argument("--modes", nargs="+", default=list(MODES), choices=MODES, help="the modes measured")
     parser.add_argument("--width", type=int, default=480)
     parser.add_argument("--height", type=int, default=320)
     parser.add_argument("--frames", type=int, default=12)

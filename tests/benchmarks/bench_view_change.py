@@ -212,7 +212,7 @@ def measure_iterative(kind: str, width: int, height: int, target_vertices: int, 
     import gpu
     from mathutils import Matrix
 
-    from curved_reflections.gpu_shaders.reflection_draw import ITERATIVE_ORDER_RANGE, ReflectionRenderer
+    from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
     from curved_reflections.operators import methods
     from curved_reflections.operators.capture import view_from_camera
     from curved_reflections.operators.render_inputs import reflector_properties, world_color
@@ -230,7 +230,6 @@ def measure_iterative(kind: str, width: int, height: int, target_vertices: int, 
     world = world_color(scene)
     views = _orbit(view_from_camera(scene.camera, scene, depsgraph), orbit_degrees, frames)
     plain = bench_draw.PlainDraw(g)
-    setup = {"inverse_diameter": 1.0 / g.diameter, "order_range": ITERATIVE_ORDER_RANGE}
 
     def matrix(view):
         translate = np.eye(4)
@@ -241,7 +240,8 @@ def measure_iterative(kind: str, width: int, height: int, target_vertices: int, 
         renderer.iterative.search(view, warm=True)
         gpu.state.depth_test_set('LESS')
         gpu.state.depth_mask_set(True)
-        renderer.meshes.draw(matrix(view), targets.prepass_labels, setup, renderer._image, renderer.iterative.answers())
+        renderer.meshes.draw(matrix(view), targets.prepass_labels, renderer.reflected_setup(view, renderer.iterative),
+                             renderer._image, renderer.iterative.answers())
         gpu.state.depth_test_set('NONE')
         gpu.state.depth_mask_set(False)
 
@@ -318,7 +318,7 @@ def measure_morph_frames(width: int, height: int, target_vertices: int, frames: 
     from curved_reflections.addon import look_at_view
     from curved_reflections.addon.methods.morphing import morph_grid, morphing
     from curved_reflections.gpu_shaders.methods.morph_source import GPUFaceImages
-    from curved_reflections.gpu_shaders.reflection_draw import ITERATIVE_ORDER_RANGE, ReflectionRenderer
+    from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
     from curved_reflections.operators.render_inputs import reflector_properties, world_color
 
     scene, _, captured = bench_draw.built_scene("sbc_fig3", width, height)
@@ -339,7 +339,6 @@ def measure_morph_frames(width: int, height: int, target_vertices: int, frames: 
     views = [look_at_view(eye, centre, fov_y_deg=45.0, width=width, height=height) for eye in eyes]
     tetrahedra = [grid.check_view(view, matrix)[0] for view in views]
     plain = bench_draw.PlainDraw(g)
-    setup = {"inverse_diameter": 1.0 / g.diameter, "order_range": ITERATIVE_ORDER_RANGE}
     translate = np.eye(4)
     translate[:3, 3] = g.shift
 
@@ -349,7 +348,7 @@ def measure_morph_frames(width: int, height: int, target_vertices: int, frames: 
         gpu.state.depth_mask_set(True)
         view_projection = Matrix((np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix)
                                   @ translate).tolist())
-        renderer.meshes.draw(view_projection, targets.prepass_labels, setup, renderer._image,
+        renderer.meshes.draw(view_projection, targets.prepass_labels, renderer.reflected_setup(view, renderer.morph), renderer._image,
                              renderer.morph.answers())
         gpu.state.depth_test_set('NONE')
         gpu.state.depth_mask_set(False)

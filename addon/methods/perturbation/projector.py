@@ -31,6 +31,7 @@ Per view (section III):
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -79,6 +80,12 @@ GRAZING_COSINE = 0.1
 BEHIND_START = 0.1
 #: Factor on the mesh model's error term of a step's estimate (``_model_errors``).
 MODEL_SAFETY = 2.0
+#: Answered from the grid alone (no adaptive seeds: the GPU twin on a mesh), a history's
+#: seeds are traced again at half the spacing while this share of them would give a step
+#: of half a spacing an estimate over the accuracy by their model error alone...
+FINER_SHARE = 0.1
+#: ... down to this spacing (px).
+MIN_GRID_STRIDE = 2
 
 
 @dataclass(frozen=True)
@@ -151,6 +158,8 @@ class PerturbationMethod:
             groups = [g for g in groups if g.history in wanted]
         histories, rows = [], []
         for group in groups:
+            if not self.settings.adaptive_seeds:
+                group = self.fine_enough(view, group)
             answers = self._answer_group(view, group, points)
             self.stats.per_history[group.history] = int(sum(np.isfinite(a[:, 0]).sum() for a in answers[0]))
             for rank in range(len(answers[0])):
@@ -181,6 +190,26 @@ class PerturbationMethod:
                     group = finer
                 groups.append(group)
         return groups
+
+    def fine_enough(self, view: View, group: SeedGroup) -> SeedGroup:
+        """``group`` traced again at half its spacing until a step from the grid alone can
+        meet the accuracy: the estimate's model term (MODEL_SAFETY x model error x step,
+        ``_step``) for a step of half a spacing is over ``accuracy_px`` at no more than
+        FINER_SHARE of the seeds. On a bumpy mesh the quadric fitted at a seed misses the
+        surface a spacing away (the model error falls slowly with the spacing, the step
+        in proportion), and the grid's answers were refused over half the mirror; adaptive
+        seeds (the numpy path) trace rays per answer instead. The candidate scan keeps its
+        spacing in pixels (its cost), hops and steps use the finer seeds."""
+        coarse_px = group.coarse * group.stride
+        while group.stride > MIN_GRID_STRIDE:
+            model = MODEL_SAFETY * group.model_error * 0.5 * group.stride
+            if np.mean(model > self.settings.accuracy_px) <= FINER_SHARE:
+                break
+            finer = self._finer(view, group)
+            if finer is None:
+                break
+            group = dataclasses.replace(finer, coarse=max(finer.coarse, coarse_px // finer.stride))
+        return group
 
     def _group(self, history: tuple, seeds: SeedPaths, stride: int) -> SeedGroup:
         cell = np.floor(seeds.pixels / stride).astype(np.int64)

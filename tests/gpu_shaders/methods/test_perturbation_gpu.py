@@ -49,6 +49,8 @@ def test_gpu_step_agrees_with_the_numpy_twin_and_the_exact_solver(gpu_ready, exa
                                 PerturbationSettings(accuracy_px=0.5, adaptive_seeds=exact_surface))
     twin = engine.project(view, points)
     [group] = engine.grid_groups(view)
+    if not exact_surface:  # as PerturbationPass: seeds fine enough for the grid alone
+        group = engine.fine_enough(view, group)
     textures = PerturbationStep(meshes).answer(view, group, 0.5, surfaces.get(0))
     answers = [meshes.read(texture)[0] for texture in textures]
     gpu_pixels = np.stack([view.to_pixels(np.nan_to_num(a))[0] for a in answers])
@@ -74,8 +76,8 @@ def test_gpu_step_agrees_with_the_numpy_twin_and_the_exact_solver(gpu_ready, exa
         covered += distance.min() <= 1.0
         errors.append(distance.min())
     errors = np.array(errors)
-    # Without adaptive seeds a bumpy mesh leaves a fifth of its images to the renderer's
-    # band tracing and the numpy path (measured 80 %); an exact surface almost none.
-    assert covered >= (0.97 if exact_surface else 0.75) * visible.sum()
+    # Without adaptive seeds, a bumpy mesh's seeds are traced finer (measured 96 %: 80 %
+    # on the 8 px grid); an exact surface misses almost none.
+    assert covered >= (0.97 if exact_surface else 0.92) * visible.sum()
     # On the exact surface the answers are the surface's, a tessellation's error (~0.2 px) from the mesh's.
     assert np.percentile(errors[errors <= 1.0], 99) < (0.6 if exact_surface else 0.5)
