@@ -15,8 +15,12 @@ from __future__ import annotations
 
 class FramePass:
     """One method's per-frame GPU work for one renderer. Subclasses implement
-    :attr:`reflector_indices`, :meth:`update` and :meth:`answers`; the rest says how the
-    renderer's band trace treats the pass's reflectors and defaults to *not at all*."""
+    :meth:`update` and :meth:`answers`, and hold ``methods`` (one per reflector, each with
+    its ``index``) or override :attr:`reflector_indices`; the rest says how the renderer's
+    band trace treats the pass's reflectors and defaults to *not at all*."""
+
+    #: Whether the method answers by a search per vertex (see :attr:`searched_reflectors`).
+    searches = False
 
     #: A reflected fragment whose reflector point lies farther from the eye than the mirror
     #: surface the pre-pass saw at its pixel, by more than this fraction of the reflector's
@@ -30,7 +34,7 @@ class FramePass:
     @property
     def reflector_indices(self) -> list:
         """Every reflector this pass may draw."""
-        raise NotImplementedError
+        return [method.index for method in self.methods]
 
     def update(self, view, warm: bool = False, skip=frozenset()) -> None:
         """This frame's answers for ``view``. ``warm``: start from the last frame's (a
@@ -51,7 +55,7 @@ class FramePass:
     def searched_reflectors(self) -> list:
         """Reflectors answered by a search per vertex: vertices go unanswered along their
         silhouette, so the band there is traced."""
-        return []
+        return self.reflector_indices if self.searches else []
 
     @property
     def folded_reflectors(self) -> list:

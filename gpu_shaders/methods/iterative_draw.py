@@ -90,6 +90,8 @@ class IterativePass(FramePass):
     star-shaped reflectors (``addon.methods.iterative.IterativeReflector`` each), among
     ``n_reflectors`` of the scene."""
 
+    searches = True
+
     def __init__(self, geometry, methods, meshes: ReflectedMeshes | None = None, n_reflectors: int = 1):
         self.geometry = geometry
         self.methods = list(methods)
@@ -99,14 +101,6 @@ class IterativePass(FramePass):
         self._atlas = None
         self._results: dict = {}
         self.counts = {"searches": 0}
-
-    @property
-    def reflector_indices(self) -> list:
-        return [m.index for m in self.methods]
-
-    @property
-    def searched_reflectors(self) -> list:
-        return self.reflector_indices
 
     @property
     def folded_reflectors(self) -> list:

@@ -26,6 +26,8 @@ class PerturbationPass(FramePass):
     caller keeps one; ``methods``: the ``addon.methods.perturbation.PerturbationReflector``
     s drawn here)."""
 
+    searches = True
+
     def __init__(self, geometry, reflectors, methods, meshes: ReflectedMeshes, accuracy_px: float = 0.5,
                  reflector_set: ReflectorSet | None = None):
         self.geometry = geometry
@@ -40,14 +42,6 @@ class PerturbationPass(FramePass):
         self._answers: list = []
         self.counts = {"projections": 0}
         self.last_stats = None
-
-    @property
-    def reflector_indices(self) -> list:
-        return [m.index for m in self.methods]
-
-    @property
-    def searched_reflectors(self) -> list:
-        return self.reflector_indices
 
     def update(self, view, warm: bool = False, skip=frozenset()) -> None:
         """:meth:`project` (``skip`` never holds one of its reflectors: a camera never draws one)."""

@@ -1,0 +1,45 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The per-frame passes behind one interface (``gpu_shaders/frame_pass.py``): what each
+tells the renderer about its reflectors, read without a GPU (nothing here draws)."""
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from curved_reflections.addon import DiffuseMesh
+from curved_reflections.addon.geometry.sphere import icosphere
+from curved_reflections.gpu_shaders.draw_geometry import prepare_geometry
+from curved_reflections.gpu_shaders.frame_pass import FramePass
+from curved_reflections.gpu_shaders.methods.iterative_draw import IterativePass
+from curved_reflections.gpu_shaders.methods.morph_pass import MorphPass
+from curved_reflections.gpu_shaders.methods.perturbation_pass import PerturbationPass
+from curved_reflections.gpu_shaders.reflected_meshes import ReflectedMeshes
+
+
+def _geometry():
+    mirrors = [icosphere((0.0, 0.0, 0.0), 1.0, 2, name="A"), icosphere((3.0, 0.0, 0.0), 1.0, 2, name="B")]
+    triangle = DiffuseMesh("Tri", np.array([[0.0, 3.0, 0.0], [1.0, 3.0, 0.0], [0.0, 3.0, 1.0]]), np.array([[0, 1, 2]]),
+                       np.ones((3, 4), np.float32))
+    return mirrors, prepare_geometry(mirrors, [triangle])
+
+
+def test_each_pass_says_how_the_band_trace_treats_its_reflectors():
+    """Searched mirrors (iterative, perturbation) get their silhouette band traced; the
+    iterative search's folded ones are its non-convex mirrors, or all when not alone; a
+    morphing pass has no searched mirror and draws gaps only where it blended; the
+    renderer asks these and never which method a pass is."""
+    mirrors, geometry = _geometry()
+    meshes = ReflectedMeshes(geometry)
+    convex = SimpleNamespace(index=0, reflector_map=SimpleNamespace(convex=True))
+    bumpy = SimpleNamespace(index=1, reflector_map=SimpleNamespace(convex=False))
+    alone = IterativePass(geometry, [convex, bumpy], meshes, n_reflectors=1)
+    assert alone.reflector_indices == alone.searched_reflectors == [0, 1]
+    assert alone.folded_reflectors == [1] and alone.traces_band
+    assert IterativePass(geometry, [convex], meshes, n_reflectors=2).folded_reflectors == [0]
+    perturbation = PerturbationPass(geometry, mirrors, [SimpleNamespace(index=1)], meshes)
+    assert perturbation.searched_reflectors == [1] and perturbation.traces_band
+    morph = MorphPass(geometry, [], meshes)
+    assert morph.searched_reflectors == morph.gap_reflectors == [] and not morph.traces_band
+    assert morph.hidden_fraction == float("inf")  # its blended images lie off the mesh
+    assert alone.hidden_fraction == perturbation.hidden_fraction == FramePass.hidden_fraction < 0.01
+    assert IterativePass(geometry, [], meshes).traces_band is False
