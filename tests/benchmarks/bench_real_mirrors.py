@@ -94,7 +94,7 @@ def build(kind: str, width: int, height: int):
     return scene, mirror
 
 
-def measure(kind: str, width: int, height: int, samples: int, folder: Path) -> dict:
+def measure(kind: str, width: int, height: int, samples: int, folder: Path, mode: str = "AUTO") -> dict:
     import bpy
 
     from curved_reflections.addon import metrics
@@ -102,6 +102,7 @@ def measure(kind: str, width: int, height: int, samples: int, folder: Path) -> d
     from curved_reflections.operators.render_image import render_scene
 
     scene, mirror = build(kind, width, height)
+    mirror.curved_reflections.mode = mode
     palette = demo_scenes.palette(scene)
     mask, _ = rr.render_mask(scene, folder / f"{kind}_mask.png", [mirror])
     start = time.perf_counter()
@@ -129,11 +130,11 @@ def _strip(folder: Path, kinds, path: Path) -> Path:
     return rr.write_png(path, np.concatenate(rows[::-1], axis=0))  # rows bottom to top
 
 
-def report(rows: list, width: int, height: int, samples: int, command: str) -> str:
+def report(rows: list, width: int, height: int, samples: int, command: str, mode: str = "AUTO") -> str:
     lines = ["# Mirrors artists model: ours against Cycles", "",
              f"Generated {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC by `{command}` on "
              f"{bench_draw._machine()}.", "",
-             f"{width}x{height}, every setting at its default (Auto mode), Cycles {samples} samples with 8 glossy "
+             f"{width}x{height}, every setting at its default ({mode.title()} mode), Cycles {samples} samples with 8 glossy "
              "bounces as the reference. Label disagreement: share of the mirror's pixels showing another object "
              "than Cycles (the demo's measure: simple convex scenes score 0.4-1.5 %, mostly anti-aliased edges). "
              "Issue 18's bar: <= 3 % on each scene, each render <= 60 s.", "",
@@ -154,6 +155,8 @@ def parse_args(argv):
     parser.add_argument("--height", type=int, default=240)
     parser.add_argument("--samples", type=int, default=16, help="Cycles samples")
     parser.add_argument("--mirrors", nargs="+", choices=MIRRORS, default=list(MIRRORS))
+    parser.add_argument("--mode", default="AUTO", choices=("AUTO", "RUNTIME", "PERTURBATION"),
+                        help="the mirror's mode (default: Auto, as a user finds it)")
     parser.add_argument("--images", type=Path, default=None, help="folder for the PNGs (default: temporary)")
     parser.add_argument("--strip", type=Path, default=None,
                         help=f"side-by-side PNG (default: {DEFAULT_STRIP.relative_to(bench_sbc.REPO_ROOT)}, "
@@ -179,11 +182,11 @@ def main(argv=None) -> int:
     folder.mkdir(parents=True, exist_ok=True)
     rows = []
     for kind in args.mirrors:
-        rows.append(measure(kind, args.width, args.height, args.samples, folder))
+        rows.append(measure(kind, args.width, args.height, args.samples, folder, args.mode))
         bench_sbc._log(f"{kind}: {100 * rows[-1]['disagreement']:.1f} % in {rows[-1]['seconds']:.1f} s")
     _strip(folder, args.mirrors, args.strip)
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(report(rows, args.width, args.height, args.samples, command), encoding="utf-8")
+    args.out.write_text(report(rows, args.width, args.height, args.samples, command, args.mode), encoding="utf-8")
     bench_sbc._log(f"wrote {args.out}; images in {folder}")
     return 0
 
