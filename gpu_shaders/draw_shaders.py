@@ -70,6 +70,7 @@ def _build_prepass():
     info.vertex_out(interface)
     info.fragment_out(0, 'VEC4', "color_out")
     info.fragment_out(1, 'VEC4', "label_out")
+    info.fragment_out(2, 'VEC4', "normal_out")
     info.vertex_source(glsl_source("reflection_prepass_vert.glsl"))
     info.fragment_source(shading_source() + glsl_source("reflection_prepass_frag.glsl"))
     return gpu.shader.create_from_info(info)
@@ -103,7 +104,7 @@ def _build_project():
 
 def reflected_interface(name: str, searched: bool = False):
     """The varyings of a reflected-mesh vertex stage, read by ``glsl/reflection_mesh_frag.glsl``;
-    ``searched`` adds the per-frame passes' interpolated validity and reflector-point eye depth."""
+    ``searched`` adds the per-frame passes' interpolated validity and reflector point."""
     import gpu
 
     interface = gpu.types.GPUStageInterfaceInfo(name)
@@ -116,7 +117,7 @@ def reflected_interface(name: str, searched: bool = False):
     interface.flat('FLOAT', "reflector_interp")
     if searched:
         interface.smooth('FLOAT', "valid_interp")
-        interface.smooth('FLOAT', "mirror_depth_interp")
+        interface.smooth('VEC3', "mirror_point_interp")
     return interface
 
 

@@ -12,6 +12,8 @@ method cannot be trusted on.
 
 from __future__ import annotations
 
+import math
+
 
 class FramePass:
     """One method's per-frame GPU work for one renderer. Subclasses implement
@@ -30,6 +32,10 @@ class FramePass:
     #: 0.1-2.5 % of it behind the surface seen (median 1 %; this catches 63-70 % of them),
     #: its visible answers at most 0.13 % (``tests/gpu_shaders/test_reflected_meshes.py``).
     hidden_fraction = 0.003
+    #: A reflected fragment is kept only where the eye's ray, reflected about the normal of
+    #: the mirror the pre-pass saw at its pixel, leaves within this cosine of the direction
+    #: toward the fragment's point of the mesh (``glsl/reflection_mesh_frag.glsl``).
+    reflection_cosine = math.cos(math.radians(20.0))
 
     @property
     def reflector_indices(self) -> list:

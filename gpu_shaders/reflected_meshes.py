@@ -42,7 +42,7 @@ def reflected_shader():
     sample-based camera's reflected meshes)."""
     import gpu
 
-    from .draw_shaders import reflected_fragment_source, reflected_interface, shading_source
+    from .draw_shaders import reflected_fragment_source, reflected_interface
 
     interface = reflected_interface("curved_reflections_iterative_interface", searched=True)
     info = gpu.types.GPUShaderCreateInfo()
@@ -54,18 +54,20 @@ def reflected_shader():
     info.push_constant('INT', "use_image")
     info.push_constant('VEC4', "camera")
     info.push_constant('FLOAT', "hidden_tolerance")
+    info.push_constant('FLOAT', "reflection_cosine")
     info.sampler(0, 'FLOAT_2D', "search_result")
     info.sampler(1, 'FLOAT_2D', "vertex_positions")
     info.sampler(2, 'FLOAT_2D', "prepass_labels")
     info.sampler(3, 'FLOAT_2D', "image")
+    info.sampler(4, 'FLOAT_2D', "prepass_normals")
     info.vertex_in(0, 'INT', "vertex_index")
     info.vertex_in(1, 'VEC4', "color")
     info.vertex_in(2, 'VEC4', "normal_lit")
     info.vertex_in(3, 'VEC2', "uv")
     info.vertex_out(interface)
     info.fragment_out(0, 'VEC4', "color_out")
-    info.vertex_source(shading_source() + glsl_source("iterative_mesh_vert.glsl", {"FOUND_CODE": FOUND_CODE,
-                                                                                   "FLIPPED_CODE": FLIPPED_CODE}))
+    info.vertex_source(glsl_source("iterative_mesh_vert.glsl", {"FOUND_CODE": FOUND_CODE,
+                                                                "FLIPPED_CODE": FLIPPED_CODE}))
     info.fragment_source(reflected_fragment_source(f"#define SEARCHED\n#define VALID_THRESHOLD {VALID_THRESHOLD}\n"))
     return gpu.shader.create_from_info(info)
 
@@ -115,15 +117,18 @@ class ReflectedMeshes:
         """The work groups of a compute stage with one invocation per vertex texel."""
         return -(-self.width // local_size), self.height, 1
 
-    def draw(self, view_projection, prepass_labels, setup: dict, image_of, answers) -> None:
+    def draw(self, view_projection, targets, setup: dict, image_of, answers) -> None:
         """The reflected meshes of each (reflector index, answer texture) of ``answers``
         into the bound framebuffer (depth test on), placed by ``view_projection`` (a
-        ``mathutils.Matrix`` relative to the shift); ``image_of(k)`` is the texture of
+        ``mathutils.Matrix`` relative to the shift), against the pre-pass of ``targets``
+        (``reflection_draw.FrameTargets``); ``image_of(k)`` is the texture of
         image ``k`` (-1: none); ``setup`` as ``ReflectionRenderer.reflected_setup``, with
         ``hidden_fraction``: a fragment whose reflector point lies farther from the eye
         than the mirror surface the pre-pass saw there, by more than this fraction of the
         reflector's bounding-box diagonal, is hidden by the mirror and dropped
-        (``FramePass.hidden_fraction``)."""
+        (``FramePass.hidden_fraction``); and ``reflection_cosine``: one whose eye ray,
+        reflected about the mirror's normal there, leaves further than this cosine from
+        the fragment's point of the mesh is dropped (``FramePass.reflection_cosine``)."""
         answers = list(answers)
         self._ensure()
         if self._batch is None or not answers:
@@ -136,7 +141,9 @@ class ReflectedMeshes:
         shader.uniform_float("order_range", setup["order_range"])
         shader.uniform_float("camera", setup["camera"])
         shader.uniform_sampler("vertex_positions", self._positions)
-        shader.uniform_sampler("prepass_labels", prepass_labels)
+        shader.uniform_sampler("prepass_labels", targets.prepass_labels)
+        shader.uniform_sampler("prepass_normals", targets.prepass_normals)
+        shader.uniform_float("reflection_cosine", setup["reflection_cosine"])
         for reflector_index, texture in answers:
             shader.uniform_sampler("search_result", texture)
             shader.uniform_float("reflector_id", float(reflector_index + 1))

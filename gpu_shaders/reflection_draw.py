@@ -117,9 +117,13 @@ class FrameTargets:
         size = (self.width, self.height)
         self.prepass_colors = gpu.types.GPUTexture(size, format='RGBA32F')
         self.prepass_labels = gpu.types.GPUTexture(size, format='RGBA32F')
+        #: The smooth normal of the surface each pixel shows (the mirrors' for the
+        #: reflected meshes' law-of-reflection test).
+        self.prepass_normals = gpu.types.GPUTexture(size, format='RGBA16F')
         self.prepass_depth = gpu.types.GPUTexture(size, format='DEPTH_COMPONENT32F')
         self.prepass = gpu.types.GPUFrameBuffer(depth_slot=self.prepass_depth,
-                                                color_slots=(self.prepass_colors, self.prepass_labels))
+                                                color_slots=(self.prepass_colors, self.prepass_labels,
+                                                             self.prepass_normals))
         self.reflection_colors = gpu.types.GPUTexture(size, format='RGBA32F')
         self.reflection_depth = gpu.types.GPUTexture(size, format='DEPTH_COMPONENT32F')
         self.reflection = gpu.types.GPUFrameBuffer(depth_slot=self.reflection_depth,
@@ -326,7 +330,7 @@ class ReflectionRenderer:
                     gpu.state.depth_test_set('LESS')
                     gpu.state.depth_mask_set(True)
                     for frame_pass in self.passes:
-                        self.meshes.draw(view_projection, targets.prepass_labels,
+                        self.meshes.draw(view_projection, targets,
                                          self.reflected_setup(view, frame_pass), self._image, frame_pass.answers())
                 if cached is not None and cached.batch is not None:
                     gpu.state.depth_test_set('LESS')
@@ -359,7 +363,8 @@ class ReflectionRenderer:
     def reflected_setup(self, view, frame_pass) -> dict:
         """The uniforms of ``frame_pass``'s reflected meshes in ``view`` (``ReflectedMeshes.draw``)."""
         return {"inverse_diameter": 1.0 / self.geometry.diameter, "order_range": ITERATIVE_ORDER_RANGE,
-                "camera": _camera(view, self.geometry.shift), "hidden_fraction": frame_pass.hidden_fraction}
+                "camera": _camera(view, self.geometry.shift), "hidden_fraction": frame_pass.hidden_fraction,
+                "reflection_cosine": frame_pass.reflection_cosine}
 
     def _answers(self) -> list:
         return [answer for frame_pass in self.passes for answer in frame_pass.answers()]
@@ -442,10 +447,10 @@ class ReflectionRenderer:
                 band_trace.unreliable_cells(camera.ray_map, camera.trees, camera.mixed, camera.folds),
                 camera.ray_map.downsample, targets.width, targets.height)
             boundary = unreliable if boundary is None else boundary | unreliable
-        if len(holes_of):
-            holes = np.isin(np.rint(labels) - 1, list(holes_of))
-            boundary = holes if boundary is None else boundary | holes
         pixels = band_trace.band_pixels(labels, drawn, radius, edges_of_drawn, boundary)
+        if len(holes_of):  # every pixel of these mirrors without a reflection, searched ones too
+            rows, columns = np.nonzero(np.isin(np.rint(labels + searched_labels) - 1, list(holes_of)) & ~drawn)
+            pixels = np.unique(np.concatenate([pixels, np.stack([columns, rows], axis=1)]), axis=0)
         if searched.any():
             # The search reaches a mirror's silhouette, but vertices go unanswered there;
             # on a non-convex mirror also where a fold crowds several images (and triangles

@@ -15,8 +15,8 @@
  * spans a fold of the mirror, its interpolated validity is below 1 in magnitude inside,
  * and it is discarded as well. Shading data as
  * reflection_mesh_vert.glsl: the true eye vector from the vertex toward P, and the
- * distance. `mirror_depth_interp`, P's eye depth, lets the fragment stage drop a
- * reflection whose reflector point is hidden from the eye by the mirror itself. */
+ * distance. `mirror_point_interp`, P, lets the fragment stage drop a reflection whose
+ * reflector point the mirror hides, or whose ray does not reflect toward it. */
 
 void main()
 {
@@ -35,7 +35,7 @@ void main()
   uv_interp = uv;
   eye_interp = to_mirror / max(distance, 1e-30);
   distance_interp = distance;
-  mirror_depth_interp = eye_depth(p, camera);
+  mirror_point_interp = p;
   reflector_interp = reflector_id;
   valid_interp = valid ? (flipped ? -1.0 : 1.0) : 0.0;
   float depth = clamp(distance * inverse_diameter, 0.0, 1.0) * order_range;

@@ -31,7 +31,18 @@ void main()
    * this pixel is hidden by the mirror itself (a bump, a handle before the body): the
    * per-frame methods answer a vertex without tracing the eye's ray, so the image of a
    * point reflected behind the front surface would be drawn on it. */
-  if (mirror_depth_interp > label.w + hidden_tolerance) {
+  if (eye_depth(mirror_point_interp, camera) > label.w + hidden_tolerance) {
+    discard;
+  }
+  /* The law of reflection at this pixel: the eye's ray, reflected about the normal of the
+   * mirror the pre-pass saw here, must leave toward the fragment's own point of the mesh.
+   * A triangle whose corners were answered in different sheets of the reflection (two
+   * images of a non-convex mirror in one answer slot, a fold) stretches across pixels
+   * whose reflected rays point elsewhere: dropped there, instead of a wedge of colour. */
+  vec3 mirror_normal = texelFetch(prepass_normals, ivec2(gl_FragCoord.xy), 0).xyz;
+  vec3 incoming = camera.w > 0.5 ? mirror_point_interp - camera.xyz : -camera.xyz;
+  vec3 outgoing = reflect(normalize(incoming), normalize(mirror_normal));
+  if (dot(outgoing, -normalize(eye_interp)) < reflection_cosine) {
     discard;
   }
 #endif

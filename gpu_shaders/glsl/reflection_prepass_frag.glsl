@@ -5,7 +5,8 @@
  * with the desired view's eye vector), a reflector at its own flat colour. Target 1, the
  * label: (id, reflection weight, attenuation distance, eye depth of the surface: `eye_depth`). The weight is the reflector's
  * reflectivity, times Schlick's Fresnel term F0 + (1 - F0)(1 - cos t)^5 with cos t = |n . e|
- * when F0 is given (SBC paper, section V-D: the reflected share grows at grazing angles). */
+ * when F0 is given (SBC paper, section V-D: the reflected share grows at grazing angles).
+ * Target 2: the smooth normal (for the per-frame passes' law-of-reflection test). */
 
 void main()
 {
@@ -28,4 +29,5 @@ void main()
   }
   color_out = vec4(rgb, 1.0);
   label_out = vec4(label_interp.x, weight, label_interp.w, eye_depth(position_interp, camera));
+  normal_out = vec4(normal_interp, 0.0);
 }

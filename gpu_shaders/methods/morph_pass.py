@@ -196,6 +196,13 @@ class MorphPass(FramePass):
         return [self.grids[k][0].reflector_index for k in self._drawn]
 
     @property
+    def searched_reflectors(self) -> list:
+        """The reflectors blended this frame: as a search's, the blend leaves vertices
+        unanswered along the silhouette (where not every node of the cell sees the
+        mirror), so a render traces that band."""
+        return self.drawn_reflectors
+
+    @property
     def gap_reflectors(self) -> list:
         """The reflectors drawn from their grids: the blend leaves pixels without an
         answer where not every node of the cell sees the mirror."""

@@ -240,7 +240,7 @@ def measure_iterative(kind: str, width: int, height: int, target_vertices: int, 
         renderer.iterative.search(view, warm=True)
         gpu.state.depth_test_set('LESS')
         gpu.state.depth_mask_set(True)
-        renderer.meshes.draw(matrix(view), targets.prepass_labels, renderer.reflected_setup(view, renderer.iterative),
+        renderer.meshes.draw(matrix(view), targets, renderer.reflected_setup(view, renderer.iterative),
                              renderer._image, renderer.iterative.answers())
         gpu.state.depth_test_set('NONE')
         gpu.state.depth_mask_set(False)
@@ -348,7 +348,7 @@ def measure_morph_frames(width: int, height: int, target_vertices: int, frames: 
         gpu.state.depth_mask_set(True)
         view_projection = Matrix((np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix)
                                   @ translate).tolist())
-        renderer.meshes.draw(view_projection, targets.prepass_labels, renderer.reflected_setup(view, renderer.morph), renderer._image,
+        renderer.meshes.draw(view_projection, targets, renderer.reflected_setup(view, renderer.morph), renderer._image,
                              renderer.morph.answers())
         gpu.state.depth_test_set('NONE')
         gpu.state.depth_mask_set(False)

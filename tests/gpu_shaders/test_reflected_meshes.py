@@ -1,38 +1,56 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """The per-frame passes' reflected meshes (``gpu_shaders/reflected_meshes.py``): placed by
 answer textures, kept on the visible footprint of their mirror, and dropped where their
-reflector point is hidden from the eye by the mirror itself."""
+reflector point is hidden from the eye by the mirror itself or where the eye's ray does
+not reflect toward them."""
 
 import numpy as np
 
 from curved_reflections.addon import DiffuseMesh, Reflector, look_at_view
 
-#: Diffuse vertices far off to the side (out of the view, so that the pre-pass shows the
-#: mirror under their reflections); each is answered on the mirror at its (x - OFFSET, y, 0).
-OFFSET = 10.0
+EYE = np.array([0.0, 0.0, 5.0])
+#: The diffuse patches' height: above the eye, behind the camera (out of the pre-pass).
+HEIGHT = 12.0
 
 
-def _two_level_mirror() -> Reflector:
+def _view():
+    return look_at_view(EYE, (0.0, 0.0, 0.0), fov_y_deg=35.0, width=80, height=80)
+
+
+def _two_level_mirror(tilt_degrees: float = 0.0) -> Reflector:
     """One reflector of two squares facing +z: the lower one, z = 0 over [-1, 1]^2, and
-    above its left half, at z = 0.5, the upper one, hiding that half from above."""
+    above its left half, at z = 0.5, the upper one, hiding that half from above. The
+    lower square's (shading) normals lean ``tilt_degrees`` toward +x."""
     vertices = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0],
                          [-1, -1, 0.5], [0, -1, 0.5], [0, 1, 0.5], [-1, 1, 0.5]], dtype=np.float64)
     triangles = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
-    return Reflector("Terrace", vertices, triangles, np.tile([0.0, 0.0, 1.0], (8, 1)))
+    normals = np.tile([0.0, 0.0, 1.0], (8, 1))
+    tilt = np.radians(tilt_degrees)
+    normals[:4] = [np.sin(tilt), 0.0, np.cos(tilt)]
+    return Reflector("Terrace", vertices, triangles, normals)
 
 
 def _patch(name: str, x0: float, x1: float, colour) -> DiffuseMesh:
-    """A finely split flat patch over x in [x0, x1] + OFFSET, y in [-0.4, 0.4], z = 3."""
+    """A finely split flat patch over x in [x0, x1], y in [-1, 1], z = HEIGHT."""
     n = 8
-    xs, ys = np.meshgrid(np.linspace(x0, x1, n) + OFFSET, np.linspace(-0.4, 0.4, n))
-    vertices = np.c_[xs.ravel(), ys.ravel(), np.full(n * n, 3.0)]
+    xs, ys = np.meshgrid(np.linspace(x0, x1, n), np.linspace(-1.0, 1.0, n))
+    vertices = np.c_[xs.ravel(), ys.ravel(), np.full(n * n, HEIGHT)]
     quads = [(j * n + i, j * n + i + 1, (j + 1) * n + i + 1, (j + 1) * n + i) for j in range(n - 1) for i in range(n - 1)]
     triangles = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))])
     return DiffuseMesh(name, vertices, triangles, np.tile([*colour, 1.0], (n * n, 1)), emissive=True)
 
 
-def _drawn(hidden_fraction: float) -> np.ndarray:
-    """The reflection target's alpha after drawing both patches at their answers."""
+def _reflected_on_the_lower_square(vertices: np.ndarray) -> np.ndarray:
+    """Where the eye sees each vertex reflected in the plane z = 0: toward its mirror image."""
+    image = vertices * [1.0, 1.0, -1.0]
+    t = EYE[2] / (EYE[2] - image[:, 2])
+    return EYE + t[:, None] * (image - EYE)
+
+
+def _drawn(hidden_fraction: float, reflection_cosine: float, tilt_degrees: float = 0.0) -> np.ndarray:
+    """The reflection target after drawing both patches at their answers on the plane
+    z = 0, the mirror's normals tilted by ``tilt_degrees`` (the law of reflection then
+    fails by twice that: as for an answer from another sheet of a curved mirror)."""
     import gpu
     from mathutils import Matrix
 
@@ -40,13 +58,13 @@ def _drawn(hidden_fraction: float) -> np.ndarray:
     from curved_reflections.gpu_shaders.gpu_data import data_texture, read_texture, saved_state
     from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
 
-    mirror = _two_level_mirror()
-    meshes = [_patch("Hidden", -0.8, -0.2, (1.0, 0.0, 0.0)), _patch("Seen", 0.2, 0.8, (0.0, 1.0, 0.0))]
-    view = look_at_view((0.0, 0.0, 5.0), (0.0, 0.0, 0.0), fov_y_deg=35.0, width=80, height=80)
-    renderer = ReflectionRenderer([mirror], meshes, edge_fraction=None)
+    # Reflected at x in [-0.88, -0.29] (behind the upper square) and [0.59, 0.88] (seen).
+    meshes = [_patch("Hidden", -3.0, -1.0, (1.0, 0.0, 0.0)), _patch("Seen", 2.0, 3.0, (0.0, 1.0, 0.0))]
+    view = _view()
+    renderer = ReflectionRenderer([_two_level_mirror(tilt_degrees)], meshes, edge_fraction=None)
     g = renderer.geometry
     texels = np.zeros((len(g.vertices), 4), np.float32)
-    texels[:, :3] = g.vertices * [1, 1, 0] - [OFFSET, 0, 0] - g.shift
+    texels[:, :3] = _reflected_on_the_lower_square(g.vertices) - g.shift
     texels[:, 3] = reflected_meshes.FOUND_CODE
     answers = data_texture(texels, renderer.meshes.width)
     targets = renderer.draw_passes(view, None)
@@ -57,15 +75,19 @@ def _drawn(hidden_fraction: float) -> np.ndarray:
         gpu.state.viewport_set(0, 0, targets.width, targets.height)
         gpu.state.depth_test_set('LESS')
         gpu.state.depth_mask_set(True)
-        setup = {**renderer.reflected_setup(view, renderer.iterative), "hidden_fraction": hidden_fraction}
-        renderer.meshes.draw(view_projection, targets.prepass_labels, setup, renderer._image, [(0, answers)])
+        setup = {**renderer.reflected_setup(view, renderer.iterative), "hidden_fraction": hidden_fraction,
+                 "reflection_cosine": reflection_cosine}
+        renderer.meshes.draw(view_projection, targets, setup, renderer._image, [(0, answers)])
     return read_texture(targets.reflection_colors, targets.width, targets.height)
 
 
-def _pixels(view_points, image):
-    view = look_at_view((0.0, 0.0, 5.0), (0.0, 0.0, 0.0), fov_y_deg=35.0, width=80, height=80)
-    pixels, _ = view.to_pixels(np.asarray(view_points, dtype=np.float64))
+def _at(points, image):
+    pixels, _ = _view().to_pixels(np.asarray(points, dtype=np.float64))
     return np.array([image[int(y), int(x)] for x, y in pixels])
+
+
+HIDDEN_POINTS = [[-0.6, 0.0, 0.0], [-0.45, 0.2, 0.0]]
+SEEN_POINTS = [[0.72, 0.0, 0.0], [0.66, -0.2, 0.0]]
 
 
 def test_a_reflection_whose_mirror_point_is_hidden_by_the_mirror_is_not_drawn(gpu_ready):
@@ -75,13 +97,23 @@ def test_a_reflection_whose_mirror_point_is_hidden_by_the_mirror_is_not_drawn(gp
     unbounded tolerance, as for the morphing grids) the hidden ones are drawn over the
     upper square: the image of a point reflected behind the front of a mirror (a bump, a
     teapot's handle)."""
-    hidden, seen = [[-0.5, 0.0, 0.0], [-0.35, 0.2, 0.0]], [[0.5, 0.0, 0.0], [0.35, -0.2, 0.0]]
     from curved_reflections.gpu_shaders.frame_pass import FramePass
 
-    image = _drawn(FramePass.hidden_fraction)
-    assert np.all(_pixels(hidden, image)[:, 3] == 0.0)
-    seen_pixels = _pixels(seen, image)
-    assert np.all(seen_pixels[:, 3] > 0.5) and np.allclose(seen_pixels[:, :3], (0.0, 1.0, 0.0), atol=1e-6)
-    unbounded = _drawn(float("inf"))
-    drawn_hidden = _pixels(hidden, unbounded)
+    image = _drawn(FramePass.hidden_fraction, FramePass.reflection_cosine)
+    assert np.all(_at(HIDDEN_POINTS, image)[:, 3] == 0.0)
+    seen = _at(SEEN_POINTS, image)
+    assert np.all(seen[:, 3] > 0.5) and np.allclose(seen[:, :3], (0.0, 1.0, 0.0), atol=1e-6)
+    drawn_hidden = _at(HIDDEN_POINTS, _drawn(float("inf"), FramePass.reflection_cosine))
     assert np.all(drawn_hidden[:, 3] > 0.5) and np.allclose(drawn_hidden[:, :3], (1.0, 0.0, 0.0), atol=1e-6)
+
+
+def test_a_reflection_the_eye_ray_does_not_reflect_toward_is_not_drawn(gpu_ready):
+    """The lower square's normals leaning 15 degrees: the eye's rays reflect 30 degrees off
+    the patch its answers place there, so nothing is drawn; with the law-of-reflection
+    test off (cosine -1) the patch shows. Leaning 5 degrees (10 off, within the test's
+    20) it still shows: the test drops another sheet's answers, not an approximate one."""
+    from curved_reflections.gpu_shaders.frame_pass import FramePass
+
+    assert np.all(_at(SEEN_POINTS, _drawn(FramePass.hidden_fraction, FramePass.reflection_cosine, 15.0))[:, 3] == 0.0)
+    assert np.all(_at(SEEN_POINTS, _drawn(FramePass.hidden_fraction, -1.0, 15.0))[:, 3] > 0.5)
+    assert np.all(_at(SEEN_POINTS, _drawn(FramePass.hidden_fraction, FramePass.reflection_cosine, 5.0))[:, 3] > 0.5)

@@ -88,8 +88,8 @@ def test_morphing_draws_inside_its_grid_and_runtime_outside(fig3_morphing):
 def test_render_image_draws_from_the_grid_on_the_gpu(fig3_morphing):
     """Render Image in Morphing mode, the scene camera inside the grid: no camera is built,
     the grid is blended on the GPU, and the image is the Runtime mode's but for a few
-    per cent of its pixels (half as many with its gaps ray traced); later frames keep the
-    renderer and the nodes' images."""
+    per cent of its pixels (fewer with all its gaps ray traced, not only the band along
+    the silhouette); later frames keep the renderer and the nodes' images."""
     from mathutils import Vector
 
     from curved_reflections.operators.render_image import FrameState, render_scene
@@ -111,15 +111,16 @@ def test_render_image_draws_from_the_grid_on_the_gpu(fig3_morphing):
     assert morphed.stats["methods"] == {"MirrorSphere": "MORPHING"}
     assert "n_rays" not in morphed.stats  # no camera built (the on-demand grid builds its nodes meanwhile)
     assert state.renderer.morph.counts == {"blends": 1, "node_projections": 4}
-    # The test grid is coarse (48-pixel faces, 7 x 7 x 5 nodes): measured, 4.7 % of the
-    # image (the ball fills about half of it) differs from the runtime camera's.
+    # The test grid is coarse (48-pixel faces, 7 x 7 x 5 nodes): measured, 3.2 % of the
+    # image (the ball fills about half of it) differs from the runtime camera's (4.7 %
+    # without the silhouette band traced), 2.1 % with every gap traced.
     differing = np.abs(morphed.image[..., :3] - runtime.image[..., :3]).max(axis=2) > 0.05
-    assert differing.mean() < 0.06
-    assert morphed.stats["traced_pixels"] == 0  # the gaps are traced on request only
+    assert differing.mean() < 0.04
+    # The band along the silhouette without a reflection is traced, every gap on request only.
     traced = render_scene(scene, bpy.context.evaluated_depsgraph_get(), trace_gaps=True, state=state)
-    assert traced.stats["traced_pixels"] > 100
+    assert 100 < morphed.stats["traced_pixels"] < 0.5 * traced.stats["traced_pixels"]
     closer = np.abs(traced.image[..., :3] - runtime.image[..., :3]).max(axis=2) > 0.05
-    assert closer.mean() < 0.5 * differing.mean()  # the traced gaps are what the runtime camera draws
+    assert closer.mean() < 0.75 * differing.mean()  # the traced gaps are what the runtime camera draws
     camera.location.x += 0.01
     render_scene(scene, bpy.context.evaluated_depsgraph_get(), state=state)
     assert state.reused == 2 and state.renderer.morph.counts["blends"] == 3
