@@ -22,7 +22,9 @@ PUSH_CONSTANT_BYTES = {
     # mat4 inverse_view_projection; vec2 view_size; int group, order, layer_offset; ivec2 target_size;
     # float inverse_diameter, order_range
     "project": 64 + 8 + 4 + 4 + 4 + 8 + 4 + 4,
-    "reflected": 64 + 8 + 4 + 4,  # mat4 view_projection; vec2 view_size; int use_camera_pixel, use_image
+    # mat4 view_projection; vec4 camera; vec2 view_size; int use_camera_pixel, use_image; float order_range,
+    # reflection_cosine
+    "reflected": 64 + 16 + 8 + 4 + 4 + 4 + 4,
     "composite": 16 + 4 + 4 + 8,  # vec4 world_color; int reflectors_only, fill_radius; ivec2 origin
 }
 _COMPOSITE_VERTEX = """
@@ -104,7 +106,7 @@ def _build_project():
 
 def reflected_interface(name: str, searched: bool = False):
     """The varyings of a reflected-mesh vertex stage, read by ``glsl/reflection_mesh_frag.glsl``;
-    ``searched`` adds the per-frame passes' interpolated validity and reflector point."""
+    ``searched`` adds the per-frame passes' interpolated validity."""
     import gpu
 
     interface = gpu.types.GPUStageInterfaceInfo(name)
@@ -115,9 +117,10 @@ def reflected_interface(name: str, searched: bool = False):
     interface.smooth('FLOAT', "distance_interp")
     interface.flat('FLOAT', "lit_interp")
     interface.flat('FLOAT', "reflector_interp")
+    interface.smooth('VEC3', "mirror_point_interp")
+    interface.flat('FLOAT', "first_order_interp")
     if searched:
         interface.smooth('FLOAT', "valid_interp")
-        interface.smooth('VEC3', "mirror_point_interp")
     return interface
 
 
@@ -133,11 +136,15 @@ def _build_reflected():
     interface = reflected_interface("curved_reflections_reflected_interface")
     info = gpu.types.GPUShaderCreateInfo()
     info.push_constant('MAT4', "view_projection")
+    info.push_constant('VEC4', "camera")
     info.push_constant('VEC2', "view_size")
     info.push_constant('INT', "use_camera_pixel")
     info.push_constant('INT', "use_image")
+    info.push_constant('FLOAT', "order_range")
+    info.push_constant('FLOAT', "reflection_cosine")
     info.sampler(0, 'FLOAT_2D', "prepass_labels")
     info.sampler(1, 'FLOAT_2D', "image")
+    info.sampler(2, 'FLOAT_2D', "prepass_normals")
     info.vertex_in(0, 'VEC4', "world_depth")
     info.vertex_in(1, 'VEC4', "pixel_reflector")
     info.vertex_in(2, 'VEC4', "eye_distance")

@@ -14,6 +14,11 @@ from __future__ import annotations
 
 import math
 
+#: 20 degrees: an answer from another sheet of a curved mirror (across a fold, a crease,
+#: another image in the same slot) misses by far more; an interpolated point of a small
+#: reflected triangle by far less.
+REFLECTION_COSINE = math.cos(math.radians(20.0))
+
 
 class FramePass:
     """One method's per-frame GPU work for one renderer. Subclasses implement
@@ -34,8 +39,9 @@ class FramePass:
     hidden_fraction = 0.003
     #: A reflected fragment is kept only where the eye's ray, reflected about the normal of
     #: the mirror the pre-pass saw at its pixel, leaves within this cosine of the direction
-    #: toward the fragment's point of the mesh (``glsl/reflection_mesh_frag.glsl``).
-    reflection_cosine = math.cos(math.radians(20.0))
+    #: toward the fragment's point of the mesh (``glsl/reflection_mesh_frag.glsl``; the
+    #: sample-based camera's first-order triangles are held to the same).
+    reflection_cosine = REFLECTION_COSINE
 
     @property
     def reflector_indices(self) -> list:

@@ -85,6 +85,7 @@ from ..addon.geometry import band_trace, subdivision
 from . import draw_shaders
 from .methods import projection
 from .draw_geometry import prepare_geometry
+from .frame_pass import REFLECTION_COSINE
 from .gpu_data import data_texture, read_texture, saved_state, vertex_buffer
 from .methods.iterative_draw import IterativePass
 from .methods.morph_pass import DEFAULT_BUDGET_MB, MorphPass
@@ -340,7 +341,11 @@ class ReflectionRenderer:
                     shader.uniform_float("view_projection", view_projection)
                     shader.uniform_float("view_size", (float(width), float(height)))
                     shader.uniform_int("use_camera_pixel", int(_same_view(view, cached.camera_view)))
+                    shader.uniform_float("camera", _camera(view, g.shift))
+                    shader.uniform_float("order_range", cached.order_range)
+                    shader.uniform_float("reflection_cosine", REFLECTION_COSINE)
                     shader.uniform_sampler("prepass_labels", targets.prepass_labels)
+                    shader.uniform_sampler("prepass_normals", targets.prepass_normals)
                     for image, first, count in cached.runs:
                         shader.uniform_int("use_image", int(image >= 0))
                         shader.uniform_sampler("image", self._image(image))

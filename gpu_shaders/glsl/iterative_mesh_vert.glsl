@@ -36,6 +36,7 @@ void main()
   eye_interp = to_mirror / max(distance, 1e-30);
   distance_interp = distance;
   mirror_point_interp = p;
+  first_order_interp = 1.0;
   reflector_interp = reflector_id;
   valid_interp = valid ? (flipped ? -1.0 : 1.0) : 0.0;
   float depth = clamp(distance * inverse_diameter, 0.0, 1.0) * order_range;

@@ -34,18 +34,21 @@ void main()
   if (eye_depth(mirror_point_interp, camera) > label.w + hidden_tolerance) {
     discard;
   }
-  /* The law of reflection at this pixel: the eye's ray, reflected about the normal of the
-   * mirror the pre-pass saw here, must leave toward the fragment's own point of the mesh.
-   * A triangle whose corners were answered in different sheets of the reflection (two
-   * images of a non-convex mirror in one answer slot, a fold) stretches across pixels
-   * whose reflected rays point elsewhere: dropped there, instead of a wedge of colour. */
-  vec3 mirror_normal = texelFetch(prepass_normals, ivec2(gl_FragCoord.xy), 0).xyz;
-  vec3 incoming = camera.w > 0.5 ? mirror_point_interp - camera.xyz : -camera.xyz;
-  vec3 outgoing = reflect(normalize(incoming), normalize(mirror_normal));
-  if (dot(outgoing, -normalize(eye_interp)) < reflection_cosine) {
-    discard;
-  }
 #endif
+  /* The law of reflection at this pixel (first order): the eye's ray, reflected about the
+   * normal of the mirror the pre-pass saw here, must leave toward the fragment's own
+   * point of the mesh. A triangle whose corners were answered in different sheets of the
+   * reflection (two images of a non-convex mirror in one answer slot, across a fold or a
+   * crease) stretches over pixels whose reflected rays point elsewhere: dropped there,
+   * instead of a wedge of colour. */
+  if (first_order_interp > 0.5) {
+    vec3 mirror_normal = texelFetch(prepass_normals, ivec2(gl_FragCoord.xy), 0).xyz;
+    vec3 incoming = camera.w > 0.5 ? mirror_point_interp - camera.xyz : -camera.xyz;
+    vec3 outgoing = reflect(normalize(incoming), normalize(mirror_normal));
+    if (dot(outgoing, -normalize(eye_interp)) < reflection_cosine) {
+      discard;
+    }
+  }
   vec4 albedo = color_interp;
   if (use_image != 0) {
     albedo *= texture(image, uv_interp);

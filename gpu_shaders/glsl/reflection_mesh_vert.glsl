@@ -28,6 +28,10 @@ void main()
   eye_interp = eye_distance.xyz;
   distance_interp = eye_distance.w;
   reflector_interp = pixel_reflector.z;
+  mirror_point_interp = world_depth.xyz;
+  /* Depth (k - 1 + z / D) g: order k = 1 below g. Only then is the eye vector's reflector
+   * point the one the eye sees, which the fragment stage's law-of-reflection test needs. */
+  first_order_interp = world_depth.w < order_range ? 1.0 : 0.0;
   vec2 ndc;
   if (use_camera_pixel != 0) {
     ndc = pixel_reflector.xy / view_size * 2.0 - 1.0;

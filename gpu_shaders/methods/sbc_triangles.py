@@ -207,6 +207,8 @@ class CachedProjection:
     #: Reflectors whose first-order sheets it leaves to the passes run every frame (the
     #: iterative search; the morphing grids covering ``camera_view``).
     per_frame: frozenset = frozenset()
+    #: The depth range per order of its vertices (``reflected_depth``): 1 / (max order + 1).
+    order_range: float = 1.0
 
 
 @functools.cache
@@ -387,7 +389,7 @@ class CameraProjections:
         batch = gpu.types.GPUBatch(type='TRIS', buf=buffer)
         stats["projection_seconds"] = time.perf_counter() - start
         return CachedProjection(textures, camera_view, batch, tuple(runs), first // 3, n_mixed, stats,
-                                per_frame=per_frame)
+                                per_frame=per_frame, order_range=setup["order_range"])
 
     def project_pass(self, textures, batch, draws: list, n_texels: int, setup: dict):
         """Project the points of ``batch`` with ``textures``: per (group, order, texel
