@@ -8,7 +8,7 @@ camera moving, preparation time and baked data, and a plot of accuracy against t
 
 Scenes: the ``sbc_fig3`` demo and ``bumpy_ball`` (a star-shaped, not convex, mirror that
 no method's constants were chosen on), at ``--width`` x ``--height``; ``--scenes`` adds the
-``teapot`` (whose tetrahedral bake does not finish today).
+``teapot`` (whose tetrahedral bake takes one node of about two CPU minutes: below).
 The camera circles the scene's mirror at 2.3 radii (inside the baked grids), turning
 ``--orbit-degrees`` a frame and tracking it. Per scene and per mode a user can pick
 (Runtime, Morphing, Octree, Iterative, Perturbation), all reflectors set to it, exactly
@@ -56,9 +56,11 @@ import bench_sbc  # noqa: E402  (same folder: package import)
 
 REPO_ROOT = HERE.parents[1]
 SCENES = ("sbc_fig3", "bumpy_ball", "teapot")
-#: Measured by default. The teapot's tetrahedral bake does not finish (its grid's centre
-#: node ran for over 20 minutes; ``--scenes`` adds it); the bumpy ball's takes about 25
-#: minutes on 2 cores (405 sample-based cameras of a bumpy mirror).
+#: Measured by default. The teapot's tetrahedral bake finishes, but one node (201, the
+#: eye between the handle and the body, facing both at a few centimetres) takes 107 s
+#: alone, against about a second for the other 404, and many times that in a bake
+#: process beside others on a loaded machine (``--scenes`` adds it); the bumpy ball's
+#: takes about 25 minutes on 2 cores (405 sample-based cameras of a bumpy mirror).
 DEFAULT_SCENES = ("sbc_fig3", "bumpy_ball")
 MODES = ("RUNTIME", "MORPHING", "OCTREE", "ITERATIVE", "PERTURBATION")
 #: A drawn image within this many px of an exact reflection of its vertex is that
