@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..addon.methods.sbc import sheet_bounds
-from ..addon.geometry import subdivision
+from ..addon.geometry import closed_surfaces, subdivision
 
 #: Float targets hold vertex indices exactly below 2^24.
 MAX_VERTICES = 1 << 24
@@ -27,8 +27,11 @@ class DrawGeometry:
     positions relative to ``shift``; its triangles sorted by image, ``prepass_ranges``
     the (image index or -1, first triangle, count) runs. Reflected meshes: all diffuse
     meshes subdivided (:mod:`.subdivision`) and concatenated, world positions, their
-    triangles sorted by image likewise (``ranges``). ``images`` are the meshes' image
-    textures, (H, W, 4) float32 linear, rows bottom to top.
+    triangles sorted by image likewise (``ranges``), and within an image by
+    ``range_windings``: per range, the :func:`.closed_surfaces.cullable_winding` of its
+    meshes (+1 or -1: closed solids no mirror lies in, whose triangles facing away from
+    the mirror may be culled; 0: the rest). ``images`` are the meshes' image textures,
+    (H, W, 4) float32 linear, rows bottom to top.
     """
 
     shift: np.ndarray  # (3,) float64
@@ -49,6 +52,7 @@ class DrawGeometry:
     images: tuple = ()
     prepass_ranges: tuple = ()
     ranges: tuple = ()
+    range_windings: tuple = ()
     stats: dict = field(default_factory=dict)
 
 
@@ -129,8 +133,10 @@ def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=Non
         np.concatenate(tri_image) if tri_image else np.zeros(0, int))
 
     centres, radii = subdivision.reflector_spheres(reflectors)
-    vertices, packed, mesh_triangles, mesh_image, offset = [], [], [], [], 0
+    vertices, packed, mesh_triangles, mesh_image, mesh_winding, offset = [], [], [], [], [], 0
+    mirrors = [r.vertices for r in reflectors]
     for mesh, (normal, uv, lit), image in zip(meshes, attributes, image_of_mesh):
+        sense = closed_surfaces.cullable_winding(mesh.vertices, mesh.triangles, mirrors)
         # Colour, normal, UV and lit are interpolated together at new midpoints.
         v, t, c = mesh.vertices, mesh.triangles, np.c_[mesh.colors, normal, uv, lit].astype(np.float32)
         if edge_fraction is not None:
@@ -139,6 +145,7 @@ def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=Non
         packed.append(c)
         mesh_triangles.append(t + offset)
         mesh_image.append(np.full(len(t), image))
+        mesh_winding.append(np.full(len(t), sense))
         offset += len(v)
     if offset >= MAX_VERTICES:
         raise ValueError(f"{offset} reflected vertices: float targets index below 2^24 only")
@@ -153,8 +160,11 @@ def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=Non
     vertex_normals = packed[:, 4:7]
     length = np.linalg.norm(vertex_normals, axis=1, keepdims=True)
     vertex_normals = np.divide(vertex_normals, length, out=np.zeros_like(vertex_normals), where=length > 0)
-    mesh_triangles, ranges = _sorted_by_image(
-        mesh_triangles, np.concatenate(mesh_image) if mesh_image else np.zeros(0, int))
+    # One run per image and winding: (image + 1) * 3 + (winding + 1) orders both.
+    keys = (np.concatenate(mesh_image) + 1) * 3 + np.concatenate(mesh_winding) + 1 if mesh_image \
+        else np.zeros(0, int)
+    mesh_triangles, keyed = _sorted_by_image(mesh_triangles, keys)
+    ranges = tuple((key // 3 - 1, first, count) for key, first, count in keyed)
     geometry = DrawGeometry(
         shift=shift,
         prepass_positions=np.concatenate(positions) if positions else np.zeros((0, 3), np.float32),
@@ -174,11 +184,13 @@ def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=Non
         images=tuple(images),
         prepass_ranges=prepass_ranges,
         ranges=ranges,
+        range_windings=tuple(key % 3 - 1 for key, _, _ in keyed),
     )
     geometry.stats.update({
         "mesh_triangles": int(sum(len(m.triangles) for m in meshes)),
         "reflected_triangles": int(len(geometry.triangles)),
         "reflected_vertices": int(len(geometry.vertices)),
+        "closed_triangles": int(sum(count for (_, _, count), w in zip(ranges, geometry.range_windings) if w)),
         "prepare_seconds": time.perf_counter() - start,
     })
     return geometry

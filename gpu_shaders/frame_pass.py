@@ -76,6 +76,14 @@ class FramePass:
         return []
 
     @property
+    def mirrored_reflectors(self) -> list:
+        """Reflectors every image of which is mirrored, as in a flat mirror (a convex
+        mirror: its caustic lies behind the surface, no image is flipped): on screen a
+        mirror reverses the winding of every triangle, so the far sides of closed
+        solids can be culled by winding (``ReflectedMeshes.draw``)."""
+        return []
+
+    @property
     def gap_reflectors(self) -> list:
         """Reflectors the last update drew with gaps a render may trace (``trace_gaps``)."""
         return []

@@ -72,6 +72,14 @@ def reflected_shader():
     return gpu.shader.create_from_info(info)
 
 
+def _culled_faces(winding: int) -> str:
+    """The faces to cull of a closed solid of ``winding`` (``closed_surfaces.winding``) in
+    a mirrored image: seen from the mirror its far side winds as its near side does in a
+    direct view (counter-clockwise for outward normals, OpenGL's front), the mirror
+    reversing it; 'NONE' for a mesh that is not a closed solid."""
+    return {1: 'FRONT', -1: 'BACK'}.get(winding, 'NONE')
+
+
 class ReflectedMeshes:
     """One renderer's diffuse vertices (a texture) and reflected meshes (an indexed batch)
     on the GPU, uploaded on first use, and the draw of answer textures."""
@@ -128,7 +136,12 @@ class ReflectedMeshes:
         reflector's bounding-box diagonal, is hidden by the mirror and dropped
         (``FramePass.hidden_fraction``); and ``reflection_cosine``: one whose eye ray,
         reflected about the mirror's normal there, leaves further than this cosine from
-        the fragment's point of the mesh is dropped (``FramePass.reflection_cosine``)."""
+        the fragment's point of the mesh is dropped (``FramePass.reflection_cosine``);
+        and optionally ``mirrored``: reflectors whose images are all mirrored
+        (``FramePass.mirrored_reflectors``), in which the triangles of closed solids that
+        face away from the mirror are culled by their winding (``range_windings``)."""
+        import gpu
+
         answers = list(answers)
         self._ensure()
         if self._batch is None or not answers:
@@ -144,15 +157,19 @@ class ReflectedMeshes:
         shader.uniform_sampler("prepass_labels", targets.prepass_labels)
         shader.uniform_sampler("prepass_normals", targets.prepass_normals)
         shader.uniform_float("reflection_cosine", setup["reflection_cosine"])
+        mirrored = setup.get("mirrored", frozenset())
         for reflector_index, texture in answers:
             shader.uniform_sampler("search_result", texture)
             shader.uniform_float("reflector_id", float(reflector_index + 1))
             shader.uniform_float("hidden_tolerance",
                                  setup["hidden_fraction"] * float(self.geometry.reflector_sizes[reflector_index]))
-            for image, first, count in self.geometry.ranges:
+            windings = self.geometry.range_windings or (0,) * len(self.geometry.ranges)
+            for (image, first, count), winding in zip(self.geometry.ranges, windings):
+                gpu.state.face_culling_set(_culled_faces(winding) if reflector_index in mirrored else 'NONE')
                 shader.uniform_int("use_image", int(image >= 0))
                 shader.uniform_sampler("image", image_of(image))
                 self._batch.draw_range(shader, elem_start=3 * first, elem_count=3 * count)
+        gpu.state.face_culling_set('NONE')
 
     def read(self, texture) -> tuple[np.ndarray, np.ndarray]:
         """An answer texture read back: (N, 3) world points (NaN where no answer) and the

@@ -369,7 +369,8 @@ class ReflectionRenderer:
         """The uniforms of ``frame_pass``'s reflected meshes in ``view`` (``ReflectedMeshes.draw``)."""
         return {"inverse_diameter": 1.0 / self.geometry.diameter, "order_range": ITERATIVE_ORDER_RANGE,
                 "camera": _camera(view, self.geometry.shift), "hidden_fraction": frame_pass.hidden_fraction,
-                "reflection_cosine": frame_pass.reflection_cosine}
+                "reflection_cosine": frame_pass.reflection_cosine,
+                "mirrored": frozenset(frame_pass.mirrored_reflectors)}
 
     def _answers(self) -> list:
         return [answer for frame_pass in self.passes for answer in frame_pass.answers()]

@@ -303,28 +303,30 @@ void main()
   int steps = 0;
   bool image_flipped = false;
   vec3 p = vec3(0.0);
-  bool eye_inside = camera.w > 0.5 && inside_surface(camera.xyz - centre);
-  if (eye_inside || length(vertex) <= 1e-9 * max(max_radius, 1e-30) || inside_surface(vertex)) {
-    status = INSIDE;
-  }
-  else {
-    /* Last frame's answer first (the view moved a little), then the restarts around the
-     * sphere guess. */
-    bool found = false;
-    if (resume) {
-      chart_axis = normalize(last.xyz - centre);
-      chart_t1 = perpendicular(chart_axis);
-      chart_t2 = cross(chart_axis, chart_t1);
-      vec3 answer;
-      int verdict = newton(vec2(0.0), steps, answer);
-      if (verdict == FOUND) {
-        status = verdict;
-        p = answer;
-        image_flipped = flipped;
-        found = true;
-      }
+  /* Last frame's answer first (the view moved a little). A found answer faces the eye
+   * and the vertex, and on a non-convex mirror no part of the surface lies between
+   * them (check()): neither lies inside the mirror, which is tested only when the
+   * resumed search fails, before the restarts around the sphere guess. */
+  bool found = false;
+  if (resume) {
+    chart_axis = normalize(last.xyz - centre);
+    chart_t1 = perpendicular(chart_axis);
+    chart_t2 = cross(chart_axis, chart_t1);
+    vec3 answer;
+    int verdict = newton(vec2(0.0), steps, answer);
+    if (verdict == FOUND) {
+      status = verdict;
+      p = answer;
+      image_flipped = flipped;
+      found = true;
     }
-    if (!found) {
+  }
+  if (!found) {
+    bool eye_inside = camera.w > 0.5 && inside_surface(camera.xyz - centre);
+    if (eye_inside || length(vertex) <= 1e-9 * max(max_radius, 1e-30) || inside_surface(vertex)) {
+      status = INSIDE;
+    }
+    else {
       chart_axis = sphere_guess(vertex);
       chart_t1 = perpendicular(chart_axis);
       chart_t2 = cross(chart_axis, chart_t1);

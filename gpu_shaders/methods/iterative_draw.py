@@ -109,6 +109,11 @@ class IterativePass(FramePass):
         higher order, begins next to a drawn one)."""
         return [m.index for m in self.methods if not m.reflector_map.convex or self.n_reflectors > 1]
 
+    @property
+    def mirrored_reflectors(self) -> list:
+        """The searched mirrors that are convex (``reflector_map.is_convex``)."""
+        return [m.index for m in self.methods if m.reflector_map.convex]
+
     def update(self, view, warm: bool = False, skip=frozenset()) -> None:
         """:meth:`search` (``skip`` never holds a searched reflector: a camera never draws one)."""
         self.search(view, warm)

@@ -117,3 +117,78 @@ def test_a_reflection_the_eye_ray_does_not_reflect_toward_is_not_drawn(gpu_ready
     assert np.all(_at(SEEN_POINTS, _drawn(FramePass.hidden_fraction, FramePass.reflection_cosine, 15.0))[:, 3] == 0.0)
     assert np.all(_at(SEEN_POINTS, _drawn(FramePass.hidden_fraction, -1.0, 15.0))[:, 3] > 0.5)
     assert np.all(_at(SEEN_POINTS, _drawn(FramePass.hidden_fraction, FramePass.reflection_cosine, 5.0))[:, 3] > 0.5)
+
+
+def _face_coloured_box(x0: float, x1: float, z0: float, z1: float) -> DiffuseMesh:
+    """A closed box over x in [x0, x1], y in [-0.5, 0.5], z in [z0, z1], its faces wound
+    counter-clockwise seen from outside, each with its own vertices: the bottom (facing
+    the mirror below) green, the top red, the sides blue."""
+    corners = {"bottom": [(x0, -0.5, z0), (x0, 0.5, z0), (x1, 0.5, z0), (x1, -0.5, z0)],
+               "top": [(x0, -0.5, z1), (x1, -0.5, z1), (x1, 0.5, z1), (x0, 0.5, z1)],
+               "front": [(x0, -0.5, z0), (x1, -0.5, z0), (x1, -0.5, z1), (x0, -0.5, z1)],
+               "back": [(x0, 0.5, z0), (x0, 0.5, z1), (x1, 0.5, z1), (x1, 0.5, z0)],
+               "left": [(x0, -0.5, z0), (x0, -0.5, z1), (x0, 0.5, z1), (x0, 0.5, z0)],
+               "right": [(x1, -0.5, z0), (x1, 0.5, z0), (x1, 0.5, z1), (x1, -0.5, z1)]}
+    colour = {"bottom": (0.0, 1.0, 0.0), "top": (1.0, 0.0, 0.0)}
+    vertices, triangles, colours = [], [], []
+    for face, quad in corners.items():
+        b = len(vertices)
+        vertices += quad
+        triangles += [(b, b + 1, b + 2), (b, b + 2, b + 3)]
+        colours += [(*colour.get(face, (0.0, 0.0, 1.0)), 1.0)] * 4
+    return DiffuseMesh("Box", np.array(vertices, np.float64), np.array(triangles), np.array(colours), emissive=True)
+
+
+def _box_reflection(cull: bool, reversed_sense: bool = False) -> np.ndarray:
+    """The box's reflection in the lower square (a flat mirror: every image mirrored),
+    drawn with its far side culled or not; ``reversed_sense`` culls the faces the
+    mirror's winding would keep instead (what a wrong sense would draw)."""
+    import gpu
+    from mathutils import Matrix
+
+    from curved_reflections.gpu_shaders import reflected_meshes
+    from curved_reflections.gpu_shaders.gpu_data import data_texture, read_texture, saved_state
+    from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
+
+    renderer = ReflectionRenderer([_two_level_mirror()], [_face_coloured_box(2.0, 3.0, HEIGHT, HEIGHT + 1.0)],
+                                  edge_fraction=None)
+    g = renderer.geometry
+    assert g.range_windings == (1,) and g.stats["closed_triangles"] == 12
+    texels = np.zeros((len(g.vertices), 4), np.float32)
+    texels[:, :3] = _reflected_on_the_lower_square(g.vertices) - g.shift
+    texels[:, 3] = reflected_meshes.FOUND_CODE
+    answers = data_texture(texels, renderer.meshes.width)
+    view = _view()
+    targets = renderer.draw_passes(view, None)
+    translate = np.eye(4)
+    translate[:3, 3] = g.shift
+    view_projection = Matrix((np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix) @ translate).tolist())
+    setup = {**renderer.reflected_setup(view, renderer.iterative), "mirrored": frozenset({0} if cull else ())}
+    culled_faces = reflected_meshes._culled_faces
+    if reversed_sense:
+        reflected_meshes._culled_faces = lambda winding: culled_faces(-winding)
+    try:
+        with saved_state(), targets.reflection.bind():
+            gpu.state.viewport_set(0, 0, targets.width, targets.height)
+            gpu.state.depth_test_set('LESS')
+            gpu.state.depth_mask_set(True)
+            renderer.meshes.draw(view_projection, targets, setup, renderer._image, [(0, answers)])
+    finally:
+        reflected_meshes._culled_faces = culled_faces
+    return read_texture(targets.reflection_colors, targets.width, targets.height)
+
+
+def test_the_far_side_of_a_closed_solid_is_culled_in_a_mirrored_image(gpu_ready):
+    """A closed box above a flat mirror: the mirror shows its bottom (green), the face
+    toward it, and the side facing the eye's axis (blue), never its top (red). Culled by
+    winding, its far faces never reach the rasteriser, and the image is the one drawn
+    without culling, pixel for pixel; culling the other sense removes the near faces,
+    and the top shows instead."""
+    plain, culled = _box_reflection(cull=False), _box_reflection(cull=True)
+    drawn = plain[..., 3] > 0.5
+    colours = plain[drawn][:, :3]
+    assert drawn.sum() > 20
+    assert np.mean(np.all(colours == (0.0, 1.0, 0.0), axis=1)) > 0.7 and not np.any(colours[:, 0] > 0.0)
+    np.testing.assert_array_equal(culled, plain)
+    wrong = _box_reflection(cull=True, reversed_sense=True)
+    assert np.mean(wrong[drawn][:, 0] == 1.0) > 0.7

@@ -1,0 +1,102 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Closed, consistently wound diffuse meshes: the triangles a reflection never shows.
+
+A watertight mesh whose triangles are all wound the same way bounds a solid. Seen from
+any point outside it, every triangle that faces away from that point lies behind the
+solid's near side, so a renderer may cull it; seen from inside, the opposite holds.
+For a reflected mesh the point is the reflection point on the mirror: where every
+mirror point lies outside the solid, the triangles facing away from the mirror are
+hidden in every first-order image (``gpu_shaders/reflected_meshes.py`` culls them
+by their winding on screen, which a mirror reverses).
+
+Positions, not vertex indices, decide which triangles meet: captured meshes split
+vertices at sharp edges and UV seams, and such a mesh is still closed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Directions of the inside test's rays: not along any axis or diagonal, so that a ray
+#: through an edge or a vertex of a modelled (axis-aligned) mesh is unlikely, and three
+#: of them vote.
+PROBE_DIRECTIONS = np.array([(0.5773, 0.6123, 0.5401), (-0.6812, 0.2137, 0.7003), (0.1517, -0.8846, 0.4410)])
+#: Points of each mirror tested against a solid (its vertices, evenly strided).
+PROBES_PER_MIRROR = 64
+#: Point-triangle pairs of the inside test held in memory at once.
+PAIRS_PER_CHUNK = 1 << 20
+
+
+def winding(vertices: np.ndarray, triangles: np.ndarray) -> int:
+    """+1 where ``triangles`` close a solid and wind counter-clockwise seen from outside
+    (normals outward, Blender's convention), -1 where they wind the other way (normals
+    inward: a flipped mesh or a mirroring transform), 0 where they do not close a solid
+    (an open edge, an edge of three or more faces, two neighbours wound against each
+    other, no volume)."""
+    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    if len(triangles) < 4:
+        return 0
+    _, welded = np.unique(np.asarray(vertices, dtype=np.float64), axis=0, return_inverse=True)
+    corners = welded.reshape(-1)[triangles]
+    if np.any(corners[:, 0] == corners[:, 1]) or np.any(corners[:, 1] == corners[:, 2]) \
+            or np.any(corners[:, 2] == corners[:, 0]):
+        return 0
+    directed = np.concatenate([corners[:, [0, 1]], corners[:, [1, 2]], corners[:, [2, 0]]])
+    n = int(welded.max()) + 1
+    forward = np.sort(directed[:, 0] * n + directed[:, 1])
+    backward = np.sort(directed[:, 1] * n + directed[:, 0])
+    # Consistently wound and closed: each directed edge once, and its reverse once.
+    if np.any(forward[1:] == forward[:-1]) or not np.array_equal(forward, backward):
+        return 0
+    v = np.asarray(vertices, dtype=np.float64)[triangles]
+    volume = np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])).sum() / 6.0
+    size = np.ptp(np.asarray(vertices, dtype=np.float64), axis=0).max()
+    if not abs(volume) > 1e-9 * size ** 3:
+        return 0
+    return 1 if volume > 0 else -1
+
+
+def inside(vertices: np.ndarray, triangles: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(P,) bool: ``points`` inside the solid a closed mesh bounds, by the parity of the
+    triangles each of three rays crosses (the majority of the three)."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    v = np.asarray(vertices, dtype=np.float64)[np.asarray(triangles, dtype=np.int64).reshape(-1, 3)]
+    v0, e1, e2 = v[:, 0], v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
+    votes = np.zeros(len(points), dtype=np.int64)
+    chunk = max(1, PAIRS_PER_CHUNK // max(len(v), 1))
+    for direction in PROBE_DIRECTIONS / np.linalg.norm(PROBE_DIRECTIONS, axis=1, keepdims=True):
+        # Moller-Trumbore, each point against every triangle.
+        p = np.cross(direction, e2)
+        det = np.einsum("ij,ij->i", e1, p)
+        usable = np.abs(det) > 1e-300
+        inverse = np.where(usable, 1.0 / np.where(usable, det, 1.0), 0.0)
+        for start in range(0, len(points), chunk):
+            s = points[start:start + chunk, None, :] - v0[None]
+            u = np.einsum("ptj,tj->pt", s, p) * inverse
+            q = np.cross(s, e1[None])
+            w = np.einsum("j,ptj->pt", direction, q) * inverse
+            t = np.einsum("tj,ptj->pt", e2, q) * inverse
+            crossed = usable & (u >= 0.0) & (w >= 0.0) & (u + w <= 1.0) & (t > 0.0)
+            votes[start:start + chunk] += crossed.sum(axis=1) % 2
+    return votes >= 2
+
+
+def cullable_winding(vertices: np.ndarray, triangles: np.ndarray, mirrors) -> int:
+    """:func:`winding` of a diffuse mesh where no point of any mirror (each an (N, 3)
+    array of its vertices) lies inside the solid it bounds, else 0: seen from inside,
+    the far side of a solid is what shows (a mirror ball in a closed room)."""
+    sense = winding(vertices, triangles)
+    if sense == 0:
+        return 0
+    vertices = np.asarray(vertices, dtype=np.float64)
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    for mirror in mirrors:
+        mirror = np.asarray(mirror, dtype=np.float64).reshape(-1, 3)
+        if len(mirror) == 0 or np.any(mirror.max(axis=0) < lo) or np.any(mirror.min(axis=0) > hi):
+            continue
+        stride = max(1, len(mirror) // PROBES_PER_MIRROR)
+        probes = np.concatenate([mirror[::stride], mirror.mean(axis=0, keepdims=True)])
+        within = np.all((probes >= lo) & (probes <= hi), axis=1)
+        if within.any() and inside(vertices, triangles, probes[within]).any():
+            return 0
+    return sense

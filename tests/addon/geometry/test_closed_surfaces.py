@@ -1,0 +1,65 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Closed solids among the diffuse meshes (``addon/geometry/closed_surfaces.py``): which
+are watertight and consistently wound, which way, and whether a mirror lies inside."""
+
+import numpy as np
+
+from curved_reflections.addon.geometry import closed_surfaces
+from curved_reflections.addon.geometry.sphere import icosphere
+
+
+def _cube(split: bool = True):
+    """The unit cube, counter-clockwise seen from outside; ``split``: each face its own
+    four vertices (as captured at sharp edges), else eight shared corners."""
+    quads = [((0, 0, 0), (0, 1, 0), (1, 1, 0), (1, 0, 0)), ((0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)),
+             ((0, 0, 0), (1, 0, 0), (1, 0, 1), (0, 0, 1)), ((0, 1, 0), (0, 1, 1), (1, 1, 1), (1, 1, 0)),
+             ((0, 0, 0), (0, 0, 1), (0, 1, 1), (0, 1, 0)), ((1, 0, 0), (1, 1, 0), (1, 1, 1), (1, 0, 1))]
+    vertices, triangles = [], []
+    for quad in quads:
+        base = len(vertices)
+        vertices += quad
+        triangles += [(base, base + 1, base + 2), (base, base + 2, base + 3)]
+    vertices, triangles = np.array(vertices, np.float64), np.array(triangles)
+    if not split:
+        vertices, welded = np.unique(vertices, axis=0, return_inverse=True)
+        triangles = welded.reshape(-1)[triangles]
+    return vertices, triangles
+
+
+def test_a_closed_mesh_wound_outward_is_plus_one_and_inward_minus_one():
+    for split in (True, False):
+        vertices, triangles = _cube(split)
+        assert closed_surfaces.winding(vertices, triangles) == 1
+        assert closed_surfaces.winding(vertices, triangles[:, ::-1]) == -1
+        assert closed_surfaces.winding(-vertices, triangles) == -1  # a mirroring transform
+    sphere = icosphere(np.zeros(3), 1.0, 2, "ball")
+    assert closed_surfaces.winding(sphere.vertices, sphere.triangles) == 1
+
+
+def test_a_mesh_that_is_not_a_closed_consistent_solid_is_zero():
+    vertices, triangles = _cube()
+    assert closed_surfaces.winding(vertices, triangles[:-2]) == 0  # a face missing
+    flipped_face = triangles.copy()
+    flipped_face[:2] = flipped_face[:2, ::-1]
+    assert closed_surfaces.winding(vertices, flipped_face) == 0  # one face wound against the rest
+    assert closed_surfaces.winding(vertices, np.r_[triangles, triangles[:1]]) == 0  # an edge of three faces
+    flat = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], np.float64)
+    assert closed_surfaces.winding(flat, np.array([[0, 1, 2], [1, 3, 2], [0, 2, 1], [1, 2, 3]])) == 0  # no volume
+
+
+def test_inside_a_closed_mesh():
+    vertices, triangles = _cube()
+    points = np.array([[0.5, 0.5, 0.5], [0.99, 0.01, 0.5], [1.5, 0.5, 0.5], [-0.01, 0.5, 0.5], [0.5, 0.5, 3.0]])
+    np.testing.assert_array_equal(closed_surfaces.inside(vertices, triangles, points),
+                                  [True, True, False, False, False])
+
+
+def test_a_solid_a_mirror_lies_in_is_not_culled():
+    """A mirror ball in a closed room shows the room's far walls: from inside, the
+    triangles facing away are the ones that show."""
+    vertices, triangles = _cube()
+    room = (vertices - 0.5) * 10.0
+    ball = icosphere(np.zeros(3), 1.0, 2, "ball").vertices
+    assert closed_surfaces.cullable_winding(room, triangles, [ball]) == 0
+    assert closed_surfaces.cullable_winding(room, triangles, [ball + (20.0, 0.0, 0.0)]) == 1
+    assert closed_surfaces.cullable_winding(room, triangles[:, ::-1], [ball + (3.0, 20.0, 0.0)]) == -1
