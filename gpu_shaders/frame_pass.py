@@ -43,6 +43,11 @@ class FramePass:
     #: sample-based camera's first-order triangles are held to the same).
     reflection_cosine = REFLECTION_COSINE
 
+    #: The Accuracy (px) the pass answers to, which sets the live view's snapping grid
+    #: (``reflected_meshes.SNAP_SHARE``); None: the pass's images are not that accurate
+    #: (the blended grids), and are not snapped.
+    accuracy_px = None
+
     @property
     def reflector_indices(self) -> list:
         """Every reflector this pass may draw."""

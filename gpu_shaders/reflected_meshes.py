@@ -33,6 +33,13 @@ FOUND_CODE = search_module.FOUND + 8
 #: Added to the code of a flipped image (``search.flipped_images``): a triangle whose
 #: corners disagree spans a fold and is not drawn. Above 16 times any step count.
 FLIPPED_CODE = 2048
+#: The live view snaps reflected vertices to a grid of this share of its Accuracy (px):
+#: at most half a cell off on each axis (0.71 of a cell in all), the answer itself a
+#: tenth of the Accuracy off (``search.STOP_FRACTION``): within the Accuracy together.
+#: A reflection packs the scene's triangles into a mirror's few pixels (sbc_fig3: 46 %
+#: of them under a pixel across), and each costs its set-up and rasterisation; one
+#: whose corners snap to one point, or to two, has no area and is dropped first.
+SNAP_SHARE = 1.0
 
 
 
@@ -46,15 +53,17 @@ def reflected_shader():
 
     interface = reflected_interface("curved_reflections_iterative_interface", searched=True)
     info = gpu.types.GPUShaderCreateInfo()
+    # In this order 120 bytes, within the 128 Vulkan guarantees (Blender counts 128).
     info.push_constant('MAT4', "view_projection")
+    info.push_constant('VEC4', "camera")
     info.push_constant('INT', "result_width")
     info.push_constant('FLOAT', "inverse_diameter")
     info.push_constant('FLOAT', "order_range")
     info.push_constant('FLOAT', "reflector_id")
     info.push_constant('INT', "use_image")
-    info.push_constant('VEC4', "camera")
     info.push_constant('FLOAT', "hidden_tolerance")
     info.push_constant('FLOAT', "reflection_cosine")
+    info.push_constant('VEC2', "snap_grid")
     info.sampler(0, 'FLOAT_2D', "search_result")
     info.sampler(1, 'FLOAT_2D', "vertex_positions")
     info.sampler(2, 'FLOAT_2D', "prepass_labels")
@@ -139,7 +148,11 @@ class ReflectedMeshes:
         the fragment's point of the mesh is dropped (``FramePass.reflection_cosine``);
         and optionally ``mirrored``: reflectors whose images are all mirrored
         (``FramePass.mirrored_reflectors``), in which the triangles of closed solids that
-        face away from the mirror are culled by their winding (``range_windings``)."""
+        face away from the mirror are culled by their winding (``range_windings``); and
+        ``snap_px`` (0: off), with ``view_size``: each vertex is placed on the nearest
+        point of a grid that many pixels apart, at pixel centres for 1 (the live view,
+        within its Accuracy), and a reflected triangle within one grid cell, collapsed
+        to a point, is dropped before it is rasterised (:data:`SNAP_SHARE`)."""
         import gpu
 
         answers = list(answers)
@@ -157,6 +170,8 @@ class ReflectedMeshes:
         shader.uniform_sampler("prepass_labels", targets.prepass_labels)
         shader.uniform_sampler("prepass_normals", targets.prepass_normals)
         shader.uniform_float("reflection_cosine", setup["reflection_cosine"])
+        snap = setup.get("snap_px", 0.0)
+        shader.uniform_float("snap_grid", tuple(size / snap for size in setup["view_size"]) if snap > 0 else (0.0, 0.0))
         mirrored = setup.get("mirrored", frozenset())
         for reflector_index, texture in answers:
             shader.uniform_sampler("search_result", texture)

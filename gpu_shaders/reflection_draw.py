@@ -90,7 +90,7 @@ from .gpu_data import data_texture, read_texture, saved_state, vertex_buffer
 from .methods.iterative_draw import IterativePass
 from .methods.morph_pass import DEFAULT_BUDGET_MB, MorphPass
 from .methods.perturbation_pass import PerturbationPass
-from .reflected_meshes import ReflectedMeshes
+from .reflected_meshes import SNAP_SHARE, ReflectedMeshes
 from .methods.sbc_triangles import MIXED_SUBDIVISIONS, CachedProjection, CameraProjections, _same_view
 
 #: Depth range of the iterative search's first-order reflections (as SBC V-A's g for
@@ -286,8 +286,9 @@ class ReflectionRenderer:
         camera's (the viewport moved, a new camera is being built) draws the cached
         first reflector points where ``view`` sees them. The iterative search's
         reflectors are searched for ``view`` itself; ``warm`` starts each vertex from
-        its last answer (the viewport's :meth:`draw` does; a render does not, so that
-        its image depends on its view alone).
+        its last answer and snaps the per-frame passes' reflected vertices to a grid
+        within their Accuracy (the viewport's :meth:`draw` does; a render does not, so
+        that its image depends on its view alone and is placed exactly).
         """
         import gpu
         from mathutils import Matrix
@@ -332,7 +333,8 @@ class ReflectionRenderer:
                     gpu.state.depth_mask_set(True)
                     for frame_pass in self.passes:
                         self.meshes.draw(view_projection, targets,
-                                         self.reflected_setup(view, frame_pass), self._image, frame_pass.answers())
+                                         self.reflected_setup(view, frame_pass, live=warm), self._image,
+                                         frame_pass.answers())
                 if cached is not None and cached.batch is not None:
                     gpu.state.depth_test_set('LESS')
                     gpu.state.depth_mask_set(True)
@@ -365,12 +367,17 @@ class ReflectionRenderer:
             found.setdefault(index, []).append(self.meshes.read(texture)[0])
         return {index: np.stack(slots) for index, slots in found.items()}
 
-    def reflected_setup(self, view, frame_pass) -> dict:
-        """The uniforms of ``frame_pass``'s reflected meshes in ``view`` (``ReflectedMeshes.draw``)."""
+    def reflected_setup(self, view, frame_pass, live: bool = False) -> dict:
+        """The uniforms of ``frame_pass``'s reflected meshes in ``view`` (``ReflectedMeshes.draw``);
+        ``live``: a viewport frame, whose vertices snap to a grid within the pass's
+        Accuracy (``reflected_meshes.SNAP_SHARE``; a render places them exactly)."""
+        accuracy = frame_pass.accuracy_px if live else None
         return {"inverse_diameter": 1.0 / self.geometry.diameter, "order_range": ITERATIVE_ORDER_RANGE,
                 "camera": _camera(view, self.geometry.shift), "hidden_fraction": frame_pass.hidden_fraction,
                 "reflection_cosine": frame_pass.reflection_cosine,
-                "mirrored": frozenset(frame_pass.mirrored_reflectors)}
+                "mirrored": frozenset(frame_pass.mirrored_reflectors), "view_size": (float(view.width),
+                                                                                     float(view.height)),
+                "snap_px": 0.0 if accuracy is None else SNAP_SHARE * float(accuracy)}
 
     def _answers(self) -> list:
         return [answer for frame_pass in self.passes for answer in frame_pass.answers()]

@@ -16,7 +16,12 @@
  * and it is discarded as well. Shading data as
  * reflection_mesh_vert.glsl: the true eye vector from the vertex toward P, and the
  * distance. `mirror_point_interp`, P, lets the fragment stage drop a reflection whose
- * reflector point the mirror hides, or whose ray does not reflect toward it. */
+ * reflector point the mirror hides, or whose ray does not reflect toward it.
+ * `snap_grid` (the view's cells across and up, 0: none): the live view places each
+ * vertex at the centre of its cell of a grid a few pixels apart (pixel centres for a
+ * one-pixel grid; reflected_meshes.SNAP_SHARE): a triangle within one cell collapses to
+ * a point and is dropped before rasterisation, and neighbours sharing a vertex still
+ * meet. */
 
 void main()
 {
@@ -40,5 +45,9 @@ void main()
   reflector_interp = reflector_id;
   valid_interp = valid ? (flipped ? -1.0 : 1.0) : 0.0;
   float depth = clamp(distance * inverse_diameter, 0.0, 1.0) * order_range;
-  gl_Position = clip.w > 0.0 ? vec4(clip.xy / clip.w, depth * 2.0 - 1.0, 1.0) : vec4(0.0, 0.0, 1.0, 1.0);
+  vec2 ndc = clip.xy / clip.w;
+  if (snap_grid.x > 0.0) {
+    ndc = (floor((ndc * 0.5 + 0.5) * snap_grid) + 0.5) / snap_grid * 2.0 - 1.0;
+  }
+  gl_Position = clip.w > 0.0 ? vec4(ndc, depth * 2.0 - 1.0, 1.0) : vec4(0.0, 0.0, 1.0, 1.0);
 }

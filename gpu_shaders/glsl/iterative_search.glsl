@@ -303,46 +303,40 @@ void main()
   int steps = 0;
   bool image_flipped = false;
   vec3 p = vec3(0.0);
-  /* Last frame's answer first (the view moved a little). A found answer faces the eye
-   * and the vertex, and on a non-convex mirror no part of the surface lies between
-   * them (check()): neither lies inside the mirror, which is tested only when the
-   * resumed search fails, before the restarts around the sphere guess. */
-  bool found = false;
-  if (resume) {
-    chart_axis = normalize(last.xyz - centre);
+  /* Last frame's answer first (attempt -1: the view moved a little), then the restarts
+   * around the sphere guess. A found answer faces the eye and the vertex, and on a
+   * non-convex mirror no part of the surface lies between them (check()): neither lies
+   * inside the mirror, which is tested only before the first restart. One loop calls
+   * newton() once: the compiled shader holds one copy of it, not one per start (on
+   * llvmpipe the search ran at half the speed with six). */
+  int attempts = convex != 0 ? 1 : 5;  /* one reflection at most on a convex mirror */
+  for (int attempt = resume ? -1 : 0; attempt < attempts; attempt++) {
+    vec2 start = vec2(0.0);
+    if (attempt < 0) {
+      chart_axis = normalize(last.xyz - centre);
+    }
+    else {
+      if (attempt == 0) {
+        bool eye_inside = camera.w > 0.5 && inside_surface(camera.xyz - centre);
+        if (eye_inside || length(vertex) <= 1e-9 * max(max_radius, 1e-30) || inside_surface(vertex)) {
+          status = INSIDE;
+          break;
+        }
+        chart_axis = sphere_guess(vertex);
+      }
+      start = starts[attempt];
+    }
     chart_t1 = perpendicular(chart_axis);
     chart_t2 = cross(chart_axis, chart_t1);
     vec3 answer;
-    int verdict = newton(vec2(0.0), steps, answer);
-    if (verdict == FOUND) {
+    int verdict = newton(start, steps, answer);
+    if (attempt == 0 || verdict == FOUND) {
       status = verdict;
       p = answer;
       image_flipped = flipped;
-      found = true;
     }
-  }
-  if (!found) {
-    bool eye_inside = camera.w > 0.5 && inside_surface(camera.xyz - centre);
-    if (eye_inside || length(vertex) <= 1e-9 * max(max_radius, 1e-30) || inside_surface(vertex)) {
-      status = INSIDE;
-    }
-    else {
-      chart_axis = sphere_guess(vertex);
-      chart_t1 = perpendicular(chart_axis);
-      chart_t2 = cross(chart_axis, chart_t1);
-      int attempts = convex != 0 ? 1 : 5;  /* one reflection at most on a convex mirror */
-      for (int attempt = 0; attempt < attempts; attempt++) {
-        vec3 answer;
-        int verdict = newton(starts[attempt], steps, answer);
-        if (attempt == 0 || verdict == FOUND) {
-          status = verdict;
-          p = answer;
-          image_flipped = flipped;
-        }
-        if (verdict == FOUND) {
-          break;
-        }
-      }
+    if (verdict == FOUND) {
+      break;
     }
   }
   /* The other star-shaped mirrors may block the reflected segment: there this point's

@@ -110,6 +110,11 @@ class IterativePass(FramePass):
         return [m.index for m in self.methods if not m.reflector_map.convex or self.n_reflectors > 1]
 
     @property
+    def accuracy_px(self) -> float | None:
+        """The finest Accuracy of the searched mirrors (their searches stop at a tenth of it)."""
+        return min((m.accuracy_px for m in self.methods), default=None)
+
+    @property
     def mirrored_reflectors(self) -> list:
         """The searched mirrors that are convex (``reflector_map.is_convex``)."""
         return [m.index for m in self.methods if m.reflector_map.convex]

@@ -113,6 +113,18 @@ class PerturbationPass(FramePass):
         return answers
 
     @property
+    def accuracy_px(self) -> float:
+        """The Accuracy its steps are held to (their error estimate)."""
+        return self._accuracy
+
+    @property
+    def mirrored_reflectors(self) -> list:
+        """The reflectors declared exact surfaces: a sphere, an ellipsoid and a
+        superquadric (exponent at least 2) bound convex bodies, and the pass draws first
+        order only."""
+        return [m.index for m in self.methods if m.surface is not None]
+
+    @property
     def folded_reflectors(self) -> list:
         """The reflectors that showed a point twice in the last view (a non-convex
         mirror), or share the scene with other mirrors: the renderer traces the pixels

@@ -43,3 +43,19 @@ def test_each_pass_says_how_the_band_trace_treats_its_reflectors():
     assert morph.hidden_fraction == float("inf")  # its blended images lie off the mesh
     assert alone.hidden_fraction == perturbation.hidden_fraction == FramePass.hidden_fraction < 0.01
     assert IterativePass(geometry, [], meshes).traces_band is False
+
+
+def test_only_mirrors_whose_every_image_is_mirrored_cull_closed_solids():
+    """A convex searched map and a declared exact surface (convex bodies, first order)
+    show every image mirrored, so the far sides of closed solids may be culled; a
+    non-convex map flips the images beyond its folds, a mesh under perturbation may be
+    non-convex, and a morphing pass does not know: they keep every triangle."""
+    mirrors, geometry = _geometry()
+    meshes = ReflectedMeshes(geometry)
+    convex = SimpleNamespace(index=0, reflector_map=SimpleNamespace(convex=True))
+    bumpy = SimpleNamespace(index=1, reflector_map=SimpleNamespace(convex=False))
+    assert IterativePass(geometry, [convex, bumpy], meshes).mirrored_reflectors == [0]
+    declared = SimpleNamespace(index=0, surface=SimpleNamespace(shape="SPHERE"))
+    mesh = SimpleNamespace(index=1, surface=None)
+    assert PerturbationPass(geometry, mirrors, [declared, mesh], meshes).mirrored_reflectors == [0]
+    assert MorphPass(geometry, [], meshes).mirrored_reflectors == []

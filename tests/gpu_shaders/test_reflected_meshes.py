@@ -30,9 +30,8 @@ def _two_level_mirror(tilt_degrees: float = 0.0) -> Reflector:
     return Reflector("Terrace", vertices, triangles, normals)
 
 
-def _patch(name: str, x0: float, x1: float, colour) -> DiffuseMesh:
-    """A finely split flat patch over x in [x0, x1], y in [-1, 1], z = HEIGHT."""
-    n = 8
+def _patch(name: str, x0: float, x1: float, colour, n: int = 8) -> DiffuseMesh:
+    """A flat patch split into n x n vertices over x in [x0, x1], y in [-1, 1], z = HEIGHT."""
     xs, ys = np.meshgrid(np.linspace(x0, x1, n), np.linspace(-1.0, 1.0, n))
     vertices = np.c_[xs.ravel(), ys.ravel(), np.full(n * n, HEIGHT)]
     quads = [(j * n + i, j * n + i + 1, (j + 1) * n + i + 1, (j + 1) * n + i) for j in range(n - 1) for i in range(n - 1)]
@@ -47,10 +46,12 @@ def _reflected_on_the_lower_square(vertices: np.ndarray) -> np.ndarray:
     return EYE + t[:, None] * (image - EYE)
 
 
-def _drawn(hidden_fraction: float, reflection_cosine: float, tilt_degrees: float = 0.0) -> np.ndarray:
-    """The reflection target after drawing both patches at their answers on the plane
-    z = 0, the mirror's normals tilted by ``tilt_degrees`` (the law of reflection then
-    fails by twice that: as for an answer from another sheet of a curved mirror)."""
+def _drawn(hidden_fraction: float, reflection_cosine: float, tilt_degrees: float = 0.0, snap_px: float = 0.0,
+           split: int = 8) -> np.ndarray:
+    """The reflection target after drawing both patches (``split`` vertices a side) at
+    their answers on the plane z = 0, the mirror's normals tilted by ``tilt_degrees``
+    (the law of reflection then fails by twice that: as for an answer from another sheet
+    of a curved mirror), the vertices snapped to a grid ``snap_px`` apart (0: not)."""
     import gpu
     from mathutils import Matrix
 
@@ -59,7 +60,7 @@ def _drawn(hidden_fraction: float, reflection_cosine: float, tilt_degrees: float
     from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
 
     # Reflected at x in [-0.88, -0.29] (behind the upper square) and [0.59, 0.88] (seen).
-    meshes = [_patch("Hidden", -3.0, -1.0, (1.0, 0.0, 0.0)), _patch("Seen", 2.0, 3.0, (0.0, 1.0, 0.0))]
+    meshes = [_patch("Hidden", -3.0, -1.0, (1.0, 0.0, 0.0), split), _patch("Seen", 2.0, 3.0, (0.0, 1.0, 0.0), split)]
     view = _view()
     renderer = ReflectionRenderer([_two_level_mirror(tilt_degrees)], meshes, edge_fraction=None)
     g = renderer.geometry
@@ -76,7 +77,7 @@ def _drawn(hidden_fraction: float, reflection_cosine: float, tilt_degrees: float
         gpu.state.depth_test_set('LESS')
         gpu.state.depth_mask_set(True)
         setup = {**renderer.reflected_setup(view, renderer.iterative), "hidden_fraction": hidden_fraction,
-                 "reflection_cosine": reflection_cosine}
+                 "reflection_cosine": reflection_cosine, "snap_px": snap_px}
         renderer.meshes.draw(view_projection, targets, setup, renderer._image, [(0, answers)])
     return read_texture(targets.reflection_colors, targets.width, targets.height)
 
@@ -117,6 +118,31 @@ def test_a_reflection_the_eye_ray_does_not_reflect_toward_is_not_drawn(gpu_ready
     assert np.all(_at(SEEN_POINTS, _drawn(FramePass.hidden_fraction, FramePass.reflection_cosine, 15.0))[:, 3] == 0.0)
     assert np.all(_at(SEEN_POINTS, _drawn(FramePass.hidden_fraction, -1.0, 15.0))[:, 3] > 0.5)
     assert np.all(_at(SEEN_POINTS, _drawn(FramePass.hidden_fraction, FramePass.reflection_cosine, 5.0))[:, 3] > 0.5)
+
+
+def test_snapped_reflected_vertices_leave_no_hole_and_move_less_than_a_cell(gpu_ready):
+    """The live view snaps reflected vertices to a grid (``reflected_meshes.SNAP_SHARE``):
+    a patch split so finely that its reflected triangles are a fraction of a pixel
+    across (most then collapse and are dropped) still covers its whole image, with no
+    pixel missing inside it, and its edge moves by less than the grid's spacing."""
+    from curved_reflections.gpu_shaders.frame_pass import FramePass
+
+    def grown(mask, steps):
+        for _ in range(steps):
+            padded = np.pad(mask, 1)
+            mask = np.any([padded[1 + di:padded.shape[0] - 1 + di, 1 + dj:padded.shape[1] - 1 + dj]
+                           for di in (-1, 0, 1) for dj in (-1, 0, 1)], axis=0)
+        return mask
+
+    exact = _drawn(FramePass.hidden_fraction, FramePass.reflection_cosine, split=48)[..., 3] > 0.5
+    assert exact.sum() > 60
+    for snap_px in (1.0, 2.0):
+        snapped = _drawn(FramePass.hidden_fraction, FramePass.reflection_cosine, snap_px=snap_px, split=48)
+        drawn = snapped[..., 3] > 0.5
+        inside = ~grown(~exact, int(np.ceil(snap_px)))
+        assert inside.sum() > 10 and drawn[inside].all()
+        assert not (drawn & ~grown(exact, int(np.ceil(snap_px)))).any()
+        assert np.allclose(snapped[drawn][:, :3], (0.0, 1.0, 0.0), atol=1e-6)
 
 
 def _face_coloured_box(x0: float, x1: float, z0: float, z1: float) -> DiffuseMesh:

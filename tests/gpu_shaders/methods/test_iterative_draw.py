@@ -259,3 +259,4 @@ def test_a_render_traces_the_searched_mirror_where_nothing_was_drawn_next_to_its
     changed = np.argwhere(np.abs(traced - plain).max(axis=2) > 1e-6)[:, ::-1]
     assert len(changed) > 0
     assert {tuple(p) for p in changed} <= {tuple(p) for p in expected}
+
