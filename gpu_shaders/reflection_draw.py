@@ -486,7 +486,7 @@ class ReflectionRenderer:
             return 0
         traced = np.zeros((targets.height, targets.width, 4), np.float32)
         if len(pixels):
-            colors = self._tracer.trace(view, pixels + 0.5, max_order, _rgba(world_color))
+            colors = self._tracer.trace(view, pixels + 0.5, max_order, _rgba(world_color), on_mirrors=True)
             traced[pixels[:, 1], pixels[:, 0], :3] = colors[:, :3]
             # As a drawn reflection's: 1 + the distance from the mirror (attenuation, SBC V-D).
             traced[pixels[:, 1], pixels[:, 0], 3] = 1.0 + np.minimum(colors[:, 3], 1e30)

@@ -71,6 +71,8 @@ class BandTracer:
             normals = np.where((np.linalg.norm(normals, axis=1) > 1e-8)[:, None], normals, [0.0, 0.0, 1.0])
             pseudo.append(Reflector(f"{m.name} (diffuse)", m.vertices, m.triangles, normals))
         self.everything = ReflectorSet(list(reflectors) + pseudo)
+        # The mirrors alone, first in ``everything``: the same triangle and owner indices.
+        self.mirrors = ReflectorSet(list(reflectors)) if reflectors else None
         self.meshes = list(meshes)
         self.offsets = np.cumsum([0] + [len(r.vertices) for r in list(reflectors) + pseudo])
         self.mesh_colors = (np.concatenate([np.asarray(m.colors, dtype=np.float64) for m in meshes])
@@ -79,10 +81,13 @@ class BandTracer:
                          if meshes else np.zeros((0, 2)))
         self.vertex_mesh = np.repeat(np.arange(len(meshes)), [len(m.vertices) for m in meshes])
 
-    def trace(self, view, pixels: np.ndarray, max_order: int, world_color) -> np.ndarray:
+    def trace(self, view, pixels: np.ndarray, max_order: int, world_color, on_mirrors: bool = False) -> np.ndarray:
         """Linear RGB seen through pixel centres ``pixels`` (K, 2), mirrors included, and in
         the fourth column the distance from the last mirror to the diffuse point (0 for a
-        point seen directly, inf where the world shows): (K, 4).
+        point seen directly, inf where the world shows): (K, 4). ``on_mirrors``: the
+        pixels show mirrors (the renderer's pre-pass says so), and their eye rays are
+        met with the mirrors alone, a far smaller tree (the rays that miss them, on a
+        pixel the pre-pass rasterised at a silhouette, with everything).
 
         Paths stop at the first diffuse hit, when they leave the scene (world colour), at
         an invalid reflection (a grazing ray turned into the mirror: world colour), or
@@ -96,7 +101,7 @@ class BandTracer:
             return out
         origins, directions = view.pixel_rays(pixels)
         alive = np.arange(len(pixels))
-        hits = self.everything.intersect(origins, directions)
+        hits = self._first_hits(origins, directions, on_mirrors and self.mirrors is not None)
         for order in range(max_order + 1):
             hit = hits.hit
             owner = np.where(hit, hits.reflector, -1)
@@ -117,6 +122,18 @@ class BandTracer:
             directions = reflect(directions[keep], hits.normal[keep])
             hits = self.everything.intersect(origins, directions, source_triangles=hits.triangle[keep])
         return out
+
+    def _first_hits(self, origins, directions, on_mirrors: bool):
+        """The eye rays' first hits: on ``mirrors`` where they meet one, else on everything."""
+        if not on_mirrors:
+            return self.everything.intersect(origins, directions)
+        hits = self.mirrors.intersect(origins, directions)
+        missed = np.flatnonzero(~hits.hit)
+        if len(missed):
+            again = self.everything.intersect(origins[missed], directions[missed])
+            for name in ("t", "triangle", "reflector", "barycentric", "position", "normal", "face_normal"):
+                getattr(hits, name)[missed] = getattr(again, name)
+        return hits
 
     def _color(self, triangles: np.ndarray, barycentric: np.ndarray, normals: np.ndarray,
                to_eye: np.ndarray) -> np.ndarray:

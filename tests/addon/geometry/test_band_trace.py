@@ -1,0 +1,43 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The band tracer (``addon/geometry/band_trace.py``): pixels the pre-pass says show a
+mirror have their eye rays met with the mirrors alone, and see what tracing the whole
+scene sees."""
+
+import numpy as np
+
+from curved_reflections.addon import DiffuseMesh, look_at_view
+from curved_reflections.addon.geometry.band_trace import BandTracer
+from curved_reflections.addon.geometry.sphere import icosphere
+
+
+def _scene():
+    ball = icosphere(np.zeros(3), 1.0, 3, "Ball")
+    n = 6
+    xs, ys = np.meshgrid(np.linspace(-4.0, 4.0, n), np.linspace(-4.0, 4.0, n))
+    floor = np.c_[xs.ravel(), ys.ravel(), np.full(n * n, -1.2)]
+    quads = [(j * n + i, j * n + i + 1, (j + 1) * n + i + 1, (j + 1) * n + i) for j in range(n - 1) for i in range(n - 1)]
+    colours = np.c_[np.linspace(0.0, 1.0, n * n), np.linspace(1.0, 0.0, n * n), np.full(n * n, 0.5), np.ones(n * n)]
+    box = icosphere((1.8, 0.4, 0.3), 0.4, 1, "Box")
+    meshes = [DiffuseMesh("Floor", floor, np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))]),
+                          colours),
+              DiffuseMesh("Blob", box.vertices, box.triangles, np.tile([0.9, 0.2, 0.1, 1.0], (len(box.vertices), 1)))]
+    return [ball], meshes
+
+
+def test_mirror_pixels_traced_with_the_mirrors_first_see_what_the_whole_scene_shows():
+    """Every pixel inside the ball's silhouette (and a few just outside, which miss it and
+    fall back to the whole scene) gets the same colour and distance either way."""
+    reflectors, meshes = _scene()
+    tracer = BandTracer(reflectors, meshes)
+    view = look_at_view((0.5, -4.0, 1.5), (0.0, 0.0, 0.0), fov_y_deg=40.0, width=64, height=48)
+    ys, xs = np.mgrid[0:48, 0:64]
+    pixels = np.c_[xs.ravel(), ys.ravel()] + 0.5
+    origins, directions = view.pixel_rays(pixels)
+    on_ball = tracer.everything.intersect(origins, directions).reflector == 0
+    assert 100 < on_ball.sum() < len(pixels)
+    chosen = pixels[on_ball | (np.arange(len(pixels)) % 7 == 0)]
+    world = (0.05, 0.1, 0.2, 1.0)
+    whole = tracer.trace(view, chosen, 1, world)
+    first = tracer.trace(view, chosen, 1, world, on_mirrors=True)
+    np.testing.assert_allclose(first, whole)
+    assert np.isfinite(whole[:, 3]).sum() > 50  # reflections of the floor and the blob among them
