@@ -40,6 +40,12 @@ FLIPPED_CODE = 2048
 #: of them under a pixel across), and each costs its set-up and rasterisation; one
 #: whose corners snap to one point, or to two, has no area and is dropped first.
 SNAP_SHARE = 1.0
+#: A vertex without an answer is never drawn (its triangles' fragments are discarded),
+#: so it is placed wherever its triangles cost least: at the centre of its cell of a grid
+#: this many cells across the view. Its triangles with no answered corner (a third of
+#: each mirror's on the two-spheres demo) collapse to points and are dropped before
+#: set-up; one with an answered corner (1-2 %) reaches at most a cell away.
+UNANSWERED_CELLS = 64
 
 
 
@@ -76,7 +82,8 @@ def reflected_shader():
     info.vertex_out(interface)
     info.fragment_out(0, 'VEC4', "color_out")
     info.vertex_source(glsl_source("iterative_mesh_vert.glsl", {"FOUND_CODE": FOUND_CODE,
-                                                                "FLIPPED_CODE": FLIPPED_CODE}))
+                                                                "FLIPPED_CODE": FLIPPED_CODE,
+                                                                "UNANSWERED_CELLS": f"{UNANSWERED_CELLS:.1f}"}))
     info.fragment_source(reflected_fragment_source(f"#define SEARCHED\n#define VALID_THRESHOLD {VALID_THRESHOLD}\n"))
     return gpu.shader.create_from_info(info)
 

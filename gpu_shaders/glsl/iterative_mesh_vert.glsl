@@ -46,7 +46,10 @@ void main()
   valid_interp = valid ? (flipped ? -1.0 : 1.0) : 0.0;
   float depth = clamp(distance * inverse_diameter, 0.0, 1.0) * order_range;
   vec2 ndc = clip.xy / clip.w;
-  if (snap_grid.x > 0.0) {
+  if (!valid) {
+    ndc = (floor(ndc * (0.5 * UNANSWERED_CELLS)) + 0.5) / (0.5 * UNANSWERED_CELLS);
+  }
+  else if (snap_grid.x > 0.0) {
     ndc = (floor((ndc * 0.5 + 0.5) * snap_grid) + 0.5) / snap_grid * 2.0 - 1.0;
   }
   gl_Position = clip.w > 0.0 ? vec4(ndc, depth * 2.0 - 1.0, 1.0) : vec4(0.0, 0.0, 1.0, 1.0);
