@@ -156,10 +156,12 @@ class ReflectedMeshes:
         and optionally ``mirrored``: reflectors whose images are all mirrored
         (``FramePass.mirrored_reflectors``), in which the triangles of closed solids that
         face away from the mirror are culled by their winding (``range_windings``); and
-        ``snap_px`` (0: off), with ``view_size``: each vertex is placed on the nearest
-        point of a grid that many pixels apart, at pixel centres for 1 (the live view,
-        within its Accuracy), and a reflected triangle within one grid cell, collapsed
-        to a point, is dropped before it is rasterised (:data:`SNAP_SHARE`)."""
+        ``snap_px`` (0: off), with ``view_size``: each vertex is placed at the centre of
+        its cell of a grid that many pixels apart, pixel centres for 1 (the live view,
+        within its Accuracy), and a reflected triangle within one cell, collapsed to a
+        point, is dropped before it is rasterised (:data:`SNAP_SHARE`). A vertex without
+        an answer goes to the centre of its cell of a coarser grid, always
+        (:data:`UNANSWERED_CELLS`)."""
         import gpu
 
         answers = list(answers)

@@ -7,10 +7,13 @@
  * search), with the depth of SBC paper V-A for a first-order reflection, z / D for its
  * distance z from P along the reflected ray (section 3.3.6 writes the same distance: the
  * nearer reflected point wins). A vertex without an answer (not converged, facing away,
- * hidden, inside the mirror) or behind the view gets `valid_interp` 0 and stays at its
- * last search sample: the fragment stage discards every fragment of a triangle with
- * such a corner (its interpolated validity is below 1 everywhere but at the valid
- * corners), so an unanswered vertex is never drawn at a wrong place. A flipped image
+ * hidden, inside the mirror) or behind the view gets `valid_interp` 0: the fragment
+ * stage discards every fragment of a triangle with such a corner (its interpolated
+ * validity is below 1 everywhere but at the valid corners), so an unanswered vertex is
+ * never drawn at a wrong place. It goes to the centre of its cell of a coarse grid
+ * (UNANSWERED_CELLS across the view, from its last search sample): its triangles
+ * without an answered corner collapse there and are dropped before rasterisation, and
+ * one with an answered corner reaches no farther than a cell. A flipped image
  * (beyond the caustic, FLIPPED_CODE) gets -1: a triangle joining it to a direct image
  * spans a fold of the mirror, its interpolated validity is below 1 in magnitude inside,
  * and it is discarded as well. Shading data as
