@@ -22,7 +22,9 @@ import numpy as np
 #: of them vote.
 PROBE_DIRECTIONS = np.array([(0.5773, 0.6123, 0.5401), (-0.6812, 0.2137, 0.7003), (0.1517, -0.8846, 0.4410)])
 #: Points of each mirror tested against a solid (its vertices, evenly strided).
-PROBES_PER_MIRROR = 64
+PROBES_PER_MIRROR = 16
+#: Probes tested together (the test stops at the first batch with one inside).
+PROBES_AT_ONCE = 8
 #: Point-triangle pairs of the inside test held in memory at once.
 PAIRS_PER_CHUNK = 1 << 20
 
@@ -83,8 +85,11 @@ def inside(vertices: np.ndarray, triangles: np.ndarray, points: np.ndarray) -> n
 
 def cullable_winding(vertices: np.ndarray, triangles: np.ndarray, mirrors) -> int:
     """:func:`winding` of a diffuse mesh where no point of any mirror (each an (N, 3)
-    array of its vertices) lies inside the solid it bounds, else 0: seen from inside,
-    the far side of a solid is what shows (a mirror ball in a closed room)."""
+    array of its vertices, PROBES_PER_MIRROR of them and the centre tested) lies inside
+    the solid it bounds, else 0: seen from inside, the far side of a solid is what shows
+    (a mirror ball in a closed room). A mirror only partly inside is seen, from an eye
+    outside the solid, only where it is outside, so testing a sample errs only toward
+    not culling."""
     sense = winding(vertices, triangles)
     if sense == 0:
         return 0
@@ -95,8 +100,11 @@ def cullable_winding(vertices: np.ndarray, triangles: np.ndarray, mirrors) -> in
         if len(mirror) == 0 or np.any(mirror.max(axis=0) < lo) or np.any(mirror.min(axis=0) > hi):
             continue
         stride = max(1, len(mirror) // PROBES_PER_MIRROR)
-        probes = np.concatenate([mirror[::stride], mirror.mean(axis=0, keepdims=True)])
-        within = np.all((probes >= lo) & (probes <= hi), axis=1)
-        if within.any() and inside(vertices, triangles, probes[within]).any():
+        probes = np.concatenate([mirror.mean(axis=0, keepdims=True), mirror[::stride]])
+        probes = probes[np.all((probes >= lo) & (probes <= hi), axis=1)]
+        # The centre alone first (a mirror inside a room is found at once), then a few
+        # at a time.
+        batches = [probes[:1]] + [probes[k:k + PROBES_AT_ONCE] for k in range(1, len(probes), PROBES_AT_ONCE)]
+        if any(len(batch) and inside(vertices, triangles, batch).any() for batch in batches):
             return 0
     return sense
