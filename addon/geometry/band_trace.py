@@ -21,6 +21,8 @@ its area.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from .raytrace import ReflectorSet, reflect, reflection_valid
@@ -131,8 +133,8 @@ class BandTracer:
         missed = np.flatnonzero(~hits.hit)
         if len(missed):
             again = self.everything.intersect(origins[missed], directions[missed])
-            for name in ("t", "triangle", "reflector", "barycentric", "position", "normal", "face_normal"):
-                getattr(hits, name)[missed] = getattr(again, name)
+            for column in dataclasses.fields(hits):
+                getattr(hits, column.name)[missed] = getattr(again, column.name)
         return hits
 
     def _color(self, triangles: np.ndarray, barycentric: np.ndarray, normals: np.ndarray,

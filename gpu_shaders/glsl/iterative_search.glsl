@@ -209,12 +209,25 @@ bool flipped_image(vec3 p, vec3 n, vec3 pu, vec3 pv, vec3 nu, vec3 nv)
 /* Whether the last converged answer of newton() is a flipped image. */
 bool flipped;
 
+/* Whether the residual vanishes: the sine of the angle between the normal and the half
+ * vector below RESIDUAL_TOLERANCE. */
+bool residual_passes(vec3 n, vec3 h)
+{
+  return length(cross(n, h)) / max(length(h), 1e-30) < RESIDUAL_TOLERANCE;
+}
+
+/* The Newton step -J^-1 f for the Jacobian's columns ju, jv (zero where J is singular). */
+vec2 newton_step(vec2 ju, vec2 jv, vec2 f)
+{
+  float det = ju.x * jv.y - jv.x * ju.y;
+  return abs(det) > 1e-30 ? -vec2(jv.y * f.x - jv.x * f.y, ju.x * f.y - ju.y * f.x) / det : vec2(0.0);
+}
+
 int check(vec3 p, vec3 n, vec3 h, vec3 face)
 {
   vec3 e = to_eye(p);
   vec3 v = normalize(vertex - p);
-  float sine = length(cross(n, h)) / max(length(h), 1e-30);
-  if (sine >= RESIDUAL_TOLERANCE) {
+  if (!residual_passes(n, h)) {
     return NOT_CONVERGED;
   }
   if (!(dot(n, e) > 0.0 && dot(n, v) > 0.0 && dot(face, e) > 0.0 && dot(face, v) > 0.0)) {
@@ -249,8 +262,7 @@ int newton(vec2 x, inout int steps, out vec3 p)
     face = dot(facet, p) < 0.0 ? -facet : facet;
     vec2 ju = (fu - f) / DERIVATIVE_STEP;
     vec2 jv = (fv - f) / DERIVATIVE_STEP;
-    float det = ju.x * jv.y - jv.x * ju.y;
-    vec2 delta = abs(det) > 1e-30 ? -vec2(jv.y * f.x - jv.x * f.y, ju.x * f.y - ju.y * f.x) / det : vec2(0.0);
+    vec2 delta = newton_step(ju, jv, f);
     float reach = length(delta);
     if (reach > TRUST_RADIUS) {
       delta *= TRUST_RADIUS / reach;
@@ -281,12 +293,12 @@ int newton(vec2 x, inout int steps, out vec3 p)
      * it would move P by less than the tolerance, it is taken without new samples (P
      * moved along the chart's tangents, the residual's normal and half vector kept),
      * and the search has converged one step earlier. */
-    vec2 next = abs(det) > 1e-30 ? -vec2(jv.y * f.x - jv.x * f.y, ju.x * f.y - ju.y * f.x) / det : vec2(0.0);
+    vec2 next = newton_step(ju, jv, f);
     vec3 predicted = ((pu - previous) * next.x + (pv - previous) * next.y) / DERIVATIVE_STEP;
     float tolerance = pixel_tolerance(p);
     /* Only where the residual already passes check()'s test (a singular Jacobian
      * predicts no step at all). */
-    bool settled = length(predicted) < tolerance && length(cross(n, h)) / max(length(h), 1e-30) < RESIDUAL_TOLERANCE;
+    bool settled = length(predicted) < tolerance && residual_passes(n, h);
     if (length(p - previous) < tolerance || settled) {
       flipped = flipped_image(previous, previous_n, pu, pv, nu, nv);  /* read only once converged */
       if (settled) {

@@ -259,8 +259,7 @@ def _newton(chart: _Chart, view: View, rows: np.ndarray, start, accuracy_px: flo
             / DERIVATIVE_STEP
         # Only where the residual already passes the answer's test (a singular Jacobian
         # predicts no step at all).
-        sine = lengths(cross(new_n, new_h)) / np.maximum(lengths(new_h), 1e-300)
-        settled = ~lost & (lengths(predicted) < tolerance) & (sine < RESIDUAL_TOLERANCE)
+        settled = ~lost & (lengths(predicted) < tolerance) & _residual_passes(new_n, new_h)
         finished = ~lost & (moved < tolerance) | settled
         # Only a converged answer's parity is read: from this step's samples, before they move.
         done = live[finished]
@@ -342,15 +341,21 @@ def search_reflections(rmap: ReflectorMap, view: View, points, accuracy_px: floa
     return SearchResult(answer, status, iterations, flipped)
 
 
+def _residual_passes(normal: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """(K,) bool: the residual vanishes, the sine of the angle between the normal and the
+    half vector below :data:`RESIDUAL_TOLERANCE`."""
+    return lengths(cross(normal, half)) / np.maximum(lengths(half), 1e-300) < RESIDUAL_TOLERANCE
+
+
 def _check(rmap: ReflectorMap, camera, perspective: bool, points, position, normal, half, face) -> np.ndarray:
     """FOUND where a converged sample is an answer, else why not: FACES_AWAY, OCCLUDED,
     or NOT_CONVERGED for a stationary point of |F| that is no root."""
     to_eye = _to_eye(camera, perspective, position)
     to_point = normalized(points - position)
-    sine = lengths(cross(normal, half)) / np.maximum(lengths(half), 1e-300)
     facing = ((dot(normal, to_eye) > 0) & (dot(normal, to_point) > 0)
               & (dot(face, to_eye) > 0) & (dot(face, to_point) > 0))
-    verdict = np.where(sine < RESIDUAL_TOLERANCE, np.where(facing, FOUND, FACES_AWAY), NOT_CONVERGED).astype(np.int8)
+    verdict = np.where(_residual_passes(normal, half), np.where(facing, FOUND, FACES_AWAY),
+                       NOT_CONVERGED).astype(np.int8)
     if not rmap.convex:
         check = np.flatnonzero(verdict == FOUND)
         verdict[check[_occluded(rmap, camera, perspective, position[check], points[check])]] = OCCLUDED
