@@ -187,7 +187,7 @@ class ReflectionRenderer:
                  edge_fraction: float | None = subdivision.EDGE_FRACTION, *, fresnel_f0=None,
                  attenuation_distance=None, mixed_subdivisions: int = MIXED_SUBDIVISIONS, cull: bool = True,
                  polish: bool = True, iterative=(), morph=(), morph_budget_mb: float = DEFAULT_BUDGET_MB,
-                 perturbation=(), perturbation_accuracy_px: float = 0.5, reflector_set=None):
+                 perturbation=(), accuracy_px: float = 0.5, reflector_set=None):
         self.geometry = prepare_geometry(reflectors, meshes, reflector_colors, reflectivity, edge_fraction,
                                          fresnel_f0, attenuation_distance)
         #: The diffuse meshes on the GPU, placed by the per-frame passes' answers.
@@ -196,10 +196,10 @@ class ReflectionRenderer:
         #: (``addon.methods.iterative.IterativeReflector`` each); the others by ``textures``.
         self.iterative = IterativePass(self.geometry, iterative, self.meshes, len(reflectors))
         #: The reflectors drawn from their morphing grids every frame (views inside a grid).
-        self.morph = MorphPass(self.geometry, morph, self.meshes, morph_budget_mb)
+        self.morph = MorphPass(self.geometry, morph, self.meshes, morph_budget_mb, accuracy_px, reflectors)
         #: The reflectors drawn by perturbation (Chen & Arvo 2000), projected per new view.
         self.perturbation = PerturbationPass(self.geometry, reflectors, perturbation, self.meshes,
-                                             perturbation_accuracy_px, reflector_set)
+                                             accuracy_px, reflector_set)
         #: Every per-frame pass, which the frame code treats alike (:class:`.frame_pass.FramePass`).
         self.passes = (self.iterative, self.morph, self.perturbation)
         self.stats = dict(self.geometry.stats)

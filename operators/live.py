@@ -183,7 +183,7 @@ def _capture(state: LiveScene, scene, depsgraph, reflectors: bool) -> None:
     state.renderer = ReflectionRenderer(captured.reflectors, captured.meshes, polish=False,
                                         iterative=state.plan.iterative, morph=state.grids,
                                         perturbation=state.plan.perturbation,
-                                        perturbation_accuracy_px=state.settings[2],
+                                        accuracy_px=state.settings[2],
                                         reflector_set=state.reflector_set,
                                         morph_budget_mb=scene.curved_reflections.morph_gpu_budget_mb,
                                         **reflector_properties(captured.reflectors, scene))

@@ -151,7 +151,7 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
     if state.renderer is None or key != state.key:
         state.renderer = ReflectionRenderer(captured.reflectors, captured.meshes, iterative=state.plan.iterative,
                                             morph=state.grids, perturbation=state.plan.perturbation,
-                                            perturbation_accuracy_px=accuracy_px,
+                                            accuracy_px=accuracy_px,
                                             reflector_set=state.reflector_set, **properties)
     else:
         state.reused += 1

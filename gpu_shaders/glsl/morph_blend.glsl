@@ -68,15 +68,15 @@ vec3 unit(vec3 v)
   return v / max(length(v), 1e-30);
 }
 
-/* The nearest present image of slots [first, first + SLOTS) of `images` to `reference`
- * within match_distance; w 0 where none. */
-vec4 nearest(vec4 images[2 * SLOTS], int first, vec3 reference)
+/* The nearest present image of `images` (`count` of them) to `reference` within
+ * match_distance; w 0 where none. */
+vec4 nearest(vec4 images[SLOTS], int count, vec3 reference)
 {
   float best = 1e30;
   vec4 chosen = vec4(0.0);
-  for (int j = first; j < first + SLOTS; j++) {
+  for (int j = 0; j < SLOTS; j++) {
     float d = distance(images[j].xyz, reference);
-    if (images[j].w > 0.5 && d < best) {
+    if (j < count && images[j].w > 0.5 && d < best) {
       best = d;
       chosen = images[j];
     }
@@ -84,51 +84,20 @@ vec4 nearest(vec4 images[2 * SLOTS], int first, vec3 reference)
   return best <= frame.eye_match.w ? chosen : vec4(0.0);
 }
 
-/* Solves the 6x6 normal equations m x = b in place (m symmetric positive definite: a sum
- * of row outer products plus a small diagonal) by Cholesky factorisation; every loop has
- * constant bounds, so the compiler can keep the arrays in registers. */
-void solve6(inout float m[36], inout float b[6])
+/* A node's match of `reference`: among its regular images, else (remedy 2) among its
+ * widened charts', fetched only then (most vertices match a regular image). */
+vec4 match_node(int n, vec4 regular[SLOTS], ivec2 texel, vec3 reference)
 {
-  for (int j = 0; j < 6; j++) {
-    float d = m[j * 6 + j];
-    for (int k = 0; k < j; k++) {
-      d -= m[j * 6 + k] * m[j * 6 + k];
-    }
-    d = sqrt(max(d, 1e-30));
-    m[j * 6 + j] = d;
-    for (int i = j + 1; i < 6; i++) {
-      float s = m[i * 6 + j];
-      for (int k = 0; k < j; k++) {
-        s -= m[i * 6 + k] * m[j * 6 + k];
-      }
-      m[i * 6 + j] = s / d;
-    }
+  vec4 found = nearest(regular, int(frame.node_slots[n].x), reference);
+  int widened = int(frame.node_slots[n].y);
+  if (found.w > 0.5 || widened == 0) {
+    return found;
   }
-  for (int i = 0; i < 6; i++) {
-    float s = b[i];
-    for (int k = 0; k < i; k++) {
-      s -= m[i * 6 + k] * b[k];
-    }
-    b[i] = s / m[i * 6 + i];
+  vec4 extended[SLOTS];
+  for (int s = 0; s < SLOTS; s++) {
+    extended[s] = s < widened ? node_image(n, SLOTS + s, texel) : vec4(0.0);
   }
-  for (int i = 5; i >= 0; i--) {
-    float s = b[i];
-    for (int k = i + 1; k < 6; k++) {
-      s -= m[k * 6 + i] * b[k];
-    }
-    b[i] = s / m[i * 6 + i];
-  }
-}
-
-/* Adds the equation row . c = value to the normal equations m c = b. */
-void add_row(inout float m[36], inout float b[6], float row[6], float value)
-{
-  for (int i = 0; i < 6; i++) {
-    for (int j = 0; j < 6; j++) {
-      m[i * 6 + j] += row[i] * row[j];
-    }
-    b[i] += row[i] * value;
-  }
+  return nearest(extended, widened, reference);
 }
 
 /* The surface point for chart (u, v): position, and the unnormalised tangents. */
@@ -157,15 +126,14 @@ void main()
   vec3 eye = frame.eye_match.xyz;
   vec3 p = (frame_from_shifted * vec4(texelFetch(vertex_positions, texel, 0).xyz, 1.0)).xyz;
 
-  vec4 images[NODES][2 * SLOTS];
+  vec4 images[NODES][SLOTS];
   int reference = -1;
   float heaviest = -1.0;
   for (int n = 0; n < NODES; n++) {
     bool has = false;
-    int regular = int(frame.node_slots[n].x), widened = int(frame.node_slots[n].y);
+    int regular = int(frame.node_slots[n].x);
     for (int s = 0; s < SLOTS; s++) {
       images[n][s] = s < regular ? node_image(n, s, texel) : vec4(0.0);
-      images[n][SLOTS + s] = s < widened ? node_image(n, SLOTS + s, texel) : vec4(0.0);
       has = has || images[n][s].w > 0.5;
     }
     if (has && frame.nodes[n].w > heaviest) {
@@ -185,10 +153,7 @@ void main()
       float total = 0.0;
       vec3 blended = vec3(0.0);
       for (int n = 0; n < NODES; n++) {
-        vec4 found = nearest(images[n], 0, own.xyz);
-        if (found.w < 0.5) {
-          found = nearest(images[n], SLOTS, own.xyz);
-        }
+        vec4 found = match_node(n, images[n], texel, own.xyz);
         matched[n] = found.xyz;
         present[n] = found.w > 0.5;
         w[n] = present[n] ? frame.nodes[n].w : 0.0;
@@ -228,28 +193,25 @@ void main()
           }
         }
         spread = max(sqrt(spread), 1e-12);
-        float m[36];
-        float c[6];
-        for (int i = 0; i < 36; i++) {
-          m[i] = i % 7 == 0 ? 1e-10 : 0.0;
-        }
-        for (int i = 0; i < 6; i++) {
-          c[i] = 0.0;
-        }
+        /* The normal equations in scalars (shader_sources.normal_equations_glsl): as
+         * arrays with loops, llvmpipe kept them in memory and the blend cost 2.3x. */
+        fit_clear();
         for (int n = 0; n < NODES; n++) {
           if (!use[n]) {
             continue;
           }
           vec3 o = (matched[n] - origin) / spread;
           float a = dot(o, t1), b = dot(o, t2), nz = dot(normals[n], normal);
-          add_row(m, c, float[6](1.0, a, b, 0.5 * a * a, a * b, 0.5 * b * b), dot(o, normal));
-          add_row(m, c, float[6](0.0, 1.0, 0.0, a, b, 0.0), -dot(normals[n], t1) / nz);
-          add_row(m, c, float[6](0.0, 0.0, 1.0, 0.0, a, b), -dot(normals[n], t2) / nz);
+          fit_add(1.0, a, b, 0.5 * a * a, a * b, 0.5 * b * b, dot(o, normal));
+          fit_add(0.0, 1.0, 0.0, a, b, 0.0, -dot(normals[n], t1) / nz);
+          fit_add(0.0, 0.0, 1.0, 0.0, a, b, -dot(normals[n], t2) / nz);
         }
-        solve6(m, c);
+        fit_solve();
+        float c[6] = float[6](fit_b0, fit_b1, fit_b2, fit_b3, fit_b4, fit_b5);
 
         vec2 uv = vec2(0.0);
         vec2 residual = vec2(0.0);
+        bool settled = false;
         for (int iteration = 0; iteration <= SURFACE_ITERATIONS; iteration++) {
           vec3 x = surface_point(c, origin, spread, t1, t2, normal, uv);
           vec3 ta = t1 + (c[1] + c[3] * uv.x + c[4] * uv.y) * normal;
@@ -260,7 +222,7 @@ void main()
           to_point /= lp;
           vec3 bisector = to_eye + to_point;
           residual = vec2(dot(bisector, ta), dot(bisector, tb));
-          if (iteration == SURFACE_ITERATIONS) {
+          if (iteration == SURFACE_ITERATIONS || settled) {
             fitted_normal = unit(cross(ta, tb));
             x = surface_point(c, origin, spread, t1, t2, normal, uv);
             ok = max(abs(residual.x), abs(residual.y)) < SURFACE_RESIDUAL && dot(uv, uv) <= SURFACE_REACH * SURFACE_REACH
@@ -279,7 +241,9 @@ void main()
           if (abs(det) < 1e-30) {
             break;
           }
-          uv = clamp(uv - inverse(jacobian) * residual, vec2(-4.0), vec2(4.0));
+          vec2 step = inverse(jacobian) * residual;
+          uv = clamp(uv - step, vec2(-4.0), vec2(4.0));
+          settled = max(abs(step.x), abs(step.y)) < SURFACE_SETTLED;
         }
         fitted_normal *= dot(fitted_normal, normal) < 0.0 ? -1.0 : 1.0;
       }

@@ -38,7 +38,8 @@ import functools
 
 import numpy as np
 
-from ...addon.methods.iterative.reflector_map import MapBake, ReflectorMap, is_convex
+from ...addon.geometry.closed_surfaces import is_convex
+from ...addon.methods.iterative.reflector_map import MapBake, ReflectorMap
 from ...addon.geometry.vectors import cross
 
 #: A texel crosses the surface again where its last crossing lies farther than its first

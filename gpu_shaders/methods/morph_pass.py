@@ -32,9 +32,10 @@ import numpy as np
 
 from ...addon.methods.morphing import morph_grid, morph_surface, morphing
 from ...addon.baking.bake_cache import CacheError
+from ...addon.geometry.closed_surfaces import is_convex
 from ..frame_pass import FramePass
 from ..reflected_meshes import FOUND_CODE, ReflectedMeshes
-from ..shader_sources import glsl_source
+from ..shader_sources import glsl_source, normal_equations_glsl
 
 #: Image slots per vertex and grid: a convex mirror shows a point once, a concave one
 #: two or three times.
@@ -46,6 +47,10 @@ DEFAULT_BUDGET_MB = 256.0
 #: The float32 blend's bound on the reflection law's residual on the fitted surface (the
 #: numpy twin asks 1e-8 of float64 Newton steps; float32 reaches about 1e-7).
 SURFACE_RESIDUAL = 1e-5
+#: A Newton step on the local surface shorter than this (in units of the nodes' images'
+#: spread) ends the iteration: float32 resolves about 1e-7 of it, and the answer moves
+#: by less than a millionth of the spread.
+SURFACE_SETTLED = 1e-6
 #: The per-frame parameters (``glsl/morph_blend.glsl``'s uniform block ``frame``), std140,
 #: for a cell of NODES nodes: per node, its eye (xyz) and weight (w), then how many
 #: regular (x) and widened-chart (y) image slots hold any image.
@@ -73,7 +78,8 @@ def blend_defines(n_nodes: int = 4) -> dict:
     return {"SLOTS": SLOTS, "NODES": n_nodes, "PARTIAL_WEIGHT": f"{morphing.PARTIAL_WEIGHT:.9e}",
             "SURFACE_NORMAL_MIN": f"{m.SURFACE_NORMAL_MIN:.9e}", "MIN_SURFACE_NODES": m.MIN_SURFACE_NODES,
             "SURFACE_ITERATIONS": m.SURFACE_ITERATIONS, "SURFACE_REACH": f"{m.SURFACE_REACH:.9e}",
-            "SURFACE_RESIDUAL": f"{SURFACE_RESIDUAL:.9e}", "FOUND_CODE": FOUND_CODE}
+            "SURFACE_RESIDUAL": f"{SURFACE_RESIDUAL:.9e}", "SURFACE_SETTLED": f"{SURFACE_SETTLED:.9e}",
+            "FOUND_CODE": FOUND_CODE}
 
 
 @functools.cache
@@ -94,8 +100,12 @@ def blend_shader(n_nodes: int = 4):
     for k in range(SLOTS):
         info.image(k, 'RGBA32F', 'FLOAT_2D', f"result{k}", qualifiers={'WRITE'})
     info.local_group_size(LOCAL_SIZE, 1)
-    info.compute_source(glsl_source("morph_blend.glsl", blend_defines(n_nodes)))
+    info.compute_source(glsl_source("morph_blend.glsl", blend_defines(n_nodes), normal_equations_glsl(6)))
     return gpu.shader.create_from_info(info)
+
+
+def _convex(reflector) -> bool:
+    return is_convex(reflector.vertices, reflector.triangles, reflector.vertices.mean(axis=0))
 
 
 def _translation(offset) -> np.ndarray:
@@ -173,8 +183,11 @@ class MorphPass(FramePass):
     hidden_fraction = float("inf")
 
     def __init__(self, geometry, grids, meshes: ReflectedMeshes | None = None,
-                 budget_mb: float = DEFAULT_BUDGET_MB):
+                 budget_mb: float = DEFAULT_BUDGET_MB, accuracy_px: float | None = None, reflectors=()):
         self.geometry = geometry
+        self._accuracy = accuracy_px
+        self._reflectors = list(reflectors)
+        self._convex = None  # the grids' convex mirrors, found on first use
         self.grids = list(grids)
         self.meshes = meshes if meshes is not None else ReflectedMeshes(geometry)
         self.nodes = NodeTextures(budget_mb)
@@ -189,6 +202,24 @@ class MorphPass(FramePass):
     @property
     def reflector_indices(self) -> list:
         return [grid.reflector_index for grid, _ in self.grids]
+
+    @property
+    def accuracy_px(self) -> float | None:
+        """The scene's Accuracy, the live view's snapping grid (``FramePass.accuracy_px``):
+        a snapped vertex moves by at most 0.71 of a cell, so the live view's blend is
+        within the Accuracy plus its own error (``docs/benchmarks/morphing.md``); a
+        render places every vertex exactly."""
+        return self._accuracy
+
+    @property
+    def mirrored_reflectors(self) -> list:
+        """The grids' mirrors that bound a convex body (``closed_surfaces.is_convex``,
+        about the mean of their vertices): every image a convex mirror shows is mirrored,
+        blended or not. Found once, on first use: a test of O(faces)."""
+        if self._convex is None:
+            self._convex = [index for index in self.reflector_indices
+                            if index < len(self._reflectors) and _convex(self._reflectors[index])]
+        return self._convex
 
     @property
     def drawn_reflectors(self) -> list:

@@ -335,6 +335,7 @@ def measure_morph_frames(width: int, height: int, target_vertices: int, frames: 
     grid.face_images = GPUFaceImages()
     meshes = bench_draw.scaled_meshes(captured.meshes, bench_draw.levels_for(captured, target_vertices))
     renderer = ReflectionRenderer(captured.reflectors, meshes, polish=False, morph=[(grid, matrix)],
+                                  accuracy_px=scene.curved_reflections.accuracy_px,
                                   **reflector_properties(captured.reflectors, scene))
     g = renderer.geometry
     world = world_color(scene)
@@ -354,7 +355,8 @@ def measure_morph_frames(width: int, height: int, target_vertices: int, frames: 
         gpu.state.depth_mask_set(True)
         view_projection = Matrix((np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix)
                                   @ translate).tolist())
-        renderer.meshes.draw(view_projection, targets, renderer.reflected_setup(view, renderer.morph), renderer._image,
+        renderer.meshes.draw(view_projection, targets, renderer.reflected_setup(view, renderer.morph, live=True),
+                             renderer._image,
                              renderer.morph.answers())
         gpu.state.depth_test_set('NONE')
         gpu.state.depth_mask_set(False)
@@ -401,7 +403,9 @@ def morph_report(r: dict, command: str) -> list:
         f"GPU, as the prefetch leaves them). The {r['nodes']} nodes of the path were projected once before "
         f"the clock ran ({r['node_seconds']:.1f} s with the node cameras' builds, {r['node_mb']:.0f} MB on "
         "the GPU). Milliseconds, medians over the frames; *frame* is what the viewport draws (pre-pass, "
-        "blend, reflected meshes, composite), *morph pass* the blend and the reflected meshes alone:", "",
+        "blend, reflected meshes, composite), *morph pass* the blend and the reflected meshes alone, drawn as "
+        "the live view draws them (vertices snapped to the scene's Accuracy, 1 px; the ball is convex, so the "
+        "far sides of closed solids are culled):", "",
         "| frame ms | morph pass ms | of which blend ms | plain ms | pass / plain | blend / plain | "
         "frame / plain | vertices with an image |",
         "|---:|---:|---:|---:|---:|---:|---:|---:|",

@@ -6,7 +6,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from curved_reflections.addon import DiffuseMesh
+from curved_reflections.addon import DiffuseMesh, Reflector
 from curved_reflections.addon.geometry.sphere import icosphere
 from curved_reflections.gpu_shaders.draw_geometry import prepare_geometry
 from curved_reflections.gpu_shaders.frame_pass import FramePass
@@ -49,7 +49,8 @@ def test_only_mirrors_whose_every_image_is_mirrored_cull_closed_solids():
     """A convex searched map and a declared exact surface (convex bodies, first order)
     show every image mirrored, so the far sides of closed solids may be culled; a
     non-convex map flips the images beyond its folds, a mesh under perturbation may be
-    non-convex, and a morphing pass does not know: they keep every triangle."""
+    non-convex: they keep every triangle. A morphing grid's mirror culls where its mesh
+    bounds a convex body."""
     mirrors, geometry = _geometry()
     meshes = ReflectedMeshes(geometry)
     convex = SimpleNamespace(index=0, reflector_map=SimpleNamespace(convex=True))
@@ -59,3 +60,19 @@ def test_only_mirrors_whose_every_image_is_mirrored_cull_closed_solids():
     mesh = SimpleNamespace(index=1, surface=None)
     assert PerturbationPass(geometry, mirrors, [declared, mesh], meshes).mirrored_reflectors == [0]
     assert MorphPass(geometry, [], meshes).mirrored_reflectors == []
+    dented = mirrors[1]
+    vertices = dented.vertices.copy()
+    vertices[0] = dented.vertices.mean(axis=0) + 0.8 * (vertices[0] - dented.vertices.mean(axis=0))
+    dented = Reflector(dented.name, vertices, dented.triangles, dented.normals)
+    grids = [(SimpleNamespace(reflector_index=0), None), (SimpleNamespace(reflector_index=1), None)]
+    assert MorphPass(geometry, grids, meshes, reflectors=[mirrors[0], dented]).mirrored_reflectors == [0]
+    assert MorphPass(geometry, grids, meshes, reflectors=mirrors).mirrored_reflectors == [0, 1]
+
+
+def test_morphing_snaps_live_vertices_to_the_scene_accuracy():
+    """The live view snaps a pass's vertices to a grid of its Accuracy: a morphing pass
+    takes the scene's, and without one it is not snapped."""
+    _, geometry = _geometry()
+    meshes = ReflectedMeshes(geometry)
+    assert MorphPass(geometry, [], meshes, accuracy_px=0.5).accuracy_px == 0.5
+    assert MorphPass(geometry, [], meshes).accuracy_px is None

@@ -32,8 +32,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...geometry.closed_surfaces import is_convex
 from ...geometry.raytrace import ReflectorSet
-from ...geometry.vectors import cross, dot, lengths, normalized
+from ...geometry.vectors import dot, lengths, normalized
 
 #: Texels along a cube face's side (without the border): about 0.35 degree per texel.
 DEFAULT_FACE_SIZE = 256
@@ -167,41 +168,3 @@ def bake_reflector_map(reflector_set: ReflectorSet, centre, face_size: int = DEF
     )
     return MapBake(reflector_map, int(again.hit.sum()), float(cosine.min()) if len(cosine) else 0.0,
                    float(hit.mean()))
-
-
-def is_convex(vertices: np.ndarray, triangles: np.ndarray, centre, tolerance: float = 1e-7) -> bool:
-    """Whether a star-shaped mesh around ``centre`` bounds a convex body: it is closed
-    (every edge of its welded vertices shared by two faces), folds outward at every edge
-    (faces oriented away from the centre: each face's neighbour across an edge lies on
-    or behind its plane) and has no saddle vertex (angles around each vertex sum to at
-    most 2 pi). A closed surface that is locally convex everywhere is convex (Tietze's
-    theorem), so this costs O(faces) where comparing every vertex with every face plane
-    cost O(vertices x faces). An open or degenerate mesh counts as not convex (only a
-    cost: the search then runs its occlusion tests)."""
-    vertices = np.asarray(vertices, dtype=np.float64)
-    triangles = np.asarray(triangles, dtype=np.int64)
-    _, welded = np.unique(vertices, axis=0, return_inverse=True)
-    welded = welded.reshape(-1)[triangles]
-    corners = vertices[triangles]
-    normals = cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    normals /= lengths(normals)[:, None]
-    normals *= np.sign(dot(normals, corners[:, 0] - np.asarray(centre, dtype=np.float64)))[:, None]
-    ends = np.sort(np.stack([welded, np.roll(welded, -1, axis=1)], axis=2), axis=2).reshape(-1, 2)
-    _, edge, count = np.unique(ends, axis=0, return_inverse=True, return_counts=True)
-    if (count != 2).any():
-        return False
-    order = np.argsort(edge.reshape(-1), kind="stable").reshape(-1, 2)  # the two sides of each edge
-    face, opposite = order // 3, triangles[order // 3, (order % 3 + 2) % 3]
-    scale = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
-    heights = np.stack([dot(normals[face[:, k]], vertices[opposite[:, 1 - k]] - corners[face[:, k], 0])
-                        for k in range(2)])
-    if not np.all(heights <= tolerance * scale):
-        return False
-    a, b, c = (corners[:, k] for k in range(3))
-    angles = np.stack([_angle(b - a, c - a), _angle(c - b, a - b), _angle(a - c, b - c)], axis=1)
-    total = np.bincount(welded.reshape(-1), angles.reshape(-1), minlength=int(welded.max()) + 1)
-    return bool(np.all(total <= 2.0 * np.pi + 1e-6))
-
-
-def _angle(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    return np.arctan2(lengths(cross(u, v)), dot(u, v))

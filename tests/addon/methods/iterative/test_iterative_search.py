@@ -9,7 +9,8 @@ from curved_reflections.addon.reference.exact import solve_reflections
 from curved_reflections.addon.methods.iterative import (IterativeReflector, check_star_shaped, prepare_iterative,
                                                         search_reflections)
 from curved_reflections.addon.methods.iterative import search as search_module
-from curved_reflections.addon.methods.iterative.reflector_map import face_coordinates, is_convex, texel_directions
+from curved_reflections.addon.geometry.closed_surfaces import is_convex
+from curved_reflections.addon.methods.iterative.reflector_map import face_coordinates, texel_directions
 from curved_reflections.addon.geometry.raytrace import ReflectorSet
 from curved_reflections.addon.scene import Reflector
 from curved_reflections.addon.geometry.sphere import bumpy_icosphere, ellipsoid, icosphere

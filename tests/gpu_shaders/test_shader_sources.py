@@ -1,0 +1,36 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""GLSL sources (``gpu_shaders/shader_sources.py``): the generated least-squares solver,
+run here as the statements it writes (GLSL's arithmetic reads as Python's), solves what
+numpy solves."""
+
+import math
+import re
+
+import numpy as np
+
+from curved_reflections.gpu_shaders.shader_sources import normal_equations_glsl
+
+
+def _run(source: str, function: str, names: dict) -> None:
+    """Executes the body of ``function`` in ``source`` on ``names`` (statements only)."""
+    body = re.search(r"void " + function + r"\([^)]*\)\n\{\n(.*?)\n\}", source, re.S).group(1)
+    for statement in body.splitlines():
+        exec(statement.strip().rstrip(";"), {"sqrt": math.sqrt, "max": max}, names)
+
+
+def test_generated_normal_equations_solve_least_squares():
+    rng = np.random.default_rng(3)
+    unknowns = 6
+    rows, values = rng.normal(size=(12, unknowns)), rng.normal(size=12)
+    source = normal_equations_glsl(unknowns)
+    names = {}
+    _run(source, "fit_clear", names)
+    for row, value in zip(rows, values):
+        names.update({f"r{i}": float(row[i]) for i in range(unknowns)}, value=float(value))
+        _run(source, "fit_add", names)
+    _run(source, "fit_solve", names)
+    solved = np.array([names[f"fit_b{i}"] for i in range(unknowns)])
+    expected = np.linalg.lstsq(rows, values, rcond=None)[0]
+    np.testing.assert_allclose(solved, expected, rtol=1e-7, atol=1e-9)
+    assert source.count("fit_m") > unknowns * (unknowns + 1) // 2  # one scalar per entry, no arrays
+    assert "[" not in source
