@@ -10,8 +10,9 @@
  * regular images, then SLOTS images of the widened leaf charts, in the grid's rigid
  * frame). Per frame:
  *   1. the reference images are those of the heaviest node that has any; every node's
- *      image nearest to each reference image within `match_distance` is its match, from
- *      its widened charts where its regular images have none (remedy 2);
+ *      image nearest to each reference image within `match_distance` plus MATCH_SLOPE
+ *      times the two nodes' distance, and mutually nearest, is its match, from its
+ *      widened charts where its regular images have none (remedy 2);
  *   2. the matches are blended with the eye's barycentric or trilinear weights, the
  *      weights of missing nodes left out where the others weigh PARTIAL_WEIGHT or more;
  *   3. our refinement: a quadratic height field fitted to the nodes' reflector points and
@@ -69,8 +70,9 @@ vec3 unit(vec3 v)
 }
 
 /* The nearest present image of `images` (`count` of them) to `reference` within
- * match_distance; w 0 where none. */
-vec4 nearest(vec4 images[SLOTS], int count, vec3 reference)
+ * `threshold` that has no nearer one among `others` (`count_others` of them: the
+ * reference node's images; mutually nearest, as morphing._match); w 0 where none. */
+vec4 nearest(vec4 images[SLOTS], int count, vec3 reference, float threshold, vec4 others[SLOTS], int count_others)
 {
   float best = 1e30;
   vec4 chosen = vec4(0.0);
@@ -81,14 +83,20 @@ vec4 nearest(vec4 images[SLOTS], int count, vec3 reference)
       chosen = images[j];
     }
   }
-  return best <= frame.eye_match.w ? chosen : vec4(0.0);
+  for (int j = 0; j < SLOTS; j++) {
+    if (j < count_others && others[j].w > 0.5 && distance(others[j].xyz, chosen.xyz) < best) {
+      best = 1e30;
+    }
+  }
+  return best <= threshold ? chosen : vec4(0.0);
 }
 
 /* A node's match of `reference`: among its regular images, else (remedy 2) among its
  * widened charts', fetched only then (most vertices match a regular image). */
-vec4 match_node(int n, vec4 regular[SLOTS], ivec2 texel, vec3 reference)
+vec4 match_node(int n, vec4 regular[SLOTS], ivec2 texel, vec3 reference, float threshold, vec4 others[SLOTS],
+                int count_others)
 {
-  vec4 found = nearest(regular, int(frame.node_slots[n].x), reference);
+  vec4 found = nearest(regular, int(frame.node_slots[n].x), reference, threshold, others, count_others);
   int widened = int(frame.node_slots[n].y);
   if (found.w > 0.5 || widened == 0) {
     return found;
@@ -97,7 +105,7 @@ vec4 match_node(int n, vec4 regular[SLOTS], ivec2 texel, vec3 reference)
   for (int s = 0; s < SLOTS; s++) {
     extended[s] = s < widened ? node_image(n, SLOTS + s, texel) : vec4(0.0);
   }
-  return nearest(extended, widened, reference);
+  return nearest(extended, widened, reference, threshold, others, count_others);
 }
 
 /* The surface point for chart (u, v): position, and the unnormalised tangents. */
@@ -153,7 +161,10 @@ void main()
       float total = 0.0;
       vec3 blended = vec3(0.0);
       for (int n = 0; n < NODES; n++) {
-        vec4 found = match_node(n, images[n], texel, own.xyz);
+        float threshold = frame.eye_match.w
+                          + MATCH_SLOPE * distance(frame.nodes[n].xyz, frame.nodes[reference].xyz);
+        vec4 found = match_node(n, images[n], texel, own.xyz, threshold, images[reference],
+                                int(frame.node_slots[reference].x));
         matched[n] = found.xyz;
         present[n] = found.w > 0.5;
         w[n] = present[n] ? frame.nodes[n].w : 0.0;

@@ -28,12 +28,12 @@ Ambiguous points (section VI, Fig. 15): seen by some of the four nodes, not by o
    ``EXTENDED_CHART`` (the leaf's ray-field patch extrapolated beyond its rays; its tail
    polynomial is the first reflector point).
 
-Images are matched across nodes by nearest first reflector point (within
-``MATCH_FRACTION`` of the reflector's size) to the image of the heaviest node that has
-one. A node still without a matching image is left out and the others' weights are
-renormalised if they hold at least ``PARTIAL_WEIGHT`` of the total; below that the
-image is dropped (its triangles are not drawn). ``MorphProjection.remedy`` says which
-case each image took.
+Images are matched across nodes by mutually nearest first reflector point (within
+``MATCH_FRACTION`` of the reflector's size plus ``MATCH_SLOPE`` times the nodes'
+distance) to the image of the heaviest node that has one. A node still without a
+matching image is left out and the others' weights are renormalised if they hold at
+least ``PARTIAL_WEIGHT`` of the total; below that the image is dropped (its triangles
+are not drawn). ``MorphProjection.remedy`` says which case each image took.
 """
 
 from __future__ import annotations
@@ -56,8 +56,15 @@ ENGINE_VERSION = "morphing-2"
 #: Camera-leaf charts span [-1, 1]; an extended frustum accepts up to this far out.
 EXTENDED_CHART = 1.25
 #: Images of one point at two nodes match when their reflector points are this close
-#: (fraction of the reflector's size).
+#: (fraction of the reflector's size), plus MATCH_SLOPE times the distance between the
+#: two nodes, and each is the other's nearest (:func:`_match`).
 MATCH_FRACTION = 0.2
+#: A reflection point moves by up to about half the eye's move on a convex mirror seen
+#: from a few radii (and up to all of it on a flat mirror, the point far). With
+#: MATCH_FRACTION alone, the nodes of a tetrahedron 1.5 sphere radii apart missed each
+#: other's images: 30 % of the facing reflections of the demo ball had no answer
+#: (bench_octree.py's views; 0.8 % with the slope).
+MATCH_SLOPE = 0.5
 #: Images closer than this many cube-face pixels (at their distance from the node), or
 #: this fraction of the reflector's size, are one image seen in two overlapping faces.
 DUPLICATE_PIXELS = 3.0
@@ -252,17 +259,19 @@ class MorphingGrid:
         has = np.isfinite(images[..., 0]).any(axis=2)  # (N, P)
         reference_node = np.argmax(np.where(has, weights[:, None], -1.0), axis=0)  # (P,)
         reference = images[reference_node, np.arange(len(points))]  # (P, K, 3)
-        threshold = MATCH_FRACTION * self.reflector_size
+        eyes = self.grid.node_positions()[np.asarray(nodes)]
         matched = np.full((len(nodes), len(points), k_max, 3), np.nan)
         how = np.zeros((len(nodes), len(points), k_max), np.int8)
         for n in range(len(nodes)):
+            threshold = (MATCH_FRACTION * self.reflector_size
+                         + MATCH_SLOPE * np.linalg.norm(eyes[n] - eyes[reference_node], axis=1))[:, None]
             found = _match(reference, images[n], threshold)
             missing = np.isfinite(reference[..., 0]) & ~np.isfinite(found[..., 0])
             rows = np.flatnonzero(missing.any(axis=1))
             how[n] = np.where(np.isfinite(found[..., 0]), ALL_NODES, NOT_PROJECTED)
             if len(rows):
                 extended = self._extended_images(int(nodes[n]), points[rows])
-                again = _match(reference[rows], extended, threshold)
+                again = _match(reference[rows], extended, threshold[rows])
                 fill = missing[rows] & np.isfinite(again[..., 0])
                 found[rows] = np.where(fill[..., None], again, found[rows])
                 how[n][rows] = np.where(fill, EXTENDED_FRUSTUM, how[n][rows])
@@ -363,8 +372,10 @@ def pad_images(images: np.ndarray, k: int) -> np.ndarray:
     return np.concatenate([images, np.full((images.shape[0], k - images.shape[1], 3), np.nan)], axis=1)
 
 
-def _match(reference: np.ndarray, candidates: np.ndarray, threshold: float) -> np.ndarray:
-    """For each reference image (P, K, 3), the nearest candidate (P, K', 3) within ``threshold``."""
+def _match(reference: np.ndarray, candidates: np.ndarray, threshold) -> np.ndarray:
+    """For each reference image (P, K, 3), the nearest candidate (P, K', 3) within
+    ``threshold`` ((P, 1) or a scalar) whose own nearest reference image it is (mutual
+    nearest: on a concave mirror, an image one node lacks is not paired with another)."""
     if candidates.shape[1] == 0:
         return np.full(reference.shape, np.nan)
     distance = np.linalg.norm(reference[:, :, None] - candidates[:, None], axis=3)
@@ -372,4 +383,6 @@ def _match(reference: np.ndarray, candidates: np.ndarray, threshold: float) -> n
     best = np.argmin(distance, axis=2)
     chosen = np.take_along_axis(candidates, best[..., None].repeat(3, axis=2), axis=1)
     close = np.take_along_axis(distance, best[..., None], axis=2)[..., 0] <= threshold
+    nearest_reference = np.take_along_axis(np.argmin(distance, axis=1), best, axis=1)
+    close &= nearest_reference == np.arange(reference.shape[1])[None]
     return np.where(close[..., None], chosen, np.nan)

@@ -110,6 +110,22 @@ def test_faces_left_out_see_no_triangle_and_the_others_are_built(sphere):
     assert built > 0 and skipped > 0
 
 
+def test_images_match_within_a_threshold_per_point_and_mutually_nearest():
+    """Each reference image takes the nearest candidate within its point's threshold,
+    unless another reference image lies nearer that candidate (a node that lacks one
+    image of a concave mirror does not lend it another)."""
+    nan = np.full(3, np.nan)
+    reference = np.array([[[0.0, 0, 0], [1.0, 0, 0]],  # two images; the node sees only the second
+                          [[0.0, 0, 0], nan],
+                          [[0.0, 0, 0], nan]])
+    candidates = np.array([[[0.9, 0, 0]], [[0.3, 0, 0]], [[0.3, 0, 0]]])
+    found = M._match(reference, candidates, np.array([[1.0], [0.5], [0.2]]))
+    assert np.isnan(found[0, 0]).all()  # within 1.0 of the first, but nearer the second
+    np.testing.assert_array_equal(found[0, 1], (0.9, 0, 0))
+    np.testing.assert_array_equal(found[1, 0], (0.3, 0, 0))
+    assert np.isnan(found[2, 0]).all()  # beyond its own point's threshold
+
+
 def test_view_at_a_node_reproduces_that_nodes_projection(sphere):
     grid, _ = morphing_grid(sphere, blend="linear")
     node = next(n for n in range(grid.grid.n_nodes) if grid.node_status[n][0] == G.NODE_OK)
@@ -124,13 +140,14 @@ def test_view_at_a_node_reproduces_that_nodes_projection(sphere):
     valid = result.valid[0]
     assert valid.sum() > 100
     # Where the node sees the point: its own image, to rounding (the eye's weights are
-    # 1 and 1e-16s); elsewhere only the node's extended frustum may answer.
+    # 1 and 1e-16s); elsewhere only the node's extended frustum may answer (with a node
+    # of weight 1e-16 left out, where it has no image mutually nearest: PARTIAL).
     seen = valid & np.isfinite(own[:, 0, 0])
     assert seen.sum() > 100
     assert np.abs(result.reflector_points[0][seen] - own[seen, 0]).max() < 1e-12
     expected, _ = view.to_pixels(own[seen, 0])
     assert np.abs(result.pixels[0][seen] - expected).max() < 1e-9
-    assert (result.remedy[0][valid & ~seen] == M.EXTENDED_FRUSTUM).all()
+    assert np.isin(result.remedy[0][valid & ~seen], (M.EXTENDED_FRUSTUM, M.PARTIAL)).all()
 
 
 def test_error_against_exact_solver_inside_a_small_grid(sphere, small_grids):
