@@ -76,7 +76,6 @@ def blend_defines(n_nodes: int = 4) -> dict:
     ``n_nodes`` nodes (4: a tetrahedron of the SBC grid; 8: a cube of the octree grid)."""
     m = morph_surface
     return {"SLOTS": SLOTS, "NODES": n_nodes, "PARTIAL_WEIGHT": f"{morphing.PARTIAL_WEIGHT:.9e}",
-            "MATCH_SLOPE": f"{morphing.MATCH_SLOPE:.9e}",
             "SURFACE_NORMAL_MIN": f"{m.SURFACE_NORMAL_MIN:.9e}", "MIN_SURFACE_NODES": m.MIN_SURFACE_NODES,
             "SURFACE_ITERATIONS": m.SURFACE_ITERATIONS, "SURFACE_REACH": f"{m.SURFACE_REACH:.9e}",
             "SURFACE_RESIDUAL": f"{SURFACE_RESIDUAL:.9e}", "SURFACE_SETTLED": f"{SURFACE_SETTLED:.9e}",
@@ -93,6 +92,7 @@ def blend_shader(n_nodes: int = 4):
     info.push_constant('INT', "positions_width")
     info.push_constant('INT', "slot_rows")
     info.push_constant('INT', "active_slots")
+    info.push_constant('FLOAT', "match_slope")
     info.typedef_source(FRAME_STRUCT.replace("NODES", str(n_nodes)))
     info.uniform_buf(0, "MorphFrame", "frame")
     info.sampler(0, 'FLOAT_2D', "vertex_positions")
@@ -328,6 +328,7 @@ class MorphPass(FramePass):
             shader.uniform_int("slot_rows", self.meshes.height)
             self._active[k] = max(u[0] for u in used)
             shader.uniform_int("active_slots", self._active[k])
+            shader.uniform_float("match_slope", grid.match_slope)
             shader.uniform_sampler("vertex_positions", self.meshes.positions)
             for n, texture in enumerate(textures):
                 shader.uniform_sampler(f"node{n}", texture)

@@ -63,7 +63,7 @@ MATCH_FRACTION = 0.2
 #: from a few radii (and up to all of it on a flat mirror, the point far). With
 #: MATCH_FRACTION alone, the nodes of a tetrahedron 1.5 sphere radii apart missed each
 #: other's images: 30 % of the facing reflections of the demo ball had no answer
-#: (bench_octree.py's views; 0.8 % with the slope).
+#: (bench_octree.py's views; 0.5 % with the slope). ``MorphingGrid.match_slope``.
 MATCH_SLOPE = 0.5
 #: Images closer than this many cube-face pixels (at their distance from the node), or
 #: this fraction of the reflector's size, are one image seen in two overlapping faces.
@@ -148,6 +148,9 @@ class MorphingGrid:
     #: is not used again (its reflector is drawn in runtime mode) until loaded anew.
     failure: object = field(default=None, repr=False, compare=False)
     _static: dict = field(default_factory=dict, repr=False)
+    #: Images of one point at two nodes match within MATCH_FRACTION of the mirror plus
+    #: this times the nodes' distance (a class attribute, not a field).
+    match_slope = MATCH_SLOPE
 
     def __post_init__(self):
         if self.blend not in ("surface", "linear"):
@@ -264,7 +267,7 @@ class MorphingGrid:
         how = np.zeros((len(nodes), len(points), k_max), np.int8)
         for n in range(len(nodes)):
             threshold = (MATCH_FRACTION * self.reflector_size
-                         + MATCH_SLOPE * np.linalg.norm(eyes[n] - eyes[reference_node], axis=1))[:, None]
+                         + self.match_slope * np.linalg.norm(eyes[n] - eyes[reference_node], axis=1))[:, None]
             found = _match(reference, images[n], threshold)
             missing = np.isfinite(reference[..., 0]) & ~np.isfinite(found[..., 0])
             rows = np.flatnonzero(missing.any(axis=1))
