@@ -11,6 +11,10 @@ by their winding on screen, which a mirror reverses).
 
 Positions, not vertex indices, decide which triangles meet: captured meshes split
 vertices at sharp edges and UV seams, and such a mesh is still closed.
+
+The same holds for the mirror side: :func:`is_convex` says whether a closed mirror
+bounds a convex body, whose every image is mirrored (the culling above is then valid
+for it), and where the iterative search may skip its occlusion tests.
 """
 
 from __future__ import annotations
