@@ -30,23 +30,28 @@ def normal_equations_glsl(unknowns: int) -> str:
     lower = [(i, j) for i in range(unknowns) for j in range(i + 1)]
     terms = range(unknowns)
 
-    def minus(first, products):
-        return " - ".join([first] + products)
+    def m(i, j):
+        return f"fit_m{i}{j}"
 
-    clear = [f"  fit_m{i}{j} = {'1e-10' if i == j else '0.0'};" for i, j in lower] + [f"  fit_b{i} = 0.0;"
-                                                                                          for i in terms]
-    add = [f"  fit_m{i}{j} += r{i} * r{j};" for i, j in lower] + [f"  fit_b{i} += r{i} * value;" for i in terms]
+    def b(i):
+        return f"fit_b{i}"
+
+    def minus(first, products):
+        """``first - a0 * b0 - a1 * b1 ...`` for the (a, b) name pairs ``products``."""
+        return " - ".join([first] + [f"{x} * {y}" for x, y in products])
+
+    clear = [f"  {m(i, j)} = {'1e-10' if i == j else '0.0'};" for i, j in lower] + [f"  {b(i)} = 0.0;" for i in terms]
+    add = [f"  {m(i, j)} += r{i} * r{j};" for i, j in lower] + [f"  {b(i)} += r{i} * value;" for i in terms]
     solve = []
     for j in terms:  # m = L L^T, L over m's lower triangle
-        solve.append(f"  fit_m{j}{j} = sqrt(max({minus(f'fit_m{j}{j}', [f'fit_m{j}{k} * fit_m{j}{k}' for k in range(j)])}"
-                     ", 1e-30));")
-        solve += [f"  fit_m{i}{j} = ({minus(f'fit_m{i}{j}', [f'fit_m{i}{k} * fit_m{j}{k}' for k in range(j)])})"
-                  f" / fit_m{j}{j};" for i in range(j + 1, unknowns)]
-    solve += [f"  fit_b{i} = ({minus(f'fit_b{i}', [f'fit_m{i}{k} * fit_b{k}' for k in range(i)])}) / fit_m{i}{i};"
+        solve.append(f"  {m(j, j)} = sqrt(max({minus(m(j, j), [(m(j, k), m(j, k)) for k in range(j)])}, 1e-30));")
+        solve += [f"  {m(i, j)} = ({minus(m(i, j), [(m(i, k), m(j, k)) for k in range(j)])}) / {m(j, j)};"
+                  for i in range(j + 1, unknowns)]
+    solve += [f"  {b(i)} = ({minus(b(i), [(m(i, k), b(k)) for k in range(i)])}) / {m(i, i)};"
               for i in terms]  # L y = b
-    solve += [f"  fit_b{i} = ({minus(f'fit_b{i}', [f'fit_m{k}{i} * fit_b{k}' for k in range(i + 1, unknowns)])})"
-              f" / fit_m{i}{i};" for i in reversed(terms)]  # L^T c = y
+    solve += [f"  {b(i)} = ({minus(b(i), [(m(k, i), b(k)) for k in range(i + 1, unknowns)])}) / {m(i, i)};"
+              for i in reversed(terms)]  # L^T c = y
     rows = ", ".join(f"float r{i}" for i in terms)
-    return "\n".join([f"float fit_m{i}{j};" for i, j in lower] + [f"float fit_b{i};" for i in terms]
+    return "\n".join([f"float {m(i, j)};" for i, j in lower] + [f"float {b(i)};" for i in terms]
                      + ["void fit_clear()", "{"] + clear + ["}", f"void fit_add({rows}, float value)", "{"] + add
                      + ["}", "void fit_solve()", "{"] + solve + ["}", ""])

@@ -27,7 +27,8 @@
 
 /* Push constants: n_vertices, positions_width, slot_rows (rows of one slot in a node
  * texture), match_slope (MorphingGrid.match_slope) and active_slots (the most regular
- * images any of the four nodes has of any vertex: the slots past it are empty this frame, neither written nor drawn). The view's parameters, in the uniform block `frame` (struct MorphFrame,
+ * images any of the four nodes has of any vertex: the slots past it are empty this
+ * frame, neither written nor drawn). The view's parameters, in the uniform block `frame` (struct MorphFrame,
  * gpu_shaders/methods/morph_pass.py): frame_from_shifted and shifted_from_frame (the grid's rigid
  * frame and the renderer's shift), view_projection (of shifted points), the eye in the
  * frame and match_distance, per node its position in the frame and weight (`nodes`), and

@@ -29,8 +29,8 @@ Ambiguous points (section VI, Fig. 15): seen by some of the four nodes, not by o
    polynomial is the first reflector point).
 
 Images are matched across nodes by mutually nearest first reflector point (within
-``MATCH_FRACTION`` of the reflector's size plus ``MATCH_SLOPE`` times the nodes'
-distance) to the image of the heaviest node that has one. A node still without a
+``MATCH_FRACTION`` of the reflector's size plus ``MorphingGrid.match_slope`` times the
+nodes' distance) to the image of the heaviest node that has one. A node still without a
 matching image is left out and the others' weights are renormalised if they hold at
 least ``PARTIAL_WEIGHT`` of the total; below that the image is dropped (its triangles
 are not drawn). ``MorphProjection.remedy`` says which case each image took.
@@ -56,14 +56,14 @@ ENGINE_VERSION = "morphing-2"
 #: Camera-leaf charts span [-1, 1]; an extended frustum accepts up to this far out.
 EXTENDED_CHART = 1.25
 #: Images of one point at two nodes match when their reflector points are this close
-#: (fraction of the reflector's size), plus MATCH_SLOPE times the distance between the
-#: two nodes, and each is the other's nearest (:func:`_match`).
+#: (fraction of the reflector's size), plus ``MorphingGrid.match_slope`` times the
+#: distance between the two nodes, and each is the other's nearest (:func:`_match`).
 MATCH_FRACTION = 0.2
 #: A reflection point moves by up to about half the eye's move on a convex mirror seen
 #: from a few radii (and up to all of it on a flat mirror, the point far). With
 #: MATCH_FRACTION alone, the nodes of a tetrahedron 1.5 sphere radii apart missed each
 #: other's images: 30 % of the facing reflections of the demo ball had no answer
-#: (bench_octree.py's views; 0.5 % with the slope). ``MorphingGrid.match_slope``.
+#: (bench_octree.py's views; 0.5 % with the slope). The tetrahedral grid's slope.
 MATCH_SLOPE = 0.5
 #: Images closer than this many cube-face pixels (at their distance from the node), or
 #: this fraction of the reflector's size, are one image seen in two overlapping faces.
