@@ -25,7 +25,8 @@ PUSH_CONSTANT_BYTES = {
     # mat4 view_projection; vec4 camera; vec2 view_size; int use_camera_pixel, use_image; float order_range,
     # reflection_cosine
     "reflected": 64 + 16 + 8 + 4 + 4 + 4 + 4,
-    "composite": 16 + 4 + 4 + 8,  # vec4 world_color; int reflectors_only, fill_radius; ivec2 origin
+    # vec4 world_color; int reflectors_only, fill_radius; ivec2 origin; vec2 depth_bias
+    "composite": 16 + 4 + 4 + 8 + 8,
 }
 _COMPOSITE_VERTEX = """
 /* One triangle covering the whole target. */
@@ -167,12 +168,15 @@ def _build_composite():
     info.push_constant('INT', "reflectors_only")
     info.push_constant('INT', "fill_radius")
     info.push_constant('IVEC2', "origin")
+    info.push_constant('VEC2', "depth_bias")
     info.sampler(0, 'FLOAT_2D', "prepass_colors")
     info.sampler(1, 'FLOAT_2D', "prepass_labels")
     info.sampler(2, 'FLOAT_2D', "reflection_colors")
     info.sampler(3, 'FLOAT_2D', "traced_colors")
+    info.sampler(4, 'FLOAT_2D', "prepass_depth")
     info.vertex_in(0, 'VEC2', "position")
     info.fragment_out(0, 'VEC4', "color_out")
+    info.depth_write('ANY')  # the pre-pass depth of each pixel, for the overlay's depth test
     info.vertex_source(_COMPOSITE_VERTEX)
     info.fragment_source(glsl_source("reflection_composite_frag.glsl"))
     return gpu.shader.create_from_info(info)

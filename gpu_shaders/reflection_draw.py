@@ -13,7 +13,10 @@ Three passes, all into float targets of the view's size:
    diffuse meshes (and nothing), reflector index + 1 for reflectors. Blender's Python
    ``gpu`` module has no stencil, so the id texture plays the stencil of Roger &
    Holzschuch 2006, section 3.3.6. The weight is the reflectivity, times Schlick's
-   Fresnel term where the reflector asks for it (SBC V-D).
+   Fresnel term where the reflector asks for it (SBC V-D). A viewport overlay
+   (:meth:`ReflectionRenderer.draw` with ``reflectors_only``) draws the reflectors alone:
+   Blender has drawn the scene already, and its depth, in the framebuffer the overlay is
+   drawn into, hides the composite where an object stands in front of a mirror.
 2. **Reflections**: the reflected ("virtual") meshes, each vertex placed where the view
    sees its first reflector point, with the depth of SBC V-A (k - 1 + z / D) g for
    order k and distance z along the reflected ray (lower orders before higher ones, the
@@ -42,7 +45,8 @@ Three passes, all into float targets of the view's size:
    along the reflected ray when the reflector has a fade distance A, else the world
    colour; mixed with the reflector's own colour by the reflection weight (1 = perfect
    mirror); elsewhere the pre-pass colour (or nothing, for a viewport overlay:
-   ``reflectors_only``).
+   ``reflectors_only``, whose mirror pixels are depth-tested against the scene's depth
+   at their own, :func:`depth_bias`).
 
 The sample-based camera cannot place a reflection in the last ray-map cell before a
 footprint's edge (the silhouette, or an object in front of the mirror), nor between
@@ -102,6 +106,11 @@ ITERATIVE_ORDER_RANGE = 0.5
 #: mirror, the eye on its surface), it is filled by the composite instead of traced, so
 #: that no view costs many times an ordinary one (the demo scenes trace 1-9 %).
 MAX_TRACED_FRACTION = 0.25
+#: A viewport overlay's mirror pixels are depth-tested against the scene's depth as if
+#: this share of their distance nearer (:func:`depth_bias`): 1 cm at 10 m.
+SCENE_DEPTH_BIAS = 1e-3
+#: ... in an orthographic view, this share (to twice it) of the clipping range.
+ORTHOGRAPHIC_DEPTH_BIAS = 1e-5
 #: A render traces the pixels of a searched mirror (the iterative search) that got no
 #: reflection within this many pixels of its silhouette or, on a non-convex mirror or
 #: with other mirrors in the scene, of a drawn reflection.
@@ -146,6 +155,31 @@ class FrameTargets:
             texture = gpu.types.GPUTexture((self.width, self.height), format='RGBA32F')
             self._output = (texture, gpu.types.GPUFrameBuffer(color_slots=(texture,)))
         return self._output
+
+
+def _view_projection(view, shift):
+    """The view's projection times view matrix, applied to positions relative to ``shift``
+    (folded in float64, so that large world coordinates keep their precision in float32)."""
+    from mathutils import Matrix
+
+    translate = np.eye(4)
+    translate[:3, 3] = shift
+    return Matrix((np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix) @ translate).tolist())
+
+
+def depth_bias(view) -> tuple:
+    """(anchor, scale) of the overlay composite's depth bias: a window depth z is brought
+    to z - scale (anchor - z). In perspective, z = a + b / d at distance d with
+    a = (1 - P[2][2]) / 2 (OpenGL's depth range [0, 1]), and z - s (a - z) is to first
+    order the depth at d (1 - s): the mirror drawn :data:`SCENE_DEPTH_BIAS` of its
+    distance nearer, which the scene's depth of the same surface (another tessellation
+    of it, 24-bit) cannot beat, while a real object in front still does. In an
+    orthographic view depth is linear: anchor 2 makes the bias between 1 and 2 times
+    the scale, a share of the clipping range."""
+    projection = np.asarray(view.projection_matrix, dtype=np.float64)
+    if abs(projection[3, 3] - 1.0) < 1e-12:  # orthographic
+        return 2.0, ORTHOGRAPHIC_DEPTH_BIAS
+    return 0.5 * (1.0 - projection[2, 2]), SCENE_DEPTH_BIAS
 
 
 def _camera(view, shift) -> tuple:
@@ -228,6 +262,11 @@ class ReflectionRenderer:
                 (image, gpu.types.GPUBatch(type='TRIS', buf=buffer, elem=gpu.types.GPUIndexBuf(
                     type='TRIS', seq=g.prepass_triangles[first:first + count])))
                 for image, first, count in g.prepass_ranges]
+            # The reflectors alone (label id > 0, no image): a viewport's pre-pass.
+            mirrors = g.prepass_triangles[g.prepass_labels[g.prepass_triangles[:, 0], 0] > 0.5]
+            batches["prepass_mirrors"] = [
+                (-1, gpu.types.GPUBatch(type='TRIS', buf=buffer, elem=gpu.types.GPUIndexBuf(type='TRIS', seq=mirrors)))
+            ] if len(mirrors) else []
         batches["images"] = [data_texture(image, image.shape[1]) for image in g.images]
         batches["no_image"] = data_texture(np.ones((1, 4)))
         screen = vertex_buffer({"position": (np.array([[-1, -1], [3, -1], [-1, 3]], np.float32), 'F32', 'FLOAT')})
@@ -264,19 +303,26 @@ class ReflectionRenderer:
         linear RGB(A) that reflected rays leaving the scene show; ``fill_radius`` the
         composite's cheap fill of the band along a footprint's edge (``None``: the
         camera's down-sampling), where :meth:`render` traces instead.
+
+        ``reflectors_only`` (the viewport overlay): the pre-pass draws the reflectors
+        alone, and the composite is depth-tested against the bound framebuffer's depth,
+        which holds the scene as Blender drew it: what stands in front of a mirror hides
+        its reflection there, and the scene is not drawn a second time.
         """
         import gpu
 
-        targets = self.draw_passes(view, textures, camera, warm=True)
+        targets = self.draw_passes(view, textures, camera, warm=True, mirrors_only=reflectors_only)
         if fill_radius is None:
             fill_radius = 0 if textures is None else textures.downsample
         x, y, width, height = gpu.state.viewport_get()
         # A viewport of the view's size is drawn into where it is; otherwise from (0, 0).
         origin = (x, y) if (width, height) == (targets.width, targets.height) else None
-        self.composite(targets, world_color, reflectors_only, fill_radius, origin)
+        self.composite(targets, world_color, reflectors_only, fill_radius, origin,
+                       scene_depth=view if reflectors_only else None)
         return targets
 
-    def draw_passes(self, view, textures, camera=None, warm: bool = False) -> FrameTargets:
+    def draw_passes(self, view, textures, camera=None, warm: bool = False,
+                    mirrors_only: bool = False) -> FrameTargets:
         """The pre-pass and the reflected triangles of ``view`` into its frame targets.
 
         The reflected triangles come from :meth:`projection` of ``textures``: made now
@@ -289,9 +335,12 @@ class ReflectionRenderer:
         its last answer and snaps the per-frame passes' reflected vertices to a grid
         within their Accuracy (the viewport's :meth:`draw` does; a render does not, so
         that its image depends on its view alone and is placed exactly).
+        ``mirrors_only``: the pre-pass draws the reflectors alone, not the diffuse meshes
+        (a viewport overlay, whose composite the scene's own depth hides where something
+        stands in front of a mirror); their pixels then keep the reflectors' labels
+        there, and the reflections drawn behind an object are hidden by that test.
         """
         import gpu
-        from mathutils import Matrix
 
         if self._batches is None:
             self._batches = self._make_batches()
@@ -300,10 +349,7 @@ class ReflectionRenderer:
         cached = None if textures is None else self.projection(textures, camera_view, camera)
         targets = self.targets(view.width, view.height)
         width, height = targets.width, targets.height
-        translate = np.eye(4)
-        translate[:3, 3] = g.shift
-        view_projection = Matrix((np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix)
-                                  @ translate).tolist())
+        view_projection = _view_projection(view, g.shift)
         with saved_state():
             gpu.state.blend_set('NONE')
             gpu.state.face_culling_set('NONE')  # mirrors are two-sided; reflections flip winding
@@ -317,7 +363,7 @@ class ReflectionRenderer:
                     shader.bind()
                     shader.uniform_float("view_projection", view_projection)
                     shader.uniform_float("camera", _camera(view, g.shift))
-                    for image, batch in batches["prepass"]:
+                    for image, batch in batches["prepass_mirrors" if mirrors_only else "prepass"]:
                         shader.uniform_int("use_image", int(image >= 0))
                         shader.uniform_sampler("image", self._image(image))
                         batch.draw(shader)
@@ -396,19 +442,27 @@ class ReflectionRenderer:
         return cached
 
     def composite(self, targets: FrameTargets, world_color=(0.0, 0.0, 0.0, 1.0), reflectors_only: bool = False,
-                  fill_radius: int = 0, origin=None) -> None:
+                  fill_radius: int = 0, origin=None, scene_depth=None) -> None:
         """The composite of the frame targets into the framebuffer bound by the caller;
         traced band colours (``targets.traced``, see :meth:`trace_band`) when present.
 
         ``origin``: the framebuffer pixel of the view's corner when the caller's viewport
-        (left as it is) already covers the view; ``None`` draws at (0, 0)."""
+        (left as it is) already covers the view; ``None`` draws at (0, 0).
+        ``scene_depth``: the view whose scene the bound framebuffer's depth holds (a
+        viewport's, as Blender drew it); each mirror pixel is then drawn at its pre-pass
+        depth, brought nearer by :data:`SCENE_DEPTH_BIAS` of its distance
+        (:func:`depth_bias`), with the depth test (depth writes off): hidden where the
+        scene has a nearer surface. (Drawing the mirrors' own triangles instead of one
+        full-screen triangle cost twice as much on llvmpipe with the band's fill: small
+        triangles shade their pixels in partly covered blocks.)"""
         import gpu
 
         if self._batches is None:
             self._batches = self._make_batches()
         with saved_state():
             gpu.state.blend_set('NONE')
-            gpu.state.depth_test_set('NONE')
+            gpu.state.depth_test_set('LESS_EQUAL' if scene_depth is not None else 'NONE')
+            gpu.state.depth_mask_set(False)
             if origin is None:
                 gpu.state.viewport_set(0, 0, targets.width, targets.height)
                 origin = (0, 0)
@@ -423,6 +477,8 @@ class ReflectionRenderer:
             shader.uniform_sampler("prepass_labels", targets.prepass_labels)
             shader.uniform_sampler("reflection_colors", targets.reflection_colors)
             shader.uniform_sampler("traced_colors", targets.traced if targets.traced is not None else targets.no_trace)
+            shader.uniform_sampler("prepass_depth", targets.prepass_depth)
+            shader.uniform_float("depth_bias", (0.0, 0.0) if scene_depth is None else depth_bias(scene_depth))
             self._batches["screen"].draw(shader)
 
     def trace_band(self, view, targets: FrameTargets, max_order: int, world_color, radius: int,

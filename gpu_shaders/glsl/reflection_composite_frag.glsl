@@ -23,7 +23,14 @@
  * times Fresnel where asked, reflection_prepass_frag.glsl) and z the attenuation
  * distance A (0: none). A reflection's alpha (and a traced one's) is 1 + its distance d
  * from the mirror along the reflected ray; it fades to the world colour by
- * min(1, (d / A)^2), the paper's quadratic fall-off with distance. */
+ * min(1, (d / A)^2), the paper's quadratic fall-off with distance.
+
+ *
+ * Depth: a mirror pixel is drawn at its pre-pass depth brought nearer by `depth_bias`
+ * (a, s): z - s (a - z) (reflection_draw.depth_bias). A viewport overlay's pre-pass draws
+ * the mirrors alone, and the depth test against the scene's own depth (Blender's
+ * drawing, in the bound framebuffer) hides a mirror pixel where an object stands in
+ * front of it. Elsewhere the test is off. */
 
 vec3 attenuated(vec3 reflected, float alpha, float attenuation)
 {
@@ -44,8 +51,11 @@ void main()
       discard;
     }
     color_out = base.a > 0.5 ? vec4(base.rgb, 1.0) : vec4(world_color.rgb, 1.0);
+    gl_FragDepth = gl_FragCoord.z;  /* a render's composite: no depth test */
     return;
   }
+  float depth = texelFetch(prepass_depth, texel, 0).r;
+  gl_FragDepth = depth - depth_bias.y * (depth_bias.x - depth);
   vec4 reflection = texelFetch(reflection_colors, texel, 0);
   vec4 traced = texelFetch(traced_colors, texel, 0);
   vec3 reflected = world_color.rgb;

@@ -257,7 +257,8 @@ def measure_iterative(kind: str, width: int, height: int, target_vertices: int, 
             for view in views[:2]:  # warm-up: shaders built, textures uploaded
                 renderer.draw(view, None, world, reflectors_only=True)
             for k, view in enumerate(views):
-                framebuffer.clear(color=(0.0, 0.0, 0.0, 1.0), depth=1.0)
+                framebuffer.clear(color=(0.0, 0.0, 0.0, 1.0))
+                bench_draw.scene_depth(framebuffer, plain, view)
                 times["frame"].append(bench_draw.timed(lambda: renderer.draw(view, None, world, reflectors_only=True),
                                                        framebuffer))
                 following = views[(k + 1) % len(views)]
@@ -372,7 +373,8 @@ def measure_morph_frames(width: int, height: int, target_vertices: int, frames: 
                 renderer.draw(view, None, world, reflectors_only=True)
             node_seconds = time.perf_counter() - start
             for view in views:
-                framebuffer.clear(color=(0.0, 0.0, 0.0, 1.0), depth=1.0)
+                framebuffer.clear(color=(0.0, 0.0, 0.0, 1.0))
+                bench_draw.scene_depth(framebuffer, plain, view)
                 times["frame"].append(bench_draw.timed(lambda: renderer.draw(view, None, world, reflectors_only=True),
                                                        framebuffer))
                 times["morph pass"].append(bench_draw.timed(lambda: morph_pass(view), framebuffer))

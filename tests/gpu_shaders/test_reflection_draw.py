@@ -19,6 +19,7 @@ from curved_reflections.addon import DiffuseMesh, look_at_view, scene_bounds
 from curved_reflections.addon.methods.sbc import build_sample_based_camera
 from curved_reflections.addon.geometry.sphere import icosphere
 from curved_reflections.addon.geometry import band_trace, subdivision
+from curved_reflections.gpu_shaders.gpu_data import read_texture
 
 WIDTH, HEIGHT = 128, 96
 #: Measured on sbc_fig3 at 128x96 (d = 2, accuracy 1 px, max order 1): 1.6 % of the
@@ -297,7 +298,7 @@ def test_draw_into_a_bound_offscreen_as_a_draw_handler_would(gpu_ready):
         for overlay in (False, True):
             with offscreen.bind():
                 framebuffer = gpu.state.active_framebuffer_get()
-                framebuffer.clear(color=(0.25, 0.5, 0.75, 1.0))
+                framebuffer.clear(color=(0.25, 0.5, 0.75, 1.0), depth=1.0)
                 renderer.draw(view, textures, world, reflectors_only=overlay)
                 pixels = framebuffer.read_color(0, 0, view.width, view.height, 4, 0, 'FLOAT')
             pixels.dimensions = view.width * view.height * 4
@@ -308,6 +309,88 @@ def test_draw_into_a_bound_offscreen_as_a_draw_handler_would(gpu_ready):
     on_mirror = np.any(np.abs(expected[..., :3] - world[:3]) > 1e-6, axis=2)  # the reflections
     np.testing.assert_allclose(images[1][on_mirror], expected[on_mirror], atol=1e-6)
     np.testing.assert_allclose(images[1][0, 0], (0.25, 0.5, 0.75, 1.0), atol=1e-6)  # untouched
+
+
+def _draw_scene_as_blender_would(view, meshes, color):
+    """Every mesh in one colour with the depth test into the bound framebuffer: the
+    scene's depth that a viewport's draw handler finds there."""
+    import gpu
+    from gpu_extras.batch import batch_for_shader
+    from mathutils import Matrix
+
+    shader = gpu.shader.from_builtin('UNIFORM_COLOR')
+    gpu.state.depth_test_set('LESS_EQUAL')
+    gpu.state.depth_mask_set(True)
+    with gpu.matrix.push_pop(), gpu.matrix.push_pop_projection():
+        gpu.matrix.load_matrix(Matrix(np.asarray(view.view_matrix).tolist()))
+        gpu.matrix.load_projection_matrix(Matrix(np.asarray(view.projection_matrix).tolist()))
+        shader.bind()
+        shader.uniform_float("color", color)
+        for mesh in meshes:
+            batch_for_shader(shader, 'TRIS', {"pos": mesh.vertices.astype(np.float32)},
+                             indices=mesh.triangles.astype(np.int32)).draw(shader)
+    gpu.state.depth_test_set('NONE')
+    gpu.state.depth_mask_set(False)
+
+
+@pytest.mark.parametrize("orthographic", [False, True])
+def test_the_overlay_is_hidden_where_the_scene_depth_has_an_object_in_front(gpu_ready, orthographic):
+    """The viewport's pre-pass draws the mirrors alone; what stands in front of a
+    mirror hides the reflection through the depth test against the scene's depth that
+    Blender drew. Over a scene drawn in grey (mirror and meshes), the overlay shows the
+    render's pixels wherever the mirror is the nearest surface, keeps the grey where a
+    square in front of the mirror hides it, and leaves the rest untouched; no mirror
+    pixel of the render is lost to the scene's own depth of the mirror (the bias)."""
+    import gpu
+
+    from curved_reflections.addon.view import View
+    from curved_reflections.gpu_shaders.methods.projection import SBCTextures
+    from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
+
+    blocker = _square("Blocker", 0.0, 0.5, (1.0, 0.0, 1.0))
+    blocker = DiffuseMesh("Blocker", blocker.vertices[:, [1, 0, 2]] + (0.3, -2.0, 0.1), blocker.triangles,
+                          blocker.colors, emissive=True)
+    meshes = [_square("Near", 2.5, 1.0, (1.0, 0.0, 0.0)), _square("Far", 4.0, 4.0, (0.0, 1.0, 0.0)), blocker]
+    mirror = icosphere((0.0, 0.0, 0.0), 1.0, 3, name="Mirror")
+    view = look_at_view((0.0, -6.0, 0.3), (0.0, 0.0, 0.0), fov_y_deg=25.0, width=64, height=48)
+    if orthographic:
+        projection = np.diag([1.0 / 1.8, 1.0 / 1.35, -2.0 / 19.9, 1.0])
+        projection[2, 3] = -20.1 / 19.9  # clipping from 0.1 to 20
+        view = View(view.view_matrix, projection, view.width, view.height)
+    sbc = build_sample_based_camera([mirror], view, scene_bounds([mirror], meshes, margin=1.0), downsample=2)
+    renderer = ReflectionRenderer([mirror], meshes)
+    world, grey, untouched = (0.0, 0.0, 1.0, 1.0), (0.5, 0.5, 0.5, 1.0), (0.25, 0.5, 0.75, 1.0)
+    expected = renderer.render(view, sbc, world_color=world, trace=False)
+    labels = read_texture(renderer.draw_passes(view, SBCTextures(sbc), sbc).prepass_labels, view.width, view.height)
+    shows_mirror = labels[..., 0] > 0.5
+    mirror_only = read_texture(renderer.draw_passes(view, SBCTextures(sbc), sbc, mirrors_only=True).prepass_labels,
+                               view.width, view.height)[..., 0] > 0.5
+    hidden = mirror_only & ~shows_mirror  # the blocker in front of the mirror
+    offscreen = gpu.types.GPUOffScreen(view.width, view.height, format='RGBA32F')
+    try:
+        with offscreen.bind():
+            framebuffer = gpu.state.active_framebuffer_get()
+            framebuffer.clear(color=untouched, depth=1.0)
+            _draw_scene_as_blender_would(view, [mirror, *meshes], grey)
+            renderer.draw(view, SBCTextures(sbc), world, reflectors_only=True)
+            pixels = framebuffer.read_color(0, 0, view.width, view.height, 4, 0, 'FLOAT')
+    finally:
+        offscreen.free()
+    pixels.dimensions = view.width * view.height * 4
+    image = np.array(pixels, dtype=np.float32).reshape(view.height, view.width, 4)
+    assert hidden.sum() >= 40 and shows_mirror.sum() >= 400
+    # Along the blocker's outline the render's pre-pass ends the mirror's footprint: its
+    # triangles with a corner there are dropped and the composite fills d pixels from
+    # the nearest reflection; the overlay's footprint goes on behind the blocker.
+    rows, columns = np.nonzero(hidden)
+    y, x = np.mgrid[:view.height, :view.width]
+    near_blocker = np.min(np.hypot(y[..., None] - rows, x[..., None] - columns), axis=2) <= 3.0
+    away = shows_mirror & ~near_blocker
+    np.testing.assert_allclose(image[away], expected[away], atol=1e-6)
+    np.testing.assert_allclose(image[hidden], np.broadcast_to(grey, (int(hidden.sum()), 4)), atol=1e-6)
+    elsewhere = ~mirror_only
+    assert np.all(np.isclose(image[elsewhere], grey, atol=1e-6).all(axis=1)
+                  | np.isclose(image[elsewhere], untouched, atol=1e-6).all(axis=1))
 
 
 # --- the cached projection ----------------------------------------------------------

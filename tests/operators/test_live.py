@@ -39,14 +39,16 @@ def _camera_view(scene):
 
 
 def _draw(scene, view, key=live.CAMERA_KEY):
-    """(drawn, image): what the draw handler draws over a SENTINEL-cleared framebuffer."""
+    """(drawn, image): what the draw handler draws over a SENTINEL-cleared framebuffer
+    whose depth is cleared too (a scene of nothing but the far plane: the overlay is
+    depth-tested against the scene's depth Blender leaves there)."""
     import gpu
 
     offscreen = gpu.types.GPUOffScreen(view.width, view.height, format='RGBA32F')
     try:
         with offscreen.bind():
             framebuffer = gpu.state.active_framebuffer_get()
-            framebuffer.clear(color=SENTINEL)
+            framebuffer.clear(color=SENTINEL, depth=1.0)
             drawn = live.draw_safely(scene, key, view)
             pixels = framebuffer.read_color(0, 0, view.width, view.height, 4, 0, 'FLOAT')
     finally:
