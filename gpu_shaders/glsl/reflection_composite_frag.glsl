@@ -45,15 +45,16 @@ void main()
 {
   ivec2 texel = ivec2(gl_FragCoord.xy) - origin;  /* the view's pixel, wherever its viewport is */
   vec4 label = texelFetch(prepass_labels, texel, 0);
-  vec4 base = texelFetch(prepass_colors, texel, 0);
   if (label.x < 0.5) {
     if (reflectors_only != 0) {
       discard;
     }
+    vec4 base = texelFetch(prepass_colors, texel, 0);
     color_out = base.a > 0.5 ? vec4(base.rgb, 1.0) : vec4(world_color.rgb, 1.0);
     gl_FragDepth = gl_FragCoord.z;  /* a render's composite: no depth test */
     return;
   }
+  vec4 base = texelFetch(prepass_colors, texel, 0);
   float depth = texelFetch(prepass_depth, texel, 0).r;
   gl_FragDepth = depth - depth_bias.y * (depth_bias.x - depth);
   vec4 reflection = texelFetch(reflection_colors, texel, 0);
