@@ -156,7 +156,12 @@ Step take_step(Seed seed, vec3 target, bool second)
    * silhouette lands on its far side. */
   vec3 normal = seed.q * step.point + seed.b;
   bool reflects = dot(normal, target - step.point) * dot(normal, eye - step.point) > 0.0;
-  step.estimate = (local && short_step && reachable && reflects && !isnan(estimate)) ? estimate : INF;
+  /* That holds on a convex mirror's far side too (eye and point both behind the tangent
+   * plane): the normal there, oriented along the seed's (a step is local), must face the
+   * eye as the seed's does (projector._faces_eye). */
+  bool faces_eye = dot(normal, grad) * dot(normal, eye - step.point) * dot(grad, eye - y) > 0.0;
+  step.estimate = (local && short_step && reachable && reflects && faces_eye && !isnan(estimate)) ? estimate
+                                                                                                    : INF;
   step.pixel = reachable ? at2 : vec2(-INF);
   return step;
 }

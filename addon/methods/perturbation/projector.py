@@ -60,10 +60,12 @@ HOP_SAMPLES = 8
 #: How far (in seed spacings) a Taylor step may move an image from its seed's pixel.
 REACH = 1.5
 #: Rounds of adaptive seeds through predicted pixels.
-REFINE_ROUNDS = 8
+REFINE_ROUNDS = 12
 #: A candidate whose adaptive seeds leave the history this often gives up (an image
-#: beyond the silhouette, or none).
-MAX_MISSES = 4
+#: beyond the silhouette, or none). Each miss halves the way back toward the last seed:
+#: 8 reach a twentieth of a pixel, where a grazing image lies (R c^2 / 2 pixels inside
+#: the silhouette of a mirror R pixels across, at cosine c; 4 stopped at 0.75 px).
+MAX_MISSES = 8
 #: Candidates farther from their nearest ray than this many times the point's best are dropped.
 CANDIDATE_SPREAD = 4.0
 #: Images of one point in one history kept at most (non-convex mirrors).
@@ -357,7 +359,8 @@ class PerturbationMethod:
         short = np.linalg.norm(targets - foot, axis=1) <= MAX_RELATIVE_STEP * np.maximum(along, 0.0)
         reachable = along < seeds.head[seed_of]
         moved = step.points(paths)
-        estimate = np.where(reachable & local & short & _reflects(paths, moved, targets), estimate, np.inf)
+        estimate = np.where(reachable & local & short & _reflects(paths, moved, targets) & _faces_eye(paths, moved),
+                            estimate, np.inf)
         return moved[:, -1], moved[:, 0], estimate, np.where(reachable[:, None], at[2], np.nan)
 
 
@@ -390,6 +393,22 @@ def _reflects(paths, moved, targets) -> np.ndarray:
     arrive = np.einsum("kni,kni->kn", normal, before - moved)
     leave = np.einsum("kni,kni->kn", normal, after_direction)
     return (arrive * leave > 0).all(axis=1)
+
+
+def _faces_eye(paths, moved) -> np.ndarray:
+    """(K,) bool: the moved point the eye sees lies on the side of the surface its seed's
+    point shows the eye. :func:`_reflects` holds on a convex mirror's far side too (eye
+    and point both behind the tangent plane), where a step carried past the silhouette
+    lands and the eye cannot see: the quadric's normal there, oriented along the seed's
+    (a step is local), must face the eye as the seed's does."""
+    def to_eye(points):
+        return np.broadcast_to(paths.eye, points.shape) if paths.orthographic else paths.eye - points
+
+    seen, moved_seen = paths.reflector_points[:, -1], moved[:, -1]
+    seed_normal = paths.gradients(paths.reflector_points)[:, -1]
+    normal = paths.gradients(moved)[:, -1]
+    normal = normal * np.where(dot(normal, seed_normal) < 0.0, -1.0, 1.0)[:, None]
+    return dot(normal, to_eye(moved_seen)) * dot(seed_normal, to_eye(seen)) > 0.0
 
 
 def grazing(view: View, points: np.ndarray, reflector_points: np.ndarray) -> np.ndarray:

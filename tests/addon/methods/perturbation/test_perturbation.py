@@ -216,6 +216,35 @@ def _match(projection, pixels_of, histories=None):
 
 
 @pytest.mark.parametrize("analytic", [True, False])
+def test_points_in_a_convex_mirrors_shadow_get_no_image_and_those_beside_it_their_grazing_one(analytic):
+    """Behind a sphere, where the eye's line to a point crosses it, the point has no
+    image; just beside that shadow its image grazes the rim. A Taylor step carried past
+    the silhouette lands on the far side, where point and eye are both behind the
+    tangent plane, so it looks like a reflection: 198 of 200 shadow points were answered
+    there before the step had to face the eye as its seed does. Beside the shadow every
+    point is answered within the accuracy of its closed-form reflection on the sphere
+    (the mesh: within a pixel)."""
+    eye = np.array([0.0, -5.0, 0.0])
+    rs = ReflectorSet([icosphere((0.0, 0.0, 0.0), 1.0, 4, name="Ball")])
+    view = look_at_view(eye, (0.0, 0.0, 0.0), fov_y_deg=40.0, width=320, height=240)
+    rng = np.random.default_rng(3)
+    angle, depth = rng.uniform(0.0, 2.0 * np.pi, 400), rng.uniform(1.5, 3.0, 400)
+    # The eye's line to each point passes the centre at `miss`: in the shadow below 1.
+    miss = np.r_[rng.uniform(0.9, 0.995, 200), rng.uniform(1.005, 1.1, 200)]
+    off_axis = miss * (depth + 5.0) / np.sqrt(25.0 - miss * miss)
+    points = np.c_[off_axis * np.cos(angle), depth, off_axis * np.sin(angle)]
+    surfaces = {0: AnalyticSurface("Ball", "SPHERE", _placed((0.0, 0.0, 0.0)), (1.0,))} if analytic else {}
+    projection = PerturbationMethod(rs, surfaces, PerturbationSettings(accuracy_px=0.5)).project(view, points)
+    answered = projection.valid.any(axis=0)
+    assert not answered[:200].any()
+    assert answered[200:].sum() >= 195
+    group, point = np.nonzero(projection.valid)
+    closed, _ = sphere_reflection(np.zeros(3), 1.0, eye, points[point])
+    error = np.linalg.norm(projection.pixels[group, point] - view.to_pixels(closed)[0], axis=1)
+    assert error.max() <= (0.5 if analytic else 1.0)
+
+
+@pytest.mark.parametrize("analytic", [True, False])
 def test_first_order_projection_against_the_exact_solver(analytic):
     rs = ReflectorSet([_egg_mesh()])
     view = _view()
