@@ -24,7 +24,6 @@
  * distance A (0: none). A reflection's alpha (and a traced one's) is 1 + its distance d
  * from the mirror along the reflected ray; it fades to the world colour by
  * min(1, (d / A)^2), the paper's quadratic fall-off with distance.
-
  *
  * Depth: a mirror pixel is drawn at its pre-pass depth brought nearer by `depth_bias`
  * (a, s): z - s (a - z) (reflection_draw.depth_bias). A viewport overlay's pre-pass draws
