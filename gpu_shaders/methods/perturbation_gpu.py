@@ -21,7 +21,7 @@ import functools
 
 import numpy as np
 
-from ...addon.methods.perturbation import projector
+from ...addon.methods.perturbation import candidates, projector
 from ..reflected_meshes import FOUND_CODE
 from ..shader_sources import glsl_source
 
@@ -41,7 +41,7 @@ def step_defines() -> dict:
     """The engine's constants, as the shader's ``#define`` s."""
     p = projector
     return {"SEED_TEXELS": SEED_TEXELS, "MAX_COLUMNS": MAX_COLUMNS,
-            "MAX_CANDIDATES": MAX_CANDIDATES, "CANDIDATE_SPREAD": f"{p.CANDIDATE_SPREAD:.9e}", "HOPS": p.HOPS,
+            "MAX_CANDIDATES": MAX_CANDIDATES, "CANDIDATE_SPREAD": f"{candidates.CANDIDATE_SPREAD:.9e}", "HOPS": p.HOPS,
             "HOP_SAMPLES": p.HOP_SAMPLES,
             "REACH": f"{p.REACH:.9e}", "MAX_RELATIVE_STEP": f"{p.MAX_RELATIVE_STEP:.9e}",
             "BEHIND_START": f"{p.BEHIND_START:.9e}", "GRAZING_COSINE": f"{p.GRAZING_COSINE:.9e}",

@@ -20,8 +20,10 @@ Scenes (none used while the method was written): an exact sphere, an exact
 ellipsoid and an exact superquadric (exponent 4; Perturbation uses the declared
 surface), the same ellipsoid and superquadric as meshes, a bumpy sphere (amplitude
 0.03, lobes 3 and 5: not convex, several images), and two spheres facing each other
-at order 2 (exact, and as meshes from another view). 640x480, points uniform in a box
-of 3 radii around the mirrors, outside them.
+at order 2 (exact, and as meshes from another view). The rim band (``rim.py``) was
+then found on the bumpy sphere's misses, so a second bumpy sphere (amplitude 0.04,
+lobes 4 and 6, other eyes) holds it out. 640x480, points uniform in a box of 3 radii
+around the mirrors, outside them.
 
 **Animation**: the sbc_fig3 demo at 480x320, its ball declared an exact sphere in
 Perturbation mode, the camera orbiting it every frame: ``render_image(animation=True)``
@@ -85,6 +87,8 @@ def scenes(subdivisions: int) -> list:
           1: AnalyticSurface("B", "SPHERE", _placed(pair[1]), (0.8,))}, ((0.3, -5.0, 1.2),), 2),
         ("two sphere meshes, order 2", [icosphere(pair[0], 1.0, subdivisions, "A"),
                                         icosphere(pair[1], 0.8, subdivisions, "B")], {}, ((-0.4, -4.8, -0.9),), 2),
+        ("bumpy sphere mesh, held out", [bumpy_icosphere(centre, 1.0, subdivisions + 1, 0.04, lobes=(4, 6),
+                                                         name="bumpy")], {}, ((2.7, 2.8, -1.5), (-3.3, -1.7, 2.1)), 1),
     ]
 
 

@@ -8,12 +8,13 @@ Per view (section III):
    and scan line (``seeds.py``, III-B.1), grouped by reflection history; a history
    with fewer than MIN_GROUP_SEEDS is traced again at half the spacing.
 2. *Nearest path*: instead of the paper's ray octree (III-B.2) the seeds' image-plane
-   grid is searched. The local minima of the distance from the point to the seeds'
-   outgoing rays over a coarse sub-grid (every COARSE-th seed, COARSE_CONVEX-th on a
-   convex mirror) are the point's candidate images (several on a non-convex mirror:
-   the paper's grouping of III-C.1, without its thresholds); each then *hops*: a
-   first-order step from its seed predicts the pixel, and the seed there (else the
-   last one on the way) is taken, until the seed stays.
+   grid is searched (``candidates.py``): the local minima of the distance from the
+   point to the seeds' outgoing rays over a coarse sub-grid (every COARSE-th seed,
+   COARSE_CONVEX-th on a convex mirror) are the point's candidate images; each then
+   *hops*: a first-order step from its seed predicts the pixel, and the seed there
+   (else the last one on the way) is taken, until the seed stays. Along a non-convex
+   mirror's silhouette, where its images crowd, seeds at every pixel of a band are
+   searched as well (``rim.py``).
 3. *Perturbation*: from the point p on the seed's outgoing ray closest to the vertex
    p', the path Jacobian and Hessian give the reflector points of the path to p'
    (eq. 4, ``path_derivatives.py``; orders 2 and more in one system).
@@ -40,7 +41,9 @@ from ...projection import NOT_PROJECTED, PERTURBATION_ANSWER, Projection
 from ...geometry.raytrace import ReflectorSet
 from ...geometry.vectors import dot, normalized
 from ...view import View
+from .candidates import MAX_IMAGES, candidate_images
 from .path_derivatives import perturb
+from .rim import RimBand
 from .seeds import SeedPaths, seed_paths_to, seed_quadrics, trace_seed_paths
 
 #: A history with fewer grid seeds is traced again at half the spacing over its footprint.
@@ -66,13 +69,8 @@ REFINE_ROUNDS = 12
 #: 8 reach a twentieth of a pixel, where a grazing image lies (R c^2 / 2 pixels inside
 #: the silhouette of a mirror R pixels across, at cosine c; 4 stopped at 0.75 px).
 MAX_MISSES = 8
-#: Candidates farther from their nearest ray than this many times the point's best are dropped.
-CANDIDATE_SPREAD = 4.0
-#: Images of one point in one history kept at most (non-convex mirrors).
-MAX_IMAGES = 8
 #: Two answers of one point and history closer than this (px) are one image.
 SAME_IMAGE_PX = 1.0
-POINT_CHUNK = 2048
 #: The longest step trusted, against the distance from the seed's last bounce (radians).
 MAX_RELATIVE_STEP = 0.3
 #: Reflections more grazing than this (cosine to the normal) are not drawn
@@ -135,6 +133,9 @@ class SeedGroup:
     model_error: np.ndarray  # (S,) per seed, :func:`_model_errors`
     stride: int  # pixels between grid seeds
     coarse: int  # grid seeds between the candidate scan's (COARSE or COARSE_CONVEX)
+    #: (rows, columns) bool, cells whose images another group answers (a rim band's
+    #: inner edge): never candidates. None: all may be.
+    inner: np.ndarray | None = None
 
 
 class PerturbationMethod:
@@ -163,6 +164,10 @@ class PerturbationMethod:
             if not self.settings.adaptive_seeds:
                 group = self.fine_enough(view, group)
             answers = self._answer_group(view, group, points)
+            band = self.rim_band(view, group) if self.settings.adaptive_seeds and group.coarse == COARSE else None
+            if band is not None:
+                answers = tuple(np.concatenate(pair) for pair in zip(answers, self._answer_group(view, band, points)))
+            answers = _ranked(len(points), *answers)
             self.stats.per_history[group.history] = int(sum(np.isfinite(a[:, 0]).sum() for a in answers[0]))
             for rank in range(len(answers[0])):
                 histories.append(group.history)
@@ -213,6 +218,22 @@ class PerturbationMethod:
             group = dataclasses.replace(finer, coarse=max(finer.coarse, coarse_px // finer.stride))
         return group
 
+    def rim_band(self, view: View, group: SeedGroup) -> SeedGroup | None:
+        """The seeds of ``group``'s history at every pixel of its rim band (``rim.py``),
+        scanned at each seed; None when the band has none."""
+        rim = RimBand.around(group.grid, group.origin, group.stride)
+        pixels = rim.pixels(view.width, view.height)
+        traced = trace_seed_paths(self.reflector_set, view, pixels, len(group.history), self.analytic)[-1]
+        self.stats.grid_seeds += len(pixels)
+        same = np.flatnonzero((traced.histories == np.array(group.history)).all(axis=1))
+        if len(same) == 0:
+            return None
+        band = self._group(group.history, traced.select(same), 1)
+        inner = np.zeros(band.grid.shape, dtype=bool)
+        cell = np.floor(band.seeds.pixels).astype(np.int64) - np.array(band.origin)
+        inner[cell[:, 1], cell[:, 0]] = rim.touches_interior(band.seeds.pixels)
+        return dataclasses.replace(band, coarse=1, inner=inner)
+
     def _group(self, history: tuple, seeds: SeedPaths, stride: int) -> SeedGroup:
         cell = np.floor(seeds.pixels / stride).astype(np.int64)
         lo = cell.min(axis=0)
@@ -239,8 +260,9 @@ class PerturbationMethod:
         return self._group(group.history, traced.select(same), stride)
 
     def _answer_group(self, view, group: SeedGroup, points):
-        """Per image rank: (P, 3) first reflector points (NaN: none) and (P, 3) last ones."""
-        point_of, seed_of = _candidate_images(group, points)
+        """The images found from ``group``'s seeds: (K,) point index, (K, 3) first and
+        last reflector points, (K, 2) pixel (one point may have several)."""
+        point_of, seed_of = candidate_images(group, points)
         seed_of = self._hop(view, group, points, point_of, seed_of)
         # Candidates that hopped onto one seed are one image.
         _, first_of = np.unique(point_of * len(group.seeds.pixels) + seed_of, return_index=True)
@@ -267,7 +289,7 @@ class PerturbationMethod:
         ok = (estimate <= max(self.settings.accuracy_px, 1e-9)) & _in_footprint(group, pixel) \
             & view.in_view(np.nan_to_num(first))
         self.stats.refused += int((~ok).sum())
-        return _ranked(len(points), point_of[ok], first[ok], last[ok], pixel[ok])
+        return point_of[ok], first[ok], last[ok], pixel[ok]
 
     def _refine(self, view, group: SeedGroup, targets, seed_pixel, model_error, answer) -> None:
         """Adaptive seeds (in place on ``answer``: first, last, estimate, pixel): where the
@@ -460,61 +482,6 @@ def _model_errors(seeds: SeedPaths, quadrics: list, grid: np.ndarray) -> np.ndar
                 np.maximum.at(error, s, np.where(turned > 1e-12, ratio, 0.0))
             seen[s] = True
     return np.where(seen, error, 1.0)
-
-
-def _candidate_images(group: SeedGroup, points):
-    """(point, seed) pairs: the local minima over the coarse sub-grid of the distance
-    from each point to each seed's outgoing ray (behind its start: to the start)."""
-    step = group.coarse
-    coarse = group.grid[step // 2::step, step // 2::step]
-    if not (coarse >= 0).any():
-        coarse = group.grid
-    seeds = group.seeds
-    present = coarse >= 0
-    index = np.where(present, coarse, 0).reshape(-1)
-    tail, direction = seeds.points[index, -1], seeds.outgoing[index]
-    # Squared distance to each ray from dot products alone (two small matrix products):
-    # |p - t|^2 - max((p - t) . d, 0)^2.
-    tail_along = np.einsum("si,si->s", tail, direction)
-    tail_square = np.einsum("si,si->s", tail, tail)
-    point_of, seed_of = [], []
-    for start in range(0, len(points), POINT_CHUNK):
-        chunk = points[start:start + POINT_CHUNK]
-        along = np.maximum(chunk @ direction.T - tail_along, 0.0)
-        square = np.einsum("pi,pi->p", chunk, chunk)[:, None] - 2.0 * chunk @ tail.T + tail_square - along * along
-        distance = np.sqrt(np.maximum(square, 0.0)).reshape(len(chunk), *coarse.shape)
-        distance = np.where(present[None], distance, np.inf)
-        minimum = _local_minima(distance)
-        p, i, j = np.nonzero(minimum)
-        order = np.lexsort((distance[p, i, j], p))
-        p, i, j = p[order], i[order], j[order]
-        first = np.searchsorted(p, p)
-        rank = np.arange(len(p)) - first
-        # A candidate much farther from its rays than the point's best is an edge
-        # minimum, not an image: every image's rays pass within a seed spacing's spread.
-        found = distance[p, i, j]
-        keep = (rank < MAX_IMAGES) & (found <= CANDIDATE_SPREAD * found[first])
-        point_of.append(p[keep] + start)
-        seed_of.append(coarse[i[keep], j[keep]])
-    return np.concatenate(point_of), np.concatenate(seed_of)
-
-
-def _local_minima(distance: np.ndarray) -> np.ndarray:
-    """(P, R, C) bool: finite cells no larger than their 8 neighbours (ties go to the
-    first in raster order, so a flat minimum is one candidate). Cells on the footprint's
-    edge count whenever the distance falls toward the edge: an image close to the
-    silhouette lies beyond the last seeds."""
-    padded = np.pad(distance, ((0, 0), (1, 1), (1, 1)), constant_values=np.inf)
-    rows, columns = distance.shape[1:]
-    minimum = np.isfinite(distance)
-    for di in (-1, 0, 1):
-        for dj in (-1, 0, 1):
-            if di == 0 and dj == 0:
-                continue
-            neighbour = padded[:, 1 + di:1 + di + rows, 1 + dj:1 + dj + columns]
-            before = di < 0 or (di == 0 and dj < 0)
-            minimum &= (distance < neighbour) if before else (distance <= neighbour)
-    return minimum
 
 
 def _grid_at(grid: np.ndarray, cell: np.ndarray) -> np.ndarray:

@@ -329,6 +329,29 @@ def test_from_the_grid_alone_a_bumpy_mirror_is_seeded_finer_until_its_steps_can_
     assert smooth.fine_enough(view, grid) is grid
 
 
+def test_a_bumpy_mirrors_crowded_images_along_its_silhouette_are_found_in_its_rim_band(monkeypatch):
+    """Toward its silhouette a bumpy mirror shows a point up to five times in a band a few
+    pixels wide, past the grid's last row of seeds; the rim band's seeds at every pixel
+    find them (``rim.py``): 99.3 % of the 537 exact images here against 95.0 % without.
+    On the benchmark's bumpy sphere every image missed without it lay in that band."""
+    from curved_reflections.addon.geometry.sphere import bumpy_icosphere
+    from curved_reflections.addon.methods.perturbation import projector
+
+    bumpy = ReflectorSet([bumpy_icosphere(CENTRE, 1.0, 5, 0.03, lobes=(3, 5))])
+    view = _view(eye=(-1.6, 3.0, -1.1))
+    points = _points_around(bumpy, 600, np.random.default_rng(41))
+    exact = solve_reflections(bumpy, view, points)
+    wanted = [(exact.point[s], exact.pixel[s], None) for s in np.flatnonzero(exact.visible)]
+    method = PerturbationMethod(bumpy, {}, PerturbationSettings(accuracy_px=0.5))
+    coverage, errors = _match(method.project(view, points), wanted)
+    band = method.rim_band(view, method.grid_groups(view)[0])
+    monkeypatch.setattr(projector.PerturbationMethod, "rim_band", lambda self, view, group: None)
+    without, _ = _match(method.project(view, points), wanted)
+    assert coverage >= 0.99 and coverage >= without + 0.03, (without, coverage)  # 0.993, 0.950
+    assert np.percentile(errors[errors <= 1.0], 99) <= 0.5
+    assert band.stride == 1 and band.coarse == 1 and band.inner.any()
+
+
 # --- superquadrics -----------------------------------------------------------------------
 
 
