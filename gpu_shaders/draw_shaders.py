@@ -25,14 +25,14 @@ PUSH_CONSTANT_BYTES = {
     # mat4 view_projection; vec4 camera; vec2 view_size; int use_camera_pixel, use_image; float order_range,
     # reflection_cosine
     "reflected": 64 + 16 + 8 + 4 + 4 + 4 + 4,
-    # vec4 world_color; int reflectors_only, fill_radius; ivec2 origin; vec2 depth_bias
-    "composite": 16 + 4 + 4 + 8 + 8,
+    # vec4 world_color, rect; int reflectors_only, fill_radius; ivec2 origin; vec2 depth_bias
+    "composite": 16 + 16 + 4 + 4 + 8 + 8,
 }
 _COMPOSITE_VERTEX = """
-/* One triangle covering the whole target. */
+/* A unit square drawn over `rect` (normalised device coordinates: x0, y0, x1, y1). */
 void main()
 {
-  gl_Position = vec4(position, 0.0, 1.0);
+  gl_Position = vec4(mix(rect.xy, rect.zw, position), 0.0, 1.0);
 }
 """
 
@@ -165,6 +165,7 @@ def _build_composite():
 
     info = gpu.types.GPUShaderCreateInfo()
     info.push_constant('VEC4', "world_color")
+    info.push_constant('VEC4', "rect")
     info.push_constant('INT', "reflectors_only")
     info.push_constant('INT', "fill_radius")
     info.push_constant('IVEC2', "origin")

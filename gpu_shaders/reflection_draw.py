@@ -111,6 +111,8 @@ MAX_TRACED_FRACTION = 0.25
 SCENE_DEPTH_BIAS = 1e-3
 #: ... in an orthographic view, this share (to twice it) of the clipping range.
 ORTHOGRAPHIC_DEPTH_BIAS = 1e-5
+#: The composite's rectangle covering the whole view (normalised device coordinates).
+FULL_SCREEN = (-1.0, -1.0, 1.0, 1.0)
 #: A render traces the pixels of a searched mirror (the iterative search) that got no
 #: reflection within this many pixels of its silhouette or, on a non-convex mirror or
 #: with other mirrors in the scene, of a drawn reflection.
@@ -155,6 +157,15 @@ class FrameTargets:
             texture = gpu.types.GPUTexture((self.width, self.height), format='RGBA32F')
             self._output = (texture, gpu.types.GPUFrameBuffer(color_slots=(texture,)))
         return self._output
+
+
+def _box_corners(points: np.ndarray) -> np.ndarray:
+    """(8, 4) homogeneous corners of the bounding box of ``points`` (none: (0, 4))."""
+    if len(points) == 0:
+        return np.zeros((0, 4))
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    corners = np.array([[(hi if (k >> a) & 1 else lo)[a] for a in range(3)] for k in range(8)], dtype=np.float64)
+    return np.c_[corners, np.ones(8)]
 
 
 def _view_projection(view, shift):
@@ -267,10 +278,12 @@ class ReflectionRenderer:
             batches["prepass_mirrors"] = [
                 (-1, gpu.types.GPUBatch(type='TRIS', buf=buffer, elem=gpu.types.GPUIndexBuf(type='TRIS', seq=mirrors)))
             ] if len(mirrors) else []
+            corners = g.prepass_positions[mirrors.reshape(-1)] if len(mirrors) else np.zeros((0, 3))
+            batches["mirror_box"] = _box_corners(corners)
         batches["images"] = [data_texture(image, image.shape[1]) for image in g.images]
         batches["no_image"] = data_texture(np.ones((1, 4)))
-        screen = vertex_buffer({"position": (np.array([[-1, -1], [3, -1], [-1, 3]], np.float32), 'F32', 'FLOAT')})
-        batches["screen"] = gpu.types.GPUBatch(type='TRIS', buf=screen)
+        square = np.array([[0, 0], [1, 0], [1, 1], [0, 0], [1, 1], [0, 1]], np.float32)
+        batches["screen"] = gpu.types.GPUBatch(type='TRIS', buf=vertex_buffer({"position": (square, 'F32', 'FLOAT')}))
         return batches
 
     def _image(self, index: int):
@@ -318,8 +331,28 @@ class ReflectionRenderer:
         # A viewport of the view's size is drawn into where it is; otherwise from (0, 0).
         origin = (x, y) if (width, height) == (targets.width, targets.height) else None
         self.composite(targets, world_color, reflectors_only, fill_radius, origin,
-                       scene_depth=view if reflectors_only else None)
+                       scene_depth=view if reflectors_only else None,
+                       rect=self.mirrors_rect(view, targets) if reflectors_only else FULL_SCREEN)
         return targets
+
+    def mirrors_rect(self, view, targets: FrameTargets) -> tuple:
+        """Where the mirrors can be on screen (normalised device coordinates x0, y0, x1,
+        y1): their bounding box's corners projected, a pixel wider; the whole screen when
+        a corner is behind the eye. An overlay's composite draws nothing elsewhere, and
+        on llvmpipe its full-screen pass cost as much as the plain draw of the scene."""
+        if self._batches is None:
+            self._batches = self._make_batches()
+        corners = self._batches.get("mirror_box")
+        if corners is None or len(corners) == 0:
+            return FULL_SCREEN
+        clip = corners @ np.asarray(_view_projection(view, self.geometry.shift), dtype=np.float64).T
+        if (clip[:, 3] <= 1e-9).any():
+            return FULL_SCREEN
+        ndc = clip[:, :2] / clip[:, 3:]
+        pixel = 2.0 / np.array([targets.width, targets.height])
+        low = np.clip(ndc.min(axis=0) - pixel, -1.0, 1.0)
+        high = np.clip(ndc.max(axis=0) + pixel, -1.0, 1.0)
+        return (*low, *high)
 
     def draw_passes(self, view, textures, camera=None, warm: bool = False,
                     mirrors_only: bool = False) -> FrameTargets:
@@ -442,7 +475,7 @@ class ReflectionRenderer:
         return cached
 
     def composite(self, targets: FrameTargets, world_color=(0.0, 0.0, 0.0, 1.0), reflectors_only: bool = False,
-                  fill_radius: int = 0, origin=None, scene_depth=None) -> None:
+                  fill_radius: int = 0, origin=None, scene_depth=None, rect=None) -> None:
         """The composite of the frame targets into the framebuffer bound by the caller;
         traced band colours (``targets.traced``, see :meth:`trace_band`) when present.
 
@@ -452,9 +485,11 @@ class ReflectionRenderer:
         viewport's, as Blender drew it); each mirror pixel is then drawn at its pre-pass
         depth, brought nearer by :data:`SCENE_DEPTH_BIAS` of its distance
         (:func:`depth_bias`), with the depth test (depth writes off): hidden where the
-        scene has a nearer surface. (Drawing the mirrors' own triangles instead of one
-        full-screen triangle cost twice as much on llvmpipe with the band's fill: small
-        triangles shade their pixels in partly covered blocks.)"""
+        scene has a nearer surface. ``rect``: the part of the view drawn (normalised
+        device coordinates, :meth:`mirrors_rect`; ``None``: all of it). (Drawing the
+        mirrors' own triangles instead of one rectangle cost twice as much on llvmpipe
+        with the band's fill: small triangles shade their pixels in partly covered
+        blocks.)"""
         import gpu
 
         if self._batches is None:
@@ -470,6 +505,7 @@ class ReflectionRenderer:
             shader.bind()
             world = tuple(float(c) for c in world_color)[:4]
             shader.uniform_float("world_color", world + (1.0,) * (4 - len(world)))
+            shader.uniform_float("rect", tuple(float(v) for v in (FULL_SCREEN if rect is None else rect)))
             shader.uniform_int("reflectors_only", int(bool(reflectors_only)))
             shader.uniform_int("fill_radius", max(0, int(fill_radius)))
             shader.uniform_int("origin", (int(origin[0]), int(origin[1])))

@@ -22,7 +22,8 @@ lands). Then, into one ``GPUOffScreen`` of the view's size, alternately, **per f
 - **reflected, moved view**: as reflected, from the view turned :data:`MOVED_DEGREES`
   with the old camera (drawn while a new camera builds);
 - a profile: the viewport's pre-pass only (the mirrors; a camera with no sheet), all
-  passes without the composite (``draw_passes``), the composite alone.
+  passes without the composite (``draw_passes``), the composite alone (over the mirrors'
+  box on screen, as ``draw`` does, and over the whole view, as before that box).
 
 Every timed call ends with a one-pixel read-back, so the GPU has finished before the
 clock stops; the figures are medians of ``--repeats`` alternating calls after warm-up.
@@ -209,14 +210,17 @@ def measure(kind: str, width: int, height: int, target_vertices: int, repeats: i
         plain_draw.draw(view)
 
     moved = _turned(view, MOVED_DEGREES)
+    targets = renderer.targets(view.width, view.height)
     calls = {
         "reflected": lambda: renderer.draw(view, textures, world, reflectors_only=True, camera=sbc),
         "plain": plain,
         "reflected, moved view": lambda: renderer.draw(moved, textures, world, reflectors_only=True, camera=sbc),
         "prepass only": lambda: renderer.draw_passes(view, no_sheet, mirrors_only=True),
         "passes": lambda: renderer.draw_passes(view, textures, sbc, mirrors_only=True),
-        "composite": lambda: renderer.composite(renderer.targets(view.width, view.height), world, True,
-                                                textures.packed.downsample),
+        "composite": lambda: renderer.composite(targets, world, True, textures.packed.downsample,
+                                                scene_depth=view, rect=renderer.mirrors_rect(view, targets)),
+        "composite, whole view": lambda: renderer.composite(targets, world, True, textures.packed.downsample,
+                                                            scene_depth=view),
     }
     times = {name: [] for name in calls}
     offscreen = gpu.types.GPUOffScreen(view.width, view.height, format='RGBA16F')
@@ -385,15 +389,16 @@ def report(results: list, command: str, machine: str, note: str = "") -> str:
         "",
         "Per frame, milliseconds (medians):",
         "",
-        "| scene | pre-pass only (no sheet) | all passes, no composite | composite | reflected triangles "
-        "(passes - pre-pass) | reflected triangles drawn | of which mixed sub-triangles | moved view ms "
-        "| moved view ratio |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| scene | pre-pass only (no sheet) | all passes, no composite | composite (mirrors' box) "
+        "| composite (whole view) | reflected triangles (passes - pre-pass) | reflected triangles drawn "
+        "| of which mixed sub-triangles | moved view ms | moved view ratio |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in results:
         ms = r["ms"]
         lines.append(
             f"| {r['scene']} | {ms['prepass only']:.1f} | {ms['passes']:.1f} | {ms['composite']:.1f} | "
+            f"{ms['composite, whole view']:.1f} | "
             f"{ms['passes'] - ms['prepass only']:.1f} | {r['drawn_triangles']:,} | {r['mixed_sub_triangles']:,} | "
             f"{ms['reflected, moved view']:.1f} | {r['moved_ratio']:.1f}x |")
     lines += [
