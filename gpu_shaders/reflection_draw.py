@@ -46,7 +46,7 @@ Three passes, all into float targets of the view's size:
    colour; mixed with the reflector's own colour by the reflection weight (1 = perfect
    mirror); elsewhere the pre-pass colour (or nothing, for a viewport overlay:
    ``reflectors_only``, whose mirror pixels are depth-tested against the scene's depth
-   at their own, :func:`depth_bias`).
+   at their own, :func:`screen_space.depth_bias`).
 
 The sample-based camera cannot place a reflection in the last ray-map cell before a
 footprint's edge (the silhouette, or an object in front of the mirror), nor between
@@ -95,6 +95,7 @@ from .methods.iterative_draw import IterativePass
 from .methods.morph_pass import DEFAULT_BUDGET_MB, MorphPass
 from .methods.perturbation_pass import PerturbationPass
 from .reflected_meshes import SNAP_SHARE, ReflectedMeshes
+from .screen_space import FULL_SCREEN, box_corners, box_on_screen, camera_position, depth_bias, view_projection
 from .methods.sbc_triangles import MIXED_SUBDIVISIONS, CachedProjection, CameraProjections, _same_view
 
 #: Depth range of the iterative search's first-order reflections (as SBC V-A's g for
@@ -106,13 +107,6 @@ ITERATIVE_ORDER_RANGE = 0.5
 #: mirror, the eye on its surface), it is filled by the composite instead of traced, so
 #: that no view costs many times an ordinary one (the demo scenes trace 1-9 %).
 MAX_TRACED_FRACTION = 0.25
-#: A viewport overlay's mirror pixels are depth-tested against the scene's depth as if
-#: this share of their distance nearer (:func:`depth_bias`): 1 cm at 10 m.
-SCENE_DEPTH_BIAS = 1e-3
-#: ... in an orthographic view, this share (to twice it) of the clipping range.
-ORTHOGRAPHIC_DEPTH_BIAS = 1e-5
-#: The composite's rectangle covering the whole view (normalised device coordinates).
-FULL_SCREEN = (-1.0, -1.0, 1.0, 1.0)
 #: A render traces the pixels of a searched mirror (the iterative search) that got no
 #: reflection within this many pixels of its silhouette or, on a non-convex mirror or
 #: with other mirrors in the scene, of a drawn reflection.
@@ -157,49 +151,6 @@ class FrameTargets:
             texture = gpu.types.GPUTexture((self.width, self.height), format='RGBA32F')
             self._output = (texture, gpu.types.GPUFrameBuffer(color_slots=(texture,)))
         return self._output
-
-
-def _box_corners(points: np.ndarray) -> np.ndarray:
-    """(8, 4) homogeneous corners of the bounding box of ``points`` (none: (0, 4))."""
-    if len(points) == 0:
-        return np.zeros((0, 4))
-    lo, hi = points.min(axis=0), points.max(axis=0)
-    corners = np.array([[(hi if (k >> a) & 1 else lo)[a] for a in range(3)] for k in range(8)], dtype=np.float64)
-    return np.c_[corners, np.ones(8)]
-
-
-def _view_projection(view, shift):
-    """The view's projection times view matrix, applied to positions relative to ``shift``
-    (folded in float64, so that large world coordinates keep their precision in float32)."""
-    from mathutils import Matrix
-
-    translate = np.eye(4)
-    translate[:3, 3] = shift
-    return Matrix((np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix) @ translate).tolist())
-
-
-def depth_bias(view) -> tuple:
-    """(anchor, scale) of the overlay composite's depth bias: a window depth z is brought
-    to z - scale (anchor - z). In perspective, z = a + b / d at distance d with
-    a = (1 - P[2][2]) / 2 (OpenGL's depth range [0, 1]), and z - s (a - z) is to first
-    order the depth at d (1 - s): the mirror drawn :data:`SCENE_DEPTH_BIAS` of its
-    distance nearer, which the scene's depth of the same surface (another tessellation
-    of it, 24-bit) cannot beat, while a real object in front still does. In an
-    orthographic view depth is linear: anchor 2 makes the bias between 1 and 2 times
-    the scale, a share of the clipping range."""
-    projection = np.asarray(view.projection_matrix, dtype=np.float64)
-    if abs(projection[3, 3] - 1.0) < 1e-12:  # orthographic
-        return 2.0, ORTHOGRAPHIC_DEPTH_BIAS
-    return 0.5 * (1.0 - projection[2, 2]), SCENE_DEPTH_BIAS
-
-
-def _camera(view, shift) -> tuple:
-    """The pre-pass's ``camera``: the eye relative to ``shift`` (w 1), or for an
-    orthographic view the unit direction toward the viewer (w 0)."""
-    inverse = np.linalg.inv(np.asarray(view.view_matrix, dtype=np.float64))
-    if abs(float(np.asarray(view.projection_matrix)[3, 3]) - 1.0) < 1e-12:  # orthographic
-        return (*inverse[:3, 2], 0.0)
-    return (*(inverse[:3, 3] - shift), 1.0)
 
 
 def _rgba(color) -> tuple:
@@ -279,7 +230,7 @@ class ReflectionRenderer:
                 (-1, gpu.types.GPUBatch(type='TRIS', buf=buffer, elem=gpu.types.GPUIndexBuf(type='TRIS', seq=mirrors)))
             ] if len(mirrors) else []
             corners = g.prepass_positions[mirrors.reshape(-1)] if len(mirrors) else np.zeros((0, 3))
-            batches["mirror_box"] = _box_corners(corners)
+            batches["mirror_box"] = box_corners(corners)
         batches["images"] = [data_texture(image, image.shape[1]) for image in g.images]
         batches["no_image"] = data_texture(np.ones((1, 4)))
         square = np.array([[0, 0], [1, 0], [1, 1], [0, 0], [1, 1], [0, 1]], np.float32)
@@ -336,23 +287,13 @@ class ReflectionRenderer:
         return targets
 
     def mirrors_rect(self, view, targets: FrameTargets) -> tuple:
-        """Where the mirrors can be on screen (normalised device coordinates x0, y0, x1,
-        y1): their bounding box's corners projected, a pixel wider; the whole screen when
-        a corner is behind the eye. An overlay's composite draws nothing elsewhere, and
-        on llvmpipe its full-screen pass cost as much as the plain draw of the scene."""
+        """Where the mirrors can be on ``view``'s screen (:func:`screen_space.box_on_screen`
+        of their bounding box): an overlay's composite draws nothing elsewhere, and on
+        llvmpipe its full-screen pass cost as much as the plain draw of the scene."""
         if self._batches is None:
             self._batches = self._make_batches()
-        corners = self._batches.get("mirror_box")
-        if corners is None or len(corners) == 0:
-            return FULL_SCREEN
-        clip = corners @ np.asarray(_view_projection(view, self.geometry.shift), dtype=np.float64).T
-        if (clip[:, 3] <= 1e-9).any():
-            return FULL_SCREEN
-        ndc = clip[:, :2] / clip[:, 3:]
-        pixel = 2.0 / np.array([targets.width, targets.height])
-        low = np.clip(ndc.min(axis=0) - pixel, -1.0, 1.0)
-        high = np.clip(ndc.max(axis=0) + pixel, -1.0, 1.0)
-        return (*low, *high)
+        return box_on_screen(self._batches.get("mirror_box", np.zeros((0, 4))), view, self.geometry.shift,
+                             targets.width, targets.height)
 
     def draw_passes(self, view, textures, camera=None, warm: bool = False,
                     mirrors_only: bool = False) -> FrameTargets:
@@ -382,7 +323,7 @@ class ReflectionRenderer:
         cached = None if textures is None else self.projection(textures, camera_view, camera)
         targets = self.targets(view.width, view.height)
         width, height = targets.width, targets.height
-        view_projection = _view_projection(view, g.shift)
+        world_to_clip = view_projection(view, g.shift)
         with saved_state():
             gpu.state.blend_set('NONE')
             gpu.state.face_culling_set('NONE')  # mirrors are two-sided; reflections flip winding
@@ -394,8 +335,8 @@ class ReflectionRenderer:
                     gpu.state.depth_mask_set(True)
                     shader = draw_shaders.shader("prepass")
                     shader.bind()
-                    shader.uniform_float("view_projection", view_projection)
-                    shader.uniform_float("camera", _camera(view, g.shift))
+                    shader.uniform_float("view_projection", world_to_clip)
+                    shader.uniform_float("camera", camera_position(view, g.shift))
                     for image, batch in batches["prepass_mirrors" if mirrors_only else "prepass"]:
                         shader.uniform_int("use_image", int(image >= 0))
                         shader.uniform_sampler("image", self._image(image))
@@ -411,7 +352,7 @@ class ReflectionRenderer:
                     gpu.state.depth_test_set('LESS')
                     gpu.state.depth_mask_set(True)
                     for frame_pass in self.passes:
-                        self.meshes.draw(view_projection, targets,
+                        self.meshes.draw(world_to_clip, targets,
                                          self.reflected_setup(view, frame_pass, live=warm), self._image,
                                          frame_pass.answers())
                 if cached is not None and cached.batch is not None:
@@ -419,10 +360,10 @@ class ReflectionRenderer:
                     gpu.state.depth_mask_set(True)
                     shader = draw_shaders.shader("reflected")
                     shader.bind()
-                    shader.uniform_float("view_projection", view_projection)
+                    shader.uniform_float("view_projection", world_to_clip)
                     shader.uniform_float("view_size", (float(width), float(height)))
                     shader.uniform_int("use_camera_pixel", int(_same_view(view, cached.camera_view)))
-                    shader.uniform_float("camera", _camera(view, g.shift))
+                    shader.uniform_float("camera", camera_position(view, g.shift))
                     shader.uniform_float("order_range", cached.order_range)
                     shader.uniform_float("reflection_cosine", REFLECTION_COSINE)
                     shader.uniform_sampler("prepass_labels", targets.prepass_labels)
@@ -452,7 +393,7 @@ class ReflectionRenderer:
         Accuracy (``reflected_meshes.SNAP_SHARE``; a render places them exactly)."""
         accuracy = frame_pass.accuracy_px if live else None
         return {"inverse_diameter": 1.0 / self.geometry.diameter, "order_range": ITERATIVE_ORDER_RANGE,
-                "camera": _camera(view, self.geometry.shift), "hidden_fraction": frame_pass.hidden_fraction,
+                "camera": camera_position(view, self.geometry.shift), "hidden_fraction": frame_pass.hidden_fraction,
                 "reflection_cosine": frame_pass.reflection_cosine,
                 "mirrored": frozenset(frame_pass.mirrored_reflectors), "view_size": (float(view.width),
                                                                                      float(view.height)),
@@ -483,7 +424,7 @@ class ReflectionRenderer:
         (left as it is) already covers the view; ``None`` draws at (0, 0).
         ``scene_depth``: the view whose scene the bound framebuffer's depth holds (a
         viewport's, as Blender drew it); each mirror pixel is then drawn at its pre-pass
-        depth, brought nearer by :data:`SCENE_DEPTH_BIAS` of its distance
+        depth, brought nearer by :data:`screen_space.SCENE_DEPTH_BIAS` of its distance
         (:func:`depth_bias`), with the depth test (depth writes off): hidden where the
         scene has a nearer surface. ``rect``: the part of the view drawn (normalised
         device coordinates, :meth:`mirrors_rect`; ``None``: all of it). (Drawing the

@@ -26,7 +26,7 @@
  * min(1, (d / A)^2), the paper's quadratic fall-off with distance.
  *
  * Depth: a mirror pixel is drawn at its pre-pass depth brought nearer by `depth_bias`
- * (a, s): z - s (a - z) (reflection_draw.depth_bias). A viewport overlay's pre-pass draws
+ * (a, s): z - s (a - z) (screen_space.depth_bias). A viewport overlay's pre-pass draws
  * the mirrors alone, and the depth test against the scene's own depth (Blender's
  * drawing, in the bound framebuffer) hides a mirror pixel where an object stands in
  * front of it. Elsewhere the test is off. */

@@ -400,18 +400,6 @@ def test_the_overlay_is_hidden_where_the_scene_depth_has_an_object_in_front(gpu_
     assert (x1 - x0) * (y1 - y0) < 0.75 * 4.0
 
 
-def test_the_overlay_composite_covers_the_whole_view_when_the_mirrors_box_reaches_behind_the_eye(gpu_ready):
-    from curved_reflections.gpu_shaders.reflection_draw import FULL_SCREEN, ReflectionRenderer
-
-    renderer = ReflectionRenderer([icosphere((0.0, 0.0, 0.0), 1.0, 2, name="Mirror")],
-                                  [_square("Far", 4.0, 4.0, (0.0, 1.0, 0.0))])
-    targets = renderer.targets(64, 48)
-    inside_box = look_at_view((0.0, -0.9, 0.9), (0.0, 0.0, 0.0), width=64, height=48)
-    assert renderer.mirrors_rect(inside_box, targets) == FULL_SCREEN
-    far = look_at_view((0.0, -30.0, 0.0), (0.0, 0.0, 0.0), fov_y_deg=40.0, width=64, height=48)
-    x0, y0, x1, y1 = renderer.mirrors_rect(far, targets)
-    assert -0.3 < x0 < -0.05 and 0.05 < x1 < 0.3 and -0.4 < y0 < -0.05 and 0.05 < y1 < 0.4
-
 
 # --- the cached projection ----------------------------------------------------------
 
