@@ -7,7 +7,8 @@ independent numpy work, which threads would serialise on the GIL between numpy c
 so nodes are built in worker *processes* (``multiprocessing``, ``fork`` context). Each
 worker writes the node it built into the grid's cache folder itself, atomically
 (compression happens on every core, and no camera is pickled to the parent); the parent
-reports progress after each node and checks the cancel flag between nodes.
+reports progress after each node and checks the cancel flag between nodes. Workers run
+numpy's BLAS on one thread each (``blas_threads``): the cores are the workers'.
 
 A bake may be given a range of nodes (``nodes``): several processes, on one machine or
 on many sharing the cache folder (a render farm's array job), then bake one grid
@@ -38,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import bake_cache
+from .blas_threads import limit_blas_threads
 from ..methods.morphing.morph_grid import NODE_OK, MorphSettings, bake_reflector, reflector_in_frame, rigid_frame
 from ..scene import Reflector
 
@@ -137,6 +139,10 @@ def bake_grid(reflector: Reflector, matrix, settings: MorphSettings, cache_dir, 
     directory.mkdir(parents=True, exist_ok=True)
     bake_cache.write_manifest(directory, key, local, grid, settings)
     todo = [n for n in nodes if not bake_cache.node_is_baked(directory, n, key)]
+    # Nearest the reflector first: there it fills most of the cube faces and a node costs
+    # the most, and a worker left alone with one of those at the end would keep the bake waiting.
+    centre, _ = reflector_set.bounding_sphere
+    todo.sort(key=lambda n: float(np.linalg.norm(positions[n] - centre)))
     skipped = len(nodes) - len(todo)
     processes = default_processes() if processes is None else max(1, int(processes))
     if "fork" not in multiprocessing.get_all_start_methods():
@@ -152,7 +158,7 @@ def bake_grid(reflector: Reflector, matrix, settings: MorphSettings, cache_dir, 
             results = map(_bake_node, todo)
             pool = None
         else:
-            pool = multiprocessing.get_context("fork").Pool(min(processes, len(todo)))
+            pool = multiprocessing.get_context("fork").Pool(min(processes, len(todo)), initializer=limit_blas_threads)
             results = pool.imap_unordered(_bake_node, todo, chunksize=1)
         try:
             for node, seconds, size in results:

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .spd_solve import solve_spd
+
 
 def expand_ranges(start: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Every index of the ranges start[k] .. start[k] + count[k] - 1, in order: (owner k,
@@ -61,11 +63,12 @@ def solve_least_squares(design: np.ndarray, targets: np.ndarray, node: np.ndarra
     """Per-node least squares: coefficients (n_nodes, k, t) of design (m, k) -> targets (m, t).
 
     Normal equations with a small ridge relative to each node's trace, so nodes with
-    fewer members than coefficients still get a (minimum-norm-like) answer.
+    fewer members than coefficients still get a (minimum-norm-like) answer. Solved by
+    batched Cholesky (spd_solve), not LAPACK per node.
     """
     normal = segment_sum(design[:, :, None] * design[:, None, :], node, n_nodes)
     rhs = segment_sum(design[:, :, None] * targets[:, None, :], node, n_nodes)
     k = design.shape[1]
     trace = np.trace(normal, axis1=1, axis2=2)
     normal = normal + (ridge * np.maximum(trace, 1e-300) / k)[:, None, None] * np.eye(k)
-    return np.linalg.solve(normal, rhs)
+    return solve_spd(normal, rhs)

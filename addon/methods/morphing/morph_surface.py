@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...geometry.spd_solve import solve_spd
 from ...geometry.vectors import cross
 
 #: Nodes with an image (and a usable normal) a local surface is fitted to, at least.
@@ -93,7 +94,7 @@ def _fit_and_reflect(images, present, usable, normals, normal, nz, origin, point
     mask = np.tile(usable, 3).astype(np.float64)
     rows, rhs = rows * mask[..., None], np.nan_to_num(rhs) * mask
     normal_matrix = np.einsum("qri,qrj->qij", rows, rows) + 1e-10 * np.eye(6)
-    coefficients = np.linalg.solve(normal_matrix, np.einsum("qri,qr->qi", rows, rhs)[..., None])[..., 0]
+    coefficients = solve_spd(normal_matrix, np.einsum("qri,qr->qi", rows, rhs))
 
     def surface(k, u, v):
         c = coefficients[k]

@@ -39,6 +39,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...geometry.spd_solve import solve_spd
+
 #: Reflector sizes between the first reflector points of two seeds of distinct images.
 SEPARATION = 0.1
 #: Gauss-Newton steps of the refinement over the ray map, and the largest step (cells).
@@ -220,7 +222,7 @@ class RayOctree:
             live[rows[~ok]] = False
             rows, error, jacobian = rows[ok], error[ok], jacobian[ok]
             jtj = np.einsum("qdi,qdj->qij", jacobian, jacobian) + 1e-18 * np.eye(2)
-            step = -np.linalg.solve(jtj, np.einsum("qdi,qd->qi", jacobian, error)[..., None])[..., 0]
+            step = -solve_spd(jtj, np.einsum("qdi,qd->qi", jacobian, error))
             step *= np.minimum(1.0, MAX_STEP_CELLS / np.maximum(np.abs(step).max(axis=1), 1e-300))[:, None]
             uv[rows] = np.clip(uv[rows] + step, 0.0, n - 1.0)
             live[rows[np.abs(step).max(axis=1) < SETTLED_CELLS]] = False

@@ -24,6 +24,7 @@ import numpy as np
 
 from .ray_patch import quadratic_basis
 from ...geometry.segments import segment_max, segment_mean, segment_min, segment_sum, solve_least_squares
+from ...geometry.spd_solve import solve_spd
 from ...geometry.vectors import cross
 
 
@@ -56,7 +57,7 @@ def fit_cameras(tails, directions, heads, first_points, node, n_nodes) -> Pinhol
     projector = np.eye(3)[None] - directions[:, :, None] * directions[:, None, :]
     lhs = segment_sum(projector, node, n_nodes) + 1e-12 * np.eye(3)
     rhs = segment_sum(np.einsum("mij,mj->mi", projector, tails), node, n_nodes)
-    centre = np.linalg.solve(lhs, rhs[:, :, None])[:, :, 0]
+    centre = solve_spd(lhs, rhs)
 
     origin = segment_mean(tails, node, n_nodes)
     offset = tails - origin[node]
