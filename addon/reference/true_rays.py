@@ -62,17 +62,19 @@ def _history(reflector) -> tuple:
     return (int(reflector),) if np.ndim(reflector) == 0 else tuple(int(r) for r in reflector)
 
 
-def _true_residual(reflector_set: ReflectorSet, view: View, reflector, pixels, points, near=None, pieces=None):
+def _true_residual(reflector_set: ReflectorSet, view: View, reflector, pixels, points, near=None, pieces=None,
+                   guess=None):
     """Per pixel: (P, 3) offset of the point from the true reflected ray (perpendicular
     part), the first reflector point, the distance along the last reflected ray, whether
     the ray is a valid reflection path through the history ``reflector`` (an index, or
     the tuple of a higher order: each bounce off the next reflector, off its front; the
     first on one of its smooth ``pieces``, if given) reaching the point, and the triangle
     the view ray hits. With ``near`` (P,) triangles, the view ray is intersected with
-    their rings only (``ReflectorSet.intersect_near``), else with the whole mesh."""
+    their rings only (``ReflectorSet.intersect_near``), else with the whole mesh, where
+    ``guess`` (P,) triangles, if given, are where its nearest hit is looked for first."""
     history = _history(reflector)
     origins, directions = view.pixel_rays(pixels)
-    hits = (reflector_set.intersect(origins, directions) if near is None
+    hits = (reflector_set.intersect(origins, directions, near_triangles=guess) if near is None
             else reflector_set.intersect_near(origins, directions, near))
     first, triangle = hits.position, hits.triangle
     valid = np.ones(len(origins), dtype=bool)
@@ -99,7 +101,7 @@ def _true_residual(reflector_set: ReflectorSet, view: View, reflector, pixels, p
 
 def polish_on_true_rays(reflector_set: ReflectorSet, view: View, reflector, pixels: np.ndarray,
                         points: np.ndarray, cell_px: float, spacing_px: np.ndarray | None = None,
-                        pieces: np.ndarray | None = None):
+                        pieces: np.ndarray | None = None, near_triangles: np.ndarray | None = None):
     """Polish images of ``points`` in ``reflector`` starting at ``pixels``: first-order
     images for a reflector index, or of a higher order for a history (a tuple of indices).
 
@@ -112,14 +114,16 @@ def polish_on_true_rays(reflector_set: ReflectorSet, view: View, reflector, pixe
     Jacobian (most answers, away from caustics). With ``pieces``, an image must lie on
     one of those smooth pieces of the reflector (``ReflectorSet.piece``): the answer of
     a tree built over one piece does not slide over a sharp edge onto another piece,
-    whose own tree answers that image.
+    whose own tree answers that image. ``near_triangles`` (P,), -1 where unknown, are
+    triangles the view rays through ``pixels`` likely hit (the ray map's, at the answer's
+    cell): the first trace looks there first (``ReflectorSet.intersect``), for the same hits.
     """
     pixels = np.asarray(pixels, dtype=np.float64)
     points = np.asarray(points, dtype=np.float64)
     n = len(pixels)
     polished = pixels.copy()
     f, position, distance, valid, triangle = _true_residual(reflector_set, view, reflector, pixels, points,
-                                                            pieces=pieces)
+                                                            pieces=pieces, guess=near_triangles)
     converged = np.zeros(n, dtype=bool)
     tolerance = np.zeros(n)  # residual (world units) a converged image's ray must stay within
     if spacing_px is not None:
@@ -176,7 +180,7 @@ def polish_on_true_rays(reflector_set: ReflectorSet, view: View, reflector, pixe
     moved = np.flatnonzero(np.any(polished != pixels, axis=1))
     f, position[moved], distance[moved], valid[moved], _ = _true_residual(reflector_set, view, reflector,
                                                                           polished[moved], points[moved],
-                                                                          pieces=pieces)
+                                                                          pieces=pieces, guess=triangle[moved])
     # Traced against the whole mesh, the final ray still reaches the point (no other part
     # of the mirror in front of the rings the iteration saw).
     valid[moved] &= np.linalg.norm(f, axis=1) < 2.0 * tolerance[moved]

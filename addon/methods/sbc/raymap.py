@@ -65,6 +65,16 @@ class RayMap:
         """Desired-view pixel coordinates of (fractional) ray-map cells."""
         return (np.asarray(cells, dtype=np.float64) + 0.5) * self.downsample
 
+    def triangles_at(self, grid: np.ndarray, cells: np.ndarray) -> np.ndarray:
+        """(P,) the tail triangle of ``grid``'s ray (``group_grid``) at the cell nearest each
+        of ``cells`` (P, 2), -1 where that cell has none or lies off the map: where a
+        view ray through an answer's pixel most likely meets the first reflector."""
+        cells = np.rint(np.asarray(cells, dtype=np.float64)).astype(np.int64)
+        on_map = (cells >= 0).all(axis=1) & (cells[:, 0] < grid.shape[1]) & (cells[:, 1] < grid.shape[0])
+        ray = np.full(len(cells), -1, dtype=np.int64)
+        ray[on_map] = grid[cells[on_map, 1], cells[on_map, 0]]
+        return np.where(ray >= 0, self.triangle[np.maximum(ray, 0)], -1)
+
     def group_grid(self, group: int, surfaces=None) -> np.ndarray:
         """(rows, columns) int: the ray index of ``group`` at each cell, -1 where none;
         with ``surfaces`` (indices into ``self.surfaces``), only the rays of those."""

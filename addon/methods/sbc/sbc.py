@@ -390,7 +390,8 @@ class SampleBasedCamera:
             pixels[risky], reflector_points[risky], s[risky], ok = polish_on_true_rays(
                 self.true_rays, self.ray_map.view, self.histories[g], pixels[risky], points[risky],
                 self.ray_map.downsample, spacing[risky] / self.ray_map.downsample,
-                first_pieces(self.ray_map, self.grids[g]) if self.surfaces and self.surfaces[g] else None)
+                first_pieces(self.ray_map, self.grids[g]) if self.surfaces and self.surfaces[g] else None,
+                self.ray_map.triangles_at(self.grids[g], pixels[risky] / self.ray_map.downsample - 0.5))
             keep[risky[~ok]] = False
         return keep
 

@@ -122,3 +122,45 @@ def test_reflect_mirrors_about_the_normal():
 def test_empty_reflector_list_is_a_clear_error():
     with pytest.raises(SceneInputError, match="no reflector"):
         ReflectorSet([])
+
+
+def _two_nested_spheres():
+    """A ball inside a larger ball: rays from outside cross four surfaces, the nearest hit
+    is the outer front one, and a wrong guess (the inner ball, or the far side) lies behind it."""
+    return ReflectorSet([icosphere(CENTER, 1.0, 4), icosphere(CENTER, 0.5, 3)])
+
+
+def test_guessed_triangles_and_distances_find_exactly_the_nearest_hits():
+    reflectors = _two_nested_spheres()
+    rng = np.random.default_rng(3)
+    origins = CENTER + rng.normal(size=(4000, 3)) * 0.2 + np.array([0.0, -4.0, 0.0])
+    directions = CENTER + rng.normal(size=(4000, 3)) * 0.6 - origins
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    plain = reflectors.intersect(origins, directions)
+    assert plain.hit.mean() > 0.5 and set(np.unique(plain.reflector[plain.hit])) == {0}
+    # Guesses: the true triangle, a wrong one behind it (the inner ball's), none, and distances
+    # too short (the BVH must look past them) or too long.
+    inner = len(reflectors.reflectors[0].triangles) + rng.integers(0, len(reflectors.reflectors[1].triangles), 4000)
+    near = np.select([np.arange(4000) % 3 == 0, np.arange(4000) % 3 == 1], [plain.triangle, inner], -1)
+    guess_t = np.where(np.arange(4000) % 2 == 0, 0.5 * plain.t, 2.0 * plain.t)
+    for hits in (reflectors.intersect(origins, directions, near_triangles=near),
+                 reflectors.intersect(origins, directions, t_guess=guess_t),
+                 reflectors.intersect(origins, directions, near_triangles=near, t_guess=guess_t)):
+        np.testing.assert_array_equal(hits.triangle, plain.triangle)
+        np.testing.assert_array_equal(hits.t, plain.t)
+
+
+def test_a_guessed_ring_never_returns_the_source_triangle_of_a_reflected_ray():
+    reflectors = _sphere_set(4)
+    view = look_at_view([0, -4, 1], CENTER, width=64, height=48, fov_y_deg=40)
+    origins, directions = view.pixel_rays(view.pixel_grid(1))
+    first = reflectors.intersect(origins, directions)
+    inside = first.hit
+    # Rays reflected inward (into the ball) from its surface: the source's ring is the guess.
+    into = -reflect(directions[inside], first.normal[inside])
+    plain = reflectors.intersect(first.position[inside], into, source_triangles=first.triangle[inside])
+    guessed = reflectors.intersect(first.position[inside], into, source_triangles=first.triangle[inside],
+                                   near_triangles=first.triangle[inside])
+    assert plain.hit.mean() > 0.9
+    np.testing.assert_array_equal(guessed.triangle, plain.triangle)
+    assert not np.any(guessed.triangle == first.triangle[inside])
