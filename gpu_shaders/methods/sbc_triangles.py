@@ -518,13 +518,15 @@ class CameraProjections:
         # Pixels per world unit at each vertex: the largest over the edges of the fully
         # projected triangles around it (local, so that a magnified part of a sheet, near a
         # silhouette, does not refine every mixed triangle of the sheet); a mixed triangle
-        # without such a neighbour takes the sheet's largest.
+        # without such a neighbour takes the sheet's median. (Its largest, thousands of
+        # pixels per unit next to a fold, subdivided a tenth of a subdivided monkey head's
+        # mixed triangles 32 times: 80 % of its 877k sub-vertices, each polished on the true
+        # rays, for no visible change.)
         scales = []
         for layer in range(len(sheets)):
             own = valid[layer][g.triangles]
             full = np.flatnonzero(own.all(axis=1))
             vertex_scale = np.zeros(len(g.vertices))
-            largest = 0.0
             for k in range(3):
                 a, b = g.triangles[full, k], g.triangles[full, (k + 1) % 3]
                 length = np.linalg.norm(g.vertices[b] - g.vertices[a], axis=1)
@@ -532,8 +534,8 @@ class CameraProjections:
                     length > 0, length, np.inf)
                 np.maximum.at(vertex_scale, a, ratio)
                 np.maximum.at(vertex_scale, b, ratio)
-                largest = max(largest, float(ratio.max(initial=0.0)))
-            scales.append((vertex_scale, largest if len(full) else np.inf))
+            scaled = vertex_scale[vertex_scale > 0]
+            scales.append((vertex_scale, float(np.median(scaled)) if len(scaled) else np.inf))
         blocks = []
         for image, first, count in g.ranges:
             triangles = g.triangles[first:first + count]
@@ -543,9 +545,9 @@ class CameraProjections:
                 chosen = np.flatnonzero(own.any(axis=1) & ~own.all(axis=1) & ~somewhere[first:first + count])
                 if len(chosen) == 0:
                     continue
-                vertex_scale, largest = scales[layer]
+                vertex_scale, typical = scales[layer]
                 scale = vertex_scale[triangles[chosen]].max(axis=1)
-                scale = np.where(scale > 0, scale, largest)
+                scale = np.where(scale > 0, scale, typical)
                 size_px = scale * longest[first:first + count][chosen]
                 cap = self.mixed_subdivisions if caps is None else min(self.mixed_subdivisions, caps[layer])
                 wanted = np.clip(np.nan_to_num(size_px / MIXED_SUB_PX, posinf=1e9), 1, cap)
