@@ -176,9 +176,10 @@ class ReflectorSet:
         return found
 
     def _past_plane(self, origins, directions, triangles) -> np.ndarray:
-        """(R,) a likely bound on where rays meet the surface near ``triangles`` (-1: inf):
-        their distance to the triangle's plane, plus a tenth and 1 % of the scene's size
-        (the surface curves away from its tangent plane)."""
+        """(R,) a likely bound on where rays meet the surface near ``triangles`` (inf for a
+        triangle -1, or a plane the ray runs along or away from): their distance to the
+        triangle's plane, plus a tenth and 1 % of the scene's size (the surface curves away
+        from its tangent plane). A guess for ``intersect(t_guess=)``, not a promise."""
         safe = np.maximum(triangles, 0)
         normal = self.face_normals[safe]
         facing = np.einsum("ij,ij->i", directions, normal)
