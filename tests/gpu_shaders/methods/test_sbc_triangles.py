@@ -1,7 +1,8 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """How finely mixed triangles are subdivided (SBC paper V-B): sub-triangles of about
 MIXED_SUB_PX, the triangle's size on screen estimated from the magnification of the
-fully projected triangles around it, or of its sheet where it has none."""
+fully projected triangles around it, or of its sheet (the 90th percentile: a fold's
+extreme magnification is a small part of a sheet) where it has none."""
 
 from types import SimpleNamespace
 
@@ -15,10 +16,10 @@ def _right_triangle(x):
 
 
 def _sheet(fold_ratio: float):
-    """Ten fully projected unit triangles, nine seen at 2 px per unit and one, next to a
+    """Thirty fully projected unit triangles, 29 seen at 2 px per unit and one, next to a
     fold, at ``fold_ratio``; and, apart from them all, a mixed triangle with one corner
     projected. Returns the projections object and the sheet's points (1, V, 4)."""
-    vertices = np.array([corner for x in range(11) for corner in _right_triangle(3.0 * x)])
+    vertices = np.array([corner for x in range(31) for corner in _right_triangle(3.0 * x)])
     triangles = np.arange(len(vertices)).reshape(-1, 3)
     points = np.zeros((1, len(vertices), 4))
     ratio = np.where(np.arange(len(vertices)) // 3 == 4, fold_ratio, 2.0)
@@ -32,7 +33,7 @@ def _sheet(fold_ratio: float):
 def test_a_mixed_triangle_with_no_projected_neighbour_is_sized_by_its_sheets_typical_magnification():
     projections, points = _sheet(fold_ratio=1000.0)
     (image, n, corners, group, order), = projections._mixed_instances(points, [0], order=1)
-    np.testing.assert_array_equal(corners, [[30, 31, 32]])
+    np.testing.assert_array_equal(corners, [[90, 91, 92]])
     # 2 px per unit times its longest edge (sqrt 2): 2.8 px, four sub-triangles of about a
     # pixel along an edge; the fold's 1000 px per unit would have asked for the cap.
     assert n == 4 < MIXED_SUBDIVISIONS
