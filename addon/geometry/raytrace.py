@@ -148,19 +148,15 @@ class ReflectorSet:
         best_triangle = np.full(n_rays, -1, dtype=np.int64)
         best_uv = np.full((n_rays, 2), np.nan)
         if near_triangles is not None:
-            guessed = np.flatnonzero(np.asarray(near_triangles) >= 0)
-            rays, t, triangles, uv = self._ring_hits(origins[guessed], directions[guessed],
-                                                     np.asarray(near_triangles)[guessed], t_max[guessed],
-                                                     sources[guessed])
-            rays = guessed[rays]
+            rays, t, triangles, uv = self._ring_hits(origins, directions, near_triangles, t_max, sources)
             best_t[rays], best_triangle[rays], best_uv[rays] = t, triangles, uv
             # Found again by the BVH below (the same test, the same t), unless a nearer one is.
             t_max = np.where(best_triangle >= 0, np.minimum(t_max, best_t * (1.0 + 1e-9)), t_max)
         searched = np.arange(n_rays)
         if t_guess is not None:
-            guessed = np.minimum(t_max, t_guess)
-            found = self._bvh_hits(origins, directions, guessed, sources, best_t, best_triangle, best_uv, searched)
-            searched = np.flatnonzero(~found & (guessed < t_max))
+            reach = np.minimum(t_max, t_guess)
+            found = self._bvh_hits(origins, directions, reach, sources, best_t, best_triangle, best_uv, searched)
+            searched = np.flatnonzero(~found & (reach < t_max))
         self._bvh_hits(origins, directions, t_max, sources, best_t, best_triangle, best_uv, searched)
         return self._hits(origins, directions, best_t, best_triangle, best_uv)
 
@@ -190,11 +186,13 @@ class ReflectorSet:
 
     def _ring_hits(self, origins, directions, near_triangles, t_max=np.inf, sources=None):
         """Each ray's nearest hit among the ring (``ring``) of its triangle in
-        ``near_triangles`` (all >= 0), within (eps, t_max] and off its source triangle's
-        ring: (rays that hit, t, triangles, (u, v))."""
+        ``near_triangles`` (-1: none, no hit), within (eps, t_max] and off its source
+        triangle's ring: (rays that hit, t, triangles, (u, v))."""
+        near_triangles = np.asarray(near_triangles, dtype=np.int64)
+        guessed = np.flatnonzero(near_triangles >= 0)
         start, ring = self.ring
-        owner, member = expand_ranges(start[near_triangles], np.diff(start)[near_triangles])
-        triangles = ring[member]
+        owner, member = expand_ranges(start[near_triangles[guessed]], np.diff(start)[near_triangles[guessed]])
+        owner, triangles = guessed[owner], ring[member]
         t, u, v, _ = self.hit_triangles(origins[owner], directions[owner], triangles)
         with np.errstate(invalid="ignore"):
             keep = (t > SELF_HIT_EPSILON * self.scale) & (t <= np.broadcast_to(t_max, (len(origins),))[owner])
@@ -224,9 +222,7 @@ class ReflectorSet:
         origins = np.asarray(origins, dtype=np.float64)
         directions = np.asarray(directions, dtype=np.float64)
         near_triangles = np.asarray(near_triangles, dtype=np.int64)
-        guess = np.flatnonzero(near_triangles >= 0)
-        rays, t, triangles, uv = self._ring_hits(origins[guess], directions[guess], near_triangles[guess])
-        rays = guess[rays]
+        rays, t, triangles, uv = self._ring_hits(origins, directions, near_triangles)
         best_t = np.full(len(origins), np.inf)
         best_triangle = np.full(len(origins), -1, dtype=np.int64)
         best_uv = np.full((len(origins), 2), np.nan)
