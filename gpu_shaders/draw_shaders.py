@@ -22,9 +22,9 @@ PUSH_CONSTANT_BYTES = {
     # mat4 inverse_view_projection; vec2 view_size; int group, order, layer_offset; ivec2 target_size;
     # float inverse_diameter, order_range
     "project": 64 + 8 + 4 + 4 + 4 + 8 + 4 + 4,
-    # mat4 view_projection; vec4 camera; vec2 view_size; int use_camera_pixel, use_image; float order_range,
-    # reflection_cosine
-    "reflected": 64 + 16 + 8 + 4 + 4 + 4 + 4,
+    # mat4 view_projection; vec4 camera; vec2 view_size, snap_grid; int use_camera_pixel, use_image;
+    # float order_range, reflection_cosine
+    "reflected": 64 + 16 + 8 + 8 + 4 + 4 + 4 + 4,
     # vec4 world_color, rect; int reflectors_only, fill_radius; ivec2 origin; vec2 depth_bias
     "composite": 16 + 16 + 4 + 4 + 8 + 8,
 }
@@ -139,6 +139,7 @@ def _build_reflected():
     info.push_constant('MAT4', "view_projection")
     info.push_constant('VEC4', "camera")
     info.push_constant('VEC2', "view_size")
+    info.push_constant('VEC2', "snap_grid")
     info.push_constant('INT', "use_camera_pixel")
     info.push_constant('INT', "use_image")
     info.push_constant('FLOAT', "order_range")

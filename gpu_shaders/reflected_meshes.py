@@ -88,6 +88,14 @@ def reflected_shader():
     return gpu.shader.create_from_info(info)
 
 
+def snap_grid(view_size, snap_px: float) -> tuple:
+    """The ``snap_grid`` uniform of the reflected-mesh shaders: the view's cells across
+    and up for a grid ``snap_px`` pixels apart; (0, 0), no snapping, for 0."""
+    if not snap_px > 0:
+        return (0.0, 0.0)
+    return tuple(float(size) / snap_px for size in view_size)
+
+
 def _culled_faces(winding: int) -> str:
     """The faces to cull of a closed solid of ``winding`` (``closed_surfaces.winding``) in
     a mirrored image: seen from the mirror its far side winds as its near side does in a
@@ -179,8 +187,7 @@ class ReflectedMeshes:
         shader.uniform_sampler("prepass_labels", targets.prepass_labels)
         shader.uniform_sampler("prepass_normals", targets.prepass_normals)
         shader.uniform_float("reflection_cosine", setup["reflection_cosine"])
-        snap = setup.get("snap_px", 0.0)
-        shader.uniform_float("snap_grid", tuple(size / snap for size in setup["view_size"]) if snap > 0 else (0.0, 0.0))
+        shader.uniform_float("snap_grid", snap_grid(setup["view_size"], setup.get("snap_px", 0.0)))
         mirrored = setup.get("mirrored", frozenset())
         for reflector_index, texture in answers:
             shader.uniform_sampler("search_result", texture)

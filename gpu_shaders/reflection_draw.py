@@ -94,8 +94,9 @@ from .gpu_data import data_texture, read_texture, saved_state, vertex_buffer
 from .methods.iterative_draw import IterativePass
 from .methods.morph_pass import DEFAULT_BUDGET_MB, MorphPass
 from .methods.perturbation_pass import PerturbationPass
-from .reflected_meshes import SNAP_SHARE, ReflectedMeshes
-from .screen_space import FULL_SCREEN, box_corners, box_on_screen, camera_position, depth_bias, view_projection
+from .reflected_meshes import SNAP_SHARE, ReflectedMeshes, snap_grid
+from .screen_space import (FULL_SCREEN, box_corners, box_on_screen, camera_position, depth_bias, pixel_box,
+                           view_projection)
 from .methods.sbc_triangles import MIXED_SUBDIVISIONS, CachedProjection, CameraProjections, _same_view
 
 #: Depth range of the iterative search's first-order reflections (as SBC V-A's g for
@@ -153,6 +154,16 @@ class FrameTargets:
         return self._output
 
 
+def _scissor_set(box: tuple | None) -> None:
+    """The bound framebuffer's scissor (Blender keeps it per framebuffer): ``box`` (x, y,
+    width, height), or none."""
+    import gpu
+
+    gpu.state.scissor_test_set(box is not None)
+    if box is not None:
+        gpu.state.scissor_set(*box)
+
+
 def _rgba(color) -> tuple:
     values = tuple(float(c) for c in color)[:4]
     return values + (1.0,) * (4 - len(values))
@@ -202,7 +213,7 @@ class ReflectionRenderer:
         self.counts = {"projections": 0, "frames": 0}
         #: The sample-based cameras' reflected triangles, made once per camera.
         self.sbc = CameraProjections(self.geometry, self.per_frame_reflectors, self.counts, mixed_subdivisions,
-                                     cull, polish)
+                                     cull, polish, reflectors)
         self._reflectors, self._meshes = list(reflectors), list(meshes)
         self._batches = None
         self._targets = None
@@ -256,14 +267,16 @@ class ReflectionRenderer:
         self.sbc.invalidate()
 
     def draw(self, view, textures, world_color=(0.0, 0.0, 0.0, 1.0), reflectors_only: bool = False,
-             fill_radius: int | None = None, camera=None) -> FrameTargets:
+             fill_radius: int | None = None, camera=None, accuracy_px: float | None = None) -> FrameTargets:
         """Pre-pass and reflections of ``view`` into the frame targets
         (:meth:`draw_passes`), then the composite into the framebuffer bound by the
         caller (:meth:`composite`). What a viewport draw handler calls, with the
         region's view (``operators.capture.view_from_region``); nothing is read back.
 
         ``textures`` is a sample-based camera as ``projection.SBCTextures``, ``camera``
-        the camera itself (optional; see :meth:`draw_passes`); ``world_color`` the
+        the camera itself (optional; see :meth:`draw_passes`), ``accuracy_px`` the
+        Accuracy it was built to (the viewport snaps its reflected triangles within it,
+        see :meth:`draw_passes`; ``None``: placed exactly); ``world_color`` the
         linear RGB(A) that reflected rays leaving the scene show; ``fill_radius`` the
         composite's cheap fill of the band along a footprint's edge (``None``: the
         camera's down-sampling), where :meth:`render` traces instead.
@@ -275,15 +288,19 @@ class ReflectionRenderer:
         """
         import gpu
 
-        targets = self.draw_passes(view, textures, camera, warm=True, mirrors_only=reflectors_only)
         if fill_radius is None:
             fill_radius = 0 if textures is None else textures.downsample
+        targets = self.targets(view.width, view.height)
+        rect = self.mirrors_rect(view, targets) if reflectors_only else FULL_SCREEN
+        # The composite reads the targets up to fill_radius beyond its rectangle.
+        scissor = pixel_box(rect, targets.width, targets.height, fill_radius + 1) if reflectors_only else None
+        targets = self.draw_passes(view, textures, camera, warm=True, mirrors_only=reflectors_only,
+                                   accuracy_px=accuracy_px, scissor=scissor)
         x, y, width, height = gpu.state.viewport_get()
         # A viewport of the view's size is drawn into where it is; otherwise from (0, 0).
         origin = (x, y) if (width, height) == (targets.width, targets.height) else None
         self.composite(targets, world_color, reflectors_only, fill_radius, origin,
-                       scene_depth=view if reflectors_only else None,
-                       rect=self.mirrors_rect(view, targets) if reflectors_only else FULL_SCREEN)
+                       scene_depth=view if reflectors_only else None, rect=rect)
         return targets
 
     def mirrors_rect(self, view, targets: FrameTargets) -> tuple:
@@ -296,7 +313,8 @@ class ReflectionRenderer:
                              targets.width, targets.height)
 
     def draw_passes(self, view, textures, camera=None, warm: bool = False,
-                    mirrors_only: bool = False) -> FrameTargets:
+                    mirrors_only: bool = False, accuracy_px: float | None = None,
+                    scissor: tuple | None = None) -> FrameTargets:
         """The pre-pass and the reflected triangles of ``view`` into its frame targets.
 
         The reflected triangles come from :meth:`projection` of ``textures``: made now
@@ -313,6 +331,12 @@ class ReflectionRenderer:
         (a viewport overlay, whose composite the scene's own depth hides where something
         stands in front of a mirror); their pixels then keep the reflectors' labels
         there, and the reflections drawn behind an object are hidden by that test.
+        ``accuracy_px`` with ``warm``: the camera's reflected triangles snap to a grid
+        of :data:`.reflected_meshes.SNAP_SHARE` times it, as the per-frame passes' do (a
+        triangle within one cell has no area and is dropped before set-up: on sbc_fig3,
+        whose 57k reflected triangles fill about 22k pixels, that halves their cost).
+        ``scissor``: (x, y, width, height), the only pixels cleared and drawn (an
+        overlay's, around its mirrors; the rest of the targets keeps old values).
         """
         import gpu
 
@@ -329,6 +353,7 @@ class ReflectionRenderer:
             gpu.state.face_culling_set('NONE')  # mirrors are two-sided; reflections flip winding
             with targets.prepass.bind():
                 gpu.state.viewport_set(0, 0, width, height)
+                _scissor_set(scissor)
                 targets.prepass.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
                 if "prepass" in batches:
                     gpu.state.depth_test_set('LESS_EQUAL')
@@ -347,6 +372,7 @@ class ReflectionRenderer:
                                   frozenset(frame_pass.reflector_indices) - cached.per_frame)
             with targets.reflection.bind():
                 gpu.state.viewport_set(0, 0, width, height)
+                _scissor_set(scissor)
                 targets.reflection.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
                 if self._answers():
                     gpu.state.depth_test_set('LESS')
@@ -362,6 +388,8 @@ class ReflectionRenderer:
                     shader.bind()
                     shader.uniform_float("view_projection", world_to_clip)
                     shader.uniform_float("view_size", (float(width), float(height)))
+                    shader.uniform_float("snap_grid", snap_grid((width, height), SNAP_SHARE * accuracy_px
+                                                                if warm and accuracy_px else 0.0))
                     shader.uniform_int("use_camera_pixel", int(_same_view(view, cached.camera_view)))
                     shader.uniform_float("camera", camera_position(view, g.shift))
                     shader.uniform_float("order_range", cached.order_range)
@@ -533,7 +561,7 @@ class ReflectionRenderer:
 
         ``sbc_or_textures``: a ``SampleBasedCamera`` built for this view, its
         ``projection.SBCTextures``, another projection source of this view
-        (:class:`.sbc_triangles.SheetSources`, :class:`.morph_source.MorphSource`), or ``None`` when
+        (:class:`.morph_source.MorphSource`), or ``None`` when
         the per-frame passes (iterative search, morphing grids) draw every reflector.
         With ``trace`` the band along each footprint's edge that the camera cannot reach
         (d pixels wide) is ray traced (:meth:`trace_band`; on a searched mirror, the pixels

@@ -74,3 +74,15 @@ def box_on_screen(corners: np.ndarray, view, shift, width: int, height: int) -> 
     low = np.clip(ndc.min(axis=0) - pixel, -1.0, 1.0)
     high = np.clip(ndc.max(axis=0) + pixel, -1.0, 1.0)
     return (*low, *high)
+
+
+def pixel_box(rect: tuple, width: int, height: int, margin: int) -> tuple:
+    """(x, y, width, height) of the pixels of a ``width`` x ``height`` view that ``rect``
+    (normalised device coordinates x0, y0, x1, y1) touches, ``margin`` pixels wider on
+    each side and clipped to the view: a scissor box."""
+    x0, y0, x1, y1 = rect
+    left = max(0, int(np.floor((x0 + 1.0) * 0.5 * width)) - margin)
+    bottom = max(0, int(np.floor((y0 + 1.0) * 0.5 * height)) - margin)
+    right = min(width, int(np.ceil((x1 + 1.0) * 0.5 * width)) + margin)
+    top = min(height, int(np.ceil((y1 + 1.0) * 0.5 * height)) + margin)
+    return left, bottom, max(0, right - left), max(0, top - bottom)

@@ -53,6 +53,9 @@ dropped when a file is loaded.
 
 from __future__ import annotations
 
+import os
+import sys
+import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -85,6 +88,11 @@ COUNT_SECONDS = 2.0
 VIEW_TOLERANCE = 1e-6
 #: Key of the view a Bake or Refresh uses when there is no 3D view (background mode).
 CAMERA_KEY = "scene camera"
+#: How much nicer than Blender the threads that build cameras and prefetch morphing
+#: nodes run (Linux, where the nice value is per thread): they yield the cores to the
+#: drawing, which on a software GL driver runs on the same cores, instead of sharing
+#: them equally (a redraw during a build: 2.6x -> 2.2x a plain draw on 2 cores).
+BACKGROUND_NICENESS = 10
 
 
 @dataclass
@@ -244,17 +252,29 @@ def _camera_bounds(state: LiveScene) -> tuple:
     return lo - margin, hi + margin
 
 
+def _lower_priority() -> None:
+    """A background thread's initializer: :data:`BACKGROUND_NICENESS` nicer, for this
+    thread and the threads it starts (Linux only: elsewhere it would be the process's)."""
+    if sys.platform.startswith("linux"):
+        thread = threading.get_native_id()
+        try:
+            os.setpriority(os.PRIO_PROCESS, thread, min(19, os.getpriority(os.PRIO_PROCESS, thread)
+                                                        + BACKGROUND_NICENESS))
+        except OSError:
+            pass  # a sandbox that forbids it: the thread runs at Blender's priority
+
+
 def _prefetcher_get() -> ThreadPoolExecutor:
     global _prefetcher
     if _prefetcher is None:
-        _prefetcher = ThreadPoolExecutor(max_workers=1, thread_name_prefix="curved_reflections_prefetch")
+        _prefetcher = ThreadPoolExecutor(1, "curved_reflections_prefetch", initializer=_lower_priority)
     return _prefetcher
 
 
 def _executor_get() -> ThreadPoolExecutor:
     global _executor
     if _executor is None:
-        _executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="curved_reflections")
+        _executor = ThreadPoolExecutor(1, "curved_reflections", initializer=_lower_priority)
     return _executor
 
 
@@ -525,7 +545,7 @@ def _draw_with(state: LiveScene, view: View, source, sbc) -> bool:
     alone); then the morphing nodes around the eye are prefetched."""
     start = time.perf_counter()
     projections = state.renderer.counts["projections"]
-    state.renderer.draw(view, source, state.world, reflectors_only=True, camera=sbc)
+    state.renderer.draw(view, source, state.world, reflectors_only=True, camera=sbc, accuracy_px=state.settings[2])
     if state.last_view is None or not _same_view(state.last_view[0], view) or state.last_view[2] is not sbc:
         state.last_view = (view, time.monotonic(), sbc, False)
         ensure_timer()  # the timer checks it once it settles

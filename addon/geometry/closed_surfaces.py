@@ -14,7 +14,9 @@ vertices at sharp edges and UV seams, and such a mesh is still closed.
 
 The same holds for the mirror side: :func:`is_convex` says whether a closed mirror
 bounds a convex body, whose every image is mirrored (the culling above is then valid
-for it), and where the iterative search may skip its occlusion tests.
+for it), and where the iterative search may skip its occlusion tests. Where the
+reflection points are known per vertex (a sample-based camera's projection),
+:func:`turned_away` culls without the winding on screen.
 """
 
 from __future__ import annotations
@@ -148,6 +150,32 @@ def is_convex(vertices: np.ndarray, triangles: np.ndarray, centre, tolerance: fl
     angles = np.stack([_angle(b - a, c - a), _angle(c - b, a - b), _angle(a - c, b - c)], axis=1)
     total = np.bincount(welded.reshape(-1), angles.reshape(-1), minlength=int(welded.max()) + 1)
     return bool(np.all(total <= 2.0 * np.pi + 1e-6))
+
+
+def bounds_convex_body(mesh) -> bool:
+    """:func:`is_convex` of a mirror ``mesh`` (``vertices``, ``triangles``) about the mean
+    of its vertices: every image it shows is mirrored, as in a flat mirror, and the far
+    sides of closed solids can be culled from its reflections."""
+    return is_convex(mesh.vertices, mesh.triangles, np.asarray(mesh.vertices, dtype=np.float64).mean(axis=0))
+
+
+def turned_away(vertices: np.ndarray, corners: np.ndarray, winding: np.ndarray, eyes: np.ndarray,
+                known: np.ndarray) -> np.ndarray:
+    """(n,) bool: which triangles (``corners``, (n, 3) indices into ``vertices``; their
+    solid's ``winding``, (n,), 0 where they bound none) turn their back, at every
+    ``known`` corner ((n, 3) bool; at least one), to the point each such corner is seen
+    from (``eyes``, (n, 3, 3): from the corner to that point, e.g. its reflection point
+    on a mirror). Seen from outside the solid, such a triangle is behind its near side."""
+    winding = np.asarray(winding)
+    away = np.zeros(len(corners), bool)
+    closed = np.flatnonzero(winding != 0)
+    if len(closed) == 0:
+        return away
+    v = np.asarray(vertices, dtype=np.float64)[corners[closed]]
+    outward = cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]) * winding[closed, None]
+    behind = np.einsum("nj,nkj->nk", outward, eyes[closed]) < 0.0
+    away[closed] = (behind | ~known[closed]).all(axis=1) & known[closed].any(axis=1)
+    return away
 
 
 def _angle(u: np.ndarray, v: np.ndarray) -> np.ndarray:

@@ -69,21 +69,30 @@ void main()
     /* Only in the band along the footprint's edge: elsewhere a missing reflection is
      * the world seen in the mirror. */
     ivec2 size = textureSize(reflection_colors, 0);
+    /* The labels first, and the colours only near an edge: most pixels without a
+     * reflection are the world seen inside the footprint, and half the fetches then.
+     * A window that reaches past the view's border is near an edge. */
+    bool near_edge = any(lessThan(texel, ivec2(fill_radius))) ||
+                     any(greaterThanEqual(texel, size - ivec2(fill_radius)));
+    for (int dy = -fill_radius; dy <= fill_radius && !near_edge; dy++) {
+      for (int dx = -fill_radius; dx <= fill_radius; dx++) {
+        if (abs(texelFetch(prepass_labels, texel + ivec2(dx, dy), 0).x - label.x) >= 0.5) {
+          near_edge = true;
+          break;
+        }
+      }
+    }
     int best = 1 << 30;
-    bool near_edge = false;
     vec4 nearest = vec4(reflected, 0.0);
-    for (int dy = -fill_radius; dy <= fill_radius; dy++) {
+    for (int dy = -fill_radius; dy <= fill_radius && near_edge; dy++) {
       for (int dx = -fill_radius; dx <= fill_radius; dx++) {
         ivec2 other = texel + ivec2(dx, dy);
         if (any(lessThan(other, ivec2(0))) || any(greaterThanEqual(other, size))) {
-          near_edge = true;
           continue;
         }
-        bool same = abs(texelFetch(prepass_labels, other, 0).x - label.x) < 0.5;
-        near_edge = near_edge || !same;
         int distance2 = dx * dx + dy * dy;
         vec4 candidate = texelFetch(reflection_colors, other, 0);
-        if (same && candidate.a > 0.5 && distance2 < best) {
+        if (distance2 < best && candidate.a > 0.5 && abs(texelFetch(prepass_labels, other, 0).x - label.x) < 0.5) {
           best = distance2;
           nearest = candidate;
         }

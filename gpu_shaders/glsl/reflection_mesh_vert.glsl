@@ -12,7 +12,10 @@
  * order and distance along the reflected ray). A reflection therefore stays on its
  * mirror in world space when the view moves away from the camera's view, until a new
  * camera lands. In the camera's own view (`use_camera_pixel`) the projected pixel itself
- * is used (`pixel_reflector.xy`), bit-for-bit what the projection gave.
+ * is used (`pixel_reflector.xy`), bit-for-bit what the projection gave. `snap_grid` (the
+ * view's cells across and up, 0: none): the live view places each vertex at the centre
+ * of its cell, within the camera's Accuracy, so that a triangle inside one cell
+ * collapses and is dropped before set-up (reflected_meshes.SNAP_SHARE).
  *
  * w = 1: the reflected triangle is interpolated affinely in the image, as before the
  * cache (the reflected positions are the projections of its corners). A vertex whose
@@ -43,6 +46,9 @@ void main()
       return;
     }
     ndc = clip.xy / clip.w;
+  }
+  if (snap_grid.x > 0.0) {
+    ndc = (floor((ndc * 0.5 + 0.5) * snap_grid) + 0.5) / snap_grid * 2.0 - 1.0;
   }
   gl_Position = vec4(ndc, world_depth.w * 2.0 - 1.0, 1.0);
 }

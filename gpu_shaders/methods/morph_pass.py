@@ -32,7 +32,7 @@ import numpy as np
 
 from ...addon.methods.morphing import morph_grid, morph_surface, morphing
 from ...addon.baking.bake_cache import CacheError
-from ...addon.geometry.closed_surfaces import is_convex
+from ...addon.geometry.closed_surfaces import bounds_convex_body
 from ..frame_pass import FramePass
 from ..reflected_meshes import FOUND_CODE, ReflectedMeshes
 from ..shader_sources import glsl_source, normal_equations_glsl
@@ -103,10 +103,6 @@ def blend_shader(n_nodes: int = 4):
     info.local_group_size(LOCAL_SIZE, 1)
     info.compute_source(glsl_source("morph_blend.glsl", blend_defines(n_nodes), normal_equations_glsl(6)))
     return gpu.shader.create_from_info(info)
-
-
-def _convex(reflector) -> bool:
-    return is_convex(reflector.vertices, reflector.triangles, reflector.vertices.mean(axis=0))
 
 
 def _translation(offset) -> np.ndarray:
@@ -219,7 +215,7 @@ class MorphPass(FramePass):
         blended or not. Found once, on first use: a test of O(faces)."""
         if self._convex is None:
             self._convex = [index for index in self.reflector_indices
-                            if index < len(self._reflectors) and _convex(self._reflectors[index])]
+                            if index < len(self._reflectors) and bounds_convex_body(self._reflectors[index])]
         return self._convex
 
     @property

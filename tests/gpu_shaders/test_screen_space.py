@@ -21,3 +21,13 @@ def test_a_box_is_drawn_over_its_projection_and_over_the_whole_view_from_inside_
     inside = look_at_view(shift + (0.0, -0.9, 0.9), shift, width=64, height=48)
     assert box_on_screen(corners, inside, shift, 64, 48) == FULL_SCREEN
     assert box_on_screen(np.zeros((0, 4)), far, shift, 64, 48) == FULL_SCREEN
+
+
+def test_a_pixel_box_covers_the_rectangle_with_its_margin_within_the_view():
+    from curved_reflections.gpu_shaders.screen_space import FULL_SCREEN, pixel_box
+
+    # x from pixel 16 to 48 of 64, y from 12 to 36 of 48, two pixels wider.
+    assert pixel_box((-0.5, -0.5, 0.5, 0.5), 64, 48, 2) == (14, 10, 36, 28)
+    assert pixel_box((-0.51, -0.49, 0.49, 0.51), 64, 48, 0) == (15, 12, 33, 25)  # partly covered pixels count
+    assert pixel_box(FULL_SCREEN, 64, 48, 3) == (0, 0, 64, 48)
+    assert pixel_box((0.9, 0.9, 1.0, 1.0), 64, 48, 5) == (55, 40, 9, 8)  # clipped at the border

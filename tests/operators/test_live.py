@@ -10,6 +10,9 @@ go through the real handler; timers never run there, so the debounced view rebui
 driven by calling the timer's body (``live.process``) with explicit times.
 """
 
+import os
+import sys
+import threading
 import time
 
 import bpy
@@ -193,6 +196,17 @@ def test_a_view_change_is_debounced_built_on_the_worker_and_the_old_camera_draws
     assert _draw(fig3, moved)[0]
     assert state.counts["projections"] == 2  # the new camera projects once
     assert live.CAMERA_KEY not in state.requests  # the same view asks for nothing
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the nice value is per thread on Linux only")
+def test_background_threads_yield_the_cores_to_drawing():
+    """Camera builds and morphing prefetches run at a lower priority than Blender's
+    drawing, which on a software GL driver shares their cores; the main thread keeps its own."""
+    main = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+    for executor in (live._executor_get(), live._prefetcher_get()):
+        nice = executor.submit(lambda: os.getpriority(os.PRIO_PROCESS, threading.get_native_id())).result(timeout=10)
+        assert nice == min(19, main + live.BACKGROUND_NICENESS)
+    assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == main
 
 
 def test_a_draw_error_becomes_the_status_line(fig3, monkeypatch):

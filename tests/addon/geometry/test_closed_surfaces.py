@@ -63,3 +63,33 @@ def test_a_solid_a_mirror_lies_in_is_not_culled():
     assert closed_surfaces.cullable_winding(room, triangles, [ball]) == 0
     assert closed_surfaces.cullable_winding(room, triangles, [ball + (20.0, 0.0, 0.0)]) == 1
     assert closed_surfaces.cullable_winding(room, triangles[:, ::-1], [ball + (3.0, 20.0, 0.0)]) == -1
+
+
+def test_triangles_turned_away_from_the_points_they_are_seen_from():
+    """Seen from a point outside the cube (each corner from its own point, as each vertex
+    of a reflection from its point on the mirror), whatever its winding, the faces turned
+    away are found and the ones facing it kept; with corners not known (a mixed
+    triangle's unprojected ones), the known corners decide; open meshes never."""
+    vertices, triangles = _cube()
+    seen_from = np.array([0.6, -2.0, 4.0])
+    faces = vertices.reshape(6, 4, 3).mean(axis=1).repeat(2, axis=0)  # each triangle's face centre (split cube)
+    facing = np.einsum("ij,ij->i", faces - 0.5, seen_from - faces) > 0  # outward normals: from (0.5, 0.5, 0.5)
+    for winding in (1, -1):
+        corners = triangles if winding > 0 else triangles[:, ::-1]
+        eyes = seen_from - vertices[corners]
+        known = np.ones(corners.shape, bool)
+        away = closed_surfaces.turned_away(vertices, corners, np.full(len(corners), winding), eyes, known)
+        np.testing.assert_array_equal(away, ~facing)
+        known[:, 1:] = False
+        np.testing.assert_array_equal(
+            closed_surfaces.turned_away(vertices, corners, np.full(len(corners), winding), eyes, known), away)
+        assert not closed_surfaces.turned_away(vertices, corners, np.full(len(corners), winding), eyes,
+                                               np.zeros_like(known)).any()
+    assert 0 < away.sum() < len(triangles)
+    back = int(np.flatnonzero(away)[0])
+    eyes = seen_from - vertices[triangles]
+    eyes[back, 0] = (vertices[triangles[back, 0]] - 0.5) * 10.0  # one corner sees it from outside its face
+    assert not closed_surfaces.turned_away(vertices, triangles, np.ones(len(triangles), int), eyes,
+                                           np.ones(triangles.shape, bool))[back]
+    assert not closed_surfaces.turned_away(vertices, triangles, np.zeros(len(triangles), int),
+                                           seen_from - vertices[triangles], np.ones(triangles.shape, bool)).any()

@@ -100,24 +100,3 @@ def test_morphed_reflection_lands_where_the_exact_reflection_is(scene):
               for k in range(len(corners))]
     assert max(errors) < 1.0
     assert renderer.stats["projected_vertices"] > 0
-
-
-def test_sheet_sources_draw_each_part_as_it_draws_alone(scene):
-    """A runtime camera with all its sheets kept draws as the camera alone; with none kept
-    and the grid added, as the grid alone (pixel for pixel)."""
-    from curved_reflections.gpu_shaders.methods.morph_source import MorphSource
-    from curved_reflections.gpu_shaders.methods.projection import SBCTextures
-    from curved_reflections.gpu_shaders.methods.sbc_triangles import SheetSources
-
-    _, _, view, grid, sbc = scene
-    textures = SBCTextures(sbc)
-    alone, _ = _render(scene, textures)
-    kept = SheetSources([(textures, range(len(sbc.groups)), sbc)], view)
-    np.testing.assert_array_equal(_render(scene, kept)[0], alone)
-
-    morph = MorphSource([(grid, np.eye(4))], view)
-    morphed, _ = _render(scene, morph)
-    swapped = SheetSources([(textures, [], sbc), (MorphSource([(grid, np.eye(4))], view),
-                                                  range(len(morph.groups)), None)], view)
-    assert swapped.groups == morph.groups
-    np.testing.assert_array_equal(_render(scene, swapped)[0], morphed)

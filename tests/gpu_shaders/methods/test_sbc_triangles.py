@@ -26,7 +26,7 @@ def _sheet(fold_ratio: float):
     points[0, :, :2] = vertices[:, :2] * ratio[:, None]
     points[0, :, 3] = 1.0
     points[0, -2:, 3] = 0.0  # the mixed triangle: only its first corner projects
-    geometry = SimpleNamespace(vertices=vertices, triangles=triangles, ranges=[(0, 0, len(triangles))])
+    geometry = SimpleNamespace(vertices=vertices, triangles=triangles, ranges=[(0, 0, len(triangles))], range_windings=(0,))
     return CameraProjections(geometry, per_frame_reflectors=(), counts={}), points
 
 
@@ -37,3 +37,19 @@ def test_a_mixed_triangle_with_no_projected_neighbour_is_sized_by_its_sheets_typ
     # 2 px per unit times its longest edge (sqrt 2): 2.8 px, four sub-triangles of about a
     # pixel along an edge; the fold's 1000 px per unit would have asked for the cap.
     assert n == 4 < MIXED_SUBDIVISIONS
+
+
+
+def test_only_convex_mirrors_cull_the_far_sides_of_closed_solids():
+    """A convex mirror's first-order sheets leave out the triangles a solid turns away
+    from it; a non-convex mirror (a sheet can hold a solid's far side without its near
+    side) keeps them."""
+    from curved_reflections.addon.geometry.sphere import icosphere
+
+    ball = icosphere((0.0, 0.0, 0.0), 1.0, 2, name="Ball")
+    sphere = icosphere((3.0, 0.0, 0.0), 1.0, 2, name="Dented")
+    vertices = sphere.vertices.copy()
+    vertices[0] = vertices[0] * 0.5 + np.array([1.5, 0.0, 0.0])  # pushed in toward its centre
+    dented = SimpleNamespace(vertices=vertices, triangles=sphere.triangles)
+    projections, _ = _sheet(fold_ratio=2.0)
+    assert CameraProjections(projections.geometry, (), {}, reflectors=[ball, dented]).convex_reflectors == {0}
