@@ -450,6 +450,29 @@ def test_redraws_reuse_the_projection_and_a_moved_view_places_the_world_reflecto
     assert renderer.counts["projections"] == 2
 
 
+def test_the_viewport_snaps_the_cameras_reflected_triangles_within_its_accuracy(gpu_ready):
+    """With the camera's Accuracy (a viewport frame, ``warm``), every reflected vertex is
+    drawn at the centre of its cell of a grid that many pixels apart: the red square's
+    reflection moves, by at most half a cell (and a pixel of rasterisation) on each axis;
+    a render (not warm) places it exactly."""
+    from curved_reflections.gpu_shaders.methods.projection import SBCTextures
+    from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
+
+    mirror = icosphere((0.0, 0.0, 0.0), 1.0, 4, name="Mirror")
+    square = _square("Near", 2.5, 1.0, (1.0, 0.0, 0.0))
+    view = look_at_view((0.0, -6.0, 0.3), (0.0, 0.0, 0.0), fov_y_deg=25.0, width=96, height=96)
+    sbc = build_sample_based_camera([mirror], view, scene_bounds([mirror], [square], margin=1.0), downsample=2)
+    renderer = ReflectionRenderer([mirror], [square])
+    textures = SBCTextures(sbc)
+    exact = _red_pixels(renderer.draw_passes(view, textures, sbc))
+    np.testing.assert_array_equal(_red_pixels(renderer.draw_passes(view, textures, sbc, accuracy_px=8.0)), exact)
+    snapped = _red_pixels(renderer.draw_passes(view, textures, sbc, warm=True, accuracy_px=8.0))
+    assert len(exact) > 20 and len(snapped) > 20
+    assert len(snapped) != len(exact) or np.any(snapped != exact)
+    offsets = np.abs(snapped[:, None, :] - exact[None, :, :]).max(axis=2)  # Chebyshev, pixels
+    assert offsets.min(axis=1).max() <= 5 and offsets.min(axis=0).max() <= 5
+
+
 def test_per_sheet_culling_leaves_the_image_identical(gpu_ready):
     """The teapot at 320 x 240 splits its reflection into sheets (per smooth piece, and
     where rays cross); projecting in each
