@@ -12,16 +12,18 @@ projection runs per draw on the GPU):
   *diffuse* object re-captures and re-uploads only this, and re-projects once: the
   cameras stay valid (unless the object leaves the camera's scene box, which ends its
   reflected rays: then they are rebuilt).
-- **camera** per view (worker thread, bpy-free): the ray map and BSP trees of
-  ``build_sample_based_camera``. A view change asks for a new one, debounced
-  (:data:`DEBOUNCE_SECONDS` after the last change); while it builds, the previous
-  camera keeps drawing. Editing a *reflector* (geometry, transform, marking or
-  unmarking one) re-bakes: capture again and rebuild every view's camera.
-- **projection** (main thread, GPU, once per camera and per mesh change): the meshes'
-  vertices projected with the camera, kept by the renderer as reflected triangles
-  whose vertices sit at their *first reflector points in world space*
-  (``ReflectionRenderer.projection``). Made on the first draw after a camera landed
-  or the meshes changed, not on every redraw.
+- **camera** per view (worker thread, bpy-free, :mod:`.live_workers`): the ray map and
+  BSP trees of ``build_sample_based_camera``. A view change asks for a new one,
+  debounced (:data:`DEBOUNCE_SECONDS` after the last change); while it builds, the
+  previous camera keeps drawing. Editing a *reflector* (geometry, transform, marking
+  or unmarking one) re-bakes: capture again and rebuild every view's camera.
+- **projection** (once per camera and per mesh change): the meshes' vertices
+  projected with the camera, kept by the renderer as reflected triangles whose
+  vertices sit at their *first reflector points in world space*
+  (``ReflectionRenderer.projection``). A new camera's is made on the worker right
+  after it, with numpy (``camera_source.CameraSource``), and only put on the GPU by
+  the first draw after it landed; after a mesh change the next draw projects on the
+  GPU (main thread). Not on every redraw.
 - **morphing** (reflectors in Morphing mode with a baked grid, SBC paper VI): their
   grids are loaded with the capture of the reflectors and drawn by the renderer on
   every redraw whose view is inside the grid (``gpu_shaders/methods/morph_pass.py``): the four
@@ -53,11 +55,8 @@ dropped when a file is loaded.
 
 from __future__ import annotations
 
-import os
-import sys
-import threading
 import time
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future
 from dataclasses import dataclass, field
 
 import bpy
@@ -66,10 +65,9 @@ import numpy as np
 from ..addon.errors import SceneInputError
 from ..addon.methods.morphing.morphing import ViewOutsideGrid
 from ..addon.geometry.raytrace import ReflectorSet
-from ..addon.methods.sbc.sbc_build import build_sample_based_camera
 from ..addon.scene import scene_bounds
 from ..addon.view import View
-from . import accuracy, methods, morph_bake
+from . import accuracy, live_workers, methods, morph_bake
 from .capture import capture_scene, view_from_camera
 from .render_inputs import BOUNDS_MARGIN, reflector_properties, world_color
 
@@ -88,11 +86,6 @@ COUNT_SECONDS = 2.0
 VIEW_TOLERANCE = 1e-6
 #: Key of the view a Bake or Refresh uses when there is no 3D view (background mode).
 CAMERA_KEY = "scene camera"
-#: How much nicer than Blender the threads that build cameras and prefetch morphing
-#: nodes run (Linux, where the nice value is per thread): they yield the cores to the
-#: drawing, which on a software GL driver runs on the same cores, instead of sharing
-#: them equally (a redraw during a build: 2.6x -> 2.2x a plain draw on 2 cores).
-BACKGROUND_NICENESS = 10
 
 
 @dataclass
@@ -109,6 +102,9 @@ class ViewCamera:
     morph: list = field(default_factory=list)  # (MorphingGrid, matrix) of the grids covering the view
     source: object = None  # what the renderer projects with (made on the first draw: needs the GPU)
     last_drawn: float = 0.0
+    #: (the renderer's CameraProjections, its CachedProjection of this camera not yet on
+    #: the GPU): made on the worker with the camera, adopted on the first draw.
+    projected: tuple | None = None
 
 
 @dataclass
@@ -146,9 +142,6 @@ class LiveScene:
 
 
 _states: dict[int, LiveScene] = {}
-_executor: ThreadPoolExecutor | None = None
-#: Projects morphing nodes around the eye ahead of time (numpy, no GPU).
-_prefetcher: ThreadPoolExecutor | None = None
 
 
 def state_of(scene) -> LiveScene | None:
@@ -239,43 +232,10 @@ def _inside(bounds, camera_bounds) -> bool:
 # --- cameras (worker thread) ---------------------------------------------------------
 
 
-def _build_camera(reflector_set, view: View, bounds, settings: tuple):
-    """The bpy-free part, run on the worker: the view's ray map and BSP trees."""
-    max_order, downsample, accuracy_px = settings
-    return build_sample_based_camera(reflector_set, view, bounds, max_order=max_order,
-                                     downsample=downsample, accuracy_px=accuracy_px)
-
-
 def _camera_bounds(state: LiveScene) -> tuple:
     lo, hi = state.bounds
     margin = BOUNDS_MARGIN * float(np.linalg.norm(hi - lo))
     return lo - margin, hi + margin
-
-
-def _lower_priority() -> None:
-    """A background thread's initializer: :data:`BACKGROUND_NICENESS` nicer, for this
-    thread and the threads it starts (Linux only: elsewhere it would be the process's)."""
-    if sys.platform.startswith("linux"):
-        thread = threading.get_native_id()
-        try:
-            os.setpriority(os.PRIO_PROCESS, thread, min(19, os.getpriority(os.PRIO_PROCESS, thread)
-                                                        + BACKGROUND_NICENESS))
-        except OSError:
-            pass  # a sandbox that forbids it: the thread runs at Blender's priority
-
-
-def _prefetcher_get() -> ThreadPoolExecutor:
-    global _prefetcher
-    if _prefetcher is None:
-        _prefetcher = ThreadPoolExecutor(1, "curved_reflections_prefetch", initializer=_lower_priority)
-    return _prefetcher
-
-
-def _executor_get() -> ThreadPoolExecutor:
-    global _executor
-    if _executor is None:
-        _executor = ThreadPoolExecutor(1, "curved_reflections", initializer=_lower_priority)
-    return _executor
 
 
 def _start(state: LiveScene, key, view: View, wait: bool) -> None:
@@ -283,18 +243,21 @@ def _start(state: LiveScene, key, view: View, wait: bool) -> None:
     state.requests.pop(key, None)
     bounds, settings, generation = _camera_bounds(state), state.settings, state.generation
     covering = _covering_grids(state, view)
+    projections = state.renderer.sbc
     if not _needs_camera(state, covering, settings):
         future = Future()
-        future.set_result(None)
-    elif wait:
-        future = Future()
-        try:
-            future.set_result(_build_camera(state.reflector_set, view, bounds, settings))
-        except Exception as error:  # noqa: BLE001 - reported as the status line
-            future.set_exception(error)
+        future.set_result((None, None))
     else:
-        future = _executor_get().submit(_build_camera, state.reflector_set, view, bounds, settings)
-    state.jobs[key] = (future, view, bounds, settings, generation, covering)
+        job = (state.reflector_set, view, bounds, settings, projections, state.renderer.per_frame_reflectors(view))
+        if wait:
+            future = Future()
+            try:
+                future.set_result(live_workers.build_camera(*job))
+            except Exception as error:  # noqa: BLE001 - reported as the status line
+                future.set_exception(error)
+        else:
+            future = live_workers.builder().submit(live_workers.build_camera, *job)
+    state.jobs[key] = (future, view, bounds, settings, generation, covering, projections)
     if future.done():
         _collect(state)
 
@@ -302,13 +265,13 @@ def _start(state: LiveScene, key, view: View, wait: bool) -> None:
 def _collect(state: LiveScene) -> bool:
     """Store the cameras that finished; returns whether any did."""
     finished = False
-    for key, (future, view, bounds, settings, generation, covering) in list(state.jobs.items()):
+    for key, (future, view, bounds, settings, generation, covering, projections) in list(state.jobs.items()):
         if not future.done():
             continue
         del state.jobs[key]
         finished = True
         try:
-            sbc = future.result()
+            sbc, projected = future.result()
         except Exception as error:  # noqa: BLE001 - a bug must not stop the viewport either
             message = str(error) if isinstance(error, SceneInputError) else (
                 f"Building the reflections failed: {type(error).__name__}: {error}")
@@ -321,7 +284,8 @@ def _collect(state: LiveScene) -> bool:
             continue  # built for reflectors that have changed since
         state.failed.pop(key, None)
         state.cameras[key] = ViewCamera(view, sbc, bounds, settings, generation, covering,
-                                        last_drawn=time.monotonic())
+                                        last_drawn=time.monotonic(),
+                                        projected=None if projected is None else (projections, projected))
         state.counts["builds"] += 1
         _update_stats(state, sbc, covering)
         _report_visibility(state, sbc, covering)
@@ -534,10 +498,25 @@ def draw(scene, key, view: View) -> bool:
             request_view(state, key, view)
     if camera is None:
         return False
-    if camera.source is None and camera.sbc is not None:
-        camera.source = SBCTextures(camera.sbc)
+    if camera.sbc is not None and (camera.source is None or not isinstance(camera.source, SBCTextures)
+                                   and not state.renderer.sbc.holds(camera.source)):
+        camera.source = _projection_source(state, camera)
     camera.last_drawn = time.monotonic()
     return _draw_with(state, view, camera.source, camera.sbc)
+
+
+def _projection_source(state: LiveScene, camera: ViewCamera):
+    """What ``camera`` draws with: the worker's projection, put on the GPU now, while it
+    was made for this renderer and its per-frame passes; else (the meshes changed since,
+    or it was dropped) the camera's GPU textures, which project on this draw."""
+    from ..gpu_shaders.methods.projection import SBCTextures
+
+    projected, camera.projected = camera.projected, None
+    if projected is not None and projected[0] is state.renderer.sbc and state.renderer.sbc.adopt(projected[1]):
+        state.counts["projections"] += 1
+        state.stats["projection_ms"] = 1000.0 * projected[1].stats.get("projection_seconds", 0.0)  # on the worker
+        return projected[1].source
+    return SBCTextures(camera.sbc)
 
 
 def _draw_with(state: LiveScene, view: View, source, sbc) -> bool:
@@ -552,7 +531,7 @@ def _draw_with(state: LiveScene, view: View, source, sbc) -> bool:
     morph = state.renderer.morph
     if morph.grids:
         morph.collect()
-        if morph.prefetch(view, _prefetcher_get().submit):
+        if morph.prefetch(view, live_workers.prefetcher().submit):
             ensure_timer()  # it redraws when a node is ready, which uploads it and starts the next
     if state.renderer.counts["projections"] != projections:
         state.counts["projections"] += 1
@@ -636,13 +615,7 @@ def tag_redraw() -> None:
 
 def shutdown() -> None:
     """Drop every state and stop the worker threads (the extension is unregistered)."""
-    global _executor, _prefetcher
     if bpy.app.timers.is_registered(_tick):
         bpy.app.timers.unregister(_tick)
     clear_all()
-    if _executor is not None:
-        _executor.shutdown(wait=False, cancel_futures=True)
-        _executor = None
-    if _prefetcher is not None:
-        _prefetcher.shutdown(wait=False, cancel_futures=True)
-        _prefetcher = None
+    live_workers.shutdown()

@@ -13,7 +13,10 @@ module gives that projection to shaders:
   binds them to a shader;
 - :func:`project_points` projects points by drawing one point primitive per input
   point into a float target, one texel per point, and reads the texels back: the same
-  answer as ``SampleBasedCamera.project``, used by the tests and benchmarks.
+  answer as ``SampleBasedCamera.project``, used by the tests and benchmarks;
+- :func:`reflected_depth` is the depth the renderer's projection pass writes, and
+  :func:`polish_readback` polishes that pass's risky answers on the true rays, as the
+  engine's numpy projection does.
 
 Shaders are built on first use and cached, never at import or register time.
 
@@ -264,3 +267,32 @@ def project_points(textures: SBCTextures, points) -> GPUProjection:
     finally:
         del framebuffer, projected, distance, batch, buffer
     return result
+
+
+def reflected_depth(order: int, distance: np.ndarray, setup: dict) -> np.ndarray:
+    """The depth that orders reflections, as ``glsl/reflection_project_vert.glsl`` writes it:
+    (k - 1 + z / D) g (SBC paper V-A), z the distance along the reflected ray."""
+    return (order - 1 + np.clip(distance * setup["inverse_diameter"], 0.0, 1.0)) * setup["order_range"]
+
+
+def polish_readback(camera, positions, draws: list, points: np.ndarray, eyes: np.ndarray, setup: dict) -> None:
+    """Polish, in place, the GPU pass's first-order answers of ray-list leaves and fold
+    cells on the true reflected rays, as the camera's numpy projection does
+    (``SampleBasedCamera.polish_answers``; the GLSL twin interpolates only): new pixel,
+    depth, eye vector and distance where polished, not projected where polishing fails."""
+    for group, order, offset, first, count in draws:
+        if len(camera.histories[group]) != 1:
+            continue
+        answered = np.flatnonzero(points[offset + first:offset + first + count, 3] > 0.5)
+        if len(answered) == 0:
+            continue
+        texels = offset + first + answered
+        position = np.asarray(positions[first + answered], dtype=np.float64)
+        pixels, reflector_points, distance, ok = camera.polish_answers(
+            group, points[texels, :2], position, np.rint(points[texels, 3]).astype(np.int8))
+        points[texels[~ok]] = 0.0
+        eyes[texels[~ok]] = 0.0
+        polished = np.flatnonzero(ok & np.isfinite(distance))
+        moved = texels[polished]
+        points[moved, :3] = np.c_[pixels[polished], reflected_depth(order, distance[polished], setup)]
+        eyes[moved] = np.c_[reflector_points[polished] - position[polished], distance[polished]]

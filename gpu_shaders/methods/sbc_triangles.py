@@ -96,35 +96,6 @@ def _same_view(a, b) -> bool:
                       and np.array_equal(np.asarray(a.projection_matrix), np.asarray(b.projection_matrix)))
 
 
-def reflected_depth(order: int, distance: np.ndarray, setup: dict) -> np.ndarray:
-    """The depth that orders reflections, as ``glsl/reflection_project_vert.glsl`` writes it:
-    (k - 1 + z / D) g (SBC paper V-A), z the distance along the reflected ray."""
-    return (order - 1 + np.clip(distance * setup["inverse_diameter"], 0.0, 1.0)) * setup["order_range"]
-
-
-def _polish_readback(camera, positions, draws: list, points: np.ndarray, eyes: np.ndarray, setup: dict) -> None:
-    """Polish, in place, the GPU pass's first-order answers of ray-list leaves and fold
-    cells on the true reflected rays, as the camera's numpy projection does
-    (``SampleBasedCamera.polish_answers``; the GLSL twin interpolates only): new pixel,
-    depth, eye vector and distance where polished, not projected where polishing fails."""
-    for group, order, offset, first, count in draws:
-        if len(camera.histories[group]) != 1:
-            continue
-        answered = np.flatnonzero(points[offset + first:offset + first + count, 3] > 0.5)
-        if len(answered) == 0:
-            continue
-        texels = offset + first + answered
-        position = np.asarray(positions[first + answered], dtype=np.float64)
-        pixels, reflector_points, distance, ok = camera.polish_answers(
-            group, points[texels, :2], position, np.rint(points[texels, 3]).astype(np.int8))
-        points[texels[~ok]] = 0.0
-        eyes[texels[~ok]] = 0.0
-        polished = np.flatnonzero(ok & np.isfinite(distance))
-        moved = texels[polished]
-        points[moved, :3] = np.c_[pixels[polished], reflected_depth(order, distance[polished], setup)]
-        eyes[moved] = np.c_[reflector_points[polished] - position[polished], distance[polished]]
-
-
 def _subdivision_caps(source, sheets: list):
     """The largest mixed-triangle sub-grid each of ``sheets`` allows (``None``: the
     renderer's): a source whose points cost much more to project than the GPU pass
@@ -163,8 +134,10 @@ class CachedProjection:
     #: Reflectors whose first-order sheets it leaves to the passes run every frame (the
     #: iterative search; the morphing grids covering ``camera_view``).
     per_frame: frozenset = frozenset()
-    #: The depth range per order of its vertices (``reflected_depth``): 1 / (max order + 1).
+    #: The depth range per order of its vertices (``projection.reflected_depth``): 1 / (max order + 1).
     order_range: float = 1.0
+    #: The vertex arrays by attribute, until they are put on the GPU as ``batch``.
+    arrays: dict | None = None
 
 
 @functools.cache
@@ -244,11 +217,41 @@ class CameraProjections:
         key = id(textures)
         cached = self._cache.pop(key, None)
         if cached is None or cached.source is not textures:
-            while len(self._cache) >= CACHED_PROJECTIONS:
-                self._cache.pop(next(iter(self._cache)))
-            cached = self._project(textures, camera_view, camera)
-        self._cache[key] = cached  # most recently used last
+            batch = self._vertex_points() if isinstance(textures, projection.SBCTextures) else None
+            cached = self._uploaded(self.triangles(textures, camera_view, camera, vertex_batch=batch))
+        self._keep(cached)
+        return cached
+
+    def adopt(self, cached: CachedProjection) -> bool:
+        """Keep ``cached``, made by :meth:`triangles` elsewhere (a live view's worker
+        thread, with a source that projects on the CPU), as its source's projection: it
+        is put on the GPU now. False, and nothing kept, when the per-frame passes now draw
+        other reflectors in its view than when it was made."""
+        if cached.per_frame != self.per_frame_reflectors(cached.camera_view):
+            return False
+        self._keep(self._uploaded(cached))
+        return True
+
+    def holds(self, source) -> bool:
+        """Whether the projection of ``source`` is kept (a draw with it projects nothing)."""
+        cached = self._cache.get(id(source))
+        return cached is not None and cached.source is source
+
+    def _keep(self, cached: CachedProjection) -> None:
+        self._cache.pop(id(cached.source), None)
+        while len(self._cache) >= CACHED_PROJECTIONS:
+            self._cache.pop(next(iter(self._cache)))
+        self._cache[id(cached.source)] = cached  # most recently used last
         self.last = cached
+
+    def _uploaded(self, cached: CachedProjection) -> CachedProjection:
+        """``cached`` with its vertex arrays in one GPU vertex buffer (main thread)."""
+        import gpu
+
+        self.counts["projections"] += 1
+        if cached.arrays is not None:
+            buffer = vertex_buffer({name: (values, 'F32', 'FLOAT') for name, values in cached.arrays.items()})
+            cached.batch, cached.arrays = gpu.types.GPUBatch(type='TRIS', buf=buffer), None
         return cached
 
     def invalidate(self) -> None:
@@ -292,26 +295,32 @@ class CameraProjections:
         return [(int(a) * CHUNK_VERTICES, int(min(b * CHUNK_VERTICES, n) - a * CHUNK_VERTICES))
                 for a, b in zip(starts, ends)]
 
-    def _project(self, textures, camera_view, camera) -> CachedProjection:
+    def triangles(self, textures, camera_view, camera=None, per_frame=None, vertex_batch=None) -> CachedProjection:
         """Project the meshes with the camera of ``textures`` (SBC V-A) and decide, from
         the read-back, which reflected triangles are drawn (V-B): per sheet, those with
         every corner projected in it or, across a seam, in another sheet of its history
         within :data:`STITCH_CELLS` cells; mixed triangles (one or two corners projected,
         none stitched) as sub-grids of about :data:`MIXED_SUB_PX` whose sub-vertices are
         projected on their own, keeping the sub-triangles whose three sub-vertices project.
+
+        Returns them as vertex arrays, not yet on the GPU (:meth:`_uploaded`). With a
+        source that projects on the CPU (``camera_source.CameraSource``) and the
+        reflectors the per-frame passes draw in ``camera_view`` (``per_frame``), it runs
+        no GPU call and changes nothing here: a worker thread may run it. ``vertex_batch``:
+        the vertices as a GPU batch, for the GPU pass of ``projection.SBCTextures``.
         """
-        import gpu
         from mathutils import Matrix
 
         start = time.perf_counter()
-        self.counts["projections"] += 1
         g = self.geometry
         histories = list(textures.groups)
         n_vertices = len(g.vertices)
+        if per_frame is None:
+            per_frame = self.per_frame_reflectors(camera_view)
         if n_vertices == 0 or not histories or not len(g.triangles):
             return CachedProjection(textures, camera_view, None, (), 0, 0, {
                 "projection_seconds": 0.0, "projected_vertices": 0, "unculled_vertices": 0, "mixed_sub_triangles": 0},
-                per_frame=self.per_frame_reflectors(camera_view))
+                per_frame=per_frame)
         world_to_clip = np.asarray(camera_view.projection_matrix) @ np.asarray(camera_view.view_matrix)
         setup = {"inverse_view_projection": Matrix(np.linalg.inv(world_to_clip).tolist()),
                  "view_size": (float(camera_view.width), float(camera_view.height)),
@@ -320,7 +329,6 @@ class CameraProjections:
         stitch_px = STITCH_CELLS * textures.downsample
         kdops = _culling(camera, g.diameter) if self.cull else None
         pieces, mixed_blocks, projected = [], [], 0
-        per_frame = self.per_frame_reflectors(camera_view)
         for sheets in _sheet_chunks(histories, max(1, MAX_PROJECTED_TEXELS // n_vertices)):
             history = histories[sheets[0]]
             if len(history) == 1 and history[0] in per_frame:
@@ -330,7 +338,7 @@ class CameraProjections:
                 for first, count in self._vertex_runs(kdops, sheet):
                     draws.append((sheet, len(history), layer * n_vertices, first, count))
                     projected += count
-            points, eyes = self.project_points(textures, g.vertices, self._vertex_points(), draws,
+            points, eyes = self.project_points(textures, g.vertices, vertex_batch, draws,
                                                 len(sheets) * n_vertices, setup, static=True, camera=camera)
             points = points.reshape(len(sheets), n_vertices, 4)
             eyes = eyes.reshape(len(sheets), n_vertices, 4)
@@ -359,12 +367,10 @@ class CameraProjections:
                 runs.append((image, first, count))
             first += count
         names = ("world_depth", "pixel_reflector", "eye_distance", "color", "normal_lit", "uv")
-        buffer = vertex_buffer({name: (np.concatenate([p[1][name] for p in pieces]).astype(np.float32), 'F32',
-                                        'FLOAT') for name in names})
-        batch = gpu.types.GPUBatch(type='TRIS', buf=buffer)
+        arrays = {name: np.concatenate([p[1][name] for p in pieces]).astype(np.float32) for name in names}
         stats["projection_seconds"] = time.perf_counter() - start
-        return CachedProjection(textures, camera_view, batch, tuple(runs), first // 3, n_mixed, stats,
-                                per_frame=per_frame, order_range=setup["order_range"])
+        return CachedProjection(textures, camera_view, None, tuple(runs), first // 3, n_mixed, stats,
+                                per_frame=per_frame, order_range=setup["order_range"], arrays=arrays)
 
     def project_pass(self, textures, batch, draws: list, n_texels: int, setup: dict):
         """Project the points of ``batch`` with ``textures``: per (group, order, texel
@@ -412,13 +418,13 @@ class CameraProjections:
         when ``None``); ``static``: they are this renderer's own vertices, which a source
         may keep work for between views (morphing's node images, SBC paper VI). With the
         ``camera`` of the textures, risky answers are polished on the true rays as its
-        numpy projection polishes them (:func:`_polish_readback`)."""
+        numpy projection polishes them (:func:`.projection.polish_readback`)."""
         if isinstance(source, projection.SBCTextures):
             if batch is None:
                 batch = points_batch(np.asarray(positions, np.float32))
             points, eyes = self.project_pass(source, batch, draws, n_texels, setup)
             if self.polish and getattr(camera, "true_rays", None) is not None:
-                _polish_readback(camera, positions, draws, points, eyes, setup)
+                projection.polish_readback(camera, positions, draws, points, eyes, setup)
             return points, eyes
         return source.project(self, positions, batch, draws, n_texels, setup, static)
 

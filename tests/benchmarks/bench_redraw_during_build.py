@@ -8,8 +8,8 @@ never waits"), measured in one run.
 The sbc_fig3 demo with its mirror in Runtime mode, baked in the live view
 (``operators/live.py``) for the scene camera's view. The view then turns by
 ``--degrees``: the live view asks for that view's camera, which builds off the main
-thread (``live._build_camera``) while the main thread goes on redrawing the moved view
-with the old camera's reflected triangles. Timed on the main thread, into one offscreen
+thread (``live_workers.build_camera``, with its reflected triangles) while the main
+thread goes on redrawing the moved view with the old camera's. Timed on the main thread, into one offscreen
 of the view's size that holds the scene's depth (``bench_draw.scene_depth``: what
 Blender's drawing leaves for a draw handler, which the overlay is depth-tested
 against), each ending with a one-pixel read-back:
@@ -17,10 +17,10 @@ against), each ending with a one-pixel read-back:
 - **redraw, idle**: ``live.draw`` of the moved view with no build running;
 - **redraw during a build**: the same, as often as it fits while the build runs;
 - **plain**: the renderer's diffuse triangles drawn once with one colour (bench_draw);
-- **the redraw when the camera lands**: the first draw with the new camera, which
-  projects the meshes with it on the main thread (``ReflectionRenderer.projection``);
+- **the redraw when the camera lands**: the first draw with the new camera, which puts
+  the reflected triangles the worker made on the GPU (``CameraProjections.adopt``);
 
-and the build's wall time. Medians and maxima over ``--builds`` view turns.
+and the build's wall time (the camera and its triangles). Medians and maxima over ``--builds`` view turns.
 """
 
 from __future__ import annotations
@@ -109,7 +109,8 @@ def report(result: dict, command: str) -> str:
     ms = result["ms"]
     plain = ms["plain"]["median"]
     rows = [("redraw, idle", "idle"), ("**redraw during a build**", "during"), ("plain draw", "plain"),
-            ("redraw when the camera lands (projection)", "landing"), ("camera build (worker)", "build")]
+            ("redraw when the camera lands (upload)", "landing"),
+            ("camera build and projection (worker)", "build")]
     lines = [
         "# The live view's main thread while a Runtime camera builds",
         "",

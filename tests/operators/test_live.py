@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from curved_reflections.addon.view import look_at_view
-from curved_reflections.operators import demo_scenes, live, live_handlers, scene_changes
+from curved_reflections.operators import demo_scenes, live, live_handlers, live_workers, scene_changes
 from curved_reflections.operators.capture import view_from_camera
 
 #: Clear colour of the offscreen: in no demo palette, so untouched pixels are known.
@@ -198,14 +198,47 @@ def test_a_view_change_is_debounced_built_on_the_worker_and_the_old_camera_draws
     assert live.CAMERA_KEY not in state.requests  # the same view asks for nothing
 
 
+def test_a_landing_camera_brings_its_reflected_triangles_and_its_first_draw_only_uploads_them(fig3, monkeypatch):
+    """The worker projects the meshes with the new camera (numpy) right after building
+    it: the first draw with it runs no projection pass on the GPU. After a mesh change
+    (a new renderer) the worker's triangles no longer fit, and the draw projects on the GPU."""
+    from curved_reflections.gpu_shaders.methods.camera_source import CameraSource
+    from curved_reflections.gpu_shaders.methods.projection import SBCTextures
+    from curved_reflections.gpu_shaders.methods.sbc_triangles import CameraProjections
+
+    bpy.ops.curved_reflections.bake()
+    state = live.state_of(fig3)
+    moved = look_at_view((0.8, -6.4, 2.4), (0.0, 0.0, 0.9), fov_y_deg=30.0, width=WIDTH, height=HEIGHT)
+    live._start(state, live.CAMERA_KEY, moved, wait=False)
+    state.jobs[live.CAMERA_KEY][0].result(timeout=60)
+    live._collect(state)
+    camera = state.cameras[live.CAMERA_KEY]
+    assert camera.projected is not None and camera.projected[1].batch is None  # arrays, not yet on the GPU
+    projections = state.counts["projections"]
+
+    def no_gpu_pass(*args, **kwargs):
+        raise AssertionError("a projection pass on the main thread")
+
+    with monkeypatch.context() as patch:
+        patch.setattr(CameraProjections, "project_pass", no_gpu_pass)
+        drawn, image = _draw(fig3, moved)
+    assert drawn and len(_pixels_of(image, "Cube", fig3)) > 0
+    assert isinstance(camera.source, CameraSource) and state.counts["projections"] == projections + 1
+
+    bpy.data.objects["Cube"].location.x -= 0.25  # a new renderer: the GPU projects again, once
+    bpy.context.view_layer.update()
+    assert _draw(fig3, moved)[0] and isinstance(camera.source, SBCTextures)
+    assert state.counts["projections"] == projections + 2
+
+
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the nice value is per thread on Linux only")
 def test_background_threads_yield_the_cores_to_drawing():
     """Camera builds and morphing prefetches run at a lower priority than Blender's
     drawing, which on a software GL driver shares their cores; the main thread keeps its own."""
     main = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
-    for executor in (live._executor_get(), live._prefetcher_get()):
+    for executor in (live_workers.builder(), live_workers.prefetcher()):
         nice = executor.submit(lambda: os.getpriority(os.PRIO_PROCESS, threading.get_native_id())).result(timeout=10)
-        assert nice == min(19, main + live.BACKGROUND_NICENESS)
+        assert nice == min(19, main + live_workers.BACKGROUND_NICENESS)
     assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == main
 
 
@@ -238,7 +271,7 @@ def test_unregister_leaves_no_handler_timer_or_state(empty_scene, gpu_ready):
     for name in ("depsgraph_update_post", "load_pre", "load_post"):
         assert not [h for h in getattr(bpy.app.handlers, name) if "curved_reflections" in h.__module__]
     assert not bpy.app.timers.is_registered(live._tick)
-    assert live_handlers._draw_handle is None and live._executor is None and not live._states
+    assert live_handlers._draw_handle is None and not live_workers.running() and not live._states
     assert not scene_changes._listeners
 
 
