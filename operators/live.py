@@ -176,6 +176,7 @@ def _capture(state: LiveScene, scene, depsgraph, reflectors: bool) -> None:
         state.counts["bakes"] += 1
     else:
         state.counts["remeshes"] += 1
+    state.reflector_set.seal_empty_interiors(captured.meshes)
     # A new renderer has no projection: the next draw projects with the view's camera
     # once (SBC V-A), and later draws reuse it until a camera lands or the meshes change.
     # Interpolated answers only: polishing them on the true rays (the headless render

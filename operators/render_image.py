@@ -149,6 +149,7 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
         state.grids = state.plan.drawn_grids(state.grids)
         state.renderer = None
     if state.renderer is None or key != state.key:
+        state.reflector_set.seal_empty_interiors(captured.meshes)
         state.renderer = ReflectionRenderer(captured.reflectors, captured.meshes, iterative=state.plan.iterative,
                                             morph=state.grids, perturbation=state.plan.perturbation,
                                             accuracy_px=accuracy_px,
@@ -164,7 +165,7 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
     if len(per_frame) < len(captured.reflectors) or max_order > 1:
         lo, hi = scene_bounds(captured.reflectors, captured.meshes)
         bounds = scene_bounds(captured.reflectors, captured.meshes, BOUNDS_MARGIN * float(np.linalg.norm(hi - lo)))
-        sbc = build_sample_based_camera(captured.reflectors, view, bounds, max_order=max_order,
+        sbc = build_sample_based_camera(state.reflector_set, view, bounds, max_order=max_order,
                                         downsample=downsample, accuracy_px=accuracy_px)
     built_at = time.perf_counter()
     image = state.renderer.render(view, sbc, world_color(scene), trace_edges=trace_edges, trace_gaps=trace_gaps)

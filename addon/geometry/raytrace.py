@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import closed_surfaces
 from .bvh import build_bvh, descend, ray_box_test
 from ..errors import SceneInputError
 from ..scene import Reflector, smooth_pieces
@@ -30,6 +31,11 @@ from .vectors import cross, cross_rows, dot_rows
 RAY_CHUNK = 1 << 16
 #: Relative (to the scene size) distance below which a hit is taken as the ray's own origin.
 SELF_HIT_EPSILON = 1e-9
+#: A closed reflector is sealed (:meth:`ReflectorSet.seal_empty_interiors`) only when at
+#: most this many diffuse vertices lie in its bounding box, each tested for inside.
+SEAL_TESTED_VERTICES = 4096
+#: ... and a diffuse vertex holds it open only this share of its diagonal or more inside.
+SEAL_DEPTH = 1e-4
 
 
 @dataclass(frozen=True)
@@ -101,6 +107,55 @@ class ReflectorSet:
         # Smooth pieces never span reflectors: each reflector's vertices are its own.
         self.piece = smooth_pieces(self.triangles, len(self.vertices))
         self.bvh = build_bvh(self.vertices, self.triangles, self.normals, leaf_size=leaf_size)
+        #: Per reflector, its winding (``closed_surfaces.winding``) where it is a closed
+        #: solid that holds no diffuse geometry (:meth:`seal_empty_interiors`), else 0.
+        self.sealed = np.zeros(len(self.reflectors), dtype=np.int64)
+        self._windings = None
+
+    def seal_empty_interiors(self, meshes) -> None:
+        """Seal the closed reflectors whose inside holds no vertex of ``meshes`` (the
+        diffuse objects, each with ``vertices``): a ray that meets one from inside (a
+        view ray starting there: the camera's clip start cutting into a mirror ball, the
+        eye on it) would bounce inside without end and can show no object, so
+        :meth:`from_inside` lets the ray map end it there instead of tracing and fitting
+        every bounce (sbc_fig3's ball seen from 5 % of its radius with the clip start
+        inside it: 764 sheets and 58 s for a 320x240 frame, against 1.1 s from the scene
+        camera). A reflector with more than :data:`SEAL_TESTED_VERTICES` diffuse vertices
+        in its bounding box is left open (not tested). Call again when the meshes change."""
+        if self._windings is None:
+            self._windings = [closed_surfaces.winding(r.vertices, r.triangles) for r in self.reflectors]
+        self.sealed[:] = 0
+        for index, (reflector, sense) in enumerate(zip(self.reflectors, self._windings)):
+            if sense == 0:
+                continue
+            lo, hi = reflector.vertices.min(axis=0), reflector.vertices.max(axis=0)
+            near = [v[np.all((v >= lo) & (v <= hi), axis=1)] for v in (np.asarray(m.vertices, np.float64)
+                                                                       for m in meshes)]
+            near = np.concatenate(near) if near else np.zeros((0, 3))
+            if len(near) > SEAL_TESTED_VERTICES or self._holds(reflector, near):
+                continue
+            self.sealed[index] = sense
+
+    @staticmethod
+    def _holds(reflector, points) -> bool:
+        """Whether a point of ``points`` lies inside the closed ``reflector`` deeper than
+        :data:`SEAL_DEPTH` of its size: a point on its surface (a floor it stands on,
+        touching it at its lowest vertex) opens nothing."""
+        inside = closed_surfaces.inside(reflector.vertices, reflector.triangles, points)
+        if not inside.any():
+            return False
+        reach = SEAL_DEPTH * float(np.linalg.norm(np.ptp(reflector.vertices, axis=0)))
+        probes = points[inside][:, None, :] + reach * np.concatenate([np.eye(3), -np.eye(3)])[None]
+        deep = closed_surfaces.inside(reflector.vertices, reflector.triangles, probes.reshape(-1, 3))
+        return bool(deep.reshape(-1, 6).all(axis=1).any())
+
+    def from_inside(self, directions, triangles) -> np.ndarray:
+        """(n,) bool: rays (``directions``) meeting ``triangles`` of a sealed reflector from
+        its inside, where no object can be seen (:meth:`seal_empty_interiors`)."""
+        triangles = np.asarray(triangles, dtype=np.int64)
+        sense = self.sealed[self.owner[np.maximum(triangles, 0)]]
+        toward = np.einsum("ij,ij->i", directions, self.face_normals[np.maximum(triangles, 0)]) * sense
+        return (triangles >= 0) & (sense != 0) & (toward > 0)
 
     @property
     def nbytes(self) -> int:

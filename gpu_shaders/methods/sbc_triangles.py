@@ -180,6 +180,8 @@ class CameraProjections:
     camera itself, not only its textures). ``polish``: the GPU's ray-list and fold-cell
     answers are polished on the true rays on the CPU (needs the camera too; exact, but
     the numpy BVH makes it seconds per camera: the live viewport turns it off).
+    ``reflectors``: the mirrors (meshes), whose convexity allows culling the far sides
+    of closed solids (:attr:`convex_reflectors`).
     """
 
     def __init__(self, geometry, per_frame_reflectors, counts: dict, mixed_subdivisions: int = MIXED_SUBDIVISIONS,

@@ -15,6 +15,6 @@ def test_quick_benchmark_times_redraws_while_cameras_build(run_quick, tmp_path):
     assert "bench_redraw_during_build.py --quick --out" in report
     rows = dict(re.findall(r"^\| (.+?) \| ([\d.]+) \| [\d.]+ \| \d+ \| [\d.]+x \|$", report, flags=re.MULTILINE))
     assert set(rows) == {"redraw, idle", "**redraw during a build**", "plain draw",
-                         "redraw when the camera lands (projection)", "camera build (worker)"}
+                         "redraw when the camera lands (upload)", "camera build and projection (worker)"}
     assert all(float(ms) > 0 for ms in rows.values())
     assert re.search(r"A redraw during a build: \*\*[\d.]+x\*\* the plain draw", report)

@@ -195,9 +195,12 @@ def test_animation_keeps_the_renderer_while_only_the_camera_moves_and_recaptures
 
 
 def test_a_view_whose_near_plane_cuts_the_mirror_is_filled_not_traced(fig3, tmp_path, capfd):
-    """The camera 5 % of a radius from the ball with its clip start inside it: nearly every
-    mirror pixel has no reflection to draw, which is no band along an edge; the composite
-    fills them instead of tracing tens of thousands of rays, and the report says so."""
+    """The camera 5 % of a radius from the ball with its clip start inside it. The ball
+    holds nothing, so it is sealed (``ReflectorSet.seal_empty_interiors``): its view rays
+    start inside it and end there, and the camera has no ray at all. With an object
+    inside the ball, they are traced, nearly every mirror pixel has no reflection to
+    draw, which is no band along an edge; the composite fills them instead of tracing
+    tens of thousands of rays, and the report says so."""
     from curved_reflections.operators.render_image import render_scene
 
     ball = bpy.data.objects["MirrorSphere"]
@@ -212,7 +215,11 @@ def test_a_view_whose_near_plane_cuts_the_mirror_is_filled_not_traced(fig3, tmp_
     camera.rotation_euler = (np.pi / 2, 0.0, 0.0)
     camera.data.clip_start = 0.1 * radius
     fig3.render.resolution_x, fig3.render.resolution_y = 48, 36
+    sealed = render_scene(fig3, bpy.context.evaluated_depsgraph_get())
+    assert sealed.stats["n_rays"] == 0 and not sealed.stats.get("traced_pixels")
+    bpy.ops.mesh.primitive_cube_add(size=0.2 * radius, location=centre)  # holds the ball open
     near = render_scene(fig3, bpy.context.evaluated_depsgraph_get())
+    assert near.stats["n_rays"] > 0
     assert near.stats["traced_pixels"] == 0 and near.stats["untraced_pixels"] > 0.25 * 48 * 36
     assert bpy.ops.curved_reflections.render_image(filepath=str(tmp_path / "near.png")) == {'FINISHED'}
     assert "mirror pixels without a reflection were filled, not ray traced" in capfd.readouterr().out

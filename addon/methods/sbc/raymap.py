@@ -165,7 +165,7 @@ def reflect_primary_hits(reflector_set, view, bounds, downsample, max_order, hit
     pieces = reflector_set.piece[source][:, None]
     rays = []
     for order in range(1, max_order + 1):
-        valid = reflection_valid(incoming, normal, face)
+        valid = reflection_valid(incoming, normal, face) & ~reflector_set.from_inside(incoming, source)
         keep = np.flatnonzero(valid)
         alive, tail, incoming, source = alive[keep], tail[keep], incoming[keep], source[keep]
         normal, first_point, first_depth, history = normal[keep], first_point[keep], first_depth[keep], history[keep]

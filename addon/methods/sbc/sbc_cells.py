@@ -166,6 +166,7 @@ def _fold_cells(reflector_set: ReflectorSet, ray_map: RayMap, grid: np.ndarray) 
     origins, incoming = ray_map.view.pixel_rays(ray_map.cell_pixels(sub.reshape(-1, 2) / m))
     hits = reflector_set.intersect(origins, incoming)
     ok = (hits.reflector == history[0]) & reflection_valid(incoming, hits.normal, hits.face_normal)
+    ok &= ~reflector_set.from_inside(incoming, hits.triangle)
     ok &= np.isin(reflector_set.piece[np.maximum(hits.triangle, 0)], first_pieces(ray_map, grid))
     tails = origins + np.where(ok, hits.t, 0.0)[:, None] * incoming
     directions = reflect(incoming, hits.normal)

@@ -164,3 +164,42 @@ def test_a_guessed_ring_never_returns_the_source_triangle_of_a_reflected_ray():
     assert plain.hit.mean() > 0.9
     np.testing.assert_array_equal(guessed.triangle, plain.triangle)
     assert not np.any(guessed.triangle == first.triangle[inside])
+
+
+def _mesh(vertices):
+    from types import SimpleNamespace
+
+    return SimpleNamespace(vertices=np.asarray(vertices, dtype=np.float64))
+
+
+def test_a_closed_mirror_holding_no_diffuse_geometry_is_sealed_and_rays_meet_it_from_inside():
+    """A closed mirror is sealed unless a diffuse vertex lies inside it deeper than
+    SEAL_DEPTH (a floor touching it at its lowest point does not count); a ray meets a
+    sealed mirror from inside where it travels along its outward normal there."""
+    reflectors = ReflectorSet([icosphere((0.0, 0.0, 0.0), 1.0, 3), icosphere((5.0, 0.0, 0.0), 1.0, 3)])
+    pole = reflectors.vertices[np.argmin(reflectors.vertices[:50, 2])]
+    reflectors.seal_empty_interiors([_mesh([pole, pole + (3.0, 0.0, 0.0)]), _mesh([(5.2, 0.1, 0.0)])])
+    np.testing.assert_array_equal(reflectors.sealed, [1, 0])  # the second holds a vertex 0.8 deep
+    reflectors.seal_empty_interiors([])  # the meshes changed: sealed again from scratch
+    np.testing.assert_array_equal(reflectors.sealed, [1, 1])
+
+    origins = np.array([[0.0, 0.0, 0.0], [0.0, -3.0, 0.0], [5.0, 0.0, 0.0]])
+    directions = np.array([[0.0, 1.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    hits = reflectors.intersect(origins, directions)
+    assert hits.hit.all()
+    np.testing.assert_array_equal(reflectors.from_inside(directions, hits.triangle), [True, False, True])
+    assert not reflectors.from_inside(directions[:1], [-1]).any()  # no hit
+
+
+def test_an_open_or_inward_wound_mirror_is_sealed_with_its_own_sense():
+    sphere = icosphere((0.0, 0.0, 0.0), 1.0, 2)
+    open_cap = Reflector("Cap", sphere.vertices, sphere.triangles[sphere.vertices[sphere.triangles].mean(axis=1)[:, 2] > 0],
+                         sphere.normals)
+    inward = Reflector("Inward", sphere.vertices, sphere.triangles[:, ::-1], sphere.normals)
+    reflectors = ReflectorSet([open_cap, inward])
+    reflectors.seal_empty_interiors([])
+    np.testing.assert_array_equal(reflectors.sealed, [0, -1])
+    hits = ReflectorSet([inward]).intersect(np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]))
+    reflectors.sealed[:] = (0, -1)
+    triangle = hits.triangle + len(open_cap.triangles)
+    assert reflectors.from_inside(np.array([[0.0, 0.0, 1.0]]), triangle)[0]

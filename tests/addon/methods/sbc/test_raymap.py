@@ -107,3 +107,18 @@ def test_view_rays_missing_the_bounding_sphere_are_not_traced_and_change_nothing
                  "triangle", "blocked"):
         np.testing.assert_array_equal(getattr(culled, name), getattr(full, name), err_msg=name)
     assert raymap.SPHERE_CULL_MARGIN > 0
+
+
+def test_rays_that_start_inside_a_sealed_mirror_end_there():
+    """The view's clip start inside a mirror ball that holds nothing: its view rays meet
+    the ball from inside, where they would bounce without end and show no object; the
+    ray map has none of them. Unsealed (something inside), they are traced as before."""
+    center = np.array([0.0, 0.0, 1.0])
+    reflectors = ReflectorSet([icosphere(center, 1.0, 3)])
+    view = look_at_view(center + (0.0, -1.05, 0.0), center + (0.0, 1.0, 0.0), width=40, height=30,
+                        near=0.1)
+    traced = trace_ray_map(reflectors, view, BOUNDS, downsample=2, max_order=2)
+    assert traced.n_rays > 300
+    reflectors.seal_empty_interiors([])
+    assert reflectors.sealed[0] == 1
+    assert trace_ray_map(reflectors, view, BOUNDS, downsample=2, max_order=2).n_rays == 0

@@ -1,0 +1,141 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Views that used to cost many ordinary frames (issue 18, part 4: "no cliffs"): the
+camera's clip start cutting into the mirror, the eye on its surface, grazing views.
+
+    .venv/bin/python tests/benchmarks/bench_cliffs.py      # docs/benchmarks/cliffs.md
+    .venv/bin/python tests/benchmarks/bench_cliffs.py --quick --out /tmp/cliffs.md
+
+The sbc_fig3 demo (a mirror ball of radius 1 on a checker floor, columns, a cube), its
+mirror in Runtime mode (the sample-based camera: the other modes build nothing per
+view), max order 2, Render Image's frame (``render_image.render_scene``) from the scene
+camera and from each view below, one process, in this order; per view the median of
+``--repeats`` frames after a first one that fills the caches, and the process's peak
+resident memory after it (it only grows, so a row's figure bounds that view's own peak).
+Target: every view within 3x the ordinary frame.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import resource
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import bench_draw  # noqa: E402  (same folder: machine facts with the GPU)
+import bench_sbc  # noqa: E402  (same folder: package import)
+
+DEFAULT_OUT = bench_sbc.REPO_ROOT / "docs" / "benchmarks" / "cliffs.md"
+#: Target: each view's frame over the ordinary view's.
+TARGET_RATIO = 3.0
+#: (name, what it is, eye offset from the ball's centre in radii (x, y, z), yaw in degrees
+#: from looking along +y, clip start in radii or None for the camera's own).
+VIEWS = (
+    ("ordinary", "the scene camera", None, 0.0, None),
+    ("clip start inside", "5 % of a radius from the surface, clip start 0.1 radius (inside the ball)",
+     (0.0, -1.05, 0.0), 0.0, 0.1),
+    ("eye on the surface", "0.2 % of a radius from the surface, the camera's clip start (0.1 m)",
+     (0.0, -1.002, 0.0), 0.0, None),
+    ("along the surface", "1 % of a radius from the surface, looking 80 degrees aside, clip start 0.001 radius",
+     (0.0, -1.01, 0.0), 80.0, 0.001),
+    ("grazing", "3 radii away, the ball's rim in the middle of the view", (1.05, -3.0, 0.0), 0.0, None),
+)
+
+
+def _place(scene, centre: np.ndarray, offset, yaw: float, clip) -> None:
+    camera = scene.camera
+    camera.constraints.clear()
+    camera.location = centre + np.asarray(offset, dtype=np.float64)
+    camera.rotation_euler = (np.pi / 2, 0.0, np.radians(yaw))
+    if clip is not None:
+        camera.data.clip_start = float(clip)
+
+
+def measure(width: int, height: int, repeats: int) -> dict:
+    import bpy
+
+    from curved_reflections.operators import demo_scenes
+    from curved_reflections.operators.gpu_init import ensure_gpu
+    from curved_reflections.operators.render_image import render_scene
+
+    ensure_gpu()
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    scene = demo_scenes.build("sbc_fig3", bpy.context.scene, width, height)
+    ball = bpy.data.objects["MirrorSphere"]
+    ball.curved_reflections.mode = 'RUNTIME'
+    scene.curved_reflections.max_order = 2
+    centre, radius = np.array(ball.matrix_world.translation), 0.5 * max(ball.dimensions)
+    rows = []
+    for name, what, offset, yaw, clip in VIEWS:
+        if offset is not None:
+            _place(scene, centre, radius * np.asarray(offset), yaw, None if clip is None else clip * radius)
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        result = render_scene(scene, depsgraph)  # caches filled (shaders, capture, plan)
+        seconds = []
+        for _ in range(repeats):
+            start = time.perf_counter()
+            result = render_scene(scene, depsgraph)
+            seconds.append(time.perf_counter() - start)
+        rows.append({"name": name, "what": what, "seconds": statistics.median(seconds),
+                     "sbc": result.seconds.get("sbc", 0.0), "draw": result.seconds.get("draw", 0.0),
+                     "rays": int(result.stats.get("n_rays", 0)), "sheets": int(result.stats.get("n_sheets", 0)),
+                     "traced": int(result.stats.get("traced_pixels") or 0),
+                     "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0})
+    return {"width": width, "height": height, "repeats": repeats, "rows": rows}
+
+
+def report(result: dict, command: str) -> str:
+    rows = result["rows"]
+    ordinary = rows[0]["seconds"]
+    lines = [
+        "# Views without cliffs",
+        "",
+        f"Generated {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC by `{command}` on "
+        f"{bench_draw._machine()}.",
+        "",
+        f"sbc_fig3 at {result['width']}x{result['height']}, the mirror ball in Runtime mode, max order 2; Render "
+        f"Image's frame (`render_image.render_scene`), median of {result['repeats']} after a first one. Peak: the "
+        "process's resident memory after the view (it only grows).",
+        "",
+        "| view | where the camera is | s per frame | / ordinary | camera s | drawing s | rays | sheets | "
+        "traced px | peak MB |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in rows:
+        lines.append(f"| {r['name']} | {r['what']} | {r['seconds']:.2f} | {r['seconds'] / ordinary:.2f}x | "
+                     f"{r['sbc']:.2f} | {r['draw']:.2f} | {r['rays']:,} | {r['sheets']:,} | {r['traced']:,} | "
+                     f"{r['peak_mb']:.0f} |")
+    worst = max(r["seconds"] for r in rows) / ordinary
+    lines += ["", f"Slowest view: **{worst:.2f}x** the ordinary frame (target <= {TARGET_RATIO:g}x: "
+              f"{'met' if worst <= TARGET_RATIO else 'not met'}).", ""]
+    return "\n".join(lines)
+
+
+def parse_args(argv):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="markdown file to write")
+    parser.add_argument("--width", type=int, default=320)
+    parser.add_argument("--height", type=int, default=240)
+    parser.add_argument("--repeats", type=int, default=3, help="timed frames per view")
+    parser.add_argument("--quick", action="store_true", help="small: 96x72, 1 frame per view")
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.width, args.height, args.repeats = 96, 72, 1
+    return args
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    args = parse_args(argv)
+    bench_sbc.import_package()
+    command = bench_draw.command_line("bench_cliffs.py", argv)
+    return bench_draw.write_report(args.out, report(measure(args.width, args.height, args.repeats), command))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
