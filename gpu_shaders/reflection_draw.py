@@ -215,6 +215,8 @@ class ReflectionRenderer:
         self.sbc = CameraProjections(self.geometry, self.per_frame_reflectors, self.counts, mixed_subdivisions,
                                      cull, polish, reflectors)
         self._reflectors, self._meshes = list(reflectors), list(meshes)
+        #: The mirrors' ray-tracing set when the caller has one (its band tracer shares it).
+        self._reflector_set = reflector_set
         self._batches = None
         self._targets = None
         self._tracer = None
@@ -507,7 +509,7 @@ class ReflectionRenderer:
         import gpu
 
         if self._tracer is None:
-            self._tracer = band_trace.BandTracer(self._reflectors, self._meshes)
+            self._tracer = band_trace.BandTracer(self._reflectors, self._meshes, self._reflector_set)
         labels = read_texture(targets.prepass_labels, targets.width, targets.height)[..., 0]
         searched = np.isin(np.rint(labels) - 1, self._reflectors_of("searched_reflectors"))
         drawn = read_texture(targets.reflection_colors, targets.width, targets.height)[..., 3] > 0.5

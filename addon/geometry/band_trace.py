@@ -25,7 +25,7 @@ import dataclasses
 
 import numpy as np
 
-from .raytrace import ReflectorSet, reflect, reflection_valid
+from .raytrace import RayHits, ReflectorSet, reflect, reflection_valid
 from ..scene import Reflector, vertex_normals
 
 #: Ambient share of the headlight Lambert shading (SBC V-C; glsl/reflection_shading.glsl).
@@ -58,30 +58,52 @@ def sample_image(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
 
 
 class BandTracer:
-    """Reflectors and diffuse meshes in one BVH (``addon.raytrace.ReflectorSet``).
-
-    The diffuse meshes join the set as pseudo-reflectors (their normals are never
-    used: a hit on one ends the path), after the reflectors, so a hit's owner below
-    the number of reflectors is a mirror.
+    """Reflectors and diffuse meshes, traced together: the mirrors' ``ReflectorSet``
+    (``mirrors``, the renderer's own when given: a big mirror's tree is built once) and
+    one of the diffuse meshes as pseudo-reflectors (their normals are never used: a hit
+    on one ends the path). Hits are numbered as in one set, the diffuse meshes after
+    the mirrors: a hit's owner below the number of reflectors is a mirror.
     """
 
-    def __init__(self, reflectors, meshes):
+    def __init__(self, reflectors, meshes, mirrors: ReflectorSet | None = None):
         self.n_reflectors = len(reflectors)
         pseudo = []
         for m in meshes:
             normals = m.normals if getattr(m, "normals", None) is not None else vertex_normals(m.vertices, m.triangles)
             normals = np.where((np.linalg.norm(normals, axis=1) > 1e-8)[:, None], normals, [0.0, 0.0, 1.0])
             pseudo.append(Reflector(f"{m.name} (diffuse)", m.vertices, m.triangles, normals))
-        self.everything = ReflectorSet(list(reflectors) + pseudo)
-        # The mirrors alone, first in ``everything``: the same triangle and owner indices.
-        self.mirrors = ReflectorSet(list(reflectors)) if reflectors else None
+        if mirrors is None and reflectors:
+            mirrors = ReflectorSet(list(reflectors))
+        self.mirrors = mirrors
+        self.diffuse = ReflectorSet(pseudo) if pseudo else None
+        self.n_mirror_triangles = 0 if mirrors is None else len(mirrors.triangles)
         self.meshes = list(meshes)
-        self.offsets = np.cumsum([0] + [len(r.vertices) for r in list(reflectors) + pseudo])
         self.mesh_colors = (np.concatenate([np.asarray(m.colors, dtype=np.float64) for m in meshes])
                             if meshes else np.zeros((0, 4)))
         self.mesh_uvs = (np.concatenate([np.zeros((len(m.vertices), 2)) if m.uvs is None else m.uvs for m in meshes])
                          if meshes else np.zeros((0, 2)))
         self.vertex_mesh = np.repeat(np.arange(len(meshes)), [len(m.vertices) for m in meshes])
+
+    def intersect(self, origins, directions, source_triangles=None, mirrors_only: bool = False):
+        """The rays' nearest hits (``raytrace.RayHits``) on a mirror or, unless
+        ``mirrors_only``, a diffuse mesh nearer; ``source_triangles``: the mirror
+        triangles the rays leave."""
+        if self.mirrors is not None:
+            hits = self.mirrors.intersect(origins, directions, source_triangles=source_triangles)
+        else:
+            hits = RayHits(np.full(len(origins), np.inf), np.full(len(origins), -1),
+                           np.full(len(origins), -1), np.full((len(origins), 3), np.nan),
+                           np.full((len(origins), 3), np.nan), np.full((len(origins), 3), np.nan),
+                           np.full((len(origins), 3), np.nan))
+        if mirrors_only or self.diffuse is None:
+            return hits
+        nearer = self.diffuse.intersect(origins, directions, hits.t)
+        rays = np.flatnonzero(nearer.hit & (nearer.t < hits.t))
+        for column in dataclasses.fields(hits):
+            getattr(hits, column.name)[rays] = getattr(nearer, column.name)[rays]
+        hits.triangle[rays] += self.n_mirror_triangles
+        hits.reflector[rays] += self.n_reflectors
+        return hits
 
     def trace(self, view, pixels: np.ndarray, max_order: int, world_color, on_mirrors: bool = False) -> np.ndarray:
         """Linear RGB seen through pixel centres ``pixels`` (K, 2), mirrors included, and in
@@ -103,7 +125,7 @@ class BandTracer:
             return out
         origins, directions = view.pixel_rays(pixels)
         alive = np.arange(len(pixels))
-        hits = self._first_hits(origins, directions, on_mirrors and self.mirrors is not None)
+        hits = self._first_hits(origins, directions, on_mirrors)
         for order in range(max_order + 1):
             hit = hits.hit
             owner = np.where(hit, hits.reflector, -1)
@@ -122,17 +144,18 @@ class BandTracer:
             alive = alive[keep]
             origins = hits.position[keep]
             directions = reflect(directions[keep], hits.normal[keep])
-            hits = self.everything.intersect(origins, directions, source_triangles=hits.triangle[keep])
+            hits = self.intersect(origins, directions, source_triangles=hits.triangle[keep])
         return out
 
     def _first_hits(self, origins, directions, on_mirrors: bool):
-        """The eye rays' first hits: on ``mirrors`` where they meet one, else on everything."""
+        """The eye rays' first hits: on the mirrors alone where they meet one
+        (``on_mirrors``), else on everything."""
         if not on_mirrors:
-            return self.everything.intersect(origins, directions)
-        hits = self.mirrors.intersect(origins, directions)
+            return self.intersect(origins, directions)
+        hits = self.intersect(origins, directions, mirrors_only=True)
         missed = np.flatnonzero(~hits.hit)
         if len(missed):
-            again = self.everything.intersect(origins[missed], directions[missed])
+            again = self.intersect(origins[missed], directions[missed])
             for column in dataclasses.fields(hits):
                 getattr(hits, column.name)[missed] = getattr(again, column.name)
         return hits
@@ -141,7 +164,7 @@ class BandTracer:
                to_eye: np.ndarray) -> np.ndarray:
         """Shaded RGB of diffuse hits: barycentric mix of the triangle's vertex colours, times
         its mesh's image at the interpolated UVs, lit along ``to_eye`` (:func:`shade`)."""
-        corners = self.everything.triangles[triangles] - self.offsets[self.n_reflectors]
+        corners = self.diffuse.triangles[triangles - self.n_mirror_triangles]
         albedo = np.einsum("ij,ijk->ik", barycentric, self.mesh_colors[corners])[:, :3]
         mesh = self.vertex_mesh[corners[:, 0]]
         for index in np.unique(mesh):

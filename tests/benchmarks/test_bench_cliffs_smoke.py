@@ -13,8 +13,8 @@ def test_quick_benchmark_times_every_view_against_the_ordinary_one(run_quick, tm
     run_quick("bench_cliffs.py", out)
     report = out.read_text()
     assert "bench_cliffs.py --quick --out" in report
-    rows = re.findall(r"^\| ([a-z ]+) \| .+? \| ([\d.]+) \| ([\d.]+)x \|", report, flags=re.MULTILINE)
+    rows = re.findall(r"^\| ([a-z0-9 ]+) \| .+? \| ([\d.]+) \| ([\d.]+)x \|", report, flags=re.MULTILINE)
     assert [name for name, _, _ in rows] == ["ordinary", "clip start inside", "eye on the surface",
-                                             "along the surface", "grazing"]
+                                             "along the surface", "grazing", "subdivided ball"]
     assert float(rows[0][2]) == 1.0 and all(float(seconds) > 0 for _, seconds, _ in rows)
     assert re.search(r"Slowest view: \*\*[\d.]+x\*\* the ordinary frame", report)

@@ -33,7 +33,7 @@ def test_mirror_pixels_traced_with_the_mirrors_first_see_what_the_whole_scene_sh
     ys, xs = np.mgrid[0:48, 0:64]
     pixels = np.c_[xs.ravel(), ys.ravel()] + 0.5
     origins, directions = view.pixel_rays(pixels)
-    on_ball = tracer.everything.intersect(origins, directions).reflector == 0
+    on_ball = tracer.intersect(origins, directions).reflector == 0
     assert 100 < on_ball.sum() < len(pixels)
     chosen = pixels[on_ball | (np.arange(len(pixels)) % 7 == 0)]
     world = (0.05, 0.1, 0.2, 1.0)
@@ -41,3 +41,28 @@ def test_mirror_pixels_traced_with_the_mirrors_first_see_what_the_whole_scene_sh
     first = tracer.trace(view, chosen, 1, world, on_mirrors=True)
     np.testing.assert_allclose(first, whole)
     assert np.isfinite(whole[:, 3]).sum() > 50  # reflections of the floor and the blob among them
+
+
+def test_mirrors_and_diffuse_meshes_traced_apart_hit_as_one_set_would():
+    """The tracer keeps the mirrors' set (shared with the caller's when given, so a big
+    mirror's tree is built once) and the diffuse meshes' apart; their nearest hits are
+    those of one set holding both, numbered the same way (diffuse after the mirrors)."""
+    from curved_reflections.addon import Reflector
+    from curved_reflections.addon.geometry.raytrace import ReflectorSet
+
+    reflectors, meshes = _scene()
+    mirrors = ReflectorSet(reflectors)
+    tracer = BandTracer(reflectors, meshes, mirrors)
+    assert tracer.mirrors is mirrors
+    one = ReflectorSet(list(reflectors) + [Reflector(m.name, m.vertices, m.triangles, np.tile([0.0, 0.0, 1.0],
+                                                                                             (len(m.vertices), 1)))
+                                          for m in meshes])
+    rng = np.random.default_rng(3)
+    origins = rng.uniform(-3.0, 3.0, (2000, 3)) + (0.0, -4.0, 1.5)
+    directions = rng.normal(size=(2000, 3)) + (0.0, 3.0, -1.0)
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    ours, expected = tracer.intersect(origins, directions), one.intersect(origins, directions)
+    assert (expected.reflector == 0).sum() > 50 and (expected.reflector > 0).sum() > 50
+    np.testing.assert_array_equal(ours.triangle, expected.triangle)
+    np.testing.assert_array_equal(ours.reflector, expected.reflector)
+    np.testing.assert_allclose(ours.t[ours.hit], expected.t[expected.hit], rtol=1e-12)
