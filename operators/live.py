@@ -65,10 +65,12 @@ import numpy as np
 from ..addon.errors import SceneInputError
 from ..addon.methods.morphing.morphing import ViewOutsideGrid
 from ..addon.geometry.raytrace import ReflectorSet
+from ..addon.methods.sbc.sbc_build import clip_start_inside
 from ..addon.scene import scene_bounds
 from ..addon.view import View
 from . import accuracy, live_workers, methods, morph_bake
 from .capture import capture_scene, view_from_camera
+from .render_image import clip_start_message
 from .render_inputs import BOUNDS_MARGIN, reflector_properties, world_color
 
 #: Seconds after the last view change before its camera is rebuilt.
@@ -324,7 +326,10 @@ def _report_visibility(state: LiveScene, sbc, covering: list) -> None:
         m.index for m in state.plan.perturbation}
     unseen = [name for k, name in enumerate(names) if k not in seen]
     quoted = ", ".join(repr(n) for n in unseen)
-    if not seen:
+    clipped = clip_start_inside(state.reflector_set, sbc.ray_map.view) if sbc is not None else []
+    if clipped:
+        state.report('WARNING', clip_start_message(clipped[0]))
+    elif not seen:
         state.report('WARNING', f"{quoted}: out of view, no reflection to draw (turn the view toward it)")
     elif unseen:
         state.report('INFO', f"{quoted}: out of view; reflections drawn in the others")

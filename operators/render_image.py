@@ -35,7 +35,7 @@ from bpy.props import BoolProperty, StringProperty
 from ..addon.errors import SceneInputError
 from ..addon.metrics import linear_to_srgb
 from ..addon.geometry.raytrace import ReflectorSet
-from ..addon.methods.sbc.sbc_build import build_sample_based_camera, check_view_outside_reflectors
+from ..addon.methods.sbc.sbc_build import build_sample_based_camera, check_view_outside_reflectors, clip_start_inside
 from ..addon.scene import scene_bounds
 from ..addon.view import View
 from . import methods
@@ -175,8 +175,16 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
                "draw": end - built_at, "total": end - start,
                "trace": sbc.stats.get("trace_seconds", float("nan")) if sbc is not None else 0.0}
     stats = {**(sbc.stats if sbc is not None else {}), **state.renderer.stats,
-             "methods": {c.reflector: c.method for c in state.plan.choices}}
+             "methods": {c.reflector: c.method for c in state.plan.choices},
+             "clip_start_inside": clip_start_inside(state.reflector_set, view) if view.is_perspective else []}
     return ReflectionRender(image, view, seconds, stats, sbc)
+
+
+def clip_start_message(name: str) -> str:
+    """What Render Image and the live view say when the view starts inside a sealed mirror
+    (``sbc_build.clip_start_inside``)."""
+    return (f"{name!r}: the camera's clip start cuts into this mirror (or the camera is on it), and inside "
+            "it reflects nothing: move the camera back or lower its Clip Start")
 
 
 def output_path(filepath: str) -> Path:
@@ -295,6 +303,8 @@ class CURVED_REFLECTIONS_OT_render_image(bpy.types.Operator):
         self.report({'INFO'}, f"Rendered {view.width}x{view.height} with reflections to {str(path)!r} in "
                               f"{seconds['total']:.2f} s (camera {seconds['sbc']:.2f} s, "
                               f"drawing {seconds['draw']:.2f} s)")
+        for name in result.stats.get("clip_start_inside", []):
+            self.report({'WARNING'}, clip_start_message(name))
         untraced = result.stats.get("untraced_pixels", 0)
         if untraced:
             self.report({'WARNING'}, f"{untraced} mirror pixels without a reflection were filled, not ray traced "

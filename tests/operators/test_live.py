@@ -242,6 +242,22 @@ def test_background_threads_yield_the_cores_to_drawing():
     assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == main
 
 
+def test_a_view_whose_clip_start_cuts_into_the_sealed_ball_says_so(fig3):
+    """The ball holds nothing, so a view whose near clip plane starts inside it sees only
+    its inside, which reflects nothing: the status line names it and says why."""
+    bpy.ops.curved_reflections.bake()
+    state = live.state_of(fig3)
+    ball = bpy.data.objects["MirrorSphere"]
+    centre, radius = np.array(ball.matrix_world.translation), 0.5 * max(ball.dimensions)
+    inside = look_at_view(centre - (0.0, 1.05 * radius, 0.0), centre, fov_y_deg=30.0, width=WIDTH, height=HEIGHT,
+                          near=0.1 * radius)
+    live._start(state, live.CAMERA_KEY, inside, wait=True)
+    assert state.cameras[live.CAMERA_KEY].sbc.ray_map.n_rays == 0
+    assert state.level == 'WARNING' and "'MirrorSphere': the camera's clip start cuts into this mirror" in state.status
+    live._start(state, live.CAMERA_KEY, _camera_view(fig3), wait=True)
+    assert state.status == "Reflections up to date"
+
+
 def test_a_draw_error_becomes_the_status_line(fig3, monkeypatch):
     bpy.ops.curved_reflections.bake()
     state = live.state_of(fig3)

@@ -217,9 +217,12 @@ def test_a_view_whose_near_plane_cuts_the_mirror_is_filled_not_traced(fig3, tmp_
     fig3.render.resolution_x, fig3.render.resolution_y = 48, 36
     sealed = render_scene(fig3, bpy.context.evaluated_depsgraph_get())
     assert sealed.stats["n_rays"] == 0 and not sealed.stats.get("traced_pixels")
+    assert sealed.stats["clip_start_inside"] == ["MirrorSphere"] and ordinary.stats["clip_start_inside"] == []
+    assert bpy.ops.curved_reflections.render_image(filepath=str(tmp_path / "sealed.png")) == {'FINISHED'}
+    assert "'MirrorSphere': the camera's clip start cuts into this mirror" in capfd.readouterr().out
     bpy.ops.mesh.primitive_cube_add(size=0.2 * radius, location=centre)  # holds the ball open
     near = render_scene(fig3, bpy.context.evaluated_depsgraph_get())
-    assert near.stats["n_rays"] > 0
+    assert near.stats["n_rays"] > 0 and near.stats["clip_start_inside"] == []  # not sealed: traced
     assert near.stats["traced_pixels"] == 0 and near.stats["untraced_pixels"] > 0.25 * 48 * 36
     assert bpy.ops.curved_reflections.render_image(filepath=str(tmp_path / "near.png")) == {'FINISHED'}
     assert "mirror pixels without a reflection were filled, not ray traced" in capfd.readouterr().out

@@ -149,16 +149,33 @@ def check_view_outside_reflectors(reflector_set: ReflectorSet, view: View) -> No
     """
     if not view.is_perspective:
         return
-    directions = np.concatenate([np.eye(3), -np.eye(3), [-view.backward]])
-    origins = np.broadcast_to(view.eye, directions.shape)
+    inside = _enclosing(reflector_set, view.eye, -view.backward)
+    if inside is not None:
+        name = reflector_set.reflectors[inside].name
+        raise SceneInputError(name, "the view is inside this reflector; move the camera outside it")
+
+
+def clip_start_inside(reflector_set: ReflectorSet, view: View) -> list:
+    """Names of the sealed reflectors (``ReflectorSet.seal_empty_interiors``) that the
+    middle of the view's near clip plane lies inside, the eye being outside: the view's
+    rays start in a mirror that reflects nothing inside, and it shows the world colour
+    there (Render Image and the live view say so)."""
+    centre, _ = view.pixel_rays(np.array([[0.5 * view.width, 0.5 * view.height]]))
+    inside = _enclosing(reflector_set, centre[0], -view.backward)
+    return [] if inside is None or not reflector_set.sealed[inside] else [reflector_set.reflectors[inside].name]
+
+
+def _enclosing(reflector_set: ReflectorSet, point, forward) -> int | None:
+    """The reflector around ``point``, if any: rays in every direction (the six axis
+    directions and ``forward``) meet the back of that one reflector first."""
+    directions = np.concatenate([np.eye(3), -np.eye(3), [np.asarray(forward, dtype=np.float64)]])
+    origins = np.broadcast_to(np.asarray(point, dtype=np.float64), directions.shape)
     hits = reflector_set.intersect(origins, directions)
     if not hits.hit.all():
-        return
+        return None
     back = np.einsum("ij,ij->i", reflector_set.face_normals[hits.triangle], directions) > 0
     owners = np.unique(hits.reflector)
-    if back.all() and len(owners) == 1:
-        name = reflector_set.reflectors[int(owners[0])].name
-        raise SceneInputError(name, "the view is inside this reflector; move the camera outside it")
+    return int(owners[0]) if back.all() and len(owners) == 1 else None
 
 
 def _stats(ray_map: RayMap, trees: list, grids: list, seconds: float) -> dict:
