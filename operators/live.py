@@ -472,8 +472,6 @@ def draw(scene, key, view: View) -> bool:
     after a mesh change) and is reused by later draws. Returns whether anything was
     drawn. Raises what drawing raises (the callers catch it).
     """
-    from ..gpu_shaders.methods.projection import SBCTextures
-
     state = state_of(scene)
     if state is None or state.renderer is None or not state.drawing:
         return False
@@ -490,7 +488,7 @@ def draw(scene, key, view: View) -> bool:
             return False
         if state.level == 'ERROR' and "the view is inside" in state.status:
             state.report('INFO', "Reflections up to date")
-        drawn = _draw_with(state, view, None, None)
+        drawn = _draw_with(state, view, None)
         damaged = [grid for grid, _ in covering if grid.failure is not None]
         for grid in damaged:
             morph_bake.note_cache_fault(grid.reflector_name, grid.failure)  # the panel names the file
@@ -504,33 +502,38 @@ def draw(scene, key, view: View) -> bool:
             request_view(state, key, view)
     if camera is None:
         return False
-    if camera.sbc is not None and (camera.source is None or not isinstance(camera.source, SBCTextures)
-                                   and not state.renderer.sbc.holds(camera.source)):
-        camera.source = _projection_source(state, camera)
     camera.last_drawn = time.monotonic()
-    return _draw_with(state, view, camera.source, camera.sbc)
+    return _draw_with(state, view, camera)
 
 
-def _projection_source(state: LiveScene, camera: ViewCamera):
-    """What ``camera`` draws with: the worker's projection, put on the GPU now, while it
-    was made for this renderer and its per-frame passes; else (the meshes changed since,
-    or it was dropped) the camera's GPU textures, which project on this draw."""
+def _projection_source(state: LiveScene, camera: ViewCamera | None):
+    """What ``camera`` draws with (``None`` without a sample-based camera): its source
+    while the renderer keeps that projection, or while it is the camera's GPU textures;
+    else the worker's projection, put on the GPU now, while it was made for this
+    renderer and its per-frame passes; else (the meshes changed since, or it was
+    dropped) the camera's GPU textures, which project on this draw."""
     from ..gpu_shaders.methods.projection import SBCTextures
 
+    if camera is None or camera.sbc is None:
+        return None
+    if isinstance(camera.source, SBCTextures) or state.renderer.sbc.holds(camera.source):
+        return camera.source
     projected, camera.projected = camera.projected, None
     if projected is not None and projected[0] is state.renderer.sbc and state.renderer.sbc.adopt(projected[1]):
-        state.counts["projections"] += 1
-        state.stats["projection_ms"] = 1000.0 * projected[1].stats.get("projection_seconds", 0.0)  # on the worker
-        return projected[1].source
-    return SBCTextures(camera.sbc)
+        camera.source = projected[1].source
+    else:
+        camera.source = SBCTextures(camera.sbc)
+    return camera.source
 
 
-def _draw_with(state: LiveScene, view: View, source, sbc) -> bool:
-    """One draw of ``view`` with a projection source (``None``: the per-frame passes
+def _draw_with(state: LiveScene, view: View, camera: ViewCamera | None) -> bool:
+    """One draw of ``view`` with ``camera``'s projection (``None``: the per-frame passes
     alone); then the morphing nodes around the eye are prefetched."""
     start = time.perf_counter()
-    projections = state.renderer.counts["projections"]
-    state.renderer.draw(view, source, state.world, reflectors_only=True, camera=sbc, accuracy_px=state.settings[2])
+    projections = state.renderer.counts["projections"]  # a projection made or adopted now counts
+    sbc = None if camera is None else camera.sbc
+    state.renderer.draw(view, _projection_source(state, camera), state.world, reflectors_only=True, camera=sbc,
+                        accuracy_px=state.settings[2])
     if state.last_view is None or not _same_view(state.last_view[0], view) or state.last_view[2] is not sbc:
         state.last_view = (view, time.monotonic(), sbc, False)
         ensure_timer()  # the timer checks it once it settles

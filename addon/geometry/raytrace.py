@@ -125,13 +125,12 @@ class ReflectorSet:
         if self._windings is None:
             self._windings = [closed_surfaces.winding(r.vertices, r.triangles) for r in self.reflectors]
         self.sealed[:] = 0
+        diffuse = [np.asarray(m.vertices, np.float64).reshape(-1, 3) for m in meshes]
         for index, (reflector, sense) in enumerate(zip(self.reflectors, self._windings)):
             if sense == 0:
                 continue
             lo, hi = reflector.vertices.min(axis=0), reflector.vertices.max(axis=0)
-            near = [v[np.all((v >= lo) & (v <= hi), axis=1)] for v in (np.asarray(m.vertices, np.float64)
-                                                                       for m in meshes)]
-            near = np.concatenate(near) if near else np.zeros((0, 3))
+            near = np.concatenate([np.zeros((0, 3))] + [v[np.all((v >= lo) & (v <= hi), axis=1)] for v in diffuse])
             if len(near) > SEAL_TESTED_VERTICES or self._holds(reflector, near):
                 continue
             self.sealed[index] = sense
