@@ -155,7 +155,7 @@ def _build_reflected():
     info.vertex_in(5, 'VEC2', "uv")
     info.vertex_out(interface)
     info.fragment_out(0, 'VEC4', "color_out")
-    info.vertex_source(glsl_source("reflection_mesh_vert.glsl"))
+    info.vertex_source(shading_source() + glsl_source("reflection_mesh_vert.glsl"))
     info.fragment_source(reflected_fragment_source())
     return gpu.shader.create_from_info(info)
 

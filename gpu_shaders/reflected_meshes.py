@@ -55,7 +55,7 @@ def reflected_shader():
     sample-based camera's reflected meshes)."""
     import gpu
 
-    from .draw_shaders import reflected_fragment_source, reflected_interface
+    from .draw_shaders import reflected_fragment_source, reflected_interface, shading_source
 
     interface = reflected_interface("curved_reflections_iterative_interface", searched=True)
     info = gpu.types.GPUShaderCreateInfo()
@@ -81,9 +81,8 @@ def reflected_shader():
     info.vertex_in(3, 'VEC2', "uv")
     info.vertex_out(interface)
     info.fragment_out(0, 'VEC4', "color_out")
-    info.vertex_source(glsl_source("iterative_mesh_vert.glsl", {"FOUND_CODE": FOUND_CODE,
-                                                                "FLIPPED_CODE": FLIPPED_CODE,
-                                                                "UNANSWERED_CELLS": f"{UNANSWERED_CELLS:.1f}"}))
+    info.vertex_source(shading_source() + glsl_source("iterative_mesh_vert.glsl", {
+        "FOUND_CODE": FOUND_CODE, "FLIPPED_CODE": FLIPPED_CODE, "UNANSWERED_CELLS": f"{UNANSWERED_CELLS:.1f}"}))
     info.fragment_source(reflected_fragment_source(f"#define SEARCHED\n#define VALID_THRESHOLD {VALID_THRESHOLD}\n"))
     return gpu.shader.create_from_info(info)
 

@@ -53,7 +53,7 @@ void main()
     ndc = (floor(ndc * (0.5 * UNANSWERED_CELLS)) + 0.5) / (0.5 * UNANSWERED_CELLS);
   }
   else if (snap_grid.x > 0.0) {
-    ndc = (floor((ndc * 0.5 + 0.5) * snap_grid) + 0.5) / snap_grid * 2.0 - 1.0;
+    ndc = snapped(ndc, snap_grid);
   }
   gl_Position = clip.w > 0.0 ? vec4(ndc, depth * 2.0 - 1.0, 1.0) : vec4(0.0, 0.0, 1.0, 1.0);
 }

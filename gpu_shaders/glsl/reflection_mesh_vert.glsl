@@ -48,7 +48,7 @@ void main()
     ndc = clip.xy / clip.w;
   }
   if (snap_grid.x > 0.0) {
-    ndc = (floor((ndc * 0.5 + 0.5) * snap_grid) + 0.5) / snap_grid * 2.0 - 1.0;
+    ndc = snapped(ndc, snap_grid);
   }
   gl_Position = vec4(ndc, world_depth.w * 2.0 - 1.0, 1.0);
 }

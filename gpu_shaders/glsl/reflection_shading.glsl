@@ -1,5 +1,5 @@
 /* SPDX-License-Identifier: GPL-3.0-or-later */
-/* Shading shared by the pre-pass, the reflected meshes and the mixed-triangle pass
+/* Shading (and the helpers below) shared by the pre-pass, the reflected meshes and the mixed-triangle pass
  * (gpu_shaders/reflection_draw.py; numpy twin in addon/geometry/band_trace.py, `shade`).
  *
  * SBC paper (Popescu, Sacks, Mei 2006), section V-C: a reflected vertex keeps the data
@@ -38,4 +38,12 @@ vec3 view_ray_point(mat4 inverse_view_projection, vec2 view_size, vec2 pixel, fl
   vec4 far = inverse_view_projection * vec4(ndc, 1.0, 1.0);
   vec3 origin = near.xyz / near.w;
   return origin + first_depth * normalize(far.xyz / far.w - origin);
+}
+
+/* `ndc` moved to the centre of its cell of a grid `cells` across and up the view: the live
+ * view's snapping of reflected vertices within their Accuracy (reflected_meshes.SNAP_SHARE),
+ * so that a triangle inside one cell collapses and is dropped before set-up. */
+vec2 snapped(vec2 ndc, vec2 cells)
+{
+  return (floor((ndc * 0.5 + 0.5) * cells) + 0.5) / cells * 2.0 - 1.0;
 }
