@@ -216,8 +216,7 @@ class CameraProjections:
         """The reflected triangles of ``textures``'s camera, built in ``camera_view``:
         the cached ones when they were made from these textures (one per viewport
         region), else made now."""
-        key = id(textures)
-        cached = self._cache.pop(key, None)
+        cached = self._cache.get(id(textures))
         if cached is None or cached.source is not textures:
             batch = self._vertex_points() if isinstance(textures, projection.SBCTextures) else None
             cached = self._uploaded(self.triangles(textures, camera_view, camera, vertex_batch=batch))
