@@ -15,6 +15,7 @@ with an unanswered corner discarded) and the sample-based camera's fragment stag
 from __future__ import annotations
 
 import functools
+import math
 
 import numpy as np
 
@@ -50,9 +51,10 @@ UNANSWERED_CELLS = 64
 
 
 @functools.cache
-def reflected_shader():
+def reflected_shader(law_test: bool = True, hidden_test: bool = True):
     """The reflected meshes' shader, built on first use (fragment stage shared with the
-    sample-based camera's reflected meshes)."""
+    sample-based camera's reflected meshes), with or without the fragment stage's
+    law-of-reflection and hidden-point tests (:func:`fragment_tests`)."""
     import gpu
 
     from .draw_shaders import reflected_fragment_source, reflected_interface, shading_source
@@ -83,8 +85,23 @@ def reflected_shader():
     info.fragment_out(0, 'VEC4', "color_out")
     info.vertex_source(shading_source() + glsl_source("iterative_mesh_vert.glsl", {
         "FOUND_CODE": FOUND_CODE, "FLIPPED_CODE": FLIPPED_CODE, "UNANSWERED_CELLS": f"{UNANSWERED_CELLS:.1f}"}))
-    info.fragment_source(reflected_fragment_source(f"#define SEARCHED\n#define VALID_THRESHOLD {VALID_THRESHOLD}\n"))
+    defines = f"#define SEARCHED\n#define VALID_THRESHOLD {VALID_THRESHOLD}\n"
+    defines += "#define LAW_TEST\n" * law_test + "#define HIDDEN_TEST\n" * hidden_test
+    info.fragment_source(reflected_fragment_source(defines))
     return gpu.shader.create_from_info(info)
+
+
+def fragment_tests(reflector_index: int, setup: dict) -> tuple[bool, bool]:
+    """(law of reflection, hidden point): which of the fragment stage's tests can drop a
+    fragment of a reflector's answers (``glsl/reflection_mesh_frag.glsl``). The law of
+    reflection guards against a triangle whose corners lie in different sheets of the
+    reflection; a mirror whose images are all mirrored (``setup["mirrored"]``, a convex
+    one) has one sheet. The hidden-point test drops nothing with an infinite
+    ``hidden_fraction`` (morphing's). A test that cannot fail is compiled out rather than
+    skipped by a uniform: llvmpipe runs a branch on a uniform for every fragment anyway,
+    and the two tests cost the morphing pass's reflected meshes a fifth of their time
+    (their texture reads and arithmetic on every fragment, overdraw included)."""
+    return reflector_index not in setup.get("mirrored", frozenset()), math.isfinite(setup["hidden_fraction"])
 
 
 def snap_grid(view_size, snap_px: float) -> tuple:
@@ -175,25 +192,29 @@ class ReflectedMeshes:
         self._ensure()
         if self._batch is None or not answers:
             return
-        shader = reflected_shader()
-        shader.bind()
-        shader.uniform_float("view_projection", view_projection)
-        shader.uniform_int("result_width", self.width)
-        shader.uniform_float("inverse_diameter", setup["inverse_diameter"])
-        shader.uniform_float("order_range", setup["order_range"])
-        shader.uniform_float("camera", setup["camera"])
-        shader.uniform_sampler("vertex_positions", self._positions)
-        shader.uniform_sampler("prepass_labels", targets.prepass_labels)
-        shader.uniform_sampler("prepass_normals", targets.prepass_normals)
-        shader.uniform_float("reflection_cosine", setup["reflection_cosine"])
-        shader.uniform_float("snap_grid", snap_grid(setup["view_size"], setup.get("snap_px", 0.0)))
         mirrored = setup.get("mirrored", frozenset())
+        windings = self.geometry.range_windings or (0,) * len(self.geometry.ranges)
         for reflector_index, texture in answers:
+            law_test, hidden_test = fragment_tests(reflector_index, setup)
+            shader = reflected_shader(law_test, hidden_test)
+            shader.bind()
+            shader.uniform_float("view_projection", view_projection)
+            shader.uniform_int("result_width", self.width)
+            shader.uniform_float("inverse_diameter", setup["inverse_diameter"])
+            shader.uniform_float("order_range", setup["order_range"])
+            shader.uniform_sampler("vertex_positions", self._positions)
+            shader.uniform_sampler("prepass_labels", targets.prepass_labels)
+            shader.uniform_float("snap_grid", snap_grid(setup["view_size"], setup.get("snap_px", 0.0)))
             shader.uniform_sampler("search_result", texture)
             shader.uniform_float("reflector_id", float(reflector_index + 1))
-            shader.uniform_float("hidden_tolerance",
-                                 setup["hidden_fraction"] * float(self.geometry.reflector_sizes[reflector_index]))
-            windings = self.geometry.range_windings or (0,) * len(self.geometry.ranges)
+            if law_test or hidden_test:
+                shader.uniform_float("camera", setup["camera"])
+            if law_test:
+                shader.uniform_sampler("prepass_normals", targets.prepass_normals)
+                shader.uniform_float("reflection_cosine", setup["reflection_cosine"])
+            if hidden_test:
+                shader.uniform_float("hidden_tolerance",
+                                     setup["hidden_fraction"] * float(self.geometry.reflector_sizes[reflector_index]))
             for (image, first, count), winding in zip(self.geometry.ranges, windings):
                 gpu.state.face_culling_set(_culled_faces(winding) if reflector_index in mirrored else 'NONE')
                 shader.uniform_int("use_image", int(image >= 0))

@@ -25,10 +25,14 @@
  * Output: one texel per vertex and image slot, (reflector point relative to the
  * renderer's shift, FOUND_CODE or 0), read by iterative_mesh_vert.glsl. */
 
-/* Push constants: n_vertices, positions_width, slot_rows (rows of one slot in a node
- * texture), match_slope (MorphingGrid.match_slope) and active_slots (the most regular
- * images any of the four nodes has of any vertex: the slots past it are empty this
- * frame, neither written nor drawn). The view's parameters, in the uniform block `frame` (struct MorphFrame,
+/* REGULAR_SLOTS and WIDENED_SLOTS: the most regular and widened-chart images any node of
+ * the cell has of any vertex (morph_pass.blend_shader compiles one shader per pair, at
+ * most SLOTS each): every loop over images runs to them, a constant. llvmpipe runs the
+ * code of a branch or a loop iteration whether or not any invocation takes it, so loops
+ * over slots that no node fills cost as much as filled ones (a convex mirror's nodes
+ * fill one of three: the blend took 1.5x as long).
+ * Push constants: n_vertices, positions_width, slot_rows (rows of one slot in a node
+ * texture) and match_slope (MorphingGrid.match_slope). The view's parameters, in the uniform block `frame` (struct MorphFrame,
  * gpu_shaders/methods/morph_pass.py): frame_from_shifted and shifted_from_frame (the grid's rigid
  * frame and the renderer's shift), view_projection (of shifted points), the eye in the
  * frame and match_distance, per node its position in the frame and weight (`nodes`), and
@@ -70,21 +74,23 @@ vec3 unit(vec3 v)
   return v / max(length(v), 1e-30);
 }
 
-/* The nearest present image of `images` (`count` of them) to `reference` within
- * `threshold` that has no nearer one among `others` (`count_others` of them: the
- * reference node's images; mutually nearest, as morphing._match); w 0 where none. */
-vec4 nearest(vec4 images[SLOTS], int count, vec3 reference, float threshold, vec4 others[SLOTS], int count_others)
+/* The nearest present image of `images` (the first `count` of them, at most `bound`, a
+ * constant) to `reference` within `threshold` that has no nearer one among `others`
+ * (`count_others` of them: the reference node's regular images; mutually nearest, as
+ * morphing._match); w 0 where none. */
+vec4 nearest(vec4 images[SLOTS], const int bound, int count, vec3 reference, float threshold, vec4 others[SLOTS],
+             int count_others)
 {
   float best = 1e30;
   vec4 chosen = vec4(0.0);
-  for (int j = 0; j < SLOTS; j++) {
+  for (int j = 0; j < bound; j++) {
     float d = distance(images[j].xyz, reference);
     if (j < count && images[j].w > 0.5 && d < best) {
       best = d;
       chosen = images[j];
     }
   }
-  for (int j = 0; j < SLOTS; j++) {
+  for (int j = 0; j < REGULAR_SLOTS; j++) {
     if (j < count_others && others[j].w > 0.5 && distance(others[j].xyz, chosen.xyz) < best) {
       best = 1e30;
     }
@@ -97,16 +103,20 @@ vec4 nearest(vec4 images[SLOTS], int count, vec3 reference, float threshold, vec
 vec4 match_node(int n, vec4 regular[SLOTS], ivec2 texel, vec3 reference, float threshold, vec4 others[SLOTS],
                 int count_others)
 {
-  vec4 found = nearest(regular, int(frame.node_slots[n].x), reference, threshold, others, count_others);
+  vec4 found = nearest(regular, REGULAR_SLOTS, int(frame.node_slots[n].x), reference, threshold, others, count_others);
+#if WIDENED_SLOTS > 0
   int widened = int(frame.node_slots[n].y);
   if (found.w > 0.5 || widened == 0) {
     return found;
   }
   vec4 extended[SLOTS];
   for (int s = 0; s < SLOTS; s++) {
-    extended[s] = s < widened ? node_image(n, SLOTS + s, texel) : vec4(0.0);
+    extended[s] = s < WIDENED_SLOTS && s < widened ? node_image(n, SLOTS + s, texel) : vec4(0.0);
   }
-  return nearest(extended, widened, reference, threshold, others, count_others);
+  return nearest(extended, WIDENED_SLOTS, widened, reference, threshold, others, count_others);
+#else
+  return found;
+#endif
 }
 
 /* The surface point for chart (u, v): position, and the unnormalised tangents. */
@@ -142,7 +152,7 @@ void main()
     bool has = false;
     int regular = int(frame.node_slots[n].x);
     for (int s = 0; s < SLOTS; s++) {
-      images[n][s] = s < regular ? node_image(n, s, texel) : vec4(0.0);
+      images[n][s] = s < REGULAR_SLOTS && s < regular ? node_image(n, s, texel) : vec4(0.0);
       has = has || images[n][s].w > 0.5;
     }
     if (has && frame.nodes[n].w > heaviest) {
@@ -151,7 +161,7 @@ void main()
     }
   }
 
-  for (int k = 0; k < active_slots; k++) {
+  for (int k = 0; k < REGULAR_SLOTS; k++) {
     vec4 answer = vec4(0.0);
     vec4 own = reference >= 0 ? images[reference][k] : vec4(0.0);
     if (own.w > 0.5) {
@@ -221,10 +231,11 @@ void main()
         fit_solve();
         float c[6] = float[6](fit_b0, fit_b1, fit_b2, fit_b3, fit_b4, fit_b5);
 
+        /* Newton's steps; the residual where they end decides (below, once: llvmpipe would
+         * run a test inside the loop on every step). */
         vec2 uv = vec2(0.0);
-        vec2 residual = vec2(0.0);
-        bool settled = false;
-        for (int iteration = 0; iteration <= SURFACE_ITERATIONS; iteration++) {
+        bool singular = false;
+        for (int iteration = 0; iteration < SURFACE_ITERATIONS; iteration++) {
           vec3 x = surface_point(c, origin, spread, t1, t2, normal, uv);
           vec3 ta = t1 + (c[1] + c[3] * uv.x + c[4] * uv.y) * normal;
           vec3 tb = t2 + (c[2] + c[4] * uv.x + c[5] * uv.y) * normal;
@@ -233,29 +244,32 @@ void main()
           to_eye /= le;
           to_point /= lp;
           vec3 bisector = to_eye + to_point;
-          residual = vec2(dot(bisector, ta), dot(bisector, tb));
-          if (iteration == SURFACE_ITERATIONS || settled) {
-            fitted_normal = unit(cross(ta, tb));
-            x = surface_point(c, origin, spread, t1, t2, normal, uv);
-            ok = max(abs(residual.x), abs(residual.y)) < SURFACE_RESIDUAL && dot(uv, uv) <= SURFACE_REACH * SURFACE_REACH
-                 && !any(isnan(x)) && !any(isinf(x));
-            if (ok) {
-              blended = x;
-            }
-            break;
-          }
+          vec2 residual = vec2(dot(bisector, ta), dot(bisector, tb));
           vec3 d_bu = -spread * bisector_derivative(to_eye, le, to_point, lp, ta);
           vec3 d_bv = -spread * bisector_derivative(to_eye, le, to_point, lp, tb);
           float bn = dot(bisector, normal);
           mat2 jacobian = mat2(dot(d_bu, ta) + bn * c[3], dot(d_bu, tb) + bn * c[4],
                                dot(d_bv, ta) + bn * c[4], dot(d_bv, tb) + bn * c[5]);
-          float det = determinant(jacobian);
-          if (abs(det) < 1e-30) {
+          if (abs(determinant(jacobian)) < 1e-30) {
+            singular = true;
             break;
           }
           vec2 step = inverse(jacobian) * residual;
           uv = clamp(uv - step, vec2(-4.0), vec2(4.0));
-          settled = max(abs(step.x), abs(step.y)) < SURFACE_SETTLED;
+          if (max(abs(step.x), abs(step.y)) < SURFACE_SETTLED) {
+            break;
+          }
+        }
+        vec3 x = surface_point(c, origin, spread, t1, t2, normal, uv);
+        vec3 ta = t1 + (c[1] + c[3] * uv.x + c[4] * uv.y) * normal;
+        vec3 tb = t2 + (c[2] + c[4] * uv.x + c[5] * uv.y) * normal;
+        vec3 bisector = unit(eye - x) + unit(p - x);
+        vec2 residual = vec2(dot(bisector, ta), dot(bisector, tb));
+        ok = !singular && max(abs(residual.x), abs(residual.y)) < SURFACE_RESIDUAL
+             && dot(uv, uv) <= SURFACE_REACH * SURFACE_REACH && !any(isnan(x)) && !any(isinf(x));
+        fitted_normal = singular ? normal : unit(cross(ta, tb));
+        if (ok) {
+          blended = x;
         }
         fitted_normal *= dot(fitted_normal, normal) < 0.0 ? -1.0 : 1.0;
       }

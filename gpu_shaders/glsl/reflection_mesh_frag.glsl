@@ -26,7 +26,7 @@ void main()
   if (abs(label.x - reflector_interp) > 0.5) {
     discard;
   }
-#ifdef SEARCHED
+#ifdef HIDDEN_TEST
   /* A reflector point farther from the eye than the mirror surface the pre-pass saw at
    * this pixel is hidden by the mirror itself (a bump, a handle before the body): the
    * per-frame methods answer a vertex without tracing the eye's ray, so the image of a
@@ -40,7 +40,9 @@ void main()
    * point of the mesh. A triangle whose corners were answered in different sheets of the
    * reflection (two images of a non-convex mirror in one answer slot, across a fold or a
    * crease) stretches over pixels whose reflected rays point elsewhere: dropped there,
-   * instead of a wedge of colour. */
+   * instead of a wedge of colour. The per-frame passes compile it out for a mirror with
+   * one sheet (LAW_TEST, reflected_meshes.fragment_tests). */
+#if !defined(SEARCHED) || defined(LAW_TEST)
   if (first_order_interp > 0.5) {
     vec3 mirror_normal = texelFetch(prepass_normals, ivec2(gl_FragCoord.xy), 0).xyz;
     vec3 incoming = camera.w > 0.5 ? mirror_point_interp - camera.xyz : -camera.xyz;
@@ -49,6 +51,7 @@ void main()
       discard;
     }
   }
+#endif
   vec4 albedo = color_interp;
   if (use_image != 0) {
     albedo *= texture(image, uv_interp);

@@ -71,11 +71,12 @@ def frame_floats(n_nodes: int) -> int:
     return 3 * 16 + 4 + 8 * n_nodes
 
 
-def blend_defines(n_nodes: int = 4) -> dict:
+def blend_defines(n_nodes: int = 4, regular: int = SLOTS, widened: int = SLOTS) -> dict:
     """The engine's constants, as the blend shader's ``#define`` s, for cells of
-    ``n_nodes`` nodes (4: a tetrahedron of the SBC grid; 8: a cube of the octree grid)."""
+    ``n_nodes`` nodes (4: a tetrahedron of the SBC grid; 8: a cube of the octree grid)
+    whose nodes fill at most ``regular`` and ``widened`` image slots."""
     m = morph_surface
-    return {"SLOTS": SLOTS, "NODES": n_nodes, "PARTIAL_WEIGHT": f"{morphing.PARTIAL_WEIGHT:.9e}",
+    return {"SLOTS": SLOTS, "REGULAR_SLOTS": regular, "WIDENED_SLOTS": widened, "NODES": n_nodes, "PARTIAL_WEIGHT": f"{morphing.PARTIAL_WEIGHT:.9e}",
             "SURFACE_NORMAL_MIN": f"{m.SURFACE_NORMAL_MIN:.9e}", "MIN_SURFACE_NODES": m.MIN_SURFACE_NODES,
             "SURFACE_ITERATIONS": m.SURFACE_ITERATIONS, "SURFACE_REACH": f"{m.SURFACE_REACH:.9e}",
             "SURFACE_RESIDUAL": f"{SURFACE_RESIDUAL:.9e}", "SURFACE_SETTLED": f"{SURFACE_SETTLED:.9e}",
@@ -83,15 +84,18 @@ def blend_defines(n_nodes: int = 4) -> dict:
 
 
 @functools.cache
-def blend_shader(n_nodes: int = 4):
-    """The compute shader of the blend for cells of ``n_nodes`` nodes, built on first use."""
+def blend_shader(n_nodes: int = 4, regular: int = SLOTS, widened: int = SLOTS):
+    """The compute shader of the blend for cells of ``n_nodes`` nodes that fill at most
+    ``regular`` and ``widened`` image slots (1 to :data:`SLOTS`, 0 to :data:`SLOTS`),
+    built on first use: llvmpipe pays for every loop iteration over slots, filled or not
+    (``glsl/morph_blend.glsl``), so each pair gets its own (a convex mirror's cells use
+    one or two of them)."""
     import gpu
 
     info = gpu.types.GPUShaderCreateInfo()
     info.push_constant('INT', "n_vertices")
     info.push_constant('INT', "positions_width")
     info.push_constant('INT', "slot_rows")
-    info.push_constant('INT', "active_slots")
     info.push_constant('FLOAT', "match_slope")
     info.typedef_source(FRAME_STRUCT.replace("NODES", str(n_nodes)))
     info.uniform_buf(0, "MorphFrame", "frame")
@@ -101,7 +105,8 @@ def blend_shader(n_nodes: int = 4):
     for k in range(SLOTS):
         info.image(k, 'RGBA32F', 'FLOAT_2D', f"result{k}", qualifiers={'WRITE'})
     info.local_group_size(LOCAL_SIZE, 1)
-    info.compute_source(glsl_source("morph_blend.glsl", blend_defines(n_nodes), normal_equations_glsl(6)))
+    info.compute_source(glsl_source("morph_blend.glsl", blend_defines(n_nodes, regular, widened),
+                                    normal_equations_glsl(6)))
     return gpu.shader.create_from_info(info)
 
 
@@ -314,24 +319,26 @@ class MorphPass(FramePass):
             values = np.concatenate([m.T.reshape(-1) for m in matrices] + [
                 np.r_[eye, morphing.MATCH_FRACTION * grid.reflector_size], node_rows.reshape(-1),
                 slot_rows.reshape(-1)]).astype(np.float32)
-            shader = blend_shader(len(nodes))
+            self._active[k], widened = (max(u[part] for u in used) for part in (0, 1))
+            self._drawn.append(k)
+            if self._active[k] == 0:
+                continue  # no node sees the mirror from any vertex: nothing to blend or draw
+            shader = blend_shader(len(nodes), self._active[k], widened)
             uniforms = self._frame_buffer(len(nodes))
             uniforms.update(gpu.types.Buffer('FLOAT', len(values), values))
             shader.bind()
             shader.uniform_block("frame", uniforms)
             shader.uniform_int("n_vertices", self.meshes.n_vertices)
             shader.uniform_int("positions_width", self.meshes.width)
-            shader.uniform_int("slot_rows", self.meshes.height)
-            self._active[k] = max(u[0] for u in used)
-            shader.uniform_int("active_slots", self._active[k])
+            if self._active[k] > 1 or widened:  # slot 0 alone needs no row offset: compiled out
+                shader.uniform_int("slot_rows", self.meshes.height)
             shader.uniform_float("match_slope", grid.match_slope)
             shader.uniform_sampler("vertex_positions", self.meshes.positions)
             for n, texture in enumerate(textures):
                 shader.uniform_sampler(f"node{n}", texture)
-            for slot, texture in enumerate(self._results[k]):
+            for slot, texture in enumerate(self._results[k][:self._active[k]]):
                 shader.image(f"result{slot}", texture)
             gpu.compute.dispatch(shader, *self.meshes.work_groups(LOCAL_SIZE))
-            self._drawn.append(k)
         self.counts["blends"] += 1
         return [self.grids[k][0].reflector_index for k in self._drawn]
 

@@ -47,11 +47,12 @@ def _reflected_on_the_lower_square(vertices: np.ndarray) -> np.ndarray:
 
 
 def _drawn(hidden_fraction: float, reflection_cosine: float, tilt_degrees: float = 0.0, snap_px: float = 0.0,
-           split: int = 8) -> np.ndarray:
+           split: int = 8, mirrored: frozenset = frozenset()) -> np.ndarray:
     """The reflection target after drawing both patches (``split`` vertices a side) at
     their answers on the plane z = 0, the mirror's normals tilted by ``tilt_degrees``
     (the law of reflection then fails by twice that: as for an answer from another sheet
-    of a curved mirror), the vertices snapped to a grid ``snap_px`` apart (0: not)."""
+    of a curved mirror), the vertices snapped to a grid ``snap_px`` apart (0: not), the
+    mirror declared to have one sheet when ``mirrored`` holds it (0)."""
     import gpu
     from mathutils import Matrix
 
@@ -77,7 +78,7 @@ def _drawn(hidden_fraction: float, reflection_cosine: float, tilt_degrees: float
         gpu.state.depth_test_set('LESS')
         gpu.state.depth_mask_set(True)
         setup = {**renderer.reflected_setup(view, renderer.iterative), "hidden_fraction": hidden_fraction,
-                 "reflection_cosine": reflection_cosine, "snap_px": snap_px}
+                 "reflection_cosine": reflection_cosine, "snap_px": snap_px, "mirrored": mirrored}
         renderer.meshes.draw(view_projection, targets, setup, renderer._image, [(0, answers)])
     return read_texture(targets.reflection_colors, targets.width, targets.height)
 
@@ -118,6 +119,23 @@ def test_a_reflection_the_eye_ray_does_not_reflect_toward_is_not_drawn(gpu_ready
     assert np.all(_at(SEEN_POINTS, _drawn(FramePass.hidden_fraction, FramePass.reflection_cosine, 15.0))[:, 3] == 0.0)
     assert np.all(_at(SEEN_POINTS, _drawn(FramePass.hidden_fraction, -1.0, 15.0))[:, 3] > 0.5)
     assert np.all(_at(SEEN_POINTS, _drawn(FramePass.hidden_fraction, FramePass.reflection_cosine, 5.0))[:, 3] > 0.5)
+
+
+def test_the_fragment_tests_that_cannot_fail_are_compiled_out(gpu_ready):
+    """A mirror with one sheet (``mirrored``: convex) is drawn without the
+    law-of-reflection test, and an unbounded hidden tolerance (morphing's) without the
+    hidden-point test; a mirror that may fold keeps both. Drawn with the normals leaning
+    15 degrees, the test that would drop the patch is not there for the convex mirror."""
+    from curved_reflections.gpu_shaders.frame_pass import FramePass
+    from curved_reflections.gpu_shaders.reflected_meshes import fragment_tests
+
+    finite = {"hidden_fraction": FramePass.hidden_fraction, "mirrored": frozenset({0})}
+    assert fragment_tests(0, finite) == (False, True)
+    assert fragment_tests(1, finite) == (True, True)
+    assert fragment_tests(1, {"hidden_fraction": float("inf")}) == (True, False)
+    convex = _drawn(FramePass.hidden_fraction, FramePass.reflection_cosine, 15.0, mirrored=frozenset({0}))
+    assert np.all(_at(SEEN_POINTS, convex)[:, 3] > 0.5)
+    assert np.all(_at(HIDDEN_POINTS, convex)[:, 3] == 0.0)  # the hidden-point test still runs
 
 
 def test_snapped_reflected_vertices_leave_no_hole_and_move_less_than_a_cell(gpu_ready):
