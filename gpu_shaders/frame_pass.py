@@ -42,6 +42,10 @@ class FramePass:
     #: toward the fragment's point of the mesh (``glsl/reflection_mesh_frag.glsl``; the
     #: sample-based camera's first-order triangles are held to the same).
     reflection_cosine = REFLECTION_COSINE
+    #: The same test in a render (Render Image): a pass whose answers are approximate can
+    #: ask for a tighter one there, where a dropped fragment is traced or shows the world
+    #: rather than a wrong object.
+    rendered_reflection_cosine = REFLECTION_COSINE
 
     #: The Accuracy (px) the pass answers to, which sets the live view's snapping grid
     #: (``reflected_meshes.SNAP_SHARE``); None: the pass's images are not that accurate

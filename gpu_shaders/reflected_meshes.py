@@ -20,6 +20,7 @@ import math
 import numpy as np
 
 from ..addon.methods.iterative import search as search_module
+from .frame_pass import REFLECTION_COSINE
 from .shader_sources import glsl_source
 
 #: Texels per row of the vertex and answer textures.
@@ -94,14 +95,18 @@ def reflected_shader(law_test: bool = True, hidden_test: bool = True):
 def fragment_tests(reflector_index: int, setup: dict) -> tuple[bool, bool]:
     """(law of reflection, hidden point): which of the fragment stage's tests can drop a
     fragment of a reflector's answers (``glsl/reflection_mesh_frag.glsl``). The law of
-    reflection guards against a triangle whose corners lie in different sheets of the
-    reflection; a mirror whose images are all mirrored (``setup["mirrored"]``, a convex
-    one) has one sheet. The hidden-point test drops nothing with an infinite
+    reflection at its usual tolerance (``frame_pass.REFLECTION_COSINE``) guards against a
+    triangle whose corners lie in different sheets of the reflection, and a mirror whose
+    images are all mirrored (``setup["mirrored"]``, a convex one) has one sheet; a
+    tighter tolerance (a render's test of blended answers) can fail on any mirror. The
+    hidden-point test drops nothing with an infinite
     ``hidden_fraction`` (morphing's). A test that cannot fail is compiled out rather than
     skipped by a uniform: llvmpipe runs a branch on a uniform for every fragment anyway,
     and the two tests cost the morphing pass's reflected meshes a fifth of their time
     (their texture reads and arithmetic on every fragment, overdraw included)."""
-    return reflector_index not in setup.get("mirrored", frozenset()), math.isfinite(setup["hidden_fraction"])
+    law_test = (reflector_index not in setup.get("mirrored", frozenset())
+                or setup["reflection_cosine"] > REFLECTION_COSINE)
+    return law_test, math.isfinite(setup["hidden_fraction"])
 
 
 def snap_grid(view_size, snap_px: float) -> tuple:

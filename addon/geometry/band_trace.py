@@ -221,21 +221,61 @@ def band_pixels(labels: np.ndarray, drawn: np.ndarray, radius: int, edges_of_dra
     ``drawn`` (H, W) bool where the reflection pass drew.
     """
     ids = np.rint(labels).astype(np.int64)
-    height, width = ids.shape
-    radius = max(0, int(radius))
-    padded = np.pad(ids, radius, constant_values=-1)
-    padded_drawn = np.pad(np.asarray(drawn, dtype=bool), radius, constant_values=False)
-    near_edge = np.zeros(ids.shape, dtype=bool)
-    for dy in range(-radius, radius + 1):
-        for dx in range(-radius, radius + 1):
-            window = (slice(radius + dy, radius + dy + height), slice(radius + dx, radius + dx + width))
-            near_edge |= padded[window] != ids
-            if edges_of_drawn:
-                near_edge |= padded_drawn[window]
+    drawn = np.asarray(drawn, dtype=bool)
+    near_edge = _near_another_id(ids, radius)
+    if edges_of_drawn:
+        near_edge |= _near(drawn, radius)
     if boundary is not None:
         near_edge |= boundary
-    rows, columns = np.nonzero((ids > 0) & ~drawn & near_edge)
+    return _pixels((ids > 0) & ~drawn & near_edge)
+
+
+def rim_gap_pixels(labels: np.ndarray, drawn: np.ndarray, radius: int) -> np.ndarray:
+    """(K, 2) integer pixels (x, y) of reflector pixels without a drawn reflection within
+    ``radius`` pixels (Chebyshev) both of their footprint's edge and of a drawn
+    reflection: the strip a blended reflection leaves between itself and the mirror's
+    silhouette, where not every node of the eye's cell sees the mirror (a ball's floor
+    along its lower rim). The pixels of a footprint that far from every drawn reflection
+    show the world (a ball's sky), and are left to the composite.
+
+    ``labels`` and ``drawn`` as :func:`band_pixels`."""
+    ids = np.rint(labels).astype(np.int64)
+    drawn = np.asarray(drawn, dtype=bool)
+    return _pixels((ids > 0) & ~drawn & _near_another_id(ids, radius) & _near(drawn, radius))
+
+
+def _pixels(mask: np.ndarray) -> np.ndarray:
+    rows, columns = np.nonzero(mask)
     return np.stack([columns, rows], axis=1)
+
+
+def _window_extremes(values: np.ndarray, radius: int, beyond: int) -> tuple[np.ndarray, np.ndarray]:
+    """(min, max) of integer ``values`` (H, W) over each pixel's square of side
+    2 ``radius`` + 1, ``beyond`` outside the image: one pass per axis (the square is
+    separable), 2 (2 radius + 1) array operations instead of (2 radius + 1)^2."""
+    radius = max(0, int(radius))
+    low, high = values, values
+    for axis in (0, 1):
+        pad = [(radius, radius) if a == axis else (0, 0) for a in range(2)]
+        padded_low, padded_high = (np.pad(v, pad, constant_values=beyond) for v in (low, high))
+        length = values.shape[axis]
+        windows = [tuple(slice(k, k + length) if a == axis else slice(None) for a in range(2))
+                   for k in range(2 * radius + 1)]
+        low, high = padded_low[windows[0]], padded_high[windows[0]]
+        for window in windows[1:]:
+            low, high = np.minimum(low, padded_low[window]), np.maximum(high, padded_high[window])
+    return low, high
+
+
+def _near_another_id(ids: np.ndarray, radius: int) -> np.ndarray:
+    """Pixels within ``radius`` (Chebyshev) of a pixel with another id or of the image edge."""
+    low, high = _window_extremes(ids, radius, -1)
+    return (low != ids) | (high != ids)
+
+
+def _near(mask: np.ndarray, radius: int) -> np.ndarray:
+    """Pixels within ``radius`` (Chebyshev) of a pixel of ``mask``."""
+    return _window_extremes(mask.astype(np.int8), radius, 0)[1] > 0
 
 
 def unreliable_cells(ray_map, trees, mixed=None, folds=None) -> np.ndarray:

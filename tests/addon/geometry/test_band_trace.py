@@ -66,3 +66,28 @@ def test_mirrors_and_diffuse_meshes_traced_apart_hit_as_one_set_would():
     np.testing.assert_array_equal(ours.triangle, expected.triangle)
     np.testing.assert_array_equal(ours.reflector, expected.reflector)
     np.testing.assert_allclose(ours.t[ours.hit], expected.t[expected.hit], rtol=1e-12)
+
+
+def test_rim_gap_pixels_are_the_strip_between_a_reflection_and_the_silhouette():
+    """A round footprint whose reflection covers its lower part but stops 3 pixels short
+    of the silhouette (a blend's strip along a ball's rim), and shows the world above (a
+    ball's sky): the strip is traced, the sky beside the silhouette is not, and of two holes
+    in the reflection the one 4 pixels from the silhouette is, the one 8 pixels in is not."""
+    from curved_reflections.addon.geometry.band_trace import band_pixels, rim_gap_pixels
+
+    size = 41
+    y, x = np.mgrid[0:size, 0:size]
+    distance = np.hypot(x - 20, y - 20)
+    labels = np.where(distance <= 18, 1.0, 0.0)
+    drawn = (distance <= 15) & (y >= 20)
+    drawn[20, 5] = False  # 4 pixels inside the silhouette
+    drawn[30, 20] = False  # 8 pixels inside
+    pixels = {tuple(p) for p in rim_gap_pixels(labels, drawn, 4).tolist()}
+    strip = {(int(i), int(j)) for j, i in zip(*np.nonzero((labels > 0) & ~drawn & (distance > 15) & (y >= 21)))}
+    assert strip <= pixels  # the whole strip below the reflection's rim
+    assert (5, 20) in pixels and (20, 30) not in pixels
+    assert not any(j < 14 for _, j in pixels)  # nothing of the sky more than 4 above the reflection
+    assert (20, 10) not in pixels  # the sky next to nothing drawn
+    # The same strip with band_pixels needs its radius (and takes the sky's rim with it).
+    ring = {tuple(p) for p in band_pixels(labels, drawn, 4).tolist()}
+    assert strip <= ring and any(j < 10 for _, j in ring)
