@@ -99,11 +99,11 @@ def fragment_tests(reflector_index: int, setup: dict) -> tuple[bool, bool]:
     triangle whose corners lie in different sheets of the reflection, and a mirror whose
     images are all mirrored (``setup["mirrored"]``, a convex one) has one sheet; a
     tighter tolerance (a render's test of blended answers) can fail on any mirror. The
-    hidden-point test drops nothing with an infinite
-    ``hidden_fraction`` (morphing's). A test that cannot fail is compiled out rather than
-    skipped by a uniform: llvmpipe runs a branch on a uniform for every fragment anyway,
-    and the two tests cost the morphing pass's reflected meshes a fifth of their time
-    (their texture reads and arithmetic on every fragment, overdraw included)."""
+    hidden-point test drops nothing with an infinite ``hidden_fraction`` (morphing's). A
+    test that cannot fail is compiled out rather than skipped by a uniform: llvmpipe runs
+    a branch on a uniform for every fragment anyway, and the two tests cost the morphing
+    pass's reflected meshes a fifth of their time (their texture reads and arithmetic on
+    every fragment, overdraw included)."""
     law_test = (reflector_index not in setup.get("mirrored", frozenset())
                 or setup["reflection_cosine"] > REFLECTION_COSINE)
     return law_test, math.isfinite(setup["hidden_fraction"])

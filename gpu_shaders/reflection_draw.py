@@ -116,7 +116,8 @@ SEARCHED_BAND_PX = 2
 #: reflection within this many pixels both of its silhouette and of a drawn reflection
 #: (``band_trace.rim_gap_pixels``): near the silhouette not every node of the eye's cell
 #: sees the mirror, and the blend leaves a strip there (sbc_fig3's floor along the ball's
-#: lower rim, up to 6 pixels wide at 480x320: 2.5 % of its mirror pixels wrong).
+#: lower rim at 480x320, up to 6 pixels wide: 1 % of the mirror's pixels on frame 12 of
+#: docs/benchmarks/morph_animation.md).
 RIM_GAP_PX = 6
 
 

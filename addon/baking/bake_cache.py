@@ -10,8 +10,8 @@ grids)::
                                                     arrays) or a ray octree (its rays and leaves)
     <reflector name>-<key[:16]>/node_00013.inside   a node inside the mirror (no camera)
 
-Every file is plain arrays (``np.savez``; node files compressed), read with
-``allow_pickle=False``, and written atomically (a temporary name, then ``os.replace``),
+Every file is plain arrays (``np.savez``; node files compressed, their arrays packed into
+one buffer, ``packed_arrays``), read with ``allow_pickle=False``, and written atomically (a temporary name, then ``os.replace``),
 so that several processes, on one machine or on a render farm's, can bake ranges of
 one grid's nodes into the same folder at once: the manifest is the same bytes whoever
 writes it, a node is either absent or whole, and a node already baked (its file present
@@ -53,6 +53,7 @@ from ..methods.morphing.morph_grid import (NODE_INSIDE, OCTREE, TETRAHEDRAL, Mor
                                            build_node)
 from ..scene import Reflector
 from ..methods.sbc.sbc_arrays import sbc_from_arrays, sbc_to_arrays
+from .packed_arrays import pack_arrays, unpack_arrays
 
 MANIFEST = "grid.npz"
 #: Suffix of a node inside the mirror (no camera: its file holds only the key).
@@ -158,7 +159,7 @@ def write_node(directory: Path, node: int, key: str, arrays: dict | None) -> Non
     else:
         def write(path):
             with open(path, "wb") as stream:
-                np.savez_compressed(stream, key=np.array(key), **arrays)
+                np.savez_compressed(stream, key=np.array(key), **pack_arrays(arrays))
 
         _atomic(node_file(directory, node), write)
 
@@ -261,6 +262,14 @@ def _read(path: Path, object_name: str):
                          f"({type(error).__name__}: {error}); clear it and bake again") from None
 
 
+def read_node_arrays(path: Path, object_name: str = "") -> dict:
+    """A node file's arrays as :func:`write_node` was given them, with its ``key``; a
+    CacheError where the file is unreadable, KeyError or ValueError where its packed
+    arrays are malformed."""
+    data = _read(path, object_name)
+    return {"key": data["key"], **unpack_arrays(data)}
+
+
 class _LazyNodes:
     """Node cameras read from their files on first use; the last few kept. A file that
     cannot be read, or that belongs to another grid, is renamed ``*.damaged`` (the next
@@ -278,7 +287,7 @@ class _LazyNodes:
             return self._cache[node]
         path = node_file(self.directory, node)
         try:
-            data = _read(path, self.object_name)
+            data = read_node_arrays(path, self.object_name)
             if str(data.get("key", "")) != self.key:
                 raise CacheError(self.object_name, "corrupt", f"the morphing cache file {path.name} belongs to "
                                  "another grid")

@@ -77,7 +77,8 @@ def blend_defines(n_nodes: int = 4, regular: int = SLOTS, widened: int = SLOTS) 
     ``n_nodes`` nodes (4: a tetrahedron of the SBC grid; 8: a cube of the octree grid)
     whose nodes fill at most ``regular`` and ``widened`` image slots."""
     m = morph_surface
-    return {"SLOTS": SLOTS, "REGULAR_SLOTS": regular, "WIDENED_SLOTS": widened, "NODES": n_nodes, "PARTIAL_WEIGHT": f"{morphing.PARTIAL_WEIGHT:.9e}",
+    return {"SLOTS": SLOTS, "REGULAR_SLOTS": regular, "WIDENED_SLOTS": widened, "NODES": n_nodes,
+            "PARTIAL_WEIGHT": f"{morphing.PARTIAL_WEIGHT:.9e}",
             "SURFACE_NORMAL_MIN": f"{m.SURFACE_NORMAL_MIN:.9e}", "MIN_SURFACE_NODES": m.MIN_SURFACE_NODES,
             "SURFACE_ITERATIONS": m.SURFACE_ITERATIONS, "SURFACE_REACH": f"{m.SURFACE_REACH:.9e}",
             "SURFACE_RESIDUAL": f"{SURFACE_RESIDUAL:.9e}", "SURFACE_SETTLED": f"{SURFACE_SETTLED:.9e}",
