@@ -113,16 +113,19 @@ def test_render_image_draws_from_the_grid_on_the_gpu(fig3_morphing):
     assert morphed.stats["methods"] == {"MirrorSphere": "MORPHING"}
     assert "n_rays" not in morphed.stats  # no camera built (the on-demand grid builds its nodes meanwhile)
     assert state.renderer.morph.counts == {"blends": 1, "node_projections": 4}
-    # The test grid is coarse (48-pixel faces, 7 x 7 x 5 nodes): measured, 2.2 % of the
+    # The test grid is coarse (48-pixel faces, 7 x 7 x 5 nodes): measured, 2.0 % of the
     # image (the ball fills about half of it) differs from the runtime camera's (3.2 %
-    # before images were matched across nodes by MATCH_SLOPE), 2.0 % with every gap traced.
+    # before images were matched across nodes by MATCH_SLOPE, 2.2 % before the strip along
+    # the rim was traced and blended fragments held to 6 degrees), 1.98 % with every gap
+    # traced.
     differing = np.abs(morphed.image[..., :3] - runtime.image[..., :3]).max(axis=2) > 0.05
     assert differing.mean() < 0.03
-    # The band along the silhouette without a reflection is traced, every gap on request only.
+    # The band along the silhouette without a reflection and the strip between it and the
+    # reflection are traced, every gap on request only.
     traced = render_scene(scene, bpy.context.evaluated_depsgraph_get(), trace_gaps=True, state=state)
     assert 100 < morphed.stats["traced_pixels"] < 0.5 * traced.stats["traced_pixels"]
     closer = np.abs(traced.image[..., :3] - runtime.image[..., :3]).max(axis=2) > 0.05
-    assert closer.mean() < 0.95 * differing.mean()  # the traced gaps are what the runtime camera draws
+    assert closer.mean() < differing.mean()  # the traced gaps are what the runtime camera draws
     camera.location.x += 0.01
     render_scene(scene, bpy.context.evaluated_depsgraph_get(), state=state)
     assert state.reused == 2 and state.renderer.morph.counts["blends"] == 3
