@@ -45,6 +45,10 @@ from .properties import BLEND_RELATIVE
 from .reference_render import write_png
 from .render_inputs import BOUNDS_MARGIN, reflector_properties, world_color
 
+#: Node projections an animation keeps queued on the prefetching thread (one runs).
+PREFETCHED_NODES = 2
+
+
 @dataclass
 class ReflectionRender:
     """One rendered frame: (H, W, 4) float32 linear RGBA, rows bottom to top, and timings.
@@ -117,7 +121,9 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
     that got none (see ``gpu_shaders/reflection_draw.py``), ``trace_gaps`` every pixel of a
     mirror drawn from its morphing grid that the blend left without a reflection (exact,
     and several times slower: see docs/benchmarks/morph_animation.md). ``state`` keeps the
-    renderer and the plan between the frames of an animation. Bad input (no camera, no
+    renderer and the plan between the frames of an animation, and with it the grids' nodes
+    around the camera are projected ahead on a worker thread while the frame is drawn
+    (:func:`_prefetch_nodes`). Bad input (no camera, no
     reflector, a reflector without faces, the camera inside a reflector) raises
     :class:`SceneInputError` naming the object; the GPU is initialised if needed.
     """
@@ -127,6 +133,7 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
     max_order = settings.max_order if max_order is None else max_order
     downsample = settings.downsample if downsample is None else downsample
     accuracy_px = settings.accuracy_px if accuracy_px is None else accuracy_px
+    animating = state is not None
     state = FrameState() if state is None else state
     start = time.perf_counter()
     view = view_from_camera(scene.camera, scene, depsgraph)
@@ -167,6 +174,8 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
         bounds = scene_bounds(captured.reflectors, captured.meshes, BOUNDS_MARGIN * float(np.linalg.norm(hi - lo)))
         sbc = build_sample_based_camera(state.reflector_set, view, bounds, max_order=max_order,
                                         downsample=downsample, accuracy_px=accuracy_px)
+    if animating:
+        _prefetch_nodes(state.renderer.morph, view)
     built_at = time.perf_counter()
     image = state.renderer.render(view, sbc, world_color(scene), trace_edges=trace_edges, trace_gaps=trace_gaps)
     end = time.perf_counter()
@@ -178,6 +187,20 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
              "methods": {c.reflector: c.method for c in state.plan.choices},
              "clip_start_inside": clip_start_inside(state.reflector_set, view) if view.is_perspective else []}
     return ReflectionRender(image, view, seconds, stats, sbc)
+
+
+def _prefetch_nodes(morph, view) -> None:
+    """Upload the node images a worker projected during the last frame, and start the next
+    ones around this frame's camera (``MorphPass.prefetch``): a frame's band trace and
+    capture keep one core busy and leave the other to the worker, and an octree grid's
+    node costs 0.2 s of numpy (sbc_fig3), four or eight of them a frame that enters a new
+    cell (docs/benchmarks/octree_animation.md). Only the grids whose nodes the main thread
+    projects the same way (``exact``), so that a frame's image does not depend on which
+    nodes were ready."""
+    from .live_workers import prefetcher
+
+    morph.collect()
+    morph.prefetch(view, prefetcher().submit, max_pending=PREFETCHED_NODES, exact=True)
 
 
 def clip_start_message(name: str) -> str:

@@ -39,6 +39,7 @@ import hashlib
 import os
 import re
 import shutil
+import threading
 import zipfile
 from collections import OrderedDict
 from dataclasses import dataclass
@@ -279,12 +280,15 @@ class _LazyNodes:
         self.directory, self.object_name, self.key = directory, object_name, key
         self.from_arrays = from_arrays
         self._cache: OrderedDict = OrderedDict()
+        # A thread prefetching node images and the main thread read nodes at once.
+        self._lock = threading.Lock()
 
     def __getitem__(self, node: int) -> NodeCamera:
         node = int(node)
-        if node in self._cache:
-            self._cache.move_to_end(node)
-            return self._cache[node]
+        with self._lock:
+            if node in self._cache:
+                self._cache.move_to_end(node)
+                return self._cache[node]
         path = node_file(self.directory, node)
         try:
             data = read_node_arrays(path, self.object_name)
@@ -299,9 +303,10 @@ class _LazyNodes:
                 f"the morphing cache file {path.name} is incomplete ({type(error).__name__}: {error})")
             raise CacheError(self.object_name, "corrupt", f"{problem} (in {self.directory}); runtime mode until "
                              "Bake Morphing Grid builds the node again") from None
-        self._cache[node] = camera
-        while len(self._cache) > NODES_IN_MEMORY:
-            self._cache.popitem(last=False)
+        with self._lock:
+            self._cache[node] = camera
+            while len(self._cache) > NODES_IN_MEMORY:
+                self._cache.popitem(last=False)
         return camera
 
 

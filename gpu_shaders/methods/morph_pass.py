@@ -365,16 +365,20 @@ class MorphPass(FramePass):
             self._uniforms[n_nodes] = gpu.types.GPUUniformBuf(gpu.types.Buffer('FLOAT', size))
         return self._uniforms[n_nodes]
 
-    def prefetch(self, view, submit, max_pending: int = 1) -> int:
+    def prefetch(self, view, submit, max_pending: int = 1, exact: bool = False) -> int:
         """Start projecting nodes not yet on the GPU around each covering grid's eye (the
         4 x 4 x 4 nodes of its cell and the cells beside it, nearest first), so that
         moving on rarely waits: ``submit(function, *args)`` runs the projection (in numpy,
         no GPU: on a worker thread) and returns a ``Future``; at most ``max_pending`` run
         at once, and a prefetch never evicts. :meth:`collect` uploads the finished ones.
-        Returns how many were started."""
+        ``exact``: only grids whose nodes the main thread would project the same way
+        (``projects_nodes_on_gpu`` false), so that a render is the same whether a node was
+        prefetched or not. Returns how many were started."""
         started = 0
         for k, (_, _, _, frame) in self.covering(view):
             grid = self.grids[k][0]
+            if exact and grid.projects_nodes_on_gpu:
+                continue
             for node in grid.grid.nodes_around(morph_grid.to_frame(frame, view.eye[None])[0]):
                 key = (k, int(node))
                 if len(self._pending) >= max_pending:

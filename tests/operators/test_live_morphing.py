@@ -129,18 +129,23 @@ def test_render_image_draws_from_the_grid_on_the_gpu(fig3_morphing):
     camera.location.x += 0.01
     render_scene(scene, bpy.context.evaluated_depsgraph_get(), state=state)
     assert state.reused == 2 and state.renderer.morph.counts["blends"] == 3
+    # Its nodes project on the GPU: an animation prefetches none on the worker thread,
+    # whose numpy projection would differ by float32's rounding.
+    assert state.renderer.morph.prefetching == 0
 
 
 def test_render_image_in_octree_mode_draws_from_ray_octrees_on_the_gpu(fig3_morphing, monkeypatch):
     """Octree mode: the grid of ray octrees (Martin & Popescu 2004) is blended over the
     eight nodes of the camera's cell on the GPU, and the image is the Runtime mode's but
-    for a few per cent of its pixels, as the tetrahedral grid's above."""
+    for a few per cent of its pixels, as the tetrahedral grid's above. An animation
+    projects the nodes around the camera ahead on a worker thread, and a frame is the
+    same whether they were ready or not."""
     from dataclasses import replace
 
     from mathutils import Vector
 
     from curved_reflections.addon.methods.octree import OctreeGrid, octree_grid_on_demand
-    from curved_reflections.operators.render_image import FrameState, render_scene
+    from curved_reflections.operators.render_image import PREFETCHED_NODES, FrameState, render_scene
 
     def octree_on_demand(reflector, matrix, scene, reflector_index=0):
         local = morph_grid.reflector_in_frame(reflector, morph_grid.rigid_frame(matrix))
@@ -163,6 +168,16 @@ def test_render_image_in_octree_mode_draws_from_ray_octrees_on_the_gpu(fig3_morp
     assert state.renderer.morph.counts == {"blends": 1, "node_projections": 8}
     differing = np.abs(octree.image[..., :3] - runtime.image[..., :3]).max(axis=2) > 0.05
     assert differing.mean() < 0.05  # measured: 3.8 % (the rim of the ball, where rays graze)
+
+    morph = state.renderer.morph
+    assert morph.prefetching == PREFETCHED_NODES
+    for _, future in list(morph._pending.values()):
+        future.result(timeout=300)
+    camera.location.x += 0.01
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    moved = render_scene(scene, depsgraph, state=state)
+    assert morph.counts["node_projections"] == 8 + PREFETCHED_NODES  # collected, none projected again
+    np.testing.assert_array_equal(moved.image, render_scene(scene, depsgraph).image)
 
 
 def test_live_view_prefetches_the_nodes_around_the_eye(fig3_morphing):

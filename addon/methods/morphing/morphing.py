@@ -216,6 +216,13 @@ class MorphingGrid:
         images = np.concatenate(parts, axis=0).transpose(1, 0, 2)
         return compact_images(images, self._duplicate_tolerance(node, images))
 
+    @property
+    def projects_nodes_on_gpu(self) -> bool:
+        """Whether :meth:`node_slots` projects on the GPU by default (``face_images`` set):
+        a projection on a thread without the GPU (``project_face``, numpy) then differs
+        from it by float32's rounding."""
+        return self.face_images is not None
+
     def node_slots(self, node: int, points: np.ndarray, slots: int, face_images=None) -> np.ndarray:
         """(P, 2 slots, 3): the first ``slots`` distinct images of each point (frame
         coordinates) at one node, then the first ``slots`` of its widened charts (remedy

@@ -67,6 +67,11 @@ class OctreeGrid(MorphingGrid):
             raise ViewOutsideGrid(self.reflector_name, "the view's grid cell touches the inside of the mirror")
         return cell, nodes, weights, frame
 
+    @property
+    def projects_nodes_on_gpu(self) -> bool:
+        """Ray octrees project in numpy on any thread (``face_images`` is unused)."""
+        return False
+
     def _node_images(self, node: int, points: np.ndarray, face_images=None):
         """(P, K, 3) distinct first reflector points of each point at one node (its ray
         octree; ``face_images`` is the tetrahedral grid's and unused here)."""
