@@ -86,6 +86,7 @@ import time
 import numpy as np
 
 from ..addon.geometry import band_trace, subdivision
+from ..addon.geometry.closed_surfaces import ConvexMirrors
 from . import draw_shaders
 from .methods import projection
 from .draw_geometry import prepare_geometry
@@ -161,6 +162,12 @@ class FrameTargets:
         return self._output
 
 
+def _showing(labels: np.ndarray, reflectors) -> np.ndarray:
+    """(H, W) bool: the pixels whose pre-pass id (``labels``: reflector index + 1, 0 for
+    none) is one of ``reflectors``."""
+    return np.isin(np.rint(labels) - 1, list(reflectors))
+
+
 def _scissor_set(box: tuple | None) -> None:
     """The bound framebuffer's scissor (Blender keeps it per framebuffer): ``box`` (x, y,
     width, height), or none."""
@@ -210,7 +217,8 @@ class ReflectionRenderer:
         #: (``addon.methods.iterative.IterativeReflector`` each); the others by ``textures``.
         self.iterative = IterativePass(self.geometry, iterative, self.meshes, len(reflectors))
         #: The reflectors drawn from their morphing grids every frame (views inside a grid).
-        self.morph = MorphPass(self.geometry, morph, self.meshes, morph_budget_mb, accuracy_px, reflectors)
+        convex = ConvexMirrors(reflectors)  # tested once, for the morphing pass and the cameras
+        self.morph = MorphPass(self.geometry, morph, self.meshes, morph_budget_mb, accuracy_px, convex)
         #: The reflectors drawn by perturbation (Chen & Arvo 2000), projected per new view.
         self.perturbation = PerturbationPass(self.geometry, reflectors, perturbation, self.meshes,
                                              accuracy_px, reflector_set)
@@ -220,7 +228,7 @@ class ReflectionRenderer:
         self.counts = {"projections": 0, "frames": 0}
         #: The sample-based cameras' reflected triangles, made once per camera.
         self.sbc = CameraProjections(self.geometry, self.per_frame_reflectors, self.counts, mixed_subdivisions,
-                                     cull, polish, reflectors)
+                                     cull, polish, convex)
         self._reflectors, self._meshes = list(reflectors), list(meshes)
         #: The mirrors' ray-tracing set when the caller has one (its band tracer shares it).
         self._reflector_set = reflector_set
@@ -519,7 +527,7 @@ class ReflectionRenderer:
         if self._tracer is None:
             self._tracer = band_trace.BandTracer(self._reflectors, self._meshes, self._reflector_set)
         labels = read_texture(targets.prepass_labels, targets.width, targets.height)[..., 0]
-        searched = np.isin(np.rint(labels) - 1, self._reflectors_of("searched_reflectors"))
+        searched = _showing(labels, self._reflectors_of("searched_reflectors"))
         drawn = read_texture(targets.reflection_colors, targets.width, targets.height)[..., 3] > 0.5
         # The searched reflectors' pixels are traced by their own rule, below.
         searched_labels, labels = np.where(searched, labels, 0.0), np.where(searched, 0.0, labels)
@@ -533,7 +541,7 @@ class ReflectionRenderer:
             boundary = unreliable if boundary is None else boundary | unreliable
         pixels = band_trace.band_pixels(labels, drawn, radius, edges_of_drawn, boundary)
         if len(holes_of):  # every pixel of these mirrors without a reflection, searched ones too
-            rows, columns = np.nonzero(np.isin(np.rint(labels + searched_labels) - 1, list(holes_of)) & ~drawn)
+            rows, columns = np.nonzero(_showing(labels + searched_labels, holes_of) & ~drawn)
             pixels = np.unique(np.concatenate([pixels, np.stack([columns, rows], axis=1)]), axis=0)
         if searched.any():
             # The search reaches a mirror's silhouette, but vertices go unanswered there;
@@ -546,8 +554,8 @@ class ReflectionRenderer:
             # every node of the eye's cell sees the mirror: the strip between the two is
             # traced, wider (the pixels farther from a drawn reflection show the world).
             reach = max(radius, SEARCHED_BAND_PX)
-            folded = np.isin(np.rint(searched_labels) - 1, self._reflectors_of("folded_reflectors"))
-            blended = np.isin(np.rint(searched_labels) - 1, self._reflectors_of("gap_reflectors"))
+            folded = _showing(searched_labels, self._reflectors_of("folded_reflectors"))
+            blended = _showing(searched_labels, self._reflectors_of("gap_reflectors"))
             pixels = np.unique(np.concatenate([
                 pixels, band_trace.band_pixels(searched_labels, drawn, reach),
                 band_trace.band_pixels(np.where(folded, searched_labels, 0.0), drawn, reach, edges_of_drawn=True),

@@ -21,9 +21,8 @@ from ..addon.view import View
 #: them equally (a redraw during a build: 2.6x -> 2.2x a plain draw on 2 cores).
 BACKGROUND_NICENESS = 10
 
-_builder: ThreadPoolExecutor | None = None
-#: Projects morphing nodes around the eye ahead of time (numpy, no GPU).
-_prefetcher: ThreadPoolExecutor | None = None
+#: The running threads by name (each made on first use).
+_executors: dict = {}
 
 
 def build_camera(reflector_set, view: View, bounds, settings: tuple, projections, per_frame: frozenset):
@@ -52,31 +51,30 @@ def _lower_priority() -> None:
             pass  # a sandbox that forbids it: the thread runs at Blender's priority
 
 
+def _executor(name: str) -> ThreadPoolExecutor:
+    if name not in _executors:
+        _executors[name] = ThreadPoolExecutor(1, name, initializer=_lower_priority)
+    return _executors[name]
+
+
 def builder() -> ThreadPoolExecutor:
     """The camera builder's thread (made on first use)."""
-    global _builder
-    if _builder is None:
-        _builder = ThreadPoolExecutor(1, "curved_reflections", initializer=_lower_priority)
-    return _builder
+    return _executor("curved_reflections")
 
 
 def prefetcher() -> ThreadPoolExecutor:
-    """The morphing prefetcher's thread (made on first use)."""
-    global _prefetcher
-    if _prefetcher is None:
-        _prefetcher = ThreadPoolExecutor(1, "curved_reflections_prefetch", initializer=_lower_priority)
-    return _prefetcher
+    """The thread that projects morphing nodes around the eye ahead of time (numpy, no
+    GPU; made on first use)."""
+    return _executor("curved_reflections_prefetch")
 
 
 def running() -> bool:
     """Whether either thread exists."""
-    return _builder is not None or _prefetcher is not None
+    return bool(_executors)
 
 
 def shutdown() -> None:
     """Stop both threads, dropping the work not started."""
-    global _builder, _prefetcher
-    for executor in (_builder, _prefetcher):
-        if executor is not None:
-            executor.shutdown(wait=False, cancel_futures=True)
-    _builder = _prefetcher = None
+    for executor in _executors.values():
+        executor.shutdown(wait=False, cancel_futures=True)
+    _executors.clear()

@@ -11,11 +11,11 @@ grids)::
     <reflector name>-<key[:16]>/node_00013.inside   a node inside the mirror (no camera)
 
 Every file is plain arrays (``np.savez``; node files compressed, their arrays packed into
-one buffer, ``packed_arrays``), read with ``allow_pickle=False``, and written atomically (a temporary name, then ``os.replace``),
-so that several processes, on one machine or on a render farm's, can bake ranges of
-one grid's nodes into the same folder at once: the manifest is the same bytes whoever
-writes it, a node is either absent or whole, and a node already baked (its file present
-and of this key) is not baked again. A grid is usable once every node has its file.
+one buffer, ``packed_arrays``), read with ``allow_pickle=False``, and written
+atomically (a temporary name, then ``os.replace``), so that several processes, on one
+machine or on a render farm's, can bake ranges of one grid's nodes into the same folder
+at once: the manifest is the same bytes whoever writes it, a node is either absent or
+whole, and a node already baked (its file present and of this key) is not baked again. A grid is usable once every node has its file.
 
 The folder's key is a SHA-256 of the reflector's topology, the grid settings and the
 engine (its version and the bytes of the modules a bake runs); every node file carries

@@ -91,10 +91,7 @@ class BandTracer:
         if self.mirrors is not None:
             hits = self.mirrors.intersect(origins, directions, source_triangles=source_triangles)
         else:
-            hits = RayHits(np.full(len(origins), np.inf), np.full(len(origins), -1),
-                           np.full(len(origins), -1), np.full((len(origins), 3), np.nan),
-                           np.full((len(origins), 3), np.nan), np.full((len(origins), 3), np.nan),
-                           np.full((len(origins), 3), np.nan))
+            hits = RayHits.misses(len(origins))
         if mirrors_only or self.diffuse is None:
             return hits
         nearer = self.diffuse.intersect(origins, directions, hits.t)

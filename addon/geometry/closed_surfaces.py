@@ -21,6 +21,8 @@ reflection points are known per vertex (a sample-based camera's projection),
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from .vectors import cross, dot, lengths
@@ -157,6 +159,21 @@ def bounds_convex_body(mesh) -> bool:
     of its vertices: every image it shows is mirrored, as in a flat mirror, and the far
     sides of closed solids can be culled from its reflections."""
     return is_convex(mesh.vertices, mesh.triangles, np.asarray(mesh.vertices, dtype=np.float64).mean(axis=0))
+
+
+class ConvexMirrors:
+    """Which of a scene's mirrors (each with ``vertices`` and ``triangles``) bound a convex
+    body (:func:`bounds_convex_body`): tested on first use, once for every pass that asks
+    (a renderer's camera projections and its morphing pass share one; the test is O(faces),
+    seconds for a million-triangle mirror)."""
+
+    def __init__(self, mirrors=()):
+        self._mirrors = list(mirrors)
+
+    @functools.cached_property
+    def indices(self) -> frozenset:
+        """Indices of the mirrors that bound a convex body."""
+        return frozenset(index for index, mirror in enumerate(self._mirrors) if bounds_convex_body(mirror))
 
 
 def turned_away(vertices: np.ndarray, corners: np.ndarray, winding: np.ndarray, eyes: np.ndarray,

@@ -54,6 +54,13 @@ class RayHits:
     def hit(self) -> np.ndarray:
         return self.triangle >= 0
 
+    @classmethod
+    def misses(cls, n_rays: int) -> "RayHits":
+        """``n_rays`` rays that hit nothing."""
+        nan3 = np.full((n_rays, 3), np.nan)
+        return cls(np.full(n_rays, np.inf), np.full(n_rays, -1), np.full(n_rays, -1), nan3, nan3.copy(),
+                   nan3.copy(), nan3.copy())
+
 
 def reflect(directions: np.ndarray, normals: np.ndarray) -> np.ndarray:
     """Mirror directions about unit normals: d - 2 (d . n) n."""

@@ -33,7 +33,7 @@ import numpy as np
 
 from ...addon.methods.morphing import morph_grid, morph_surface, morphing
 from ...addon.baking.bake_cache import CacheError
-from ...addon.geometry.closed_surfaces import bounds_convex_body
+from ...addon.geometry.closed_surfaces import ConvexMirrors
 from ..frame_pass import FramePass
 from ..reflected_meshes import FOUND_CODE, ReflectedMeshes
 from ..shader_sources import glsl_source, normal_equations_glsl
@@ -199,11 +199,11 @@ class MorphPass(FramePass):
     rendered_reflection_cosine = math.cos(math.radians(6.0))
 
     def __init__(self, geometry, grids, meshes: ReflectedMeshes | None = None,
-                 budget_mb: float = DEFAULT_BUDGET_MB, accuracy_px: float | None = None, reflectors=()):
+                 budget_mb: float = DEFAULT_BUDGET_MB, accuracy_px: float | None = None,
+                 convex_mirrors: ConvexMirrors | None = None):
         self.geometry = geometry
         self._accuracy = accuracy_px
-        self._reflectors = list(reflectors)
-        self._convex = None  # the grids' convex mirrors, found on first use
+        self._convex = ConvexMirrors() if convex_mirrors is None else convex_mirrors
         self.grids = list(grids)
         self.meshes = meshes if meshes is not None else ReflectedMeshes(geometry)
         self.nodes = NodeTextures(budget_mb)
@@ -229,13 +229,9 @@ class MorphPass(FramePass):
 
     @property
     def mirrored_reflectors(self) -> list:
-        """The grids' mirrors that bound a convex body (``closed_surfaces.is_convex``,
-        about the mean of their vertices): every image a convex mirror shows is mirrored,
-        blended or not. Found once, on first use: a test of O(faces)."""
-        if self._convex is None:
-            self._convex = [index for index in self.reflector_indices
-                            if index < len(self._reflectors) and bounds_convex_body(self._reflectors[index])]
-        return self._convex
+        """The grids' mirrors that bound a convex body (``convex_mirrors``): every image a
+        convex mirror shows is mirrored, blended or not."""
+        return [index for index in self.reflector_indices if index in self._convex.indices]
 
     @property
     def drawn_reflectors(self) -> list:

@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...addon.geometry.closed_surfaces import bounds_convex_body, turned_away
+from ...addon.geometry.closed_surfaces import ConvexMirrors, turned_away
 from ...addon.methods.sbc import sheet_bounds
 from ...addon.geometry import subdivision
 from .. import draw_shaders
@@ -180,12 +180,12 @@ class CameraProjections:
     camera itself, not only its textures). ``polish``: the GPU's ray-list and fold-cell
     answers are polished on the true rays on the CPU (needs the camera too; exact, but
     the numpy BVH makes it seconds per camera: the live viewport turns it off).
-    ``reflectors``: the mirrors (meshes), whose convexity allows culling the far sides
-    of closed solids (:attr:`convex_reflectors`).
+    ``convex_mirrors``: which mirrors are convex (``closed_surfaces.ConvexMirrors``),
+    allowing the far sides of closed solids to be culled (:attr:`convex_reflectors`).
     """
 
     def __init__(self, geometry, per_frame_reflectors, counts: dict, mixed_subdivisions: int = MIXED_SUBDIVISIONS,
-                 cull: bool = True, polish: bool = True, reflectors=()):
+                 cull: bool = True, polish: bool = True, convex_mirrors: ConvexMirrors | None = None):
         self.geometry = geometry
         self.per_frame_reflectors = per_frame_reflectors
         self.counts = counts
@@ -193,8 +193,7 @@ class CameraProjections:
         self.mixed_subdivisions = int(mixed_subdivisions)
         self.cull = bool(cull)
         self.polish = bool(polish)
-        self._reflectors = list(reflectors)
-        self._convex = None
+        self._convex = ConvexMirrors() if convex_mirrors is None else convex_mirrors
         #: Names these vertices for sources that keep work for them (MorphSource).
         self.vertices_token = object()
         #: The projection drawn last.
@@ -262,13 +261,9 @@ class CameraProjections:
 
     @property
     def convex_reflectors(self) -> frozenset:
-        """Indices of the mirrors that bound a convex body
-        (``closed_surfaces.bounds_convex_body``), whose first-order sheets leave out the
-        far sides of closed solids (:meth:`_facing_away`). Found on first use."""
-        if self._convex is None:
-            self._convex = frozenset(index for index, mirror in enumerate(self._reflectors)
-                                     if bounds_convex_body(mirror))
-        return self._convex
+        """Indices of the mirrors that bound a convex body (``convex_mirrors``), whose
+        first-order sheets leave out the far sides of closed solids (:meth:`_facing_away`)."""
+        return self._convex.indices
 
     def _vertex_points(self):
         """The renderer's vertices as a POINTS batch (the projection pass's input)."""

@@ -7,6 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from curved_reflections.addon import DiffuseMesh, Reflector
+from curved_reflections.addon.geometry.closed_surfaces import ConvexMirrors
 from curved_reflections.addon.geometry.sphere import icosphere
 from curved_reflections.gpu_shaders.draw_geometry import prepare_geometry
 from curved_reflections.gpu_shaders.frame_pass import FramePass
@@ -65,8 +66,9 @@ def test_only_mirrors_whose_every_image_is_mirrored_cull_closed_solids():
     vertices[0] = dented.vertices.mean(axis=0) + 0.8 * (vertices[0] - dented.vertices.mean(axis=0))
     dented = Reflector(dented.name, vertices, dented.triangles, dented.normals)
     grids = [(SimpleNamespace(reflector_index=0), None), (SimpleNamespace(reflector_index=1), None)]
-    assert MorphPass(geometry, grids, meshes, reflectors=[mirrors[0], dented]).mirrored_reflectors == [0]
-    assert MorphPass(geometry, grids, meshes, reflectors=mirrors).mirrored_reflectors == [0, 1]
+    assert MorphPass(geometry, grids, meshes, convex_mirrors=ConvexMirrors([mirrors[0], dented])
+                     ).mirrored_reflectors == [0]
+    assert MorphPass(geometry, grids, meshes, convex_mirrors=ConvexMirrors(mirrors)).mirrored_reflectors == [0, 1]
 
 
 def test_morphing_snaps_live_vertices_to_the_scene_accuracy():

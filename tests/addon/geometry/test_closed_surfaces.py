@@ -2,6 +2,8 @@
 """Closed solids among the diffuse meshes (``addon/geometry/closed_surfaces.py``): which
 are watertight and consistently wound, which way, and whether a mirror lies inside."""
 
+from types import SimpleNamespace
+
 import numpy as np
 
 from curved_reflections.addon.geometry import closed_surfaces
@@ -93,3 +95,19 @@ def test_triangles_turned_away_from_the_points_they_are_seen_from():
                                            np.ones(triangles.shape, bool))[back]
     assert not closed_surfaces.turned_away(vertices, triangles, np.zeros(len(triangles), int),
                                            seen_from - vertices[triangles], np.ones(triangles.shape, bool)).any()
+
+
+def test_convex_mirrors_are_tested_once_for_every_pass_that_asks(monkeypatch):
+    """A ball is convex and a dented one is not; the renderer's camera projections and
+    its morphing pass share one ``ConvexMirrors``, which tests each mirror once."""
+    ball = icosphere((0.0, 0.0, 0.0), 1.0, 2, name="Ball")
+    dented = icosphere((3.0, 0.0, 0.0), 1.0, 2, name="Dented")
+    vertices = dented.vertices.copy()
+    vertices[0] = dented.vertices.mean(axis=0) + 0.5 * (vertices[0] - dented.vertices.mean(axis=0))
+    dented = SimpleNamespace(vertices=vertices, triangles=dented.triangles)
+    tested = []
+    real = closed_surfaces.bounds_convex_body
+    monkeypatch.setattr(closed_surfaces, "bounds_convex_body", lambda mesh: tested.append(mesh) or real(mesh))
+    convex = closed_surfaces.ConvexMirrors([ball, dented])
+    assert convex.indices == {0} and convex.indices == {0}
+    assert len(tested) == 2

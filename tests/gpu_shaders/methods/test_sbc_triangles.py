@@ -44,6 +44,7 @@ def test_only_convex_mirrors_cull_the_far_sides_of_closed_solids():
     """A convex mirror's first-order sheets leave out the triangles a solid turns away
     from it; a non-convex mirror (a sheet can hold a solid's far side without its near
     side) keeps them."""
+    from curved_reflections.addon.geometry.closed_surfaces import ConvexMirrors
     from curved_reflections.addon.geometry.sphere import icosphere
 
     ball = icosphere((0.0, 0.0, 0.0), 1.0, 2, name="Ball")
@@ -52,4 +53,5 @@ def test_only_convex_mirrors_cull_the_far_sides_of_closed_solids():
     vertices[0] = vertices[0] * 0.5 + np.array([1.5, 0.0, 0.0])  # pushed in toward its centre
     dented = SimpleNamespace(vertices=vertices, triangles=sphere.triangles)
     projections, _ = _sheet(fold_ratio=2.0)
-    assert CameraProjections(projections.geometry, (), {}, reflectors=[ball, dented]).convex_reflectors == {0}
+    convex = ConvexMirrors([ball, dented])
+    assert CameraProjections(projections.geometry, (), {}, convex_mirrors=convex).convex_reflectors == {0}
