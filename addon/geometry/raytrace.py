@@ -270,11 +270,11 @@ class ReflectorSet:
                               & (triangles[from_surface] != sources[from_surface]))
         return keep
 
-    def intersect_near(self, origins, directions, near_triangles) -> RayHits:
+    def intersect_near(self, origins, directions, near_triangles, source_triangles=None) -> RayHits:
         """Hits of rays expected to land next to known triangles (``near_triangles`` (R,),
         -1 where unknown): the nearest hit among each ray's triangle and those sharing a
         vertex with it (``ring``); rays that hit none of them, or have no guess, get the
-        nearest hit over all triangles (``intersect``).
+        nearest hit over all triangles (``intersect``). ``source_triangles`` as in ``intersect``.
 
         Not always the nearest hit: another part of the mesh, not in the ring, may lie in
         front. For rays iterated in small steps over one surface (true_rays.py), whose
@@ -283,7 +283,8 @@ class ReflectorSet:
         origins = np.asarray(origins, dtype=np.float64)
         directions = np.asarray(directions, dtype=np.float64)
         near_triangles = np.asarray(near_triangles, dtype=np.int64)
-        rays, t, triangles, uv = self._ring_hits(origins, directions, near_triangles)
+        sources = None if source_triangles is None else np.asarray(source_triangles, dtype=np.int64)
+        rays, t, triangles, uv = self._ring_hits(origins, directions, near_triangles, sources=sources)
         best_t = np.full(len(origins), np.inf)
         best_triangle = np.full(len(origins), -1, dtype=np.int64)
         best_uv = np.full((len(origins), 2), np.nan)
@@ -291,6 +292,7 @@ class ReflectorSet:
         missed = np.flatnonzero(best_triangle < 0)
         if len(missed):
             hits = self.intersect(origins[missed], directions[missed],
+                                  source_triangles=None if sources is None else sources[missed],
                                   t_guess=self._past_plane(origins[missed], directions[missed], near_triangles[missed]))
             best_t[missed] = hits.t
             best_triangle[missed] = hits.triangle

@@ -47,14 +47,22 @@ ITERATIONS = 10
 HALVINGS = 3
 #: Finite-difference step of the Jacobian, desired-view pixels.
 STEP_PX = 0.25
+MIN_STEP_PX = 1.0 / 64.0
+FD_SCALE = 0.5
 #: A step shorter than this (pixels) ends an image's iteration: converged.
 CONVERGED_PX = 0.01
 #: A converged image's ray passes within this many pixels (at the point) of the point.
 RESIDUAL_PX = 0.05
 #: Longest step of one iteration (pixels): far from the root the linear model is poor.
 MAX_STEP_PX = 4.0
+#: A step turning back on the last one (cosine below this) is halved: near the edge of a
+#: higher order's footprint the image moves as the square root of the distance to the
+#: edge, and full Gauss-Newton steps on sqrt(x) jump between x and -x.
+REVERSAL_COSINE = -0.5
 #: A polished image may end at most this many ray-map cells from where it started.
 MAX_SHIFT_CELLS = 12.0
+#: Steps of the target in a continuation polish (``polish_by_continuation``).
+CONTINUATION_STAGES = 4
 
 
 def _history(reflector) -> tuple:
@@ -62,41 +70,57 @@ def _history(reflector) -> tuple:
     return (int(reflector),) if np.ndim(reflector) == 0 else tuple(int(r) for r in reflector)
 
 
-def _true_residual(reflector_set: ReflectorSet, view: View, reflector, pixels, points, near=None, pieces=None,
-                   guess=None):
-    """Per pixel: (P, 3) offset of the point from the true reflected ray (perpendicular
-    part), the first reflector point, the distance along the last reflected ray, whether
-    the ray is a valid reflection path through the history ``reflector`` (an index, or
-    the tuple of a higher order: each bounce off the next reflector, off its front; the
-    first on one of its smooth ``pieces``, if given) reaching the point, and the triangle
-    the view ray hits. With ``near`` (P,) triangles, the view ray is intersected with
-    their rings only (``ReflectorSet.intersect_near``), else with the whole mesh, where
-    ``guess`` (P,) triangles, if given, are where its nearest hit is looked for first."""
+def trace_history(reflector_set: ReflectorSet, view: View, reflector, pixels, near=None, pieces=None, guess=None):
+    """The view rays through ``pixels`` bounced through the history ``reflector`` (an
+    index, or the tuple of a higher order): per pixel the last reflected ray's tail and
+    unit direction, the first reflector point, whether the path is valid (each bounce
+    off the next reflector of the history, off its front; the first on one of its smooth
+    ``pieces``, if given) and (P, bounces) the triangles each bounce hits (-1: none).
+    With ``near`` (P, bounces) triangles, each bounce is intersected with their rings
+    only (``ReflectorSet.intersect_near``), else with the whole mesh, where ``guess`` (P,)
+    triangles, if given, are where the view ray's nearest hit is looked for first."""
     history = _history(reflector)
     origins, directions = view.pixel_rays(pixels)
-    hits = (reflector_set.intersect(origins, directions, near_triangles=guess) if near is None
-            else reflector_set.intersect_near(origins, directions, near))
-    first, triangle = hits.position, hits.triangle
+    triangles = np.full((len(origins), len(history)), -1, dtype=np.int64)
     valid = np.ones(len(origins), dtype=bool)
     for bounce, mirror in enumerate(history):
-        if bounce:
-            hits = reflector_set.intersect(origins, directions, source_triangles=hits.triangle)
+        sources = hits.triangle if bounce else None
+        if near is not None:
+            hits = reflector_set.intersect_near(origins, directions, near[:, bounce], source_triangles=sources)
+        else:
+            hits = reflector_set.intersect(origins, directions, source_triangles=sources,
+                                           near_triangles=None if bounce else guess)
+        if bounce == 0:
+            first = hits.position
+        triangles[:, bounce] = hits.triangle
         normal = np.where(hits.hit[:, None], hits.normal, 0.0)
         valid &= (hits.hit & (hits.reflector == mirror)
                   & reflection_valid(directions, normal, np.where(hits.hit[:, None], hits.face_normal, 0.0)))
         if bounce == 0 and pieces is not None:
             valid &= np.isin(reflector_set.piece[np.maximum(hits.triangle, 0)], pieces)
         origins, directions = np.where(valid[:, None], hits.position, origins), reflect(directions, normal)
-        last = hits.triangle
+    return origins, directions, first, valid, triangles
+
+
+def _true_residual(reflector_set: ReflectorSet, view: View, reflector, pixels, points, near=None, pieces=None,
+                   guess=None):
+    """Per pixel: (P, 3) offset of the point from the true reflected ray of the history
+    ``reflector`` (perpendicular part), the first reflector point, the distance along the
+    last reflected ray, whether the path is valid (``trace_history``) and reaches the
+    point, and (P, bounces) the triangles each bounce hits. ``near``, ``pieces`` and
+    ``guess`` as in ``trace_history``; without ``near``, a higher order's last segment
+    is also checked for other parts of the mirrors before the point."""
+    origins, directions, first, valid, triangles = trace_history(reflector_set, view, reflector, pixels, near, pieces,
+                                                                 guess)
     offset = points - origins
     distance = np.einsum("ij,ij->i", offset, directions)
     residual = offset - distance[:, None] * directions
     valid &= distance > 0
-    if len(history) > 1 and near is None and valid.any():
-        # The last segment may pass another part of the mirrors on its way to the point.
+    if triangles.shape[1] > 1 and near is None and valid.any():
         check = np.flatnonzero(valid)
-        valid[check] = ~reflector_set.occluded(origins[check], directions[check], distance[check], last[check])
-    return np.nan_to_num(residual), first, distance, valid, triangle
+        valid[check] = ~reflector_set.occluded(origins[check], directions[check], distance[check],
+                                               triangles[check, -1])
+    return np.nan_to_num(residual), first, distance, valid, triangles
 
 
 def polish_on_true_rays(reflector_set: ReflectorSet, view: View, reflector, pixels: np.ndarray,
@@ -121,13 +145,34 @@ def polish_on_true_rays(reflector_set: ReflectorSet, view: View, reflector, pixe
     pixels = np.asarray(pixels, dtype=np.float64)
     points = np.asarray(points, dtype=np.float64)
     n = len(pixels)
-    polished = pixels.copy()
     f, position, distance, valid, triangle = _true_residual(reflector_set, view, reflector, pixels, points,
                                                             pieces=pieces, guess=near_triangles)
     converged = np.zeros(n, dtype=bool)
-    tolerance = np.zeros(n)  # residual (world units) a converged image's ray must stay within
     if spacing_px is not None:
         converged = valid & (np.linalg.norm(f, axis=1) < RESIDUAL_PX * np.asarray(spacing_px))
+    polished, converged, tolerance = _iterate(reflector_set, view, reflector, pixels, points, triangle, converged,
+                                              pieces)
+    moved = np.flatnonzero(np.any(polished != pixels, axis=1))
+    f, position[moved], distance[moved], valid[moved], _ = _true_residual(reflector_set, view, reflector,
+                                                                          polished[moved], points[moved],
+                                                                          pieces=pieces, guess=triangle[moved, 0])
+    # Traced against the whole mesh, the final ray still reaches the point (no other part
+    # of the mirror in front of the rings the iteration saw).
+    valid[moved] &= np.linalg.norm(f, axis=1) < 2.0 * tolerance[moved]
+    inside = ((polished >= 0).all(axis=1) & (polished[:, 0] <= view.width) & (polished[:, 1] <= view.height))
+    near = np.linalg.norm(polished - pixels, axis=1) <= MAX_SHIFT_CELLS * cell_px
+    ok = converged & valid & inside & near
+    return np.where(ok[:, None], polished, pixels), position, distance, ok
+
+
+def _iterate(reflector_set: ReflectorSet, view: View, reflector, pixels, points, triangle, converged, pieces):
+    """Gauss-Newton from ``pixels`` for the images not yet ``converged``, tracing against
+    the rings around the hits (``triangle`` (P, bounces), updated in place). Returns
+    (pixels, converged, the residual each converged image's ray must stay within)."""
+    n = len(pixels)
+    polished = pixels.copy()
+    converged = converged.copy()
+    tolerance = np.zeros(n)  # residual (world units) a converged image's ray must stay within
     active = np.flatnonzero(~converged)
     last_step = np.zeros((n, 2))
     halvings = np.zeros(n, dtype=np.int64)
@@ -138,8 +183,10 @@ def polish_on_true_rays(reflector_set: ReflectorSet, view: View, reflector, pixe
         # The pixel and its two finite-difference neighbours, traced in one batch against
         # the triangles around the pixel's last hit (steps are a few pixels at most); the
         # final answer is traced against the whole mesh below.
-        near = np.tile(triangle[active], 3)
-        offsets = np.concatenate([np.zeros((m, 2)), np.tile((STEP_PX, 0.0), (m, 1)), np.tile((0.0, STEP_PX), (m, 1))])
+        near = np.tile(triangle[active], (3, 1))
+        h = np.where(last_step[active].any(axis=1),
+                     np.clip(FD_SCALE * np.linalg.norm(last_step[active], axis=1), MIN_STEP_PX, STEP_PX), STEP_PX)
+        offsets = np.concatenate([np.zeros((m, 2)), np.c_[h, np.zeros(m)], np.c_[np.zeros(m), h]])
         f, _, _, reflects, hit = _true_residual(reflector_set, view, reflector, np.tile(q, (3, 1)) + offsets,
                                                 np.tile(p, (3, 1)), near, pieces)
         # Next to an edge of the mirror (or of a smooth piece) a neighbour may leave it,
@@ -161,6 +208,8 @@ def polish_on_true_rays(reflector_set: ReflectorSet, view: View, reflector, pixe
         step = np.stack([(c * gu - b * gv) / det, (a * gv - b * gu) / det], axis=1)
         length = np.linalg.norm(step, axis=1)
         step *= np.minimum(1.0, MAX_STEP_PX / np.maximum(length, 1e-300))[:, None]
+        turn = np.einsum("ij,ij->i", step, last_step[active])
+        step[turn < REVERSAL_COSINE * length * np.linalg.norm(last_step[active], axis=1)] *= 0.5
         polished[active] = q - np.where(usable[:, None], step, 0.0)
         # A step that left the path is halved instead (near a silhouette the path bends
         # fast: on two facing spheres this took the second-order images found at d = 2
@@ -177,14 +226,39 @@ def polish_on_true_rays(reflector_set: ReflectorSet, view: View, reflector, pixe
         converged[active[done]] = True
         tolerance[active[done]] = limit[done]
         active = active[(usable & ~done) | lost]
-    moved = np.flatnonzero(np.any(polished != pixels, axis=1))
-    f, position[moved], distance[moved], valid[moved], _ = _true_residual(reflector_set, view, reflector,
-                                                                          polished[moved], points[moved],
-                                                                          pieces=pieces, guess=triangle[moved])
-    # Traced against the whole mesh, the final ray still reaches the point (no other part
-    # of the mirror in front of the rings the iteration saw).
-    valid[moved] &= np.linalg.norm(f, axis=1) < 2.0 * tolerance[moved]
-    inside = ((polished >= 0).all(axis=1) & (polished[:, 0] <= view.width) & (polished[:, 1] <= view.height))
-    near = np.linalg.norm(polished - pixels, axis=1) <= MAX_SHIFT_CELLS * cell_px
-    ok = converged & valid & inside & near
-    return np.where(ok[:, None], polished, pixels), position, distance, ok
+    return polished, converged, tolerance
+
+
+def polish_by_continuation(reflector_set: ReflectorSet, view: View, reflector, pixels: np.ndarray,
+                           points: np.ndarray, cell_px: float, stages: int = CONTINUATION_STAGES,
+                           pieces: np.ndarray | None = None, near_triangles: np.ndarray | None = None):
+    """Polish images of ``points`` from seed ``pixels`` (traced rays of the history that
+    pass near the points, a ray map's rays) by continuation: the target moves from the
+    point of the seed's true ray nearest each point to the point in ``stages`` equal
+    steps, each polished (``polish_on_true_rays``) from the image of the step before.
+
+    Near the edge of a higher order's footprint, where a path leaves a mirror past its
+    silhouette, the image moves as the square root of the distance to that edge: a
+    Gauss-Newton step from a ray a cell away overshoots out of the footprint, or along a
+    mirror's rim, and is halved until it gives up. A step of the target moves the image
+    little, and each stage starts where the last one converged. Returns as
+    ``polish_on_true_rays``, with the last stage's answers; rows not ok keep the seed.
+    """
+    pixels = np.asarray(pixels, dtype=np.float64)
+    points = np.asarray(points, dtype=np.float64)
+    f, position, distance, ok, triangle = _true_residual(reflector_set, view, reflector, pixels, points,
+                                                         pieces=pieces, guess=near_triangles)
+    start = points - f  # on each seed's ray, level with the point
+    current = pixels.copy()
+    rows = np.flatnonzero(ok)
+    for t in np.arange(1, stages) / stages:
+        # Intermediate targets are iterated on the rings only; the last stage is polished in full.
+        ring = triangle[rows]
+        polished, converged, _ = _iterate(reflector_set, view, reflector, current[rows],
+                                          start[rows] + t * (points[rows] - start[rows]), ring,
+                                          np.zeros(len(rows), dtype=bool), pieces)
+        current[rows[converged]], triangle[rows] = polished[converged], ring
+    current[rows], position[rows], distance[rows], ok[rows] = polish_on_true_rays(
+        reflector_set, view, reflector, current[rows], points[rows], cell_px, pieces=pieces,
+        near_triangles=triangle[rows, 0])
+    return np.where(ok[:, None], current, pixels), position, distance, ok

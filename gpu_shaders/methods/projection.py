@@ -91,7 +91,7 @@ def defines() -> dict:
         "SBC_FOLD_CANDIDATES": str(sbc_module.FOLD_CANDIDATES),
         "SBC_MAX_CANDIDATES": str(max(sbc_module.CANDIDATE_CELLS, sbc_module.BAND_CANDIDATES,
                                       sbc_module.FOLD_CANDIDATES)),
-        "SBC_MISS_CELLS": _float(sbc_module.MISS_CELLS),
+        "SBC_MISS_CELLS": _float(sbc_cells.MISS_CELLS),
         "SBC_STEP_TOLERANCE": _float(STEP_TOLERANCE),
         "SBC_RESIDUAL_TOLERANCE": _float(RESIDUAL_TOLERANCE),
         "SBC_ROUNDING_TOLERANCE": _float(ROUNDING_TOLERANCE),

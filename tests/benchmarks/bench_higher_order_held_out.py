@@ -6,8 +6,13 @@ coverage and error of the sample-based camera against the exact second-order sol
     .venv/bin/python tests/benchmarks/bench_higher_order_held_out.py --quick --out /tmp/held_out
 
 Scenes (engine only, no Blender): two facing mirror spheres (radii 1 and 0.8, 1.2 apart),
-and a mirror sphere in front of a flat wall mirror (a 6 x 4 plane, 24 x 24 quads). A
-320x240 view sees both reflectors; points are drawn uniformly (fixed seed) in the box of
+a mirror sphere in front of a flat wall mirror (a 6 x 4 plane, 24 x 24 quads), a small
+and a large sphere (radii 0.7 and 1.1), and a ball before a low wall turned -35 degrees:
+the true-ray polish's continuation, ring and sub-ray seeds and polish of every
+higher-order answer were found on their misses (``TUNED_ON``); a ball before a wall
+turned 25 degrees, two equal spheres side by side and a ball under a flat ceiling
+mirror were first run after that work. A 320x240 view sees both
+reflectors; points are drawn uniformly (fixed seed) in the box of
 the reflectors grown by 2, outside the spheres. The exact solver
 (``addon/reference/exact_paths.py``) gives every visible path eye -> x1 -> x2 -> p (a path
 it finds twice, through an edge two of a flat mirror's triangles share, counts once).
@@ -52,6 +57,22 @@ def _wall(x: float, y_range, z_range, quads: int = 24):
     return Reflector("Wall", vertices, triangles, np.tile([1.0, 0.0, 0.0], (len(vertices), 1)))
 
 
+def _turned(reflector, degrees: float, axis: str = "z"):
+    """``reflector`` turned about the Z (or Y) axis through the origin."""
+    from curved_reflections.addon.scene import Reflector
+
+    c, s = np.cos(np.radians(degrees)), np.sin(np.radians(degrees))
+    turn = (np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) if axis == "z"
+            else np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]]))
+    return Reflector(reflector.name, reflector.vertices @ turn.T, reflector.triangles, reflector.normals @ turn.T)
+
+
+#: Scenes whose misses the true-ray polish's continuation, ring seeds, sub-ray seeds and
+#: polish of every higher-order answer were found on (2026-11-27); the others were first
+#: run after them.
+TUNED_ON = {"facing spheres", "sphere and wall", "small and large sphere", "ball before a low wall"}
+
+
 def scenes() -> dict:
     """{name: (reflectors, view, spheres as (centre, radius))}."""
     from curved_reflections.addon.geometry.sphere import icosphere
@@ -64,6 +85,29 @@ def scenes() -> dict:
         "sphere and wall": ([_wall(-1.5, (-3.0, 3.0), (0.0, 4.0)), icosphere((0.6, 0.2, 1.2), 0.8, 4, "Ball")],
                             look_at_view((3.5, -4.0, 2.0), (-0.5, 0.0, 1.3), width=320, height=240, fov_y_deg=50.0),
                             [((0.6, 0.2, 1.2), 0.8)]),
+        "small and large sphere": ([icosphere((0.2, 0.4, 0.9), 0.7, 4, "C"), icosphere((2.4, -0.6, 1.4), 1.1, 4, "D")],
+                                   look_at_view((0.2, -5.5, 2.8), (1.3, -0.1, 1.1), width=320, height=240,
+                                                fov_y_deg=48.0),
+                                   [((0.2, 0.4, 0.9), 0.7), ((2.4, -0.6, 1.4), 1.1)]),
+        "ball and turned wall": ([_turned(_wall(-1.2, (-2.5, 2.5), (0.0, 3.5)), 25.0),
+                                  icosphere((0.9, -0.4, 1.0), 0.6, 4, "Ball")],
+                                 look_at_view((4.2, -2.6, 2.4), (-0.4, 0.3, 1.2), width=320, height=240,
+                                              fov_y_deg=50.0),
+                                 [((0.9, -0.4, 1.0), 0.6)]),
+        "spheres side by side": ([icosphere((-0.2, 0.5, 1.0), 0.9, 4, "E"), icosphere((1.9, 0.9, 0.9), 0.9, 4, "F")],
+                                 look_at_view((0.6, -4.8, 1.6), (0.9, 0.6, 1.0), width=320, height=240,
+                                              fov_y_deg=42.0),
+                                 [((-0.2, 0.5, 1.0), 0.9), ((1.9, 0.9, 0.9), 0.9)]),
+        "ball before a low wall": ([_turned(_wall(-1.0, (-2.0, 2.0), (0.0, 2.0)), -35.0),
+                                    icosphere((0.7, 0.3, 0.8), 0.7, 4, "Ball")],
+                                   look_at_view((3.0, -3.5, 1.5), (-0.3, 0.2, 0.9), width=320, height=240,
+                                                fov_y_deg=55.0),
+                                   [((0.7, 0.3, 0.8), 0.7)]),
+        "ball under a ceiling mirror": ([_turned(_wall(-2.6, (-2.5, 2.5), (-2.0, 2.5)), 90.0, "y"),
+                                         icosphere((0.4, 0.3, 1.1), 0.75, 4, "Ball")],
+                                        look_at_view((3.2, -3.6, 1.4), (0.0, 0.3, 1.7), width=320, height=240,
+                                                     fov_y_deg=55.0),
+                                        [((0.4, 0.3, 1.1), 0.75)]),
     }
 
 
@@ -143,13 +187,15 @@ def report(results: list, command: str) -> str:
     lines = ["# Second-order images on held-out scenes against the exact solver", "",
              f"Generated {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC by `{command}` on "
              f"{bench_sbc._machine()['cpu']}, {bench_sbc._machine()['cores']} cores.", "",
-             "Two-reflector scenes nothing was tuned on (see the module docstring); `max_order` 2, accuracy 1 px. "
+             "Two-reflector scenes (see the module docstring: each title says whether the polish was tuned on its "
+             "misses); `max_order` 2, accuracy 1 px. "
              "*Coverage*: share of the exact solver's visible second-order images that the camera projects within "
              "1 px, all of them, with the true-ray polish (`SampleBasedCamera.project`) and, apart, the interpolated "
              "answers alone (the GPU twin's). Errors in pixels over the covered images; *false*: projected images "
              "with no exact image of that history within 1 px.", ""]
     for result in results:
-        lines += [f"## {result['scene']}", "",
+        tuned = " (tuned on)" if result["scene"] in TUNED_ON else " (not tuned on)"
+        lines += [f"## {result['scene']}{tuned}", "",
                   f"{result['points']} points, {result['exact']} visible second-order paths "
                   f"(exact solver {result['exact_seconds']:.1f} s).", "",
                   "| d | history | images | coverage | interpolated only | p50 px | p95 px | p99 px | false | "
@@ -162,10 +208,13 @@ def report(results: list, command: str) -> str:
                              f"{row['p50']:.3f} | {row['p95']:.3f} | {row['p99']:.3f} | {row['false']} | "
                              f"{cell['build_seconds']:.2f} | {cell['project_seconds']:.2f} |")
         lines.append("")
-    coverage = [row["coverage"] for r in results for c in r["cells"] for row in c["histories"].values()]
-    p99 = [row["p99"] for r in results for c in r["cells"] for row in c["histories"].values()]
-    lines += [f"Issue 18's bar: coverage >= 97 % with p99 <= 1 px. Lowest coverage here **{100 * min(coverage):.1f} %**, "
-              f"largest p99 **{max(p99):.2f} px**.", ""]
+    for label, chosen in (("all scenes", results), ("the scenes not tuned on",
+                                                    [r for r in results if r["scene"] not in TUNED_ON])):
+        rows = [row for r in chosen for c in r["cells"] for row in c["histories"].values()]
+        if rows:
+            lines += [f"Issue 18's bar: coverage >= 97 % with p99 <= 1 px. Over {label}: lowest coverage "
+                      f"**{100 * min(row['coverage'] for row in rows):.1f} %**, largest p99 "
+                      f"**{max(row['p99'] for row in rows):.2f} px**.", ""]
     return "\n".join(lines)
 
 

@@ -220,7 +220,9 @@ def _ray_and_derivatives(k, u, v):
 
 def _newton_steps(k, p, u, v, s, iterations: int, check: bool = True):
     """Newton on t(u, v) + s r(u, v) = p; returns u, v, s and which points still move
-    (with ``check=False`` every iteration runs and all points count as moving)."""
+    (with ``check=False`` every iteration runs and all points count as moving). A point
+    stops after its first step shorter than STEP_TOLERANCE, as each vertex of the GLSL
+    twin does: its answer does not depend on which other points share the batch."""
     moving = np.ones(len(u), dtype=bool)
     tiny = np.finfo(u.dtype).tiny
     for _ in range(iterations):
@@ -235,12 +237,13 @@ def _newton_steps(k, p, u, v, s, iterations: int, check: bool = True):
         det = dot_rows(r, ab)
         det = np.where(np.abs(det) > tiny, det, tiny)
         step_u, step_v = -dot_rows(b, fr) / det, dot_rows(a, fr) / det
-        u = np.clip(u - step_u, -4.0, 4.0)
-        v = np.clip(v - step_v, -4.0, 4.0)
-        s = s - dot_rows(f, ab) / det
         if not check:
+            u, v, s = np.clip(u - step_u, -4.0, 4.0), np.clip(v - step_v, -4.0, 4.0), s - dot_rows(f, ab) / det
             continue
-        moving = np.abs(step_u) + np.abs(step_v) >= STEP_TOLERANCE
+        u = np.where(moving, np.clip(u - step_u, -4.0, 4.0), u)
+        v = np.where(moving, np.clip(v - step_v, -4.0, 4.0), v)
+        s = np.where(moving, s - dot_rows(f, ab) / det, s)
+        moving &= np.abs(step_u) + np.abs(step_v) >= STEP_TOLERANCE
         if not moving.any():
             break
     return u, v, s, moving

@@ -34,16 +34,15 @@ from ...projection import Projection
 from .ray_patch import RayPatchLeaves, invert_patches
 from .raymap import RayMap, first_pieces
 from ...geometry.raytrace import ReflectorSet
-from .sbc_cells import FOLD_SAMPLES, FoldCells, MixedCells, rays_fold_at
-from .sbc_edges import EDGE_REACH_CELLS, complete, complete_quads, edge_seeds, nearest_ray_seeds, touches
+from .sbc_cells import FOLD_SAMPLES, FoldCells, check_on_rays, rays_fold_at
+from .sbc_edges import (EDGE_REACH_CELLS, SeedRays, complete, complete_quads, edge_seeds, nearest_ray_seeds,
+                        sub_ray_seeds, touches)
 from ...geometry.segments import expand_ranges
-from ...reference.true_rays import polish_on_true_rays
+from ...reference.true_rays import polish_by_continuation, polish_on_true_rays
 
 LEAF_MODELS = {"ray_patch": RayPatchLeaves(), "pinhole": PinholeLeaves()}
 #: Tolerance (cell units) for a ray-list cell's bilinear coordinates.
 CELL_TOLERANCE = 1e-6
-#: A projected point may lie off the ray map's interpolated ray by this many cell spacings.
-MISS_CELLS = 1.0
 #: Threads that project parts of the points at once, and the fewest points per thread.
 PROJECT_THREADS = 4
 THREAD_MIN_POINTS = 16384
@@ -56,6 +55,8 @@ CANDIDATE_CELLS = 3
 BAND_CANDIDATES = 8
 #: Fold sub-cells tried per point, nearest central ray first.
 FOLD_CANDIDATES = 16
+#: Rays of a higher order's last ring that seed the true-ray polish of an answer in turn.
+RING_SEEDS = 3
 
 
 @dataclass
@@ -90,9 +91,9 @@ class SampleBasedCamera:
 
     def project(self, points, polish: bool = True) -> Projection:
         """Project world points (P, 3) in every group. With ``polish`` (and ``true_rays``
-        set), first-order answers of ray-list leaves and fold cells are polished on the
-        true reflected rays (``true_rays.polish_on_true_rays``); without, every answer is
-        the interpolated one (what the GLSL twin computes)."""
+        set), first-order answers of ray-list leaves and fold cells, and every answer of a
+        higher order, are polished on the true reflected rays (``true_rays.py``); without,
+        every answer is the interpolated one (what the GLSL twin computes)."""
         points = np.asarray(points, dtype=np.float64)
         if points.ndim != 2 or points.shape[1] != 3:
             raise ValueError(f"points must be a (P, 3) array, got shape {points.shape}")
@@ -132,15 +133,20 @@ class SampleBasedCamera:
             if len(self.histories[g]) > 1:
                 # A higher order's answer that did not polish from where it was found (a
                 # leaf's patch extrapolated, or refused by the ray checks) starts again
-                # from the footprint's last ring.
+                # from the footprint's last ring, from the ray passing closest, then the
+                # next: near the footprint's edge the path bends fast, and the closest
+                # passing ray may lie across the image from the point's.
                 retry = np.flatnonzero(edge & ~keep)
-                seed_cells, seed_distance = nearest_ray_seeds(self.ray_map, points[target[retry]],
-                                                               self._edge_rays[g], self._ray_spacing[g])
+                seed_cells, seed_distance = nearest_ray_seeds(self._ring_seeds[g], points[target[retry]], RING_SEEDS)
                 seeds = self.ray_map.cell_pixels(seed_cells)
-                fresh = np.isfinite(seed_distance) & (np.abs(seeds - pixels[retry]).max(axis=1) > 0.5)
-                again = retry[fresh]
-                pixels[again], s[again] = seeds[fresh], seed_distance[fresh]
-                keep[again] = self._polish(g, again, pixels, reflector_points, s, points[target], spacing)[again]
+                tried = pixels[retry]
+                for rank in range(RING_SEEDS):
+                    fresh = (~keep[retry] & np.isfinite(seed_distance[:, rank])
+                             & (np.abs(seeds[:, rank] - tried).max(axis=1) > 0.5))
+                    again = retry[fresh]
+                    pixels[again], s[again] = seeds[fresh, rank], seed_distance[fresh, rank]
+                    keep[again] = self._polish(g, again, pixels, reflector_points, s, points[target], spacing,
+                                               seeded=True)[again]
             if self.owned is not None:
                 # Polished from a seed, an image across an edge may come to rest in another sheet's cells.
                 keep[edge] &= self._owns(g, pixels[edge] / self.ray_map.downsample - 0.5)
@@ -247,8 +253,7 @@ class SampleBasedCamera:
             # poorly past it: a point no leaf answers is seeded by the footprint's last
             # ring of rays (the one passing closest), and polished on the true rays.
             rest = np.setdiff1d(np.flatnonzero(~accepted), edge)
-            seed_cells, seed_distance = nearest_ray_seeds(self.ray_map, points[rest], self._edge_rays[g],
-                                                           self._ray_spacing[g])
+            seed_cells, seed_distance = (seeds[:, 0] for seeds in nearest_ray_seeds(self._ring_seeds[g], points[rest]))
             reached = np.flatnonzero(np.isfinite(seed_distance))
             cells[rest[reached]] = seed_cells[reached]
             edge = np.concatenate([edge, rest[reached]])
@@ -268,11 +273,11 @@ class SampleBasedCamera:
         found = np.flatnonzero(accepted & np.isfinite(cells).all(axis=1))
         points, cells, kind, target = points[found], cells[found], kind[found], point_index[found]
         mixed = None if self.mixed is None else self.mixed[g]
-        hits, s, first_depth, spacing = _check_on_rays(self.ray_map, self._ray_table, grid, cells, points, mixed)
-        if edges and len(self.histories[g]) > 1 and not hits.all():
+        hits, s, first_depth, spacing = check_on_rays(self.ray_map, self._ray_table, grid, cells, points, mixed)
+        if edges and len(self.histories[g]) > 1 and len(hits) < len(cells):
             # A higher order's interpolated rays bend fast near a mirror's silhouette: an
             # answer they refuse is tried again on the true rays, from where it is.
-            failed = np.flatnonzero(~hits)
+            failed = np.setdiff1d(np.arange(len(cells)), hits)
             pending.append((g, target[failed], self.ray_map.cell_pixels(cells[failed]),
                             np.full((len(failed), 3), np.nan), np.full(len(failed), np.nan), kind[failed],
                             np.zeros(len(failed)), np.ones(len(failed), dtype=bool)))
@@ -280,11 +285,12 @@ class SampleBasedCamera:
         origins, directions = self.ray_map.view.pixel_rays(pixels)
         target, kind = target[hits], kind[hits]
         reflector_points = origins + first_depth[:, None] * directions
-        if pending is not None and len(self.histories[g]) == 1:
+        if pending is not None:
             risky = self._risky(g, kind, cells[hits])
             if len(risky):
+                # A higher order's answer that does not polish is seeded again, as one at its edge is.
                 pending.append((g, target[risky], pixels[risky], reflector_points[risky], s[risky], kind[risky],
-                                spacing[risky], np.zeros(len(risky), dtype=bool)))
+                                spacing[risky], np.full(len(risky), len(self.histories[g]) > 1)))
         result.reflector_points[g, target] = reflector_points
         result.pixels[g, target] = pixels
         result.valid[g, target] = True
@@ -355,6 +361,23 @@ class SampleBasedCamera:
         return [masks.get(id(grid)) if self._has_edges(g) else None for g, grid in enumerate(self.grids)]
 
     @functools.cached_property
+    def _ring_seeds(self) -> list:
+        """Per higher-order tree, the SeedRays of its footprint's last ring: the ray map's
+        rays there and sub-rays traced between them (``sbc_edges.sub_ray_seeds``); None
+        for a first-order tree. Sheets of one set share theirs."""
+        seeds = {}
+        for g, grid in enumerate(self.grids):
+            history = tuple(self.histories[g])
+            if len(history) > 1 and self._has_edges(g) and id(grid) not in seeds:
+                first = (history[0],)
+                first_order = (self.ray_map.group_grid(self.ray_map.histories.index(first))
+                               if first in self.ray_map.histories else np.full(grid.shape, -1))
+                seeds[id(grid)] = (SeedRays.of_rays(self.ray_map, np.flatnonzero(self._edge_rays[g]),
+                                                    self._ray_spacing[g])
+                                   + sub_ray_seeds(self.true_rays, self.ray_map, history, grid, first_order))
+        return [seeds.get(id(grid)) for grid in self.grids]
+
+    @functools.cached_property
     def _ray_spacing(self) -> list:
         """Per tree, (tail, direction) (R,) each: how far its rays lie from their
         neighbours in its grid (``bsp.neighbour_spacing``), 0 for rays not in it; None for
@@ -376,22 +399,33 @@ class SampleBasedCamera:
         return [grids[tuple(h)] for h in self.histories]
 
     def _risky(self, g: int, kind: np.ndarray, cells: np.ndarray) -> np.ndarray:
-        """Indices of group ``g``'s answers to polish: first order, from a ray-list leaf or in a fold cell."""
-        if self.true_rays is None or len(self.histories[g]) != 1:
+        """Indices of group ``g``'s answers to polish: first order, from a ray-list leaf or in
+        a fold cell; every answer of a higher order, whose footprint is a few cells across
+        and whose interpolated rays bend fast (the image of a small sphere in a large one:
+        5 % of them 1-2.5 px off at d = 2, accepted by the ray checks)."""
+        if self.true_rays is None:
             return np.zeros(0, dtype=np.int64)
+        if len(self.histories[g]) > 1:
+            return np.arange(len(kind))
         return np.flatnonzero((kind == RAY_LIST_LEAF) | _in_fold_cells(self.folds, g, cells))
 
-    def _polish(self, g, risky, pixels, reflector_points, s, points, spacing) -> np.ndarray:
+    def _polish(self, g, risky, pixels, reflector_points, s, points, spacing, seeded: bool = False) -> np.ndarray:
         """Polish group ``g``'s ``risky`` answers (``_risky``) in place on the true reflected
         rays (true_rays.py); returns which answers stand. ``spacing``: the ray spacing at
-        each point (world units per cell)."""
+        each point (world units per cell). ``seeded``: the pixels are rays of the ray map
+        passing near the points, polished from by continuation (``polish_by_continuation``)."""
         keep = np.ones(len(pixels), dtype=bool)
         if len(risky):
-            pixels[risky], reflector_points[risky], s[risky], ok = polish_on_true_rays(
-                self.true_rays, self.ray_map.view, self.histories[g], pixels[risky], points[risky],
-                self.ray_map.downsample, spacing[risky] / self.ray_map.downsample,
-                first_pieces(self.ray_map, self.grids[g]) if self.surfaces and self.surfaces[g] else None,
-                self.ray_map.triangles_at(self.grids[g], pixels[risky] / self.ray_map.downsample - 0.5))
+            pieces = first_pieces(self.ray_map, self.grids[g]) if self.surfaces and self.surfaces[g] else None
+            near = self.ray_map.triangles_at(self.grids[g], pixels[risky] / self.ray_map.downsample - 0.5)
+            if seeded:
+                pixels[risky], reflector_points[risky], s[risky], ok = polish_by_continuation(
+                    self.true_rays, self.ray_map.view, self.histories[g], pixels[risky], points[risky],
+                    self.ray_map.downsample, pieces=pieces, near_triangles=near)
+            else:
+                pixels[risky], reflector_points[risky], s[risky], ok = polish_on_true_rays(
+                    self.true_rays, self.ray_map.view, self.histories[g], pixels[risky], points[risky],
+                    self.ray_map.downsample, spacing[risky] / self.ray_map.downsample, pieces, near)
             keep[risky[~ok]] = False
         return keep
 
@@ -409,7 +443,7 @@ class SampleBasedCamera:
         cells = pixels / self.ray_map.downsample - 0.5
         spacing = np.zeros(len(pixels))  # unconfirmed by the ray map (float32 answers at an edge): iterate
         mixed = None if self.mixed is None else self.mixed[g]
-        hits, _, _, confirmed = _check_on_rays(self.ray_map, self._ray_table, self.grids[g], cells, points, mixed)
+        hits, _, _, confirmed = check_on_rays(self.ray_map, self._ray_table, self.grids[g], cells, points, mixed)
         spacing[hits] = confirmed
         ok = self._polish(g, self._risky(g, kind, cells), pixels, reflector_points, s, points, spacing)
         return pixels, reflector_points, s, ok
@@ -570,62 +604,6 @@ def _closest_cells(cells, pair_point, pair_cell, points, keep=CANDIDATE_CELLS):
     rank = np.arange(len(order)) - np.repeat(group_start, np.diff(np.concatenate([group_start, [len(order)]])))
     chosen = order[rank < (keep if np.isscalar(keep) else keep[sorted_point])]
     return pair_point[chosen], pair_cell[chosen]
-
-
-def _check_on_rays(ray_map: RayMap, table: np.ndarray, grid: np.ndarray, cells: np.ndarray, points: np.ndarray,
-                   mixed_cells: MixedCells | None = None):
-    """Which leaf answers the ray map's own rays confirm: indices into ``cells``, their ray
-    distances s, interpolated first-hit depths, and the spacing of the cell's rays at s
-    (the smaller of its two axes, world units per cell).
-
-    The four rays around the fractional cell must exist in the group; their bilinear
-    interpolation (tail, direction, head) must pass within one cell spacing of the point
-    (MISS_CELLS; this checks every leaf's answer against the traced rays themselves), with
-    the point in front of the tail and, where a corner ray ends on another reflector,
-    before the interpolated head. Where a ray merely leaves the scene box, every scene
-    point along it is in front of its end. In a mixed cell (``mixed_cells``), the head is that
-    of the nearest traced sub-ray instead.
-    """
-    base = np.floor(cells).astype(np.int64)
-    rows, columns = grid.shape
-    i0, j0 = base[:, 0], base[:, 1]
-    keep = np.flatnonzero((i0 >= 0) & (j0 >= 0) & (i0 + 1 < columns) & (j0 + 1 < rows))
-    flat = grid.reshape(-1)
-    first = j0[keep] * columns + i0[keep]
-    corners = [flat[first], flat[first + 1], flat[first + columns], flat[first + columns + 1]]
-    four = np.flatnonzero((corners[0] >= 0) & (corners[1] >= 0) & (corners[2] >= 0) & (corners[3] >= 0))
-    keep = keep[four]
-    corners = [c[four] for c in corners]
-    frac = cells[keep] - base[keep]
-    fu, fv = frac[:, 0:1], frac[:, 1:2]
-    rays = [table[c] for c in corners]
-    mixed = ((1 - fu) * (1 - fv)) * rays[0] + (fu * (1 - fv)) * rays[1] + ((1 - fu) * fv) * rays[2] + (fu * fv) * rays[3]
-    direction = mixed[:, 3:6] / np.maximum(_norm(mixed[:, 3:6]), 1e-300)[:, None]
-    head_distance = mixed[:, 6]
-    blocked = ray_map.blocked
-    blocked = blocked[corners[0]] | blocked[corners[1]] | blocked[corners[2]] | blocked[corners[3]]
-    if mixed_cells is not None and len(mixed_cells.heads):
-        row = mixed_cells.index.reshape(-1)[first[four]]
-        in_mixed = np.flatnonzero(row >= 0)
-        if len(in_mixed):
-            m = mixed_cells.heads.shape[1]
-            a = np.minimum((frac[in_mixed, 0] * m).astype(np.int64), m - 1)
-            b = np.minimum((frac[in_mixed, 1] * m).astype(np.int64), m - 1)
-            head = mixed_cells.heads[row[in_mixed], b, a]
-            blocked[in_mixed] = np.isfinite(head)
-            head_distance = head_distance.copy()
-            head_distance[in_mixed] = np.where(np.isfinite(head), head, head_distance[in_mixed])
-    offset = points[keep] - mixed[:, 0:3]
-    s = np.einsum("pd,pd->p", offset, direction)
-    tolerance = 1e-6 * (1.0 + head_distance)
-    miss = _norm(offset - s[:, None] * direction)
-    # Spacing of neighbouring rays at distance s (the larger axis of the cell).
-    along_u = _norm(rays[1][:, 0:3] - rays[0][:, 0:3] + s[:, None] * (rays[1][:, 3:6] - rays[0][:, 3:6]))
-    along_v = _norm(rays[2][:, 0:3] - rays[0][:, 0:3] + s[:, None] * (rays[2][:, 3:6] - rays[0][:, 3:6]))
-    ok = ((miss <= MISS_CELLS * np.maximum(along_u, along_v) + tolerance) & (s >= -tolerance)
-          & (~blocked | (s <= head_distance + tolerance)))
-    hits = np.flatnonzero(ok)
-    return keep[hits], s[hits], mixed[hits, 7], np.minimum(along_u, along_v)[hits]
 
 
 def _norm(vectors: np.ndarray) -> np.ndarray:

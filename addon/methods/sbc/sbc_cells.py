@@ -9,7 +9,8 @@ ray-list leaves interpolate a finer frustum; here per cell):
   cell: SUBCELL_SAMPLES^2 in-between rays, whose heads bound a point's projection.
 
 ``sbc.py`` builds them with the camera and answers from them; ``gpu_shaders/methods/sbc_pack.py``
-packs them for the GLSL twin.
+packs them for the GLSL twin. Every answer is checked on its cell's four traced rays
+(:func:`check_on_rays`), a mixed cell's sub-rays bounding it.
 """
 
 from __future__ import annotations
@@ -23,6 +24,8 @@ from .raymap import RayMap, box_exit_distance, first_pieces
 from ...geometry.raytrace import ReflectorSet, reflect, reflection_valid
 from ...geometry.vectors import cross
 
+#: A projected point may lie off the ray map's interpolated ray by this many cell spacings.
+MISS_CELLS = 1.0
 #: Sub-rays per side traced in each *mixed* cell (see MixedCells).
 SUBCELL_SAMPLES = 8
 #: Sub-cells per side traced in each *fold* cell (see FoldCells).
@@ -229,3 +232,63 @@ def _mixed_cells(reflector_set: ReflectorSet, ray_map: RayMap, grid: np.ndarray,
     hits = reflector_set.intersect(tails, directions, box, sources)
     heads = np.where(hits.hit, hits.t, np.inf).reshape(len(j), m, m)
     return MixedCells(index, heads)
+
+
+def check_on_rays(ray_map: RayMap, table: np.ndarray, grid: np.ndarray, cells: np.ndarray, points: np.ndarray,
+                   mixed_cells: MixedCells | None = None):
+    """Which leaf answers the ray map's own rays confirm: indices into ``cells``, their ray
+    distances s, interpolated first-hit depths, and the spacing of the cell's rays at s
+    (the smaller of its two axes, world units per cell).
+
+    The four rays around the fractional cell must exist in the group; their bilinear
+    interpolation (tail, direction, head) must pass within one cell spacing of the point
+    (MISS_CELLS; this checks every leaf's answer against the traced rays themselves), with
+    the point in front of the tail and, where a corner ray ends on another reflector,
+    before the interpolated head. Where a ray merely leaves the scene box, every scene
+    point along it is in front of its end. In a mixed cell (``mixed_cells``), the head is that
+    of the nearest traced sub-ray instead.
+    """
+    base = np.floor(cells).astype(np.int64)
+    rows, columns = grid.shape
+    i0, j0 = base[:, 0], base[:, 1]
+    keep = np.flatnonzero((i0 >= 0) & (j0 >= 0) & (i0 + 1 < columns) & (j0 + 1 < rows))
+    flat = grid.reshape(-1)
+    first = j0[keep] * columns + i0[keep]
+    corners = [flat[first], flat[first + 1], flat[first + columns], flat[first + columns + 1]]
+    four = np.flatnonzero((corners[0] >= 0) & (corners[1] >= 0) & (corners[2] >= 0) & (corners[3] >= 0))
+    keep = keep[four]
+    corners = [c[four] for c in corners]
+    frac = cells[keep] - base[keep]
+    fu, fv = frac[:, 0:1], frac[:, 1:2]
+    rays = [table[c] for c in corners]
+    mixed = ((1 - fu) * (1 - fv)) * rays[0] + (fu * (1 - fv)) * rays[1] + ((1 - fu) * fv) * rays[2] + (fu * fv) * rays[3]
+    direction = mixed[:, 3:6] / np.maximum(_norm(mixed[:, 3:6]), 1e-300)[:, None]
+    head_distance = mixed[:, 6]
+    blocked = ray_map.blocked
+    blocked = blocked[corners[0]] | blocked[corners[1]] | blocked[corners[2]] | blocked[corners[3]]
+    if mixed_cells is not None and len(mixed_cells.heads):
+        row = mixed_cells.index.reshape(-1)[first[four]]
+        in_mixed = np.flatnonzero(row >= 0)
+        if len(in_mixed):
+            m = mixed_cells.heads.shape[1]
+            a = np.minimum((frac[in_mixed, 0] * m).astype(np.int64), m - 1)
+            b = np.minimum((frac[in_mixed, 1] * m).astype(np.int64), m - 1)
+            head = mixed_cells.heads[row[in_mixed], b, a]
+            blocked[in_mixed] = np.isfinite(head)
+            head_distance = head_distance.copy()
+            head_distance[in_mixed] = np.where(np.isfinite(head), head, head_distance[in_mixed])
+    offset = points[keep] - mixed[:, 0:3]
+    s = np.einsum("pd,pd->p", offset, direction)
+    tolerance = 1e-6 * (1.0 + head_distance)
+    miss = _norm(offset - s[:, None] * direction)
+    # Spacing of neighbouring rays at distance s (the larger axis of the cell).
+    along_u = _norm(rays[1][:, 0:3] - rays[0][:, 0:3] + s[:, None] * (rays[1][:, 3:6] - rays[0][:, 3:6]))
+    along_v = _norm(rays[2][:, 0:3] - rays[0][:, 0:3] + s[:, None] * (rays[2][:, 3:6] - rays[0][:, 3:6]))
+    ok = ((miss <= MISS_CELLS * np.maximum(along_u, along_v) + tolerance) & (s >= -tolerance)
+          & (~blocked | (s <= head_distance + tolerance)))
+    hits = np.flatnonzero(ok)
+    return keep[hits], s[hits], mixed[hits, 7], np.minimum(along_u, along_v)[hits]
+
+
+def _norm(vectors: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.einsum("pd,pd->p", vectors, vectors))

@@ -3,7 +3,7 @@
 
 SBC paper (Popescu, Sacks, Mei 2006), section IV-B/V-A: a point projects in a group
 (sheet) only near one of the group's rays, between four neighbouring rays of its ray
-map, at most ``sbc.MISS_CELLS`` cell spacings off the interpolated ray and not beyond
+map, at most ``sbc_cells.MISS_CELLS`` cell spacings off the interpolated ray and not beyond
 its head when the head is on a reflector. So a sheet reflects only the part of space
 its rays sweep. This module bounds that part conservatively and lets the renderer skip,
 per sheet, the diffuse vertices that lie outside it (``gpu_shaders/methods/sbc_triangles.py``):
@@ -30,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...geometry.bvh import morton_codes
-from .sbc import MISS_CELLS
+from .sbc_cells import MISS_CELLS
 
 #: Slab directions of the k-DOPs: the axes, the face diagonals and the body diagonals (k = 26).
 DIRECTIONS = np.array([

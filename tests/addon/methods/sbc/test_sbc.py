@@ -636,7 +636,9 @@ def test_ray_lists_along_an_edge_seed_the_images_across_it(monkeypatch):
     unseeded = sbc.project(points)
     added = seeded.valid & ~unseeded.valid
     assert added.sum() >= 15 and not (unseeded.valid & ~seeded.valid).any()
-    assert _images_found(seeded, exact) - _images_found(unseeded, exact) == added.sum()
+    for g, point in zip(*np.nonzero(added)):  # each an exact image (two may lie within a pixel)
+        assert np.linalg.norm(exact.pixel[exact.point == point] - seeded.pixels[g, point], axis=1).min() <= 1.0
+    assert _images_found(seeded, exact) - _images_found(unseeded, exact) >= added.sum()
     np.testing.assert_allclose(seeded.pixels[unseeded.valid], unseeded.pixels[unseeded.valid], atol=1e-9)
 
 
