@@ -16,7 +16,10 @@ projection runs per draw on the GPU):
   BSP trees of ``build_sample_based_camera``. A view change asks for a new one,
   debounced (:data:`DEBOUNCE_SECONDS` after the last change); while it builds, the
   previous camera keeps drawing. Editing a *reflector* (geometry, transform, marking
-  or unmarking one) re-bakes: capture again and rebuild every view's camera.
+  or unmarking one) re-bakes: capture again and rebuild every view's camera. Reflectors
+  of more than :data:`BACKGROUND_TRIANGLES` are made ready for tracing (BVH, seal) on
+  the worker too (:class:`.live_state.Preparing`): the last reflections draw, and the
+  status line counts the seconds, until they land.
 - **projection** (once per camera and per mesh change): the meshes' vertices
   projected with the camera, kept by the renderer as reflected triangles whose
   vertices sit at their *first reflector points in world space*
@@ -57,20 +60,17 @@ from __future__ import annotations
 
 import time
 from concurrent.futures import Future
-from dataclasses import dataclass, field
 
 import bpy
 import numpy as np
 
 from ..addon.errors import SceneInputError
 from ..addon.methods.morphing.morphing import ViewOutsideGrid
-from ..addon.geometry.raytrace import ReflectorSet
-from ..addon.methods.sbc.sbc_build import clip_start_inside
 from ..addon.scene import scene_bounds
 from ..addon.view import View
-from . import accuracy, live_workers, methods, morph_bake
+from . import accuracy, live_status, live_workers, methods, morph_bake
+from .live_state import LiveScene, Preparing, ViewCamera
 from .capture import capture_scene, view_from_camera
-from .render_image import clip_start_message
 from .render_inputs import BOUNDS_MARGIN, reflector_properties, world_color
 
 #: Seconds after the last view change before its camera is rebuilt.
@@ -86,61 +86,12 @@ MAX_VIEWS = 8
 COUNT_SECONDS = 2.0
 #: Views whose matrices differ by less than this are the same view (no rebuild).
 VIEW_TOLERANCE = 1e-6
+#: Reflectors of more triangles than this (all together) are made ready for tracing on
+#: the worker when the viewport should not wait: a million-triangle mirror's BVH and seal
+#: took 8 s on the main thread (docs/benchmarks/cliffs.md).
+BACKGROUND_TRIANGLES = 100_000
 #: Key of the view a Bake or Refresh uses when there is no 3D view (background mode).
 CAMERA_KEY = "scene camera"
-
-
-@dataclass
-class ViewCamera:
-    """The sample-based camera of one view (``None`` when morphing grids draw every
-    reflector), the grids covering the view, and their projection source once made
-    (main thread)."""
-
-    view: View
-    sbc: object
-    bounds: tuple
-    settings: tuple
-    generation: int
-    morph: list = field(default_factory=list)  # (MorphingGrid, matrix) of the grids covering the view
-    source: object = None  # what the renderer projects with (made on the first draw: needs the GPU)
-    last_drawn: float = 0.0
-    #: (the renderer's CameraProjections, its CachedProjection of this camera not yet on
-    #: the GPU): made on the worker with the camera, adopted on the first draw.
-    projected: tuple | None = None
-
-
-@dataclass
-class LiveScene:
-    """Everything live about one scene (keyed by ``scene.session_uid``)."""
-
-    settings: tuple = ()
-    captured: object = None
-    renderer: object = None
-    reflector_set: object = None
-    reflector_names: frozenset = frozenset()
-    grids: list = field(default_factory=list)  # (MorphingGrid, matrix) of the baked reflectors in Morphing mode
-    plan: object = field(default_factory=lambda: methods.MethodPlan())  # which method draws each reflector
-    bounds: tuple | None = None
-    world: tuple = (0.0, 0.0, 0.0, 1.0)
-    cameras: dict = field(default_factory=dict)  # view key -> ViewCamera
-    jobs: dict = field(default_factory=dict)  # view key -> (Future, View, generation)
-    requests: dict = field(default_factory=dict)  # view key -> (View, time of the request)
-    failed: dict = field(default_factory=dict)  # view key -> View whose camera could not be built
-    generation: int = 0  # bumped by every capture of the reflectors: older cameras are stale
-    dirty_reflectors: bool = False
-    dirty_meshes: bool = False
-    drawing: bool = True  # False after a draw failed, until the next bake or refresh
-    status: str = ""
-    level: str = 'INFO'  # 'INFO', 'WARNING' or 'ERROR'
-    stats: dict = field(default_factory=dict)
-    counts: dict = field(default_factory=lambda: {"bakes": 0, "remeshes": 0, "builds": 0, "draws": 0,
-                                                  "projections": 0, "checks": 0})
-    #: The last view drawn, when it was first drawn, the camera it was drawn with, and
-    #: whether its accuracy has been checked (``accuracy.measure`` once it settles).
-    last_view: tuple | None = None
-
-    def report(self, level: str, message: str) -> None:
-        self.level, self.status = level, message
 
 
 _states: dict[int, LiveScene] = {}
@@ -160,25 +111,44 @@ def scene_settings(scene) -> tuple:
 # --- capture (main thread) -----------------------------------------------------------
 
 
-def _capture(state: LiveScene, scene, depsgraph, reflectors: bool) -> None:
+def _capture(state: LiveScene, scene, depsgraph, reflectors: bool, wait: bool = True) -> bool:
     """Capture the scene into ``state``: a new renderer; with ``reflectors`` also a new
-    reflector set (a new generation: every camera is rebuilt)."""
+    reflector set (a new generation: every camera is rebuilt). Reflectors of more than
+    BACKGROUND_TRIANGLES together are made ready for tracing on the worker unless
+    ``wait``: returns False then, the capture landing later (``_finish_preparing``)."""
+    captured = capture_scene(depsgraph)
+    scene_bounds(captured.reflectors, captured.meshes)  # bad input raises here, before any work
+    if not (reflectors or state.reflector_set is None):
+        state.reflector_set.seal_empty_interiors(captured.meshes)
+        state.counts["remeshes"] += 1
+        _renew_renderer(state, scene, captured)
+        return True
+    triangles = sum(len(r.triangles) for r in captured.reflectors)
+    if wait or triangles <= BACKGROUND_TRIANGLES:
+        _adopt(state, scene, captured, live_workers.prepare_reflectors(captured.reflectors, captured.meshes))
+        return True
+    future = live_workers.builder().submit(live_workers.prepare_reflectors, captured.reflectors, captured.meshes)
+    state.preparing = Preparing(future, captured, time.monotonic(), triangles)
+    _report_preparing(state)
+    return False
+
+
+def _adopt(state: LiveScene, scene, captured, reflector_set) -> None:
+    """Make ``captured``'s reflectors, ready for tracing in ``reflector_set``, the state's."""
+    state.reflector_set = reflector_set
+    state.reflector_names = marked_reflectors(scene)
+    state.grids = morph_bake.load_grids(scene, captured.reflectors)
+    state.plan = methods.plan(scene, captured.reflectors, state.settings[2],
+                              baked={grid.reflector_name for grid, _ in state.grids})
+    state.grids = state.plan.drawn_grids(state.grids)
+    state.generation += 1
+    state.counts["bakes"] += 1
+    _renew_renderer(state, scene, captured)
+
+
+def _renew_renderer(state: LiveScene, scene, captured) -> None:
     from ..gpu_shaders.reflection_draw import ReflectionRenderer
 
-    captured = capture_scene(depsgraph)
-    lo, hi = scene_bounds(captured.reflectors, captured.meshes)
-    if reflectors or state.reflector_set is None:
-        state.reflector_set = ReflectorSet(list(captured.reflectors))
-        state.reflector_names = marked_reflectors(scene)
-        state.grids = morph_bake.load_grids(scene, captured.reflectors)
-        state.plan = methods.plan(scene, captured.reflectors, state.settings[2],
-                                  baked={grid.reflector_name for grid, _ in state.grids})
-        state.grids = state.plan.drawn_grids(state.grids)
-        state.generation += 1
-        state.counts["bakes"] += 1
-    else:
-        state.counts["remeshes"] += 1
-    state.reflector_set.seal_empty_interiors(captured.meshes)
     # A new renderer has no projection: the next draw projects with the view's camera
     # once (SBC V-A), and later draws reuse it until a camera lands or the meshes change.
     # Interpolated answers only: polishing them on the true rays (the headless render
@@ -193,8 +163,37 @@ def _capture(state: LiveScene, scene, depsgraph, reflectors: bool) -> None:
                                         **reflector_properties(captured.reflectors, scene))
     state.captured = captured
     state.world = world_color(scene)
-    state.bounds = (lo, hi)
+    state.bounds = scene_bounds(captured.reflectors, captured.meshes)
     state.drawing = True
+
+
+def _report_preparing(state: LiveScene) -> None:
+    preparing = state.preparing
+    names = ", ".join(repr(r.name) for r in preparing.captured.reflectors)
+    state.report('INFO', f"Preparing {names} for ray tracing ({preparing.triangles:,} triangles, "
+                         f"{time.monotonic() - preparing.started:.0f} s); the last reflections draw meanwhile")
+
+
+def _finish_preparing(state: LiveScene, scene, wait: bool) -> bool:
+    """Adopt the capture prepared on the worker once ready (with ``wait``, now): returns
+    whether it landed (the status shows the progress until then)."""
+    preparing = state.preparing
+    if not (wait or preparing.future.done()):
+        _report_preparing(state)
+        return False
+    state.preparing = None
+    _adopt(state, scene, preparing.captured, preparing.future.result())
+    state.report('INFO', "Building reflections...")
+    return True
+
+
+def _restart_stale(state: LiveScene, reflectors: bool, wait: bool) -> None:
+    """Rebuild the cameras a new capture made stale: all after new reflectors, those
+    whose bounds no longer hold the scene after new meshes."""
+    stale = {key: c.view for key, c in state.cameras.items() if reflectors or not _inside(state.bounds, c.bounds)}
+    for key, view in stale.items():
+        if key not in state.requests:
+            _start(state, key, view, wait)
 
 
 def _covering_grids(state: LiveScene, view: View) -> list:
@@ -290,51 +289,12 @@ def _collect(state: LiveScene) -> bool:
                                         last_drawn=time.monotonic(),
                                         projected=None if projected is None else (projections, projected))
         state.counts["builds"] += 1
-        _update_stats(state, sbc, covering)
-        _report_visibility(state, sbc, covering)
+        live_status.update_stats(state, sbc, covering)
+        live_status.report_visibility(state, sbc, covering)
     while len(state.cameras) > MAX_VIEWS:
         oldest = min(state.cameras, key=lambda k: state.cameras[k].last_drawn)
         del state.cameras[oldest]
     return finished
-
-
-def _update_stats(state: LiveScene, sbc, covering: list) -> None:
-    s = {} if sbc is None else sbc.stats
-    geometry = state.renderer.geometry
-    mesh_bytes = geometry.vertices.nbytes + geometry.colors.nbytes + geometry.triangles.nbytes
-    camera_bytes = sum(c.sbc.stats.get("nbytes", 0) for c in state.cameras.values() if c.sbc is not None)
-    state.stats.update({
-        "rays": int(s.get("n_rays", 0)),
-        "leaves": int(s.get("n_leaves", 0)),
-        "build_ms": 1000.0 * (s.get("trace_seconds", 0.0) + s.get("build_seconds", 0.0)),
-        "memory_mb": (camera_bytes + mesh_bytes) / 2.0 ** 20,
-        "views": len(state.cameras),
-        "reflected_triangles": int(len(geometry.triangles)),
-        "morphing": ", ".join(grid.reflector_name for grid, _ in covering),
-        "iterative": ", ".join(m.name for m in state.plan.iterative),
-        "perturbation": ", ".join(m.name for m in state.plan.perturbation),
-    })
-
-
-def _report_visibility(state: LiveScene, sbc, covering: list) -> None:
-    """Reflectors the view does not see: a warning when none is seen (nothing to draw).
-    A reflector drawn from its grid, searched or perturbed counts as seen (its method
-    decides per vertex)."""
-    names = [r.name for r in state.captured.reflectors]
-    seen = {int(history[0]) for history in ([] if sbc is None else sbc.groups)}
-    seen |= {grid.reflector_index for grid, _ in covering} | state.plan.iterative_indices | {
-        m.index for m in state.plan.perturbation}
-    unseen = [name for k, name in enumerate(names) if k not in seen]
-    quoted = ", ".join(repr(n) for n in unseen)
-    clipped = clip_start_inside(state.reflector_set, sbc.ray_map.view) if sbc is not None else []
-    if clipped:
-        state.report('WARNING', clip_start_message(clipped[0]))
-    elif not seen:
-        state.report('WARNING', f"{quoted}: out of view, no reflection to draw (turn the view toward it)")
-    elif unseen:
-        state.report('INFO', f"{quoted}: out of view; reflections drawn in the others")
-    else:
-        state.report('INFO', "Reflections up to date")
 
 
 # --- the public operations ------------------------------------------------------------
@@ -351,7 +311,7 @@ def bake(scene, depsgraph, views: dict | None = None, wait: bool = False) -> Liv
     state.settings = scene_settings(scene)
     state.dirty_reflectors = state.dirty_meshes = False
     try:
-        _capture(state, scene, depsgraph, reflectors=True)
+        ready = _capture(state, scene, depsgraph, reflectors=True, wait=wait)
         if views is None:
             views = {key: camera.view for key, camera in state.cameras.items()}
             views.update({key: job[1] for key, job in state.jobs.items()})
@@ -362,6 +322,10 @@ def bake(scene, depsgraph, views: dict | None = None, wait: bool = False) -> Liv
         state.report('ERROR', str(error))
         raise
     state.failed.clear()
+    if not ready:  # the views' cameras are built once the reflectors are ready
+        state.requests.update({key: (view, 0.0) for key, view in views.items()})
+        ensure_timer()
+        return state
     state.report('INFO', "Building reflections...")
     for key, view in views.items():
         _start(state, key, view, wait)
@@ -416,26 +380,28 @@ def process(scene, depsgraph, wait: bool = False, now: float | None = None) -> b
         if settings != state.settings:  # a method setting changed: new cameras for every view
             state.settings = settings
             state.dirty_reflectors = True
-        if state.dirty_reflectors or state.dirty_meshes:
+        if state.preparing is not None and _finish_preparing(state, scene, wait):
+            _restart_stale(state, True, wait)
+        # Edits made while reflectors are prepared wait for them (the capture then is stale).
+        if state.preparing is None and (state.dirty_reflectors or state.dirty_meshes):
             reflectors = state.dirty_reflectors
             state.dirty_reflectors = state.dirty_meshes = False
-            _capture(state, scene, depsgraph, reflectors)
-            stale = {key: c.view for key, c in state.cameras.items()
-                     if reflectors or not _inside(state.bounds, c.bounds)}
-            for key, view in stale.items():
-                if key not in state.requests:
-                    _start(state, key, view, wait)
+            if _capture(state, scene, depsgraph, reflectors, wait):
+                _restart_stale(state, reflectors, wait)
         for key, (view, asked) in list(state.requests.items()):
-            if wait or (now - asked >= DEBOUNCE_SECONDS and key not in state.jobs):
+            if state.preparing is None and (wait or (now - asked >= DEBOUNCE_SECONDS and key not in state.jobs)):
                 _start(state, key, view, wait)
     except SceneInputError as error:
         state.report('ERROR', str(error))
+    except Exception as error:  # noqa: BLE001 - the worker's preparation failed: say so, draw the last
+        state.preparing = None
+        state.report('ERROR', f"Preparing the reflectors failed: {type(error).__name__}: {error}")
     morph = None if state.renderer is None else state.renderer.morph
     if _collect(state) or (morph is not None and morph.prefetched):
         tag_redraw()
     checking = _check_when_settled(state, scene, now, wait)
     return bool(state.jobs or state.requests or state.dirty_meshes or state.dirty_reflectors
-                or (morph is not None and morph.prefetching) or checking)
+                or state.preparing is not None or (morph is not None and morph.prefetching) or checking)
 
 
 def _check_when_settled(state: LiveScene, scene, now: float, wait: bool) -> bool:

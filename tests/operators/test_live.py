@@ -231,6 +231,48 @@ def test_a_landing_camera_brings_its_reflected_triangles_and_its_first_draw_only
     assert state.counts["projections"] == projections + 2
 
 
+def test_big_reflectors_are_made_ready_on_the_worker_while_the_last_reflections_draw(fig3, monkeypatch):
+    """Reflectors of more than BACKGROUND_TRIANGLES (lowered here below the ball's) are
+    made ready for tracing (BVH, seal) on the worker: the re-bake after moving the ball
+    returns at once, the last reflection keeps drawing and the status counts the
+    seconds; once ready the capture lands, a new camera is built and drawn. A Bake that
+    does not wait queues its views for then."""
+    bpy.ops.curved_reflections.bake()
+    state = live.state_of(fig3)
+    view = _camera_view(fig3)
+    monkeypatch.setattr(live, "BACKGROUND_TRIANGLES", 10)
+    ready = threading.Event()
+    prepare = live_workers.prepare_reflectors
+    monkeypatch.setattr(live_workers, "prepare_reflectors", lambda *args: ready.wait(60) and prepare(*args))
+    fig3.curved_reflections.auto_refresh = False  # the handler would process at once, waiting (background mode)
+    bpy.data.objects["MirrorSphere"].location.x += 0.2
+    bpy.context.view_layer.update()
+    state.dirty_reflectors = True
+    renderer, generation, camera = state.renderer, state.generation, state.cameras[live.CAMERA_KEY]
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    assert live.process(fig3, depsgraph)  # returns while the worker is held: pending
+    assert state.preparing is not None and state.renderer is renderer and state.generation == generation
+    assert "Preparing 'MirrorSphere' for ray tracing" in state.status and "triangles" in state.status
+    drawn, image = _draw(fig3, view)
+    assert drawn and len(_pixels_of(image, "Cube", fig3)) > 0  # the last reflection
+    assert live.process(fig3, depsgraph) and state.preparing is not None
+    ready.set()
+    state.preparing.future.result(timeout=60)
+    assert live.process(fig3, depsgraph)  # lands; the view's camera is rebuilt on the worker
+    assert state.preparing is None and state.generation == generation + 1 and state.renderer is not renderer
+    assert state.captured.reflectors[0].vertices[:, 0].max() == pytest.approx(1.2, abs=1e-3)
+    state.jobs[live.CAMERA_KEY][0].result(timeout=60)
+    live.process(fig3, depsgraph)
+    assert state.cameras[live.CAMERA_KEY] is not camera and _draw(fig3, view)[0]
+
+    live.bake(fig3, depsgraph, {live.CAMERA_KEY: view}, wait=False)
+    assert state.preparing is not None and state.requests[live.CAMERA_KEY] == (view, 0.0)
+    state.preparing.future.result(timeout=60)
+    live.process(fig3, depsgraph)
+    assert state.preparing is None and live.CAMERA_KEY in state.jobs and not state.requests
+    state.jobs[live.CAMERA_KEY][0].result(timeout=60)
+
+
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the nice value is per thread on Linux only")
 def test_background_threads_yield_the_cores_to_drawing():
     """Camera builds and morphing prefetches run at a lower priority than Blender's

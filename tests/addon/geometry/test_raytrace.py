@@ -203,3 +203,21 @@ def test_an_open_or_inward_wound_mirror_is_sealed_with_its_own_sense():
     reflectors.sealed[:] = (0, -1)
     triangle = hits.triangle + len(open_cap.triangles)
     assert reflectors.from_inside(np.array([[0.0, 0.0, 1.0]]), triangle)[0]
+
+
+def test_the_seal_finds_points_inside_through_the_bvh_as_every_triangle_tested_does():
+    """Inside a closed mirror or not (``ReflectorSet._inside``, the seal's test): the
+    same answers as ``closed_surfaces.inside``, which tests every triangle, on points
+    around a ball and a torus (a non-convex solid: points in its hole are outside) set
+    side by side, each point asked of each mirror."""
+    from curved_reflections.addon.geometry import closed_surfaces
+    from curved_reflections.addon.geometry.sphere import torus
+
+    mirrors = [icosphere((0.0, 0.0, 0.0), 1.0, 3, "Ball"), torus((4.0, 0.0, 0.0), 1.2, 0.4, 48, 24)]
+    reflectors = ReflectorSet(mirrors)
+    points = np.random.default_rng(3).uniform((-1.5, -1.5, -1.5), (6.0, 1.5, 1.5), (3000, 3))
+    for index, mirror in enumerate(mirrors):
+        expected = closed_surfaces.inside(mirror.vertices, mirror.triangles, points)
+        assert 100 < expected.sum() < len(points) - 100
+        np.testing.assert_array_equal(reflectors._inside(index, points), expected)
+

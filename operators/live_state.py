@@ -1,0 +1,75 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The records of the live view (``live.py``): one scene's state, the camera of one
+view, and a capture whose reflectors are being made ready on the worker."""
+
+from __future__ import annotations
+
+from concurrent.futures import Future
+from dataclasses import dataclass, field
+
+from . import methods
+
+
+@dataclass
+class ViewCamera:
+    """The sample-based camera of one view (``None`` when morphing grids draw every
+    reflector), the grids covering the view, and their projection source once made
+    (main thread)."""
+
+    view: View
+    sbc: object
+    bounds: tuple
+    settings: tuple
+    generation: int
+    morph: list = field(default_factory=list)  # (MorphingGrid, matrix) of the grids covering the view
+    source: object = None  # what the renderer projects with (made on the first draw: needs the GPU)
+    last_drawn: float = 0.0
+    #: (the renderer's CameraProjections, its CachedProjection of this camera not yet on
+    #: the GPU): made on the worker with the camera, adopted on the first draw.
+    projected: tuple | None = None
+
+
+@dataclass
+class Preparing:
+    """A capture whose reflectors are made ready for tracing on the worker (their BVH and
+    seal, ``live_workers.prepare_reflectors``): the last reflections draw meanwhile."""
+
+    future: Future
+    captured: object
+    started: float
+    triangles: int
+
+
+@dataclass
+class LiveScene:
+    """Everything live about one scene (keyed by ``scene.session_uid``)."""
+
+    settings: tuple = ()
+    captured: object = None
+    renderer: object = None
+    reflector_set: object = None
+    reflector_names: frozenset = frozenset()
+    grids: list = field(default_factory=list)  # (MorphingGrid, matrix) of the baked reflectors in Morphing mode
+    plan: object = field(default_factory=lambda: methods.MethodPlan())  # which method draws each reflector
+    bounds: tuple | None = None
+    world: tuple = (0.0, 0.0, 0.0, 1.0)
+    cameras: dict = field(default_factory=dict)  # view key -> ViewCamera
+    jobs: dict = field(default_factory=dict)  # view key -> (Future, View, generation)
+    requests: dict = field(default_factory=dict)  # view key -> (View, time of the request)
+    failed: dict = field(default_factory=dict)  # view key -> View whose camera could not be built
+    generation: int = 0  # bumped by every capture of the reflectors: older cameras are stale
+    preparing: object = None  # Preparing: a capture whose reflectors are made ready on the worker
+    dirty_reflectors: bool = False
+    dirty_meshes: bool = False
+    drawing: bool = True  # False after a draw failed, until the next bake or refresh
+    status: str = ""
+    level: str = 'INFO'  # 'INFO', 'WARNING' or 'ERROR'
+    stats: dict = field(default_factory=dict)
+    counts: dict = field(default_factory=lambda: {"bakes": 0, "remeshes": 0, "builds": 0, "draws": 0,
+                                                  "projections": 0, "checks": 0})
+    #: The last view drawn, when it was first drawn, the camera it was drawn with, and
+    #: whether its accuracy has been checked (``accuracy.measure`` once it settles).
+    last_view: tuple | None = None
+
+    def report(self, level: str, message: str) -> None:
+        self.level, self.status = level, message
