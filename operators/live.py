@@ -116,9 +116,10 @@ def _capture(state: LiveScene, scene, depsgraph, reflectors: bool, wait: bool = 
     reflector set (a new generation: every camera is rebuilt). Reflectors of more than
     BACKGROUND_TRIANGLES together are made ready for tracing on the worker unless
     ``wait``: returns False then, the capture landing later (``_finish_preparing``)."""
-    captured = capture_scene(depsgraph)
+    remesh = not (reflectors or state.reflector_set is None)
+    captured = capture_scene(depsgraph, reflectors_as_before=state.captured.reflectors if remesh else None)
     scene_bounds(captured.reflectors, captured.meshes)  # bad input raises here, before any work
-    if not (reflectors or state.reflector_set is None):
+    if remesh:
         state.reflector_set.seal_empty_interiors(captured.meshes)
         state.counts["remeshes"] += 1
         _renew_renderer(state, scene, captured)

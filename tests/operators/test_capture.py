@@ -158,6 +158,28 @@ def test_custom_split_normals_are_honoured(empty_scene):
     np.testing.assert_allclose(mirror.normals, [[0, 0.6, 0.8]] * 4, atol=1e-3)
 
 
+def test_reflectors_known_unchanged_are_taken_from_the_earlier_capture(empty_scene):
+    """After a diffuse object's edit the live view passes the earlier reflectors on: each
+    one is taken by name, not read again, unless it is an instance (its instancer may
+    have moved); a reflector new since then is read."""
+    reflector(cube_object("Mirror"))
+    collection = bpy.data.collections.new("Mirrors")
+    collection.objects.link(reflector(bpy.data.objects.new("Inner", cube_object("Plain").data)))
+    _link(bpy.data.objects.new("Instancer", None)).instance_type = 'COLLECTION'
+    bpy.data.objects["Instancer"].instance_collection = collection
+    bpy.data.objects["Instancer"].location.x = 5.0
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    earlier = capture_scene(depsgraph).reflectors
+    assert {r.name for r in earlier} == {"Mirror", "Inner (instanced by Instancer)"}
+    bpy.data.objects["Instancer"].location.x = 8.0
+    reflector(cube_object("Added")).location.x = -5.0
+    now = {r.name: r for r in capture_scene(bpy.context.evaluated_depsgraph_get(),
+                                            reflectors_as_before=earlier).reflectors}
+    assert now["Mirror"] is earlier[[r.name for r in earlier].index("Mirror")]
+    assert now["Inner (instanced by Instancer)"].vertices[:, 0].min() == pytest.approx(7.0)
+    assert now["Added"].vertices[:, 0].max() == pytest.approx(-4.0)
+
+
 def test_hidden_objects_are_not_captured_and_instances_get_unique_names(empty_scene):
     reflector(folded_quads("Mirror"))
     cube_object("Hidden").hide_set(True)

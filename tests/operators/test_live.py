@@ -113,9 +113,11 @@ def test_moving_a_diffuse_object_moves_its_reflection_without_rebaking(fig3):
     view = _camera_view(fig3)
     before = _pixels_of(_draw(fig3, view)[1], "Cube", fig3).mean(axis=0)
     camera = state.cameras[live.CAMERA_KEY]
+    ball = state.captured.reflectors[0]
 
     bpy.data.objects["Cube"].location.x -= 0.25  # along the ball, toward the left
     bpy.context.view_layer.update()  # depsgraph_update_post fires in background mode
+    assert state.captured.reflectors[0] is ball  # not read again
     # (Background mode processes the change at once: the drawn view's accuracy is checked too.)
     assert state.counts == {"bakes": 1, "remeshes": 1, "builds": 1, "draws": 1, "projections": 1, "checks": 1}
     assert state.cameras[live.CAMERA_KEY] is camera  # a mesh change re-projects: same camera
