@@ -217,7 +217,7 @@ class ReflectionRenderer:
         #: (``addon.methods.iterative.IterativeReflector`` each); the others by ``textures``.
         self.iterative = IterativePass(self.geometry, iterative, self.meshes, len(reflectors))
         #: The reflectors drawn from their morphing grids every frame (views inside a grid).
-        convex = ConvexMirrors(reflectors)  # tested once, for the morphing pass and the cameras
+        self.convex_mirrors = convex = ConvexMirrors(reflectors)  # tested once, for every pass
         self.morph = MorphPass(self.geometry, morph, self.meshes, morph_budget_mb, accuracy_px, convex)
         #: The reflectors drawn by perturbation (Chen & Arvo 2000), projected per new view.
         self.perturbation = PerturbationPass(self.geometry, reflectors, perturbation, self.meshes,

@@ -219,9 +219,10 @@ def _covering_grids(state: LiveScene, view: View) -> list:
 def _needs_camera(state: LiveScene, covering: list, settings: tuple) -> bool:
     """Whether a sample-based camera must be built: a reflector drawn neither from a grid
     nor by the iterative search nor by perturbation, or reflections of a higher order
-    (those three give first-order ones only)."""
+    where there can be some (those three give first-order ones only)."""
     drawn = len(covering) + len(state.plan.iterative) + len(state.plan.perturbation)
-    return drawn < len(state.reflector_set.reflectors) or settings[0] > 1
+    return drawn < len(state.reflector_set.reflectors) or (settings[0] > 1
+                                                           and state.renderer.convex_mirrors.higher_orders)
 
 
 def marked_reflectors(scene) -> frozenset:

@@ -117,8 +117,9 @@ class CurvedReflectionsSceneSettings(bpy.types.PropertyGroup):
     )
     max_order: IntProperty(
         name="Max Order",
-        description="Highest number of mirror bounces drawn",
-        default=1, min=1, max=4,
+        description="Highest number of mirror bounces drawn (2: reflections of reflections, "
+                    "and a curved mirror's reflections of itself)",
+        default=2, min=1, max=4,
     )
     auto_refresh: BoolProperty(
         name="Auto Refresh",

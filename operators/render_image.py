@@ -169,7 +169,8 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
     per_frame = state.renderer.per_frame_reflectors(view)
     if per_frame:
         check_view_outside_reflectors(state.reflector_set, view)
-    if len(per_frame) < len(captured.reflectors) or max_order > 1:
+    higher_orders = max_order > 1 and state.renderer.convex_mirrors.higher_orders
+    if len(per_frame) < len(captured.reflectors) or higher_orders:
         lo, hi = scene_bounds(captured.reflectors, captured.meshes)
         bounds = scene_bounds(captured.reflectors, captured.meshes, BOUNDS_MARGIN * float(np.linalg.norm(hi - lo)))
         sbc = build_sample_based_camera(state.reflector_set, view, bounds, max_order=max_order,

@@ -175,6 +175,12 @@ class ConvexMirrors:
         """Indices of the mirrors that bound a convex body."""
         return frozenset(index for index, mirror in enumerate(self._mirrors) if bounds_convex_body(mirror))
 
+    @property
+    def higher_orders(self) -> bool:
+        """Whether a path can meet a mirror after a mirror: there is more than one, or the
+        one bounds no convex body (it may see itself). One convex mirror never does."""
+        return len(self._mirrors) != 1 or 0 not in self.indices
+
 
 def turned_away(vertices: np.ndarray, corners: np.ndarray, winding: np.ndarray, eyes: np.ndarray,
                 known: np.ndarray) -> np.ndarray:

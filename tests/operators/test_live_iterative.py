@@ -83,9 +83,16 @@ def test_a_torus_in_iterative_mode_is_drawn_in_runtime_mode_and_the_panel_says_w
 
 
 def test_second_order_in_auto_mode_builds_a_camera_for_the_higher_orders(fig3):
-    fig3.curved_reflections.max_order = 2
+    """Max Order 2 (the default): the lone convex ball cannot reflect itself, so the
+    search draws it with no camera; a second mirror (a column) brings reflections of
+    reflections, and a camera for them."""
+    assert fig3.curved_reflections.max_order == 2
+    state = live.bake(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
+    assert state.cameras[live.CAMERA_KEY].sbc is None
+    bpy.data.objects["Column1"].curved_reflections.is_reflector = True
     state = live.bake(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
     assert state.cameras[live.CAMERA_KEY].sbc is not None
+    assert {(0, 1), (1, 0)} & {tuple(h) for h in state.cameras[live.CAMERA_KEY].sbc.groups}
     assert live.draw_safely(fig3, live.CAMERA_KEY, _camera_view(fig3))
 
 
@@ -143,7 +150,9 @@ def test_a_new_capture_of_the_reflectors_makes_older_cameras_stale(fig3):
 
 def test_perturbation_mode_draws_live_with_no_camera_and_the_torus_too(fig3, capfd):
     """Perturbation (Chen & Arvo 2000) draws the ball and a torus in the viewport with no
-    sample-based camera; a new view is projected again, the same view is not."""
+    sample-based camera; a new view is projected again, the same view is not (Max Order
+    1: two mirrors, or the torus alone, would reflect each other at 2, by a camera)."""
+    fig3.curved_reflections.max_order = 1
     bpy.data.objects["MirrorSphere"].curved_reflections.mode = 'PERTURBATION'
     torus = _torus(fig3)
     torus.curved_reflections.mode = 'PERTURBATION'
