@@ -36,6 +36,8 @@ def viewport_views(context) -> dict:
 
 
 def _summary(state) -> str:
+    if state.preparing is not None:  # big reflectors made ready on the worker: the status counts the seconds
+        return state.status
     stats = state.stats
     searched = ", ".join(m.name for m in state.plan.iterative)
     perturbed = ", ".join(m.name for m in state.plan.perturbation)

@@ -269,6 +269,8 @@ def test_big_reflectors_are_made_ready_on_the_worker_while_the_last_reflections_
 
     live.bake(fig3, depsgraph, {live.CAMERA_KEY: view}, wait=False)
     assert state.preparing is not None and state.requests[live.CAMERA_KEY] == (view, 0.0)
+    from curved_reflections.operators import bake
+    assert bake._summary(state).startswith("Preparing 'MirrorSphere' for ray tracing")  # what Bake reports
     state.preparing.future.result(timeout=60)
     live.process(fig3, depsgraph)
     assert state.preparing is None and live.CAMERA_KEY in state.jobs and not state.requests
