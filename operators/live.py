@@ -124,7 +124,7 @@ def _capture(state: LiveScene, scene, depsgraph, reflectors: bool, wait: bool = 
         state.counts["remeshes"] += 1
         _renew_renderer(state, scene, captured)
         return True
-    triangles = sum(len(r.triangles) for r in captured.reflectors)
+    triangles = captured.reflector_triangles
     if wait or triangles <= BACKGROUND_TRIANGLES:
         _adopt(state, scene, captured, live_workers.prepare_reflectors(captured.reflectors, captured.meshes))
         return True

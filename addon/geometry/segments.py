@@ -22,6 +22,17 @@ def expand_ranges(start: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.
     return owner, np.repeat(np.asarray(start, dtype=np.int64) - np.cumsum(count) + count, count) + np.arange(count.sum())
 
 
+def ranks_in_runs(sorted_keys: np.ndarray) -> np.ndarray:
+    """(n,) each entry's place in its run of equal ``sorted_keys`` (0 for the run's first):
+    with pairs sorted by owner and then by preference, the entries of rank below k are
+    each owner's k best."""
+    keys = np.asarray(sorted_keys)
+    if len(keys) == 0:
+        return np.zeros(0, dtype=np.int64)
+    start = np.flatnonzero(np.concatenate([[True], keys[1:] != keys[:-1]]))
+    return np.arange(len(keys)) - np.repeat(start, np.diff(np.append(start, len(keys))))
+
+
 def range_offsets(owner: np.ndarray, n: int) -> np.ndarray:
     """(n + 1,) offsets of each owner's range once entries are sorted by ``owner`` (CSR)."""
     return np.concatenate([[0], np.cumsum(np.bincount(owner, minlength=n))])

@@ -59,11 +59,11 @@ def _wall(x: float, y_range, z_range, quads: int = 24):
 
 def _turned(reflector, degrees: float, axis: str = "z"):
     """``reflector`` turned about the Z (or Y) axis through the origin."""
+    from curved_reflections.addon.geometry.shapes import rotation_z
     from curved_reflections.addon.scene import Reflector
 
     c, s = np.cos(np.radians(degrees)), np.sin(np.radians(degrees))
-    turn = (np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) if axis == "z"
-            else np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]]))
+    turn = rotation_z(np.radians(degrees)) if axis == "z" else np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
     return Reflector(reflector.name, reflector.vertices @ turn.T, reflector.triangles, reflector.normals @ turn.T)
 
 

@@ -36,8 +36,9 @@ from .raymap import RayMap, first_pieces
 from ...geometry.raytrace import ReflectorSet
 from .sbc_cells import FOLD_SAMPLES, FoldCells, check_on_rays, rays_fold_at
 from .sbc_edges import (EDGE_REACH_CELLS, SeedRays, complete, complete_quads, edge_seeds, nearest_ray_seeds,
-                        sub_ray_seeds, touches)
-from ...geometry.segments import expand_ranges
+                        sub_ray_seeds, touched_quads, touches)
+from ...geometry.segments import expand_ranges, ranks_in_runs
+from ...geometry.vectors import lengths
 from ...reference.true_rays import polish_by_continuation, polish_on_true_rays
 
 LEAF_MODELS = {"ray_patch": RayPatchLeaves(), "pinhole": PinholeLeaves()}
@@ -155,7 +156,7 @@ class SampleBasedCamera:
             check = np.flatnonzero(edge & keep)
             if len(check) and len(self.histories[g]) == 1:  # a higher order's polish checked its last segment
                 offset = points[target[check]] - reflector_points[check]
-                length = _norm(offset)
+                length = lengths(offset)
                 keep[check] = ~self.true_rays.occluded(reflector_points[check], offset / length[:, None], length)
             result.reflector_points[g, target] = np.where(keep[:, None], reflector_points, np.nan)
             result.pixels[g, target] = np.where(keep[:, None], pixels, np.nan)
@@ -346,9 +347,7 @@ class SampleBasedCamera:
         for g, (grid, history) in enumerate(zip(self.grids, self._history_grids)):
             if self._has_edges(g) and id(grid) not in masks:
                 if len(self.histories[g]) > 1:  # the last ring of the footprint
-                    present = grid >= 0
-                    edge = (present[:-1, :-1] | present[:-1, 1:] | present[1:, :-1] | present[1:, 1:]) & ~complete_quads(
-                        grid)
+                    edge = touched_quads(grid >= 0) & ~complete_quads(grid)
                 else:
                     edge = complete_quads(history) & ~complete_quads(grid)
                 corner = np.zeros(grid.shape, dtype=bool)
@@ -600,11 +599,5 @@ def _closest_cells(cells, pair_point, pair_cell, points, keep=CANDIDATE_CELLS):
     pair_point, pair_cell, miss = pair_point[near], pair_cell[near], miss[near]
     order = np.lexsort((miss, pair_point))
     sorted_point = pair_point[order]
-    group_start = np.flatnonzero(np.concatenate([[True], sorted_point[1:] != sorted_point[:-1]]))
-    rank = np.arange(len(order)) - np.repeat(group_start, np.diff(np.concatenate([group_start, [len(order)]])))
-    chosen = order[rank < (keep if np.isscalar(keep) else keep[sorted_point])]
+    chosen = order[ranks_in_runs(sorted_point) < (keep if np.isscalar(keep) else keep[sorted_point])]
     return pair_point[chosen], pair_cell[chosen]
-
-
-def _norm(vectors: np.ndarray) -> np.ndarray:
-    return np.sqrt(np.einsum("pd,pd->p", vectors, vectors))

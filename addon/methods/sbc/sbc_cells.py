@@ -22,7 +22,7 @@ import numpy as np
 from .ray_patch import RayPatches
 from .raymap import RayMap, box_exit_distance, first_pieces
 from ...geometry.raytrace import ReflectorSet, reflect, reflection_valid
-from ...geometry.vectors import cross
+from ...geometry.vectors import cross, lengths
 
 #: A projected point may lie off the ray map's interpolated ray by this many cell spacings.
 MISS_CELLS = 1.0
@@ -262,7 +262,7 @@ def check_on_rays(ray_map: RayMap, table: np.ndarray, grid: np.ndarray, cells: n
     fu, fv = frac[:, 0:1], frac[:, 1:2]
     rays = [table[c] for c in corners]
     mixed = ((1 - fu) * (1 - fv)) * rays[0] + (fu * (1 - fv)) * rays[1] + ((1 - fu) * fv) * rays[2] + (fu * fv) * rays[3]
-    direction = mixed[:, 3:6] / np.maximum(_norm(mixed[:, 3:6]), 1e-300)[:, None]
+    direction = mixed[:, 3:6] / np.maximum(lengths(mixed[:, 3:6]), 1e-300)[:, None]
     head_distance = mixed[:, 6]
     blocked = ray_map.blocked
     blocked = blocked[corners[0]] | blocked[corners[1]] | blocked[corners[2]] | blocked[corners[3]]
@@ -280,15 +280,11 @@ def check_on_rays(ray_map: RayMap, table: np.ndarray, grid: np.ndarray, cells: n
     offset = points[keep] - mixed[:, 0:3]
     s = np.einsum("pd,pd->p", offset, direction)
     tolerance = 1e-6 * (1.0 + head_distance)
-    miss = _norm(offset - s[:, None] * direction)
+    miss = lengths(offset - s[:, None] * direction)
     # Spacing of neighbouring rays at distance s (the larger axis of the cell).
-    along_u = _norm(rays[1][:, 0:3] - rays[0][:, 0:3] + s[:, None] * (rays[1][:, 3:6] - rays[0][:, 3:6]))
-    along_v = _norm(rays[2][:, 0:3] - rays[0][:, 0:3] + s[:, None] * (rays[2][:, 3:6] - rays[0][:, 3:6]))
+    along_u = lengths(rays[1][:, 0:3] - rays[0][:, 0:3] + s[:, None] * (rays[1][:, 3:6] - rays[0][:, 3:6]))
+    along_v = lengths(rays[2][:, 0:3] - rays[0][:, 0:3] + s[:, None] * (rays[2][:, 3:6] - rays[0][:, 3:6]))
     ok = ((miss <= MISS_CELLS * np.maximum(along_u, along_v) + tolerance) & (s >= -tolerance)
           & (~blocked | (s <= head_distance + tolerance)))
     hits = np.flatnonzero(ok)
     return keep[hits], s[hits], mixed[hits, 7], np.minimum(along_u, along_v)[hits]
-
-
-def _norm(vectors: np.ndarray) -> np.ndarray:
-    return np.sqrt(np.einsum("pd,pd->p", vectors, vectors))

@@ -17,7 +17,7 @@ import numpy as np
 from .bsp import BSPTree
 from .raymap import RayMap
 from ...geometry.raytrace import ReflectorSet
-from ...geometry.segments import expand_ranges
+from ...geometry.segments import expand_ranges, ranks_in_runs
 from ...reference.true_rays import trace_history
 
 #: Camera answers up to this many cells past their leaf's rays, across a sharp edge of
@@ -29,6 +29,11 @@ def complete_quads(grid: np.ndarray) -> np.ndarray:
     """(rows - 1, columns - 1) whether the four rays at the corners of each unit cell exist in ``grid``."""
     present = grid >= 0
     return present[:-1, :-1] & present[:-1, 1:] & present[1:, :-1] & present[1:, 1:]
+
+
+def touched_quads(mask: np.ndarray) -> np.ndarray:
+    """(rows - 1, columns - 1) whether ``mask`` (rows, columns) holds some corner of each unit cell."""
+    return mask[:-1, :-1] | mask[:-1, 1:] | mask[1:, :-1] | mask[1:, 1:]
 
 
 @dataclass(frozen=True)
@@ -126,9 +131,7 @@ def sub_ray_seeds(reflector_set: ReflectorSet, ray_map: RayMap, history, grid: n
         near[:-1] |= near[1:]
         near[:, 1:] |= near[:, :-1]
         near[:, :-1] |= near[:, 1:]
-    hit = first_order >= 0
-    quads = (~complete_quads(grid) & (near[:-1, :-1] | near[:-1, 1:] | near[1:, :-1] | near[1:, 1:])
-             & (hit[:-1, :-1] | hit[:-1, 1:] | hit[1:, :-1] | hit[1:, 1:]))
+    quads = ~complete_quads(grid) & touched_quads(near) & touched_quads(first_order >= 0)
     j, i = np.nonzero(quads)
     per_axis = max(2, math.ceil(ray_map.downsample / SUB_RAY_PX))
     step = 1.0 / per_axis
@@ -172,8 +175,7 @@ def _closest_seeds(seeds: SeedRays, points, pair_point, seed, reach: float = EDG
     near = np.flatnonzero((along >= 0) & (ratio <= 1.0))
     order = near[np.lexsort((ratio[near], pair_point[near]))]
     owner = pair_point[order]
-    group_start = np.flatnonzero(np.concatenate([[True], owner[1:] != owner[:-1]])) if len(order) else order
-    rank = np.arange(len(order)) - np.repeat(group_start, np.diff(np.append(group_start, len(order))))
+    rank = ranks_in_runs(owner)
     chosen = np.flatnonzero(rank < ranks)
     cells = np.full((len(points), ranks, 2), np.nan)
     distance = np.full((len(points), ranks), np.nan)

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from curved_reflections.addon.geometry.segments import (segment_max, segment_mean, segment_min, segment_sum,
-                                                        solve_least_squares)
+from curved_reflections.addon.geometry.segments import (ranks_in_runs, segment_max, segment_mean, segment_min,
+                                                        segment_sum, solve_least_squares)
 
 
 def test_segment_reductions_match_per_node_loops():
@@ -28,3 +28,8 @@ def test_per_node_least_squares_recovers_each_nodes_line():
 def test_a_node_without_members_is_an_error():
     with pytest.raises(ValueError, match="at least one member"):
         segment_sum(np.ones((3, 1)), np.array([0, 0, 2]), 3)
+
+
+def test_ranks_in_runs_count_each_entry_s_place_among_its_equals():
+    np.testing.assert_array_equal(ranks_in_runs(np.array([3, 3, 3, 5, 7, 7])), [0, 1, 2, 0, 0, 1])
+    assert ranks_in_runs(np.zeros(0, dtype=np.int64)).shape == (0,)

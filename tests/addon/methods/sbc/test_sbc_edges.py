@@ -5,6 +5,7 @@ import numpy as np
 
 from curved_reflections.addon import Reflector, look_at_view
 from curved_reflections.addon.geometry.raytrace import ReflectorSet
+from curved_reflections.addon.geometry.shapes import rotation_z
 from curved_reflections.addon.geometry.sphere import icosphere
 from curved_reflections.addon.methods.sbc.raymap import trace_ray_map
 from curved_reflections.addon.methods.sbc.sbc_edges import SeedRays, nearest_ray_seeds, sub_ray_seeds
@@ -30,8 +31,7 @@ def test_ring_seeds_come_closest_first():
 def _low_wall_and_ball():
     """A ball before a low flat wall mirror turned -35 degrees (two triangles), seen so
     that the wall's reflection in the ball is a sliver along its rim."""
-    angle = np.radians(-35.0)
-    turn = np.array([[np.cos(angle), -np.sin(angle), 0.0], [np.sin(angle), np.cos(angle), 0.0], [0.0, 0.0, 1.0]])
+    turn = rotation_z(np.radians(-35.0))
     corners = np.array([[-1.0, -2.0, 0.0], [-1.0, 2.0, 0.0], [-1.0, 2.0, 2.0], [-1.0, -2.0, 2.0]]) @ turn.T
     wall = Reflector("Wall", corners, np.array([[0, 1, 2], [0, 2, 3]]), np.tile(turn[:, 0], (4, 1)))
     reflector_set = ReflectorSet([wall, icosphere((0.7, 0.3, 0.8), 0.7, 4, "Ball")])
