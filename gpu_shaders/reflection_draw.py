@@ -40,7 +40,7 @@ Three passes, all into float targets of the view's size:
    mesh's colour, normal and UVs (times the mesh's image texture, if any); emission
    is shown unlit, anything else is lit by a headlight along the *true* eye vector,
    from the vertex toward its reflector point: ambient + Lambert, two-sided.
-3. **Composite** (SBC V-D): on reflector pixels, the reflection where one was drawn,
+3. **Composite** (SBC V-D): on reflector pixels, the traced or else the drawn reflection,
    faded toward the world colour by min(1, (d / A)^2) for its distance d from the mirror
    along the reflected ray when the reflector has a fade distance A, else the world
    colour; mixed with the reflector's own colour by the reflection weight (1 = perfect
@@ -52,11 +52,10 @@ The sample-based camera cannot place a reflection in the last ray-map cell befor
 footprint's edge (the silhouette, or an object in front of the mirror), nor between
 ray-map cells of different reflection histories inside a footprint (where another
 mirror's reflection begins): a projection needs four neighbouring rays of one group.
-:meth:`ReflectionRenderer.render` ray traces those pixels, when they got no reflection,
-on the CPU (:mod:`.band_trace`, shaded alike); :meth:`ReflectionRenderer.draw` (no
-read-back of the image, for a viewport) fills the band from the nearest reflected pixel
-instead. Optionally (``trace_edges``) every pixel next to a drawn reflection that got
-none is traced too.
+:meth:`ReflectionRenderer.render` ray traces those pixels on the CPU (:mod:`.band_trace`,
+shaded alike), and every pixel where the camera knows it is unreliable (a traced colour
+wins); :meth:`ReflectionRenderer.draw` (for a viewport) fills the band from the nearest
+reflected pixel instead. ``trace_edges`` traces every pixel next to a drawn reflection too.
 
 Drawn from a view other than the camera's, the cached reflection is exact only at the
 reflector points: a reflected triangle is interpolated affinely between them (as in the
@@ -81,6 +80,7 @@ Shaders: :mod:`.draw_shaders`; the arrays drawn: :mod:`.draw_geometry`.
 
 from __future__ import annotations
 
+import functools
 import time
 
 import numpy as np
@@ -227,8 +227,10 @@ class ReflectionRenderer:
         self.stats = dict(self.geometry.stats)
         self.counts = {"projections": 0, "frames": 0}
         #: The sample-based cameras' reflected triangles, made once per camera.
-        self.sbc = CameraProjections(self.geometry, self.per_frame_reflectors, self.counts, mixed_subdivisions,
-                                     cull, polish, convex)
+        # The passes, not a bound method: no reference cycle keeps a finished render
+        # (a gigabyte for a million-triangle mirror) alive until a full garbage collection.
+        self.sbc = CameraProjections(self.geometry, functools.partial(_drawn_by, self.passes), self.counts,
+                                     mixed_subdivisions, cull, polish, convex)
         self._reflectors, self._meshes = list(reflectors), list(meshes)
         #: The mirrors' ray-tracing set when the caller has one (its band tracer shares it).
         self._reflector_set = reflector_set
@@ -277,7 +279,7 @@ class ReflectionRenderer:
     def per_frame_reflectors(self, view) -> frozenset:
         """The reflectors whose first-order reflections of ``view`` the per-frame passes
         draw: the searched ones, and those whose grid covers the view."""
-        return frozenset().union(*(frame_pass.drawn_in(view) for frame_pass in self.passes))
+        return _drawn_by(self.passes, view)
 
     def invalidate(self) -> None:
         """Forget the cached projections: the next draw projects again."""
@@ -511,13 +513,12 @@ class ReflectionRenderer:
         traces those pixels on the CPU and uploads their colours for the composite. With
         the camera's ``ray_map``, also those between ray-map cells of different histories
         (:func:`band_trace.history_boundary`: the edge of a second-order reflection inside
-        a footprint). With the ``camera`` itself, also the pixels without a drawn
-        reflection in cells where its projection is unreliable
-        (:func:`band_trace.unreliable_cells`: ray-list leaves, fold and mixed cells).
-        ``holes_of``: reflector indices (drawn from morphing grids) every pixel of which
-        without a drawn reflection is traced: where the blend has no answer (the parts of
-        the mirror not all four nodes see, and triangles with such a corner), but also
-        where the mirror shows the world, so it costs many rays.
+        a footprint). With the ``camera`` itself, also every pixel in cells where its
+        projection is unreliable (:func:`band_trace.unreliable_cells`), drawn ones only
+        while the budget allows (:func:`band_trace.drawn_pixels_in`). ``holes_of``:
+        reflector indices (drawn from morphing grids) every pixel of which without a
+        drawn reflection is traced: where the blend has no answer, but also where the
+        mirror shows the world, so it costs many rays.
         More than :data:`MAX_TRACED_FRACTION` of the image is not a band: then nothing is
         traced (``stats["untraced_pixels"]``, and ``targets.traced`` stays None: the
         composite fills), except for ``holes_of``, which the caller asked for.
@@ -526,19 +527,20 @@ class ReflectionRenderer:
 
         if self._tracer is None:
             self._tracer = band_trace.BandTracer(self._reflectors, self._meshes, self._reflector_set)
-        labels = read_texture(targets.prepass_labels, targets.width, targets.height)[..., 0]
+        size = (targets.width, targets.height)
+        labels = read_texture(targets.prepass_labels, *size)[..., 0]
         searched = _showing(labels, self._reflectors_of("searched_reflectors"))
-        drawn = read_texture(targets.reflection_colors, targets.width, targets.height)[..., 3] > 0.5
+        drawn = read_texture(targets.reflection_colors, *size)[..., 3] > 0.5
         # The searched reflectors' pixels are traced by their own rule, below.
         searched_labels, labels = np.where(searched, labels, 0.0), np.where(searched, 0.0, labels)
-        boundary = None if ray_map is None else band_trace.history_boundary(
-            ray_map, targets.width, targets.height, max_order)
+        boundary = None if ray_map is None else band_trace.history_boundary(ray_map, *size, max_order)
+        doubtful = np.zeros((0, 2), np.int64)  # drawn pixels where the camera's answers are doubtful
         if camera is not None:
             # Cells where the camera knows it may not project (ray lists, folds, mixed).
-            unreliable = band_trace.cell_pixels_mask(
-                band_trace.unreliable_cells(camera.ray_map, camera.trees, camera.mixed, camera.folds),
-                camera.ray_map.downsample, targets.width, targets.height)
+            unreliable = band_trace.cell_pixels_mask(band_trace.unreliable_cells(
+                camera.ray_map, camera.trees, camera.mixed, camera.folds), camera.ray_map.downsample, *size)
             boundary = unreliable if boundary is None else boundary | unreliable
+            doubtful = band_trace.drawn_pixels_in(labels, drawn, unreliable)
         pixels = band_trace.band_pixels(labels, drawn, radius, edges_of_drawn, boundary)
         if len(holes_of):  # every pixel of these mirrors without a reflection, searched ones too
             rows, columns = np.nonzero(_showing(labels + searched_labels, holes_of) & ~drawn)
@@ -568,6 +570,8 @@ class ReflectionRenderer:
             self.stats["untraced_pixels"] = int(len(pixels))
             targets.traced = None
             return 0
+        if len(pixels) + len(doubtful) <= MAX_TRACED_FRACTION * targets.width * targets.height:
+            pixels = np.concatenate([pixels, doubtful])  # distinct: band pixels have no reflection
         traced = np.zeros((targets.height, targets.width, 4), np.float32)
         if len(pixels):
             colors = self._tracer.trace(view, pixels + 0.5, max_order, _rgba(world_color), on_mirrors=True)
@@ -637,14 +641,5 @@ class ReflectionRenderer:
         return image
 
 
-
-def render_offscreen(reflectors, meshes, view, sbc, world_color=(0.0, 0.0, 0.0, 1.0), reflector_colors=None,
-                     reflectivity=None, edge_fraction: float | None = subdivision.EDGE_FRACTION):
-    """One offscreen frame of ``view`` with reflections: ``(image, renderer)``, the image
-    (H, W, 4) float32 linear RGBA, the renderer's ``stats`` the timings and counts.
-
-    ``sbc`` is the view's sample-based camera (built with bounds from
-    ``addon.scene.scene_bounds`` of the same reflectors and meshes, with a margin).
-    """
-    renderer = ReflectionRenderer(reflectors, meshes, reflector_colors, reflectivity, edge_fraction)
-    return renderer.render(view, sbc, world_color), renderer
+def _drawn_by(passes, view) -> frozenset:
+    return frozenset().union(*(frame_pass.drawn_in(view) for frame_pass in passes))

@@ -227,6 +227,14 @@ def band_pixels(labels: np.ndarray, drawn: np.ndarray, radius: int, edges_of_dra
     return _pixels((ids > 0) & ~drawn & near_edge)
 
 
+def drawn_pixels_in(labels: np.ndarray, drawn: np.ndarray, region: np.ndarray) -> np.ndarray:
+    """(K, 2) integer pixels (x, y) of reflector pixels in ``region`` (H, W) bool that
+    have a drawn reflection (``labels`` and ``drawn`` as :func:`band_pixels`): where the
+    sample-based camera's answers are doubtful (:func:`unreliable_cells`), those drawn
+    may be an image of the wrong point while the right one is missing."""
+    return _pixels((np.rint(labels) > 0) & np.asarray(drawn, dtype=bool) & region)
+
+
 def rim_gap_pixels(labels: np.ndarray, drawn: np.ndarray, radius: int) -> np.ndarray:
     """(K, 2) integer pixels (x, y) of reflector pixels without a drawn reflection within
     ``radius`` pixels (Chebyshev) both of their footprint's edge and of a drawn

@@ -101,7 +101,8 @@ def build_bvh(vertices: np.ndarray, triangles: np.ndarray, normals: np.ndarray |
     if normals is None:
         slot_normals = np.zeros((n_slots, 3, 3))
     else:
-        slot_normals = np.where(filled[:, None, None], normals[triangles][slot_triangles], 0.0)
+        slot_normals = normals[triangles[slot_triangles]]
+        slot_normals[~filled] = 0.0
 
     depth = int(np.log2(n_leaves))
     box_lo, box_hi, cone_axis, cone_cos = [], [], [], []

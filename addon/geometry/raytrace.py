@@ -82,6 +82,11 @@ def _nearest_per_ray(rays, triangles, t, u, v):
     return rays[first], t[first], triangles[first], np.stack([u[first], v[first]], axis=1)
 
 
+def _joined(arrays: list, dtype) -> np.ndarray:
+    """The arrays end to end as ``dtype``; a single one of that type as it is, not copied."""
+    return np.asarray(arrays[0], dtype=dtype) if len(arrays) == 1 else np.concatenate(arrays).astype(dtype, copy=False)
+
+
 class ReflectorSet:
     """All reflectors of a scene, concatenated, with one BVH for tracing and solving."""
 
@@ -90,21 +95,24 @@ class ReflectorSet:
             raise SceneInputError("scene", "has no reflector: mark at least one object as a reflector")
         self.reflectors = list(reflectors)
         offsets = np.cumsum([0] + [len(r.vertices) for r in reflectors])
-        self.vertices = np.concatenate([r.vertices for r in reflectors])
-        self.normals = np.concatenate([r.normals for r in reflectors])
-        self.triangles = np.concatenate([r.triangles + o for r, o in zip(reflectors, offsets)])
+        # One reflector's arrays are used as they are (a million-triangle mirror's copies: 48 MB).
+        self.vertices = _joined([r.vertices for r in reflectors], np.float64)
+        self.normals = _joined([r.normals for r in reflectors], np.float64)
+        self.triangles = _joined([r.triangles + o if o else r.triangles for r, o in zip(reflectors, offsets)], np.int64)
         self.owner = np.concatenate(
             [np.full(len(r.triangles), i, dtype=np.int64) for i, r in enumerate(reflectors)]
         )
         corners = self.vertices[self.triangles]
-        self.v0 = corners[:, 0]
-        self.e1 = corners[:, 1] - corners[:, 0]
-        self.e2 = corners[:, 2] - corners[:, 0]
+        # v0, e1 and e2 as nine rows: one gather gives a batch's corners coordinate by
+        # coordinate; the (T, 3) arrays are views of them (a million-triangle mirror's
+        # copies cost 70 MB).
+        self.corner_rows = np.concatenate([corners[:, 0], corners[:, 1] - corners[:, 0],
+                                           corners[:, 2] - corners[:, 0]], axis=1).T.copy()
+        del corners
+        self.v0, self.e1, self.e2 = (self.corner_rows[k:k + 3].T for k in (0, 3, 6))
         face = cross(self.e1, self.e2)
         self.area2 = np.linalg.norm(face, axis=1)
         self.face_normals = face / np.maximum(self.area2, 1e-300)[:, None]
-        # v0, e1 and e2 as nine rows: one gather gives a batch's corners coordinate by coordinate.
-        self.corner_rows = np.concatenate([self.v0, self.e1, self.e2], axis=1).T.copy()
         lo, hi = self.vertices.min(axis=0), self.vertices.max(axis=0)
         self.scale = float(max(np.linalg.norm(hi - lo), 1e-12))
         # Split vertices (sharp edges, custom normals) share positions: weld them so that
@@ -185,7 +193,7 @@ class ReflectorSet:
 
     @property
     def nbytes(self) -> int:
-        arrays = (self.vertices, self.normals, self.triangles, self.owner, self.v0, self.e1, self.e2,
+        arrays = (self.vertices, self.normals, self.triangles, self.owner, self.corner_rows,
                   self.face_normals, self.welded_triangles, self.piece)
         return int(sum(a.nbytes for a in arrays)) + self.bvh.nbytes
 
@@ -271,9 +279,8 @@ class ReflectorSet:
         triangle's ring: (rays that hit, t, triangles, (u, v))."""
         near_triangles = np.asarray(near_triangles, dtype=np.int64)
         guessed = np.flatnonzero(near_triangles >= 0)
-        start, ring = self.ring
-        owner, member = expand_ranges(start[near_triangles[guessed]], np.diff(start)[near_triangles[guessed]])
-        owner, triangles = guessed[owner], ring[member]
+        owner, triangles = self.ring(near_triangles[guessed])
+        owner = guessed[owner]
         t, u, v, _ = self.hit_triangles(origins[owner], directions[owner], triangles)
         with np.errstate(invalid="ignore"):
             keep = (t > SELF_HIT_EPSILON * self.scale) & (t <= np.broadcast_to(t_max, (len(origins),))[owner])
@@ -328,23 +335,29 @@ class ReflectorSet:
         return centre, float(np.sqrt(np.max(np.einsum("vd,vd->v", offset, offset))))
 
     @functools.cached_property
-    def ring(self) -> tuple[np.ndarray, np.ndarray]:
-        """CSR (start (T + 1,), triangles) of each triangle and those sharing a (welded)
-        vertex with it, itself included."""
-        n = len(self.triangles)
+    def fans(self) -> tuple[np.ndarray, np.ndarray]:
+        """CSR (start (V + 1,), triangles) of the triangles around each welded vertex.
+        A triangle's ring (those sharing a vertex with it) is its corners' fans: 3 T
+        entries, where the rings themselves held 13 T and cost seconds to pair up."""
         corner_vertex = self.welded_triangles.reshape(-1)
-        corner_triangle = np.repeat(np.arange(n), 3)
         order = np.argsort(corner_vertex, kind="stable")
-        vertex, triangle = corner_vertex[order], corner_triangle[order]
-        bounds = np.flatnonzero(np.r_[True, vertex[1:] != vertex[:-1], True])
-        valence = np.diff(bounds)
-        # Every pair of triangles around one vertex: (a, b) for a, b in its fan.
-        fan, local = expand_ranges(np.zeros(len(valence), dtype=np.int64), valence * valence)
-        a = triangle[bounds[fan] + local // valence[fan]]
-        b = triangle[bounds[fan] + local % valence[fan]]
-        pairs = np.unique(a * n + b)
-        a, b = pairs // n, pairs % n
-        return np.searchsorted(a, np.arange(n + 1)), b
+        start = np.searchsorted(corner_vertex[order], np.arange(len(self.vertices) + 1))
+        return start, order // 3
+
+    def ring(self, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(owner, member): for each of ``triangles`` (K,), every triangle sharing a
+        (welded) vertex with it, itself included, once: ``owner`` its row in
+        ``triangles``. A member of the fans of two of its corners is kept in the first."""
+        start, fan = self.fans
+        corners = self.welded_triangles[triangles]  # (K, 3)
+        owner, member = expand_ranges(start[corners.reshape(-1)], np.diff(start)[corners.reshape(-1)])
+        corner, owner = owner % 3, owner // 3
+        member = fan[member]
+        around = self.welded_triangles[member]  # (M, 3)
+        earlier = np.zeros(len(member), dtype=bool)
+        for k in (0, 1):  # the member also holds an earlier corner of its owner
+            earlier |= (corner > k) & (around == corners[owner, k][:, None]).any(axis=1)
+        return owner[~earlier], member[~earlier]
 
     def occluded(self, origins, directions, distances, source_triangles=None) -> np.ndarray:
         """(R,) bool: a reflector lies on the segment of length ``distances`` along each ray."""

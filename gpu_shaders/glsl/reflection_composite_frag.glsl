@@ -1,7 +1,9 @@
 /* SPDX-License-Identifier: GPL-3.0-or-later */
 /* Composite, fragment stage (gpu_shaders/reflection_draw.py), one full-screen triangle.
  *
- * On reflector pixels (pre-pass id > 0): the reflected colour where a reflection was
+ * On reflector pixels (pre-pass id > 0): the traced colour where the caller traced the
+ * pixel (exact: it wins over a drawn one, which in a camera's unreliable cells may be an
+ * image of the wrong point), else the reflected colour where a reflection was
  * drawn (reflection alpha 1), else the world colour (the reflected ray leaves the
  * scene), blended with the reflector's own colour by its reflectivity (1 = perfect
  * mirror; SBC paper, Popescu, Sacks, Mei 2006, section V-D: "the diffuse component
@@ -59,11 +61,11 @@ void main()
   vec4 reflection = texelFetch(reflection_colors, texel, 0);
   vec4 traced = texelFetch(traced_colors, texel, 0);
   vec3 reflected = world_color.rgb;
-  if (reflection.a > 0.5) {
-    reflected = attenuated(reflection.rgb, reflection.a, label.z);
-  }
-  else if (traced.a > 0.5) {
+  if (traced.a > 0.5) {
     reflected = attenuated(traced.rgb, traced.a, label.z);
+  }
+  else if (reflection.a > 0.5) {
+    reflected = attenuated(reflection.rgb, reflection.a, label.z);
   }
   else if (fill_radius > 0) {
     /* Only in the band along the footprint's edge: elsewhere a missing reflection is

@@ -158,7 +158,12 @@ def report(rows: list, width: int, height: int, samples: int, command: str, mode
                      f"{r['seconds']:.1f} | {r['traced']:,} | {r['cycles_seconds']:.1f} | "
                      f"{100 * r['disagreement_order1']:.1f} % | {r['seconds_order1']:.1f} |")
     lines += ["", "*With Max Order 1*: the same render with the scene's Max Order 1 (default 2): without the "
-              "mirror's reflections of itself, which Cycles shows."]
+              "mirror's reflections of itself, which Cycles shows.", "",
+              "*Traced px*: mirror pixels ray traced on the CPU: the band along each footprint's edge, and every "
+              "pixel in ray-map cells where the sample-based camera marks its own projection unreliable (ray-list "
+              "leaves, folds, mixed cells), drawn or not: on a crumpled mirror a point appears many times and the "
+              "camera answers some of its images only (docs/overview.md, the composite). There that is most of "
+              "the mirror; the viewport, which does not trace, draws the camera's answers."]
     return "\n".join(lines + [""])
 
 

@@ -536,3 +536,46 @@ def test_unreliable_cells_mark_ray_list_fold_and_mixed_cells_and_their_pixels():
     traced = {tuple(p) for p in band_trace.band_pixels(labels, drawn, radius=0, boundary=pixels).tolist()}
     assert (3, 3) in traced and (6, 6) not in traced
     assert all(pixels[y, x] for x, y in traced)  # only pixels of unreliable cells (radius 0)
+    # The drawn pixels there too (band_trace.drawn_pixels_in): the other three of the cell.
+    doubtful = {tuple(p) for p in band_trace.drawn_pixels_in(labels, drawn, pixels).tolist()}
+    assert {(4, 3), (3, 4), (4, 4)} <= doubtful and not doubtful & traced
+    assert all(pixels[y, x] and drawn[y, x] for x, y in doubtful)
+
+
+def test_a_traced_colour_replaces_a_drawn_reflection_in_unreliable_cells(gpu_ready, monkeypatch):
+    """Where the camera knows its answers are doubtful (here: every cell), each mirror
+    pixel is traced, drawn or not, while the image's budget allows, and the composite shows
+    the traced colour: a crumpled mirror's drawn images may be of the wrong point.
+    Elsewhere the drawn reflection stays."""
+    from curved_reflections.gpu_shaders import reflection_draw
+
+    meshes = [_square("Red", -3.0, 4.0, (1.0, 0.0, 0.0)), _square("Green", 3.0, 4.0, (0.0, 1.0, 0.0))]
+    sentinel = np.array([1.0, 0.0, 1.0])  # what the stubbed tracer sees: no square is magenta
+
+    def magenta(self, view, pixels, *args, **kwargs):
+        out = np.zeros((len(pixels), 4))
+        out[:, :3] = sentinel
+        return out
+
+    monkeypatch.setattr(band_trace.BandTracer, "trace", magenta)
+    image, _ = _render_squares(meshes)
+    is_magenta = np.all(np.abs(image[..., :3] - sentinel) < 1e-4, axis=2)
+    reflected = np.any(np.abs(image[..., :3] - [1.0, 0.0, 0.0]) < 1e-3, axis=2)
+    assert reflected.sum() > 50 and is_magenta.sum() < 0.5 * reflected.sum()  # the band only
+
+    def every_cell(ray_map, *args, **kwargs):
+        return np.ones((ray_map.rows, ray_map.columns), dtype=bool)
+
+    monkeypatch.setattr(band_trace, "unreliable_cells", every_cell)
+    # The mirror is 40 % of this image: over the budget the drawn pixels are not traced.
+    over_budget, _ = _render_squares(meshes)
+    assert np.all(np.abs(over_budget[..., :3] - [1.0, 0.0, 0.0]) < 1e-3, axis=2).sum() > 50
+    monkeypatch.setattr(reflection_draw, "MAX_TRACED_FRACTION", 1.0)
+    image, sbc = _render_squares(meshes)
+    rows, columns = np.mgrid[0:image.shape[0], 0:image.shape[1]]
+    origins, directions = sbc.ray_map.view.pixel_rays(np.stack([columns.ravel(), rows.ravel()], axis=1) + 0.5)
+    along = -np.einsum("ij,ij->i", origins, directions)  # the unit sphere at the origin, well inside
+    on_mirror = (np.linalg.norm(origins + along[:, None] * directions, axis=1) < 0.95).reshape(image.shape[:2])
+    shown = np.all(np.abs(image[..., :3] - [1.0, 0.0, 0.0]) < 1e-3, axis=2)
+    assert on_mirror.sum() > 500 and not (shown & on_mirror).any()  # every red reflection traced over
+    assert np.all(np.abs(image[..., :3] - sentinel) < 1e-4, axis=2).sum() > is_magenta.sum() + 50
