@@ -96,6 +96,7 @@ from .methods.iterative_draw import IterativePass
 from .methods.morph_pass import DEFAULT_BUDGET_MB, MorphPass
 from .methods.perturbation_pass import PerturbationPass
 from .reflected_meshes import SNAP_SHARE, ReflectedMeshes, snap_grid
+from .traced_pixels import traced_rgba, traced_texture
 from .screen_space import (FULL_SCREEN, box_corners, box_on_screen, camera_position, depth_bias, pixel_box,
                            view_projection)
 from .methods.sbc_triangles import MIXED_SUBDIVISIONS, CachedProjection, CameraProjections, _same_view
@@ -281,12 +282,20 @@ class ReflectionRenderer:
         draw: the searched ones, and those whose grid covers the view."""
         return _drawn_by(self.passes, view)
 
+    @property
+    def band_tracer(self) -> band_trace.BandTracer:
+        """The reflectors and meshes ray traced together (made on first use)."""
+        if self._tracer is None:
+            self._tracer = band_trace.BandTracer(self._reflectors, self._meshes, self._reflector_set)
+        return self._tracer
+
     def invalidate(self) -> None:
         """Forget the cached projections: the next draw projects again."""
         self.sbc.invalidate()
 
     def draw(self, view, textures, world_color=(0.0, 0.0, 0.0, 1.0), reflectors_only: bool = False,
-             fill_radius: int | None = None, camera=None, accuracy_px: float | None = None) -> FrameTargets:
+             fill_radius: int | None = None, camera=None, accuracy_px: float | None = None,
+             traced=None) -> FrameTargets:
         """Pre-pass and reflections of ``view`` into the frame targets
         (:meth:`draw_passes`), then the composite into the framebuffer bound by the
         caller (:meth:`composite`). What a viewport draw handler calls, with the
@@ -298,7 +307,9 @@ class ReflectionRenderer:
         see :meth:`draw_passes`; ``None``: placed exactly); ``world_color`` the
         linear RGB(A) that reflected rays leaving the scene show; ``fill_radius`` the
         composite's cheap fill of the band along a footprint's edge (``None``: the
-        camera's down-sampling), where :meth:`render` traces instead.
+        camera's down-sampling), where :meth:`render` traces instead; ``traced``
+        (:class:`.traced_pixels.TracedPixels`) are drawn over the reflections where
+        they were traced for this very view.
 
         ``reflectors_only`` (the viewport overlay): the pre-pass draws the reflectors
         alone, and the composite is depth-tested against the bound framebuffer's depth,
@@ -315,6 +326,7 @@ class ReflectionRenderer:
         scissor = pixel_box(rect, targets.width, targets.height, fill_radius + 1) if reflectors_only else None
         targets = self.draw_passes(view, textures, camera, warm=True, mirrors_only=reflectors_only,
                                    accuracy_px=accuracy_px, scissor=scissor)
+        targets.traced = traced.texture() if traced is not None and _same_view(traced.view, view) else None
         x, y, width, height = gpu.state.viewport_get()
         # A viewport of the view's size is drawn into where it is; otherwise from (0, 0).
         origin = (x, y) if (width, height) == (targets.width, targets.height) else None
@@ -523,10 +535,6 @@ class ReflectionRenderer:
         traced (``stats["untraced_pixels"]``, and ``targets.traced`` stays None: the
         composite fills), except for ``holes_of``, which the caller asked for.
         Returns how many pixels were traced."""
-        import gpu
-
-        if self._tracer is None:
-            self._tracer = band_trace.BandTracer(self._reflectors, self._meshes, self._reflector_set)
         size = (targets.width, targets.height)
         labels = read_texture(targets.prepass_labels, *size)[..., 0]
         searched = _showing(labels, self._reflectors_of("searched_reflectors"))
@@ -537,8 +545,7 @@ class ReflectionRenderer:
         doubtful = np.zeros((0, 2), np.int64)  # drawn pixels where the camera's answers are doubtful
         if camera is not None:
             # Cells where the camera knows it may not project (ray lists, folds, mixed).
-            unreliable = band_trace.cell_pixels_mask(band_trace.unreliable_cells(
-                camera.ray_map, camera.trees, camera.mixed, camera.folds), camera.ray_map.downsample, *size)
+            unreliable = band_trace.unreliable_pixels(camera, *size)
             boundary = unreliable if boundary is None else boundary | unreliable
             doubtful = band_trace.drawn_pixels_in(labels, drawn, unreliable)
         pixels = band_trace.band_pixels(labels, drawn, radius, edges_of_drawn, boundary)
@@ -572,14 +579,8 @@ class ReflectionRenderer:
             return 0
         if len(pixels) + len(doubtful) <= MAX_TRACED_FRACTION * targets.width * targets.height:
             pixels = np.concatenate([pixels, doubtful])  # distinct: band pixels have no reflection
-        traced = np.zeros((targets.height, targets.width, 4), np.float32)
-        if len(pixels):
-            colors = self._tracer.trace(view, pixels + 0.5, max_order, _rgba(world_color), on_mirrors=True)
-            traced[pixels[:, 1], pixels[:, 0], :3] = colors[:, :3]
-            # As a drawn reflection's: 1 + the distance from the mirror (attenuation, SBC V-D).
-            traced[pixels[:, 1], pixels[:, 0], 3] = 1.0 + np.minimum(colors[:, 3], 1e30)
-        data = gpu.types.Buffer('FLOAT', traced.size, traced.reshape(-1))
-        targets.traced = gpu.types.GPUTexture((targets.width, targets.height), format='RGBA32F', data=data)
+        rgba = traced_rgba(self.band_tracer, view, pixels, max_order, _rgba(world_color))
+        targets.traced = traced_texture(*size, pixels, rgba)
         return int(len(pixels))
 
     def render(self, view, sbc_or_textures, world_color=(0.0, 0.0, 0.0, 1.0), trace: bool = True,

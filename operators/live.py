@@ -35,6 +35,10 @@ projection runs per draw on the GPU):
   The runtime camera, when another reflector or a higher order still needs one, leaves
   that reflector's first-order sheets out. A view outside the grid (or orthographic)
   draws the reflector in runtime mode, and the panel says so.
+- **traced pixels** (worker thread, once a camera's own view is drawn): the mirror pixels
+  of the cells where the camera marks its projection unreliable are ray traced
+  (``gpu_shaders/traced_pixels.py``) and drawn over its reflections in that view only:
+  a crumpled mirror shows a point many times, and the camera places some images only.
 - **iterative search** (Auto and Iterative mode, ``operators/methods.py``): star-shaped
   reflectors get their cube maps with the reflectors' capture and are searched on the
   GPU on every redraw for the region's own view (Roger & Holzschuch 2006): no camera is
@@ -399,10 +403,11 @@ def process(scene, depsgraph, wait: bool = False, now: float | None = None) -> b
         state.preparing = None
         state.report('ERROR', f"Preparing the reflectors failed: {type(error).__name__}: {error}")
     morph = None if state.renderer is None else state.renderer.morph
-    if _collect(state) or (morph is not None and morph.prefetched):
+    traced, tracing = _traces_landed(state)
+    if _collect(state) or (morph is not None and morph.prefetched) or traced:
         tag_redraw()
     checking = _check_when_settled(state, scene, now, wait)
-    return bool(state.jobs or state.requests or state.dirty_meshes or state.dirty_reflectors
+    return bool(state.jobs or state.requests or state.dirty_meshes or state.dirty_reflectors or tracing
                 or state.preparing is not None or (morph is not None and morph.prefetching) or checking)
 
 
@@ -494,6 +499,48 @@ def _projection_source(state: LiveScene, camera: ViewCamera | None):
     return camera.source
 
 
+def _traced(state: LiveScene, camera: ViewCamera | None, view: View):
+    """The pixels of ``camera``'s unreliable cells, traced, when ``view`` is the camera's
+    own and they are ready for this renderer (its meshes); else None, and unless they
+    are being traced, they start on the worker (``traced_pixels.trace_doubtful``): a
+    crumpled mirror's reflections come out exact once the view rests."""
+    from ..gpu_shaders.reflection_draw import MAX_TRACED_FRACTION
+    from ..gpu_shaders.traced_pixels import trace_doubtful
+
+    if camera is None or camera.sbc is None or not _same_view(view, camera.view):
+        return None
+    if camera.tracing is None or camera.tracing[0] is not state.renderer:
+        renderer, sbc, max_order, world = state.renderer, camera.sbc, camera.settings[0], state.world
+        # The renderer's tracer is made on the worker too (a tree of the diffuse meshes).
+        future = live_workers.tracer().submit(
+            lambda: trace_doubtful(renderer.band_tracer, sbc, max_order, world, MAX_TRACED_FRACTION))
+        camera.tracing = (renderer, future, False)
+        ensure_timer()  # it redraws once they land (_traces_landed)
+    future = camera.tracing[1]
+    if not future.done():
+        return None
+    try:
+        return future.result()
+    except Exception as error:  # noqa: BLE001 - the camera's own answers keep drawing
+        camera.tracing = (state.renderer, Future(), True)
+        camera.tracing[1].set_result(None)
+        state.report('WARNING', f"Tracing the reflections failed: {type(error).__name__}: {error}")
+        return None
+
+
+def _traces_landed(state: LiveScene) -> tuple[bool, bool]:
+    """(whether some camera's traced pixels landed since the last call: redraw, whether
+    some are still being traced: keep polling)."""
+    landed = pending = False
+    for camera in state.cameras.values():
+        if camera.tracing is not None and not camera.tracing[2]:
+            if camera.tracing[1].done():
+                camera.tracing, landed = camera.tracing[:2] + (True,), True
+            else:
+                pending = True
+    return landed, pending
+
+
 def _draw_with(state: LiveScene, view: View, camera: ViewCamera | None) -> bool:
     """One draw of ``view`` with ``camera``'s projection (``None``: the per-frame passes
     alone); then the morphing nodes around the eye are prefetched."""
@@ -501,7 +548,7 @@ def _draw_with(state: LiveScene, view: View, camera: ViewCamera | None) -> bool:
     projections = state.renderer.counts["projections"]  # a projection made or adopted now counts
     sbc = None if camera is None else camera.sbc
     state.renderer.draw(view, _projection_source(state, camera), state.world, reflectors_only=True, camera=sbc,
-                        accuracy_px=state.settings[2])
+                        accuracy_px=state.settings[2], traced=_traced(state, camera, view))
     if state.last_view is None or not _same_view(state.last_view[0], view) or state.last_view[2] is not sbc:
         state.last_view = (view, time.monotonic(), sbc, False)
         ensure_timer()  # the timer checks it once it settles

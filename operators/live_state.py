@@ -27,6 +27,10 @@ class ViewCamera:
     #: (the renderer's CameraProjections, its CachedProjection of this camera not yet on
     #: the GPU): made on the worker with the camera, adopted on the first draw.
     projected: tuple | None = None
+    #: (renderer, Future of ``traced_pixels.TracedPixels`` or None, whether its landing was
+    #: redrawn): the pixels of the camera's unreliable cells, traced on a worker for that
+    #: renderer (its meshes) once the camera's own view is drawn.
+    tracing: tuple | None = None
 
 
 @dataclass

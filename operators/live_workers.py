@@ -78,6 +78,13 @@ def prefetcher() -> ThreadPoolExecutor:
     return _executor("curved_reflections_prefetch")
 
 
+def tracer() -> ThreadPoolExecutor:
+    """The thread that ray traces the pixels of a landed camera's unreliable cells
+    (``traced_pixels.trace_doubtful``; made on first use): beside the camera builder, so
+    that a view change's next camera never queues behind it."""
+    return _executor("curved_reflections_trace")
+
+
 def running() -> bool:
     """Whether either thread exists."""
     return bool(_executors)

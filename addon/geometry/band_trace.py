@@ -309,6 +309,12 @@ def unreliable_cells(ray_map, trees, mixed=None, folds=None) -> np.ndarray:
     return out
 
 
+def unreliable_pixels(camera, width: int, height: int) -> np.ndarray:
+    """(H, W) bool: the pixels of ``camera``'s :func:`unreliable_cells`."""
+    cells = unreliable_cells(camera.ray_map, camera.trees, camera.mixed, camera.folds)
+    return cell_pixels_mask(cells, camera.ray_map.downsample, width, height)
+
+
 def cell_pixels_mask(cells: np.ndarray, downsample: int, width: int, height: int) -> np.ndarray:
     """(H, W) bool: pixels whose centre lies in a marked ray-map cell square (the four
     rays around the centre, lower-left corner marked), as :func:`history_boundary` reads them."""

@@ -20,7 +20,8 @@ Per scene: Render Image's frame (``render_image.render_scene``, every setting at
 default, the mirror in Auto mode), timed, against Cycles (16 samples, 8 glossy
 bounces): label disagreement on the mirror's pixels (Workbench mask) and the method
 the plan chose (the default Max Order, 2, draws the mirror's reflections of itself);
-then the same with Max Order 1.
+then the same with Max Order 1; then the live view of the scene camera, before and
+after its unreliable cells are traced.
 """
 
 from __future__ import annotations
@@ -121,12 +122,64 @@ def measure(kind: str, width: int, height: int, samples: int, folder: Path, mode
     second = render_scene(scene, bpy.context.evaluated_depsgraph_get())
     seconds_second = time.perf_counter() - start
     second_path = rr.write_png(folder / f"{kind}_ours_order1.png", second.display)
-    return {"kind": kind, "mirror_px": int(mask.sum()), "seconds": seconds,
+    scene.curved_reflections.max_order = 2
+    live_view = viewport(scene, cycles.image, mask, palette)
+    return {**live_view, "kind": kind, "mirror_px": int(mask.sum()), "seconds": seconds,
             "method": ", ".join(f"{k}: {v}" for k, v in ours.stats.get("methods", {}).items()),
             "disagreement": metrics.label_disagreement(rr.read_png(path), cycles.image, mask, palette),
             "traced": int(ours.stats.get("traced_pixels", 0)), "cycles_seconds": cycles_seconds,
             "disagreement_order1": metrics.label_disagreement(rr.read_png(second_path), cycles.image, mask, palette),
             "seconds_order1": seconds_second}
+
+
+def _overlay(scene, view):
+    """(H, W, 4) display sRGB: the live view's draw of ``view`` over nothing (what the
+    viewport overlays on the mirrors), rows bottom to top."""
+    import gpu
+    import numpy as np
+
+    from curved_reflections.addon.metrics import linear_to_srgb
+    from curved_reflections.operators import live
+
+    offscreen = gpu.types.GPUOffScreen(view.width, view.height, format='RGBA32F')
+    try:
+        with offscreen.bind():
+            framebuffer = gpu.state.active_framebuffer_get()
+            framebuffer.clear(color=(0.0, 0.0, 0.0, 1.0), depth=1.0)
+            live.draw_safely(scene, live.CAMERA_KEY, view)
+            pixels = framebuffer.read_color(0, 0, view.width, view.height, 4, 0, 'FLOAT')
+    finally:
+        offscreen.free()
+    pixels.dimensions = view.width * view.height * 4
+    image = np.array(pixels, dtype=np.float32).reshape(view.height, view.width, 4)
+    image[..., :3] = linear_to_srgb(image[..., :3])
+    return image
+
+
+def viewport(scene, cycles_image, mask, palette) -> dict:
+    """The live view of the scene camera (a Bake): label disagreement with Cycles of its
+    first draw (the camera's answers) and of the draw after the worker traced the
+    camera's unreliable cells (``traced_pixels.trace_doubtful``), and that trace's time."""
+    import bpy
+
+    from curved_reflections.addon import metrics
+    from curved_reflections.operators import live
+    from curved_reflections.operators.capture import view_from_camera
+
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    view = view_from_camera(scene.camera, scene, depsgraph)
+    state = live.bake(scene, depsgraph, {live.CAMERA_KEY: view}, wait=True)
+    camera = state.cameras[live.CAMERA_KEY]
+    first = _overlay(scene, view)
+    start = time.perf_counter()
+    traced = camera.tracing[1].result() if camera.tracing is not None else None
+    seconds = time.perf_counter() - start
+    live.process(scene, depsgraph)
+    rested = _overlay(scene, view)
+    live.clear(scene)
+    return {"viewport": metrics.label_disagreement(first, cycles_image, mask, palette),
+            "viewport_traced": metrics.label_disagreement(rested, cycles_image, mask, palette),
+            "viewport_trace_seconds": seconds, "viewport_traced_px": 0 if traced is None else len(traced.pixels)}
 
 
 def _strip(folder: Path, kinds, path: Path) -> Path:
@@ -151,19 +204,24 @@ def report(rows: list, width: int, height: int, samples: int, command: str, mode
              f"![Cycles (left) and ours (right), top to bottom: {', '.join(r['kind'] for r in rows)}]"
              "(../images/real_mirrors.png)", "",
              "| mirror | mirror px | method | label disagreement | ours s | traced px | Cycles s | "
-             "with Max Order 1 | its s |",
-             "|---|---:|---|---:|---:|---:|---:|---:|---:|"]
+             "with Max Order 1 | its s | viewport | viewport at rest | its trace s |",
+             "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         lines.append(f"| {r['kind']} | {r['mirror_px']:,} | {r['method']} | **{100 * r['disagreement']:.1f} %** | "
                      f"{r['seconds']:.1f} | {r['traced']:,} | {r['cycles_seconds']:.1f} | "
-                     f"{100 * r['disagreement_order1']:.1f} % | {r['seconds_order1']:.1f} |")
+                     f"{100 * r['disagreement_order1']:.1f} % | {r['seconds_order1']:.1f} | "
+                     f"{100 * r['viewport']:.1f} % | {100 * r['viewport_traced']:.1f} % | "
+                     f"{r['viewport_trace_seconds']:.1f} |")
     lines += ["", "*With Max Order 1*: the same render with the scene's Max Order 1 (default 2): without the "
               "mirror's reflections of itself, which Cycles shows.", "",
               "*Traced px*: mirror pixels ray traced on the CPU: the band along each footprint's edge, and every "
               "pixel in ray-map cells where the sample-based camera marks its own projection unreliable (ray-list "
               "leaves, folds, mixed cells), drawn or not: on a crumpled mirror a point appears many times and the "
               "camera answers some of its images only (docs/overview.md, the composite). There that is most of "
-              "the mirror; the viewport, which does not trace, draws the camera's answers."]
+              "the mirror. *Viewport*: the live view of the same camera (a Bake), its first draw (the camera's "
+              "answers, every view while it moves) and *at rest*, once the worker traced the pixels of the "
+              "camera's unreliable cells (`traced_pixels.trace_doubtful`; *its trace s*: how long after that "
+              "first draw they landed)."]
     return "\n".join(lines + [""])
 
 

@@ -233,6 +233,45 @@ def test_a_landing_camera_brings_its_reflected_triangles_and_its_first_draw_only
     assert state.counts["projections"] == projections + 2
 
 
+def test_a_resting_views_unreliable_cells_are_traced_on_a_worker_and_drawn_over_its_camera(fig3, monkeypatch):
+    """Once a camera's own view is drawn, the pixels of the cells where it marks its
+    projection unreliable are traced on a worker (traced_pixels.trace_doubtful); the
+    timer redraws when they land, and they are drawn over the camera's reflections in
+    that view only. Here every cell is unreliable and the tracer sees magenta."""
+    from curved_reflections.addon.geometry import band_trace
+    from curved_reflections.gpu_shaders import reflection_draw
+
+    magenta = np.array([1.0, 0.0, 1.0])
+
+    def every_cell(ray_map, *args, **kwargs):
+        return np.ones((ray_map.rows, ray_map.columns), dtype=bool)
+
+    def traced(self, view, pixels, *args, **kwargs):
+        return np.concatenate([np.tile(magenta, (len(pixels), 1)), np.ones((len(pixels), 1))], axis=1)
+
+    monkeypatch.setattr(band_trace, "unreliable_cells", every_cell)
+    monkeypatch.setattr(band_trace.BandTracer, "trace", traced)
+    monkeypatch.setattr(reflection_draw, "MAX_TRACED_FRACTION", 1.0)
+    bpy.ops.curved_reflections.bake()
+    state = live.state_of(fig3)
+    camera = state.cameras[live.CAMERA_KEY]
+
+    def shown(image):
+        return int((np.abs(image[..., :3] - magenta).max(axis=2) < 1e-3).sum())
+
+    drawn, image = _draw(fig3, camera.view)  # the camera's answers; the trace starts
+    assert drawn and shown(image) == 0 and len(_pixels_of(image, "Cube", fig3)) > 0
+    traced_pixels = camera.tracing[1].result(timeout=60)
+    assert 500 < len(traced_pixels.pixels) < 0.5 * camera.view.width * camera.view.height  # the mirror's
+    live.process(fig3, bpy.context.evaluated_depsgraph_get())  # collects the landing (a redraw)
+    assert camera.tracing[2]
+    drawn, image = _draw(fig3, camera.view)
+    assert drawn and shown(image) > 500 and len(_pixels_of(image, "Cube", fig3)) == 0  # every mirror pixel
+    moved = look_at_view((0.8, -6.4, 2.4), (0.0, 0.0, 0.9), fov_y_deg=30.0, width=WIDTH, height=HEIGHT)
+    drawn, image = _draw(fig3, moved)  # the same camera, from another view: its answers alone
+    assert drawn and shown(image) == 0
+
+
 def test_big_reflectors_are_made_ready_on_the_worker_while_the_last_reflections_draw(fig3, monkeypatch):
     """Reflectors of more than BACKGROUND_TRIANGLES (lowered here below the ball's) are
     made ready for tracing (BVH, seal) on the worker: the re-bake after moving the ball
