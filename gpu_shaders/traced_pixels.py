@@ -12,8 +12,8 @@ the traced colour before a drawn one (``glsl/reflection_composite_frag.glsl``).
 A render traces them for its frame (``ReflectionRenderer.trace_band``). The viewport
 cannot wait for them, so :func:`trace_doubtful` runs on the live view's worker for a
 camera's own view once it is drawn, and the :class:`TracedPixels` it returns are drawn
-over that view only (any other view moves the reflection, and the camera's answers draw
-alone until a camera of it is traced in turn).
+over that view only (from any other view the reflection has moved: the camera's answers
+draw alone there, until that view's own camera lands and is traced in turn).
 """
 
 from __future__ import annotations

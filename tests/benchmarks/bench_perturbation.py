@@ -22,8 +22,11 @@ surface), the same ellipsoid and superquadric as meshes, a bumpy sphere (amplitu
 0.03, lobes 3 and 5: not convex, several images), and two spheres facing each other
 at order 2 (exact, and as meshes from another view). The rim band (``rim.py``) was
 then found on the bumpy sphere's misses, so a second bumpy sphere (amplitude 0.04,
-lobes 4 and 6, other eyes) holds it out. 640x480, points uniform in a box of 3 radii
-around the mirrors, outside them.
+lobes 4 and 6, other eyes) holds it out; the candidate scan's every seed and wider
+spread (``projector.COARSE``, ``candidates.CANDIDATE_SPREAD``) were then found on that
+one's misses, so a rippled ellipsoid (amplitude 0.035, lobes 6 and 3, other eyes)
+holds those out. 640x480, points uniform in a box of 3 radii around the mirrors,
+outside them.
 
 **Animation**: the sbc_fig3 demo at 480x320, its ball declared an exact sphere in
 Perturbation mode, the camera orbiting it every frame: ``render_image(animation=True)``
@@ -61,6 +64,21 @@ def _placed(centre):
     return matrix
 
 
+def rippled_ellipsoid(centre, radii, subdivisions: int, amplitude: float, lobes=(6, 3), name: str = "rippled"):
+    """An ellipsoid mesh rippled along its radius, (1 + a sin(m phi + 0.4) sin(n theta)),
+    normals from the faces: a second held-out bumpy mirror, made after the candidate
+    scan was tuned on the first (its images crowd differently: an ellipse's curvatures)."""
+    from curved_reflections.addon.geometry.sphere import ellipsoid
+    from curved_reflections.addon.scene import Reflector, vertex_normals
+
+    base = ellipsoid(centre, radii, subdivisions, name)
+    offset = base.vertices - np.asarray(centre, dtype=np.float64)
+    d = offset / np.linalg.norm(offset, axis=1)[:, None]
+    theta, phi = np.arccos(np.clip(d[:, 2], -1.0, 1.0)), np.arctan2(d[:, 1], d[:, 0])
+    vertices = base.vertices + amplitude * (np.sin(lobes[0] * phi + 0.4) * np.sin(lobes[1] * theta))[:, None] * offset
+    return Reflector(name, vertices, base.triangles, vertex_normals(vertices, base.triangles))
+
+
 def scenes(subdivisions: int) -> list:
     """(name, reflectors, {index: AnalyticSurface}, eyes, max_order) of every scene."""
     from curved_reflections.addon.methods.perturbation import AnalyticSurface
@@ -89,6 +107,8 @@ def scenes(subdivisions: int) -> list:
                                         icosphere(pair[1], 0.8, subdivisions, "B")], {}, ((-0.4, -4.8, -0.9),), 2),
         ("bumpy sphere mesh, held out", [bumpy_icosphere(centre, 1.0, subdivisions + 1, 0.04, lobes=(4, 6),
                                                          name="bumpy")], {}, ((2.7, 2.8, -1.5), (-3.3, -1.7, 2.1)), 1),
+        ("rippled ellipsoid mesh, held out", [rippled_ellipsoid((-0.1, 0.15, 0.0), (1.0, 0.85, 0.7), subdivisions + 1,
+                                                                0.035)], {}, ((1.9, -3.1, 1.7), (-2.6, 2.2, -1.9)), 1),
     ]
 
 

@@ -15,8 +15,10 @@ import numpy as np
 
 #: Images of one point in one history kept at most (non-convex mirrors).
 MAX_IMAGES = 8
-#: Candidates farther from their nearest ray than this many times the point's best are dropped.
-CANDIDATE_SPREAD = 4.0
+#: Candidates farther from their nearest ray than this many times the point's best are
+#: dropped. A small image (near a fold, where the mirror shrinks what it shows) has its
+#: rays spread wide at the point: at 4 those images were dropped on bumpy mirrors.
+CANDIDATE_SPREAD = 16.0
 #: Distances evaluated per block of points (points x scanned seeds).
 BLOCK_SIZE = 4_000_000
 

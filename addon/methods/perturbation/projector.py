@@ -48,8 +48,12 @@ from .seeds import SeedPaths, seed_paths_to, seed_quadrics, trace_seed_paths
 
 #: A history with fewer grid seeds is traced again at half the spacing over its footprint.
 MIN_GROUP_SEEDS = 600
-#: Seed spacing of the coarse search for candidate images, in grid seeds.
-COARSE = 2
+#: Seed spacing of the coarse search for candidate images, in grid seeds: every seed
+#: on a mirror that bends both ways, where a point's images crowd (two images a few
+#: pixels apart shared one basin of every other seed). With candidates.CANDIDATE_SPREAD
+#: 16 it took the held-out bumpy sphere's coverage from 93.3 / 91.3 % to 96.6 / 95.6 %
+#: (docs/benchmarks/perturbation.md).
+COARSE = 1
 #: ... on a mirror whose seeds all bend one way (convex): a point has one image there,
 #: one minimum of the distance, which a coarser scan finds as well (the hops refine it).
 COARSE_CONVEX = 4
