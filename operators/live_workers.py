@@ -1,8 +1,9 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """The live view's background threads (``live.py``): one builds the sample-based cameras
 of changed views and their reflected triangles (and makes big reflectors ready for ray
-tracing), one prefetches morphing nodes around the eye. Both are bpy-free numpy work, and both run nicer than Blender, so that the
-drawing they share the cores with keeps its pace.
+tracing), one traces the pixels a landed camera cannot place, one prefetches morphing
+nodes around the eye. All are bpy-free numpy work, and all run nicer than Blender, so
+that the drawing they share the cores with keeps its pace.
 """
 
 from __future__ import annotations
@@ -86,12 +87,12 @@ def tracer() -> ThreadPoolExecutor:
 
 
 def running() -> bool:
-    """Whether either thread exists."""
+    """Whether any of the threads exists."""
     return bool(_executors)
 
 
 def shutdown() -> None:
-    """Stop both threads, dropping the work not started."""
+    """Stop the threads, dropping the work not started."""
     for executor in _executors.values():
         executor.shutdown(wait=False, cancel_futures=True)
     _executors.clear()
