@@ -25,8 +25,11 @@ then found on the bumpy sphere's misses, so a second bumpy sphere (amplitude 0.0
 lobes 4 and 6, other eyes) holds it out; the candidate scan's every seed and wider
 spread (``projector.COARSE``, ``candidates.CANDIDATE_SPREAD``) were then found on that
 one's misses, so a rippled ellipsoid (amplitude 0.035, lobes 6 and 3, other eyes)
-holds those out. 640x480, points uniform in a box of 3 radii around the mirrors,
-outside them.
+holds those out; the neighbour candidates and the confirming seeds
+(``projector.NEIGHBOUR_CELLS``, ``CONFIRM_PX``) were found on the first two bumpy
+spheres too, and a second rippled ellipsoid (amplitude 0.045, lobes 5 and 4, other
+radii and eyes) was added after them. 640x480, points uniform in a box of 3 radii
+around the mirrors, outside them.
 
 **Animation**: the sbc_fig3 demo at 480x320, its ball declared an exact sphere in
 Perturbation mode, the camera orbiting it every frame: ``render_image(animation=True)``
@@ -109,6 +112,9 @@ def scenes(subdivisions: int) -> list:
                                                          name="bumpy")], {}, ((2.7, 2.8, -1.5), (-3.3, -1.7, 2.1)), 1),
         ("rippled ellipsoid mesh, held out", [rippled_ellipsoid((-0.1, 0.15, 0.0), (1.0, 0.85, 0.7), subdivisions + 1,
                                                                 0.035)], {}, ((1.9, -3.1, 1.7), (-2.6, 2.2, -1.9)), 1),
+        ("rippled ellipsoid mesh, held out 2", [rippled_ellipsoid((0.05, -0.1, 0.1), (0.8, 1.0, 0.9), subdivisions + 1,
+                                                                  0.045, lobes=(5, 4), name="rippled2")], {},
+         ((-3.0, -2.4, 0.9), (2.2, 2.9, 1.6)), 1),
     ]
 
 
