@@ -234,14 +234,13 @@ class PerturbationMethod:
         scanned at each seed; None when the band has none."""
         rim = RimBand.around(group.grid, group.origin, group.stride)
         pixels = rim.pixels(view.width, view.height)
-        traced = trace_seed_paths(self.reflector_set, view, pixels, len(group.history), self.analytic)[-1]
+        traced = self._traced_in(view, group.history, pixels)
         self.stats.grid_seeds += len(pixels)
-        same = np.flatnonzero((traced.histories == np.array(group.history)).all(axis=1))
-        if len(same) == 0:
+        if len(traced.pixels) == 0:
             return None
-        band = self._group(group.history, traced.select(same), 1)
+        band = self._group(group.history, traced, 1)
         inner = np.zeros(band.grid.shape, dtype=bool)
-        cell = np.floor(band.seeds.pixels).astype(np.int64) - np.array(band.origin)
+        cell = _cells(band, band.seeds.pixels)
         inner[cell[:, 1], cell[:, 0]] = rim.touches_interior(band.seeds.pixels)
         return dataclasses.replace(band, coarse=1, inner=inner)
 
@@ -263,12 +262,23 @@ class PerturbationMethod:
         lo, hi = group.seeds.pixels.min(axis=0) - group.stride, group.seeds.pixels.max(axis=0) + group.stride
         pixels = view.pixel_grid(stride)
         pixels = pixels[((pixels >= lo) & (pixels <= hi)).all(axis=1)]
-        traced = trace_seed_paths(self.reflector_set, view, pixels, len(group.history), self.analytic)[-1]
+        traced = self._traced_in(view, group.history, pixels)
         self.stats.grid_seeds += len(pixels)
-        same = np.flatnonzero((traced.histories == np.array(group.history)).all(axis=1))
-        if len(same) <= len(group.seeds.pixels):
+        if len(traced.pixels) <= len(group.seeds.pixels):
             return None
-        return self._group(group.history, traced.select(same), stride)
+        return self._group(group.history, traced, stride)
+
+    def _traced_in(self, view: View, history: tuple, pixels) -> SeedPaths:
+        """The seeds traced through ``pixels`` whose paths have ``history`` (``ray``: their
+        rows in ``pixels``)."""
+        traced = trace_seed_paths(self.reflector_set, view, pixels, len(history), self.analytic)[-1]
+        return traced.select(np.flatnonzero((traced.histories == np.array(history)).all(axis=1)))
+
+    def _step_from(self, view, traced: SeedPaths, targets, model_error, reach_px):
+        """:meth:`_step` from each of the ``traced`` seeds to its target (its row of
+        ``targets`` and ``model_error``), with the seeds' own quadrics."""
+        quadrics = seed_quadrics(self.reflector_set, traced, self.analytic)
+        return self._step(view, traced, quadrics, targets, np.arange(len(targets)), model_error, reach_px)
 
     def _answer_group(self, view, group: SeedGroup, points):
         """The images found from ``group``'s seeds: (K,) point index, (K, 3) first and
@@ -325,18 +335,15 @@ class PerturbationMethod:
             move = aim[redo] - seed_pixel[redo]
             size = np.linalg.norm(move, axis=1)
             target = seed_pixel[redo] + move * np.minimum(1.0, reach / np.maximum(size, 1e-12))[:, None]
-            traced = trace_seed_paths(self.reflector_set, view, target, group.seeds.order, self.analytic)[-1]
+            traced = self._traced_in(view, group.history, target)
             self.stats.adaptive_seeds += len(redo)
-            traced = traced.select(np.flatnonzero((traced.histories == np.array(group.history)).all(axis=1)))
             missed = np.ones(len(redo), dtype=bool)
             missed[traced.ray] = False
             misses[redo] += missed
             aim[redo[missed]] = np.where((misses[redo[missed]] < MAX_MISSES)[:, None],
                                          0.5 * (seed_pixel[redo[missed]] + target[missed]), np.nan)
             rows = redo[traced.ray]
-            quadrics = seed_quadrics(self.reflector_set, traced, self.analytic)
-            f, l, e, p = self._step(view, traced, quadrics, targets[rows], np.arange(len(rows)), model_error[rows],
-                                    reach)
+            f, l, e, p = self._step_from(view, traced, targets[rows], model_error[rows], reach)
             seed_pixel[rows], aim[rows] = target[traced.ray], p
             better = ~(e >= estimate[rows])
             rows = rows[better]
@@ -353,16 +360,13 @@ class PerturbationMethod:
         pixel from every exact image 2.2-3.1 -> 1.0-1.1 %, p99 0.5-0.6 -> 0.1 px)."""
         first, last, estimate, pixel = answer
         asked = np.flatnonzero(estimate <= max(self.settings.accuracy_px, 1e-9))
-        traced = trace_seed_paths(self.reflector_set, view, pixel[asked], group.seeds.order, self.analytic)[-1]
+        traced = self._traced_in(view, group.history, pixel[asked])
         self.stats.adaptive_seeds += len(asked)
-        traced = traced.select(np.flatnonzero((traced.histories == np.array(group.history)).all(axis=1)))
         rows = asked[traced.ray]
         confirmed = np.zeros(len(estimate), dtype=bool)
         if len(rows) == 0:
             return confirmed
-        quadrics = seed_quadrics(self.reflector_set, traced, self.analytic)
-        f, l, e, p = self._step(view, traced, quadrics, targets[rows], np.arange(len(rows)), model_error[rows],
-                                REACH * group.stride)
+        f, l, e, p = self._step_from(view, traced, targets[rows], model_error[rows], REACH * group.stride)
         good = (e <= max(self.settings.accuracy_px, 1e-9)) & (np.linalg.norm(p - pixel[rows], axis=1) <= CONFIRM_PX)
         rows = rows[good]
         first[rows], last[rows], estimate[rows], pixel[rows] = f[good], l[good], e[good], p[good]
@@ -375,7 +379,7 @@ class PerturbationMethod:
         last seed on the way (HOP_SAMPLES cells along the line): the edge seed nearest
         the image, which the adaptive seeds then have little left to walk."""
         origin = np.array(group.origin)
-        current = np.floor(group.seeds.pixels / group.stride).astype(np.int64) - origin
+        current = _cells(group, group.seeds.pixels)
         for _ in range(HOPS):
             pixel = self._first_order_pixels(view, group.seeds, group.quadrics, points[point_of], seed_of)
             aim = np.nan_to_num(pixel / group.stride, nan=-1e9) - origin
@@ -534,13 +538,18 @@ def _with_neighbours(group: SeedGroup, point_of, seed_of):
     (its hops and steps reach one of them), and the step from a seed beside it reaches
     the other. A point with one candidate has one image there."""
     crowded = np.flatnonzero(np.bincount(point_of)[point_of] > 1)
-    cell = np.floor(group.seeds.pixels[seed_of[crowded]] / group.stride).astype(np.int64) - np.array(group.origin)
+    cell = _cells(group, group.seeds.pixels[seed_of[crowded]])
     points, seeds = [point_of], [seed_of]
     for offset in NEIGHBOUR_CELLS:
         beside = _grid_at(group.grid, cell + np.array(offset))
         points.append(point_of[crowded[beside >= 0]])
         seeds.append(beside[beside >= 0])
     return np.concatenate(points), np.concatenate(seeds)
+
+
+def _cells(group: SeedGroup, pixels) -> np.ndarray:
+    """(K, 2) the grid cells (column, row) of ``group``'s seed grid that hold ``pixels``."""
+    return np.floor(pixels / group.stride).astype(np.int64) - np.array(group.origin)
 
 
 def _grid_at(grid: np.ndarray, cell: np.ndarray) -> np.ndarray:
@@ -554,7 +563,7 @@ def _grid_at(grid: np.ndarray, cell: np.ndarray) -> np.ndarray:
 
 def _in_footprint(group: SeedGroup, pixel) -> np.ndarray:
     """(K,) bool: a grid seed of the history lies within one cell of the pixel."""
-    cell = np.floor(np.nan_to_num(pixel, nan=-1e9) / group.stride).astype(np.int64) - np.array(group.origin)
+    cell = _cells(group, np.nan_to_num(pixel, nan=-1e9))
     return np.any([_grid_at(group.grid, cell + (dj, di)) >= 0 for di in (-1, 0, 1) for dj in (-1, 0, 1)], axis=0)
 
 
