@@ -73,7 +73,7 @@ from ..addon.methods.morphing.morphing import ViewOutsideGrid
 from ..addon.scene import scene_bounds
 from ..addon.view import View
 from . import accuracy, live_status, live_workers, methods, morph_bake
-from .live_state import LiveScene, Preparing, ViewCamera
+from .live_state import LiveScene, Preparing, Tracing, ViewCamera
 from .capture import capture_scene, view_from_camera
 from .render_inputs import BOUNDS_MARGIN, reflector_properties, world_color
 
@@ -509,21 +509,21 @@ def _traced(state: LiveScene, camera: ViewCamera | None, view: View):
 
     if camera is None or camera.sbc is None or not _same_view(view, camera.view):
         return None
-    if camera.tracing is None or camera.tracing[0] is not state.renderer:
+    if camera.tracing is None or camera.tracing.renderer is not state.renderer:
         renderer, sbc, max_order, world = state.renderer, camera.sbc, camera.settings[0], state.world
         # The renderer's tracer is made on the worker too (a tree of the diffuse meshes).
         future = live_workers.tracer().submit(
             lambda: trace_doubtful(renderer.band_tracer, sbc, max_order, world, MAX_TRACED_FRACTION))
-        camera.tracing = (renderer, future, False)
+        camera.tracing = Tracing(renderer, future)
         ensure_timer()  # it redraws once they land (_traces_landed)
-    future = camera.tracing[1]
+    future = camera.tracing.future
     if not future.done():
         return None
     try:
         return future.result()
     except Exception as error:  # noqa: BLE001 - the camera's own answers keep drawing
-        camera.tracing = (state.renderer, Future(), True)
-        camera.tracing[1].set_result(None)
+        camera.tracing = Tracing(state.renderer, Future(), redrawn=True)
+        camera.tracing.future.set_result(None)
         state.report('WARNING', f"Tracing the reflections failed: {type(error).__name__}: {error}")
         return None
 
@@ -533,9 +533,9 @@ def _traces_landed(state: LiveScene) -> tuple[bool, bool]:
     some are still being traced: keep polling)."""
     landed = pending = False
     for camera in state.cameras.values():
-        if camera.tracing is not None and not camera.tracing[2]:
-            if camera.tracing[1].done():
-                camera.tracing, landed = camera.tracing[:2] + (True,), True
+        if camera.tracing is not None and not camera.tracing.redrawn:
+            if camera.tracing.future.done():
+                camera.tracing.redrawn = landed = True
             else:
                 pending = True
     return landed, pending

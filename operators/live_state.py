@@ -11,6 +11,15 @@ from . import methods
 
 
 @dataclass
+class Tracing:
+    """A camera's traced pixels (``traced_pixels.TracedPixels`` or None) on their way."""
+
+    renderer: object  # the renderer they are traced for (its meshes)
+    future: Future
+    redrawn: bool = False  # whether their landing asked for a redraw
+
+
+@dataclass
 class ViewCamera:
     """The sample-based camera of one view (``None`` when morphing grids draw every
     reflector), the grids covering the view, and their projection source once made
@@ -27,10 +36,9 @@ class ViewCamera:
     #: (the renderer's CameraProjections, its CachedProjection of this camera not yet on
     #: the GPU): made on the worker with the camera, adopted on the first draw.
     projected: tuple | None = None
-    #: (renderer, Future of ``traced_pixels.TracedPixels`` or None, whether its landing was
-    #: redrawn): the pixels of the camera's unreliable cells, traced on a worker for that
-    #: renderer (its meshes) once the camera's own view is drawn.
-    tracing: tuple | None = None
+    #: The pixels of the camera's unreliable cells, traced on a worker once the camera's
+    #: own view is drawn (``live._traced``).
+    tracing: Tracing | None = None
 
 
 @dataclass

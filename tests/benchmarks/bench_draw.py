@@ -324,6 +324,14 @@ def _looking_away(view):
     return View(turn @ np.asarray(view.view_matrix), view.projection_matrix, view.width, view.height, name="away")
 
 
+def evaluated_triangles(obj, depsgraph) -> int:
+    """Triangles of ``obj``'s evaluated mesh (modifiers applied), as the capture reads them."""
+    polygons = obj.evaluated_get(depsgraph).data.polygons
+    corners = np.zeros(len(polygons), dtype=np.int64)
+    polygons.foreach_get("loop_total", corners)
+    return int((corners - 2).sum())
+
+
 def command_line(script: str, argv) -> str:
     """The command that ran benchmark ``script`` with ``argv``, as a report quotes it."""
     import shlex

@@ -39,15 +39,6 @@ DEFAULT_OUT = bench_sbc.REPO_ROOT / "docs" / "benchmarks" / "live_rebake.md"
 LEVELS = 4
 
 
-def _triangles(obj, depsgraph) -> int:
-    import numpy as np
-
-    polygons = obj.evaluated_get(depsgraph).data.polygons
-    corners = np.zeros(len(polygons), dtype=np.int64)
-    polygons.foreach_get("loop_total", corners)
-    return int((corners - 2).sum())
-
-
 def measure(width: int, height: int, levels: int, repeats: int) -> dict:
     import bpy
 
@@ -63,7 +54,7 @@ def measure(width: int, height: int, levels: int, repeats: int) -> dict:
     ball.modifiers.new("Subdivision", 'SUBSURF').levels = levels
     scene.curved_reflections.auto_refresh = False  # the re-bakes below are driven by hand
     depsgraph = bpy.context.evaluated_depsgraph_get()
-    triangles = _triangles(ball, depsgraph)
+    triangles = bench_draw.evaluated_triangles(ball, depsgraph)
     view = view_from_camera(scene.camera, scene, depsgraph)
     start = time.perf_counter()
     state = live.bake(scene, depsgraph, {live.CAMERA_KEY: view}, wait=True)

@@ -172,7 +172,7 @@ def viewport(scene, cycles_image, mask, palette) -> dict:
     camera = state.cameras[live.CAMERA_KEY]
     first = _overlay(scene, view)
     start = time.perf_counter()
-    traced = camera.tracing[1].result() if camera.tracing is not None else None
+    traced = camera.tracing.future.result() if camera.tracing is not None else None
     seconds = time.perf_counter() - start
     live.process(scene, depsgraph)
     rested = _overlay(scene, view)

@@ -261,10 +261,10 @@ def test_a_resting_views_unreliable_cells_are_traced_on_a_worker_and_drawn_over_
 
     drawn, image = _draw(fig3, camera.view)  # the camera's answers; the trace starts
     assert drawn and shown(image) == 0 and len(_pixels_of(image, "Cube", fig3)) > 0
-    traced_pixels = camera.tracing[1].result(timeout=60)
+    traced_pixels = camera.tracing.future.result(timeout=60)
     assert 500 < len(traced_pixels.pixels) < 0.5 * camera.view.width * camera.view.height  # the mirror's
     live.process(fig3, bpy.context.evaluated_depsgraph_get())  # collects the landing (a redraw)
-    assert camera.tracing[2]
+    assert camera.tracing.redrawn
     drawn, image = _draw(fig3, camera.view)
     assert drawn and shown(image) > 500 and len(_pixels_of(image, "Cube", fig3)) == 0  # every mirror pixel
     moved = look_at_view((0.8, -6.4, 2.4), (0.0, 0.0, 0.9), fov_y_deg=30.0, width=WIDTH, height=HEIGHT)
