@@ -17,12 +17,13 @@ def glsl_source(name: str, defines: dict | None = None, prelude: str = "") -> st
     return "\n".join(f"#define {key} {value}" for key, value in defines.items()) + "\n" + text
 
 
-def normal_equations_glsl(unknowns: int) -> str:
+def normal_equations_glsl(unknowns: int, ridge=None) -> str:
     """GLSL for least squares in ``unknowns`` scalars: ``fit_clear()``, then
     ``fit_add(r0, .., r<n-1>, value)`` per equation (row . c = value), then
     ``fit_solve()``, which leaves c in ``fit_b0`` .. ``fit_b<n-1>``.
 
-    The normal equations (a small diagonal added, 1e-10, as the numpy twin's) are
+    The normal equations (``ridge`` added to their diagonal, one value per unknown, by
+    default 1e-10 each, as the numpy twin's) are
     solved by Cholesky factorisation, written out term by term: llvmpipe kept the same
     code written with arrays and loops in memory, and the morphing blend, which fits
     one surface per vertex and frame, ran 2.3x slower (``glsl/morph_blend.glsl``).
@@ -40,7 +41,8 @@ def normal_equations_glsl(unknowns: int) -> str:
         """``first - a0 * b0 - a1 * b1 ...`` for the (a, b) name pairs ``products``."""
         return " - ".join([first] + [f"{x} * {y}" for x, y in products])
 
-    clear = [f"  {m(i, j)} = {'1e-10' if i == j else '0.0'};" for i, j in lower] + [f"  {b(i)} = 0.0;" for i in terms]
+    ridge = [1e-10] * unknowns if ridge is None else list(ridge)
+    clear = [f"  {m(i, j)} = {f'{ridge[i]:.9e}' if i == j else '0.0'};" for i, j in lower] + [f"  {b(i)} = 0.0;" for i in terms]
     add = [f"  {m(i, j)} += r{i} * r{j};" for i, j in lower] + [f"  {b(i)} += r{i} * value;" for i in terms]
     solve = []
     for j in terms:  # m = L L^T, L over m's lower triangle

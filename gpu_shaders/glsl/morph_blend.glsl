@@ -15,7 +15,7 @@
  *      widened charts where its regular images have none (remedy 2);
  *   2. the matches are blended with the eye's barycentric or trilinear weights, the
  *      weights of missing nodes left out where the others weigh PARTIAL_WEIGHT or more;
- *   3. our refinement: a quadratic height field fitted to the nodes' reflector points and
+ *   3. our refinement: a quadric, written as a height field, fitted to the nodes' reflector points and
  *      the normals the law of reflection gives them (refine_on_local_surface), and
  *      Newton's method for the point of it whose normal bisects the directions to the
  *      eye and to the vertex; the Jacobian is analytic here (float32 has no room for the
@@ -119,12 +119,21 @@ vec4 match_node(int n, vec4 regular[SLOTS], ivec2 texel, vec3 reference, float t
 #endif
 }
 
-/* The surface point for chart (u, v): position, and the unnormalised tangents. */
-vec3 surface_point(float c[6], vec3 origin, float spread, vec3 t1, vec3 t2, vec3 n, vec2 uv)
+/* The fitted quadric's height at chart (u, v) (morph_surface.quadric_height), its slopes
+ * (h_u, h_v) and second derivatives (h_uu, h_uv, h_vv), by implicit differentiation of
+ * h = q(u, v) + c6 h^2 + c7 u h + c8 v h. */
+float quadric_height(float c[9], vec2 uv, out vec2 slope, out vec3 second)
 {
-  float h = c[0] + c[1] * uv.x + c[2] * uv.y + 0.5 * c[3] * uv.x * uv.x + c[4] * uv.x * uv.y
+  float q = c[0] + c[1] * uv.x + c[2] * uv.y + 0.5 * c[3] * uv.x * uv.x + c[4] * uv.x * uv.y
             + 0.5 * c[5] * uv.y * uv.y;
-  return origin + spread * (uv.x * t1 + uv.y * t2 + h * n);
+  float linear = 1.0 - c[7] * uv.x - c[8] * uv.y;
+  float h = 2.0 * q / (linear + sqrt(max(linear * linear - 4.0 * c[6] * q, 0.0)));
+  float along_h = linear - 2.0 * c[6] * h;
+  slope = vec2(c[1] + c[3] * uv.x + c[4] * uv.y + c[7] * h, c[2] + c[4] * uv.x + c[5] * uv.y + c[8] * h) / along_h;
+  second = vec3(c[3] + 2.0 * c[7] * slope.x + 2.0 * c[6] * slope.x * slope.x,
+                c[4] + c[7] * slope.y + c[8] * slope.x + 2.0 * c[6] * slope.x * slope.y,
+                c[5] + 2.0 * c[8] * slope.y + 2.0 * c[6] * slope.y * slope.y) / along_h;
+  return h;
 }
 
 /* (I - d d^T) v / length, the derivative of unit(target - x) along -v, for the two
@@ -224,21 +233,24 @@ void main()
           }
           vec3 o = (matched[n] - origin) / spread;
           float a = dot(o, t1), b = dot(o, t2), nz = dot(normals[n], normal);
-          fit_add(1.0, a, b, 0.5 * a * a, a * b, 0.5 * b * b, dot(o, normal));
-          fit_add(0.0, 1.0, 0.0, a, b, 0.0, -dot(normals[n], t1) / nz);
-          fit_add(0.0, 0.0, 1.0, 0.0, a, b, -dot(normals[n], t2) / nz);
+          float h = dot(o, normal), slope_a = -dot(normals[n], t1) / nz, slope_b = -dot(normals[n], t2) / nz;
+          fit_add(1.0, a, b, 0.5 * a * a, a * b, 0.5 * b * b, h * h, a * h, b * h, h);
+          fit_add(0.0, 1.0, 0.0, a, b, 0.0, 2.0 * slope_a * h, h + slope_a * a, slope_a * b, slope_a);
+          fit_add(0.0, 0.0, 1.0, 0.0, a, b, 2.0 * slope_b * h, slope_b * a, h + slope_b * b, slope_b);
         }
         fit_solve();
-        float c[6] = float[6](fit_b0, fit_b1, fit_b2, fit_b3, fit_b4, fit_b5);
+        float c[9] = float[9](fit_b0, fit_b1, fit_b2, fit_b3, fit_b4, fit_b5, fit_b6, fit_b7, fit_b8);
 
         /* Newton's steps; the residual where they end decides (below, once: llvmpipe would
          * run a test inside the loop on every step). */
         vec2 uv = vec2(0.0);
         bool singular = false;
         for (int iteration = 0; iteration < SURFACE_ITERATIONS; iteration++) {
-          vec3 x = surface_point(c, origin, spread, t1, t2, normal, uv);
-          vec3 ta = t1 + (c[1] + c[3] * uv.x + c[4] * uv.y) * normal;
-          vec3 tb = t2 + (c[2] + c[4] * uv.x + c[5] * uv.y) * normal;
+          vec2 slope;
+          vec3 second;
+          vec3 x = origin + spread * (uv.x * t1 + uv.y * t2 + quadric_height(c, uv, slope, second) * normal);
+          vec3 ta = t1 + slope.x * normal;
+          vec3 tb = t2 + slope.y * normal;
           vec3 to_eye = eye - x, to_point = p - x;
           float le = max(length(to_eye), 1e-30), lp = max(length(to_point), 1e-30);
           to_eye /= le;
@@ -248,8 +260,8 @@ void main()
           vec3 d_bu = -spread * bisector_derivative(to_eye, le, to_point, lp, ta);
           vec3 d_bv = -spread * bisector_derivative(to_eye, le, to_point, lp, tb);
           float bn = dot(bisector, normal);
-          mat2 jacobian = mat2(dot(d_bu, ta) + bn * c[3], dot(d_bu, tb) + bn * c[4],
-                               dot(d_bv, ta) + bn * c[4], dot(d_bv, tb) + bn * c[5]);
+          mat2 jacobian = mat2(dot(d_bu, ta) + bn * second.x, dot(d_bu, tb) + bn * second.y,
+                               dot(d_bv, ta) + bn * second.y, dot(d_bv, tb) + bn * second.z);
           if (abs(determinant(jacobian)) < 1e-30) {
             singular = true;
             break;
@@ -260,9 +272,11 @@ void main()
             break;
           }
         }
-        vec3 x = surface_point(c, origin, spread, t1, t2, normal, uv);
-        vec3 ta = t1 + (c[1] + c[3] * uv.x + c[4] * uv.y) * normal;
-        vec3 tb = t2 + (c[2] + c[4] * uv.x + c[5] * uv.y) * normal;
+        vec2 slope;
+        vec3 second;
+        vec3 x = origin + spread * (uv.x * t1 + uv.y * t2 + quadric_height(c, uv, slope, second) * normal);
+        vec3 ta = t1 + slope.x * normal;
+        vec3 tb = t2 + slope.y * normal;
         vec3 bisector = unit(eye - x) + unit(p - x);
         vec2 residual = vec2(dot(bisector, ta), dot(bisector, tb));
         ok = !singular && max(abs(residual.x), abs(residual.y)) < SURFACE_RESIDUAL

@@ -19,7 +19,7 @@ views for every grid. Per view, fresh points; the exact solver (``addon/referenc
 the visible reflections. Only the nodes of the views' tetrahedra are built (lazily; the
 error does not depend on the others). Both blends: the paper's barycentric blend of the
 four first reflector points (``linear``) and ours (``surface``: the blend refined on a
-quadratic fitted to the four nodes' images and normals). Error: desired-view pixel
+quadric fitted to the four nodes' images and normals). Error: desired-view pixel
 distance from each projected image to the exact visible reflection; coverage: share of
 exact visible reflections that are projected; false: projected images with no exact
 visible reflection. Projection rate: a second ``project`` call (nodes already in memory),
@@ -238,7 +238,7 @@ def report(results: dict) -> str:
         f"{FOV:.0f} degrees, {args['points']} points each (box, diffuse meshes, near the mirror). Cube faces "
         f"{args['face_resolution']} px, accuracy {args['accuracy_px']} face px. *linear*: the paper's barycentric "
         "blend of the four "
-        "first reflector points; *surface*: ours, the blend refined on a quadratic fitted to the four nodes' images "
+        "first reflector points; *surface*: ours, the blend refined on a quadric fitted to the four nodes' images "
         "and normals (`refine_on_local_surface`). Error: desired-view px from each projected image to the exact "
         "visible reflection (`addon/reference/exact.py`). Coverage: exact visible reflections that are projected; "
         "in parentheses, those seen less than 72.5 degrees off the mirror's normal (the rim of the sphere, a cell or "

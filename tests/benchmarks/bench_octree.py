@@ -7,15 +7,17 @@ the nodes, and the bake's time and memory per node.
     .venv/bin/python tests/benchmarks/bench_octree.py --quick --out /tmp/octree.md
 
 Scenes: the ``sbc_fig3`` demo's mirror sphere (with its scene's points, as
-``bench_morphing.py``) and a held-out ellipsoid (``bench_sbc.ellipsoid_reflector``: radii
-1.5 / 0.75 / 0.95, turned; no constant of the octree was chosen on it). Per scene,
+``bench_morphing.py``), a held-out ellipsoid (``bench_sbc.ellipsoid_reflector``: radii
+1.5 / 0.75 / 0.95, turned; no constant of the octree was chosen on it) and a held-out
+rippled ellipsoid (``bench_sbc.rippled_ellipsoid``), which is not a quadric: the blend's
+local surface is a quadric, exact on the first two mirrors' shapes. Per scene,
 ``--views`` eyes drawn at random inside the default grid (9x9x5, margin 1: so between
 nodes), away from the mirror, 480x320, 45 degrees, fresh points per view; both kinds of
 grid answer the same views and points. Error: desired-view px from each projected image
 to the exact visible reflection; coverage as in ``bench_morphing.py`` (in parentheses:
 reflections seen at most 72.5 degrees off the normal). Blends: the paper's (*linear*:
 barycentric over a tetrahedron, trilinear over a cube) and ours (*surface*: refined on
-the quadratic fitted to the nodes' images). ``--finer`` grids (default 17x17x9) answer the
+the quadric fitted to the nodes' images). ``--finer`` grids (default 17x17x9) answer the
 same views, to show how the error falls with the cell size.
 
 Bake: each kind's whole default grid, ``--processes`` worker processes, into a temporary
@@ -69,6 +71,11 @@ def scenes(n_points: int, quick: bool):
         box = (lo - B.HELD_OUT_MARGIN, hi + B.HELD_OUT_MARGIN)
         found.append(("ellipsoid (held out)", ellipsoid, np.eye(4),
                       lambda rng: B.make_points("ellipsoid", [ellipsoid], [], box, n_points, rng)[0]))
+        rippled = B.rippled_ellipsoid((0.0, 0.0, 1.0), (1.2, 0.8, 0.9), 5, 0.04, lobes=(4, 3), name="HeldOutRippled")
+        lo, hi = rippled.bounds
+        rippled_box = (lo - B.HELD_OUT_MARGIN, hi + B.HELD_OUT_MARGIN)
+        found.append(("rippled ellipsoid (held out, not a quadric)", rippled, np.eye(4),
+                      lambda rng: B.make_points("rippled", [rippled], [], rippled_box, n_points, rng)[0]))
     return found
 
 
@@ -130,7 +137,7 @@ def report(results: dict) -> str:
         f"octree depth {args['octree_depth']}. {args['views']} views per scene with eyes drawn at random inside "
         f"the grid (between nodes), {BM.WIDTH}x{BM.HEIGHT} px, {args['points']} points per view. Both kinds answer "
         "the same views and points. *linear*: the papers' blends (barycentric over the eye's tetrahedron, "
-        "trilinear over its cube); *surface*: ours, refined on the quadratic fitted to the nodes' images. "
+        "trilinear over its cube); *surface*: ours, refined on the quadric fitted to the nodes' images. "
         "Coverage in parentheses: reflections seen at most 72.5 degrees off the mirror's normal.", "",
         "## Error against the exact solver", "",
         "| scene | grid | blend | views | compared | p50 / p95 / p99 / max px | coverage % (facing) | false % "

@@ -67,21 +67,6 @@ def _placed(centre):
     return matrix
 
 
-def rippled_ellipsoid(centre, radii, subdivisions: int, amplitude: float, lobes=(6, 3), name: str = "rippled"):
-    """An ellipsoid mesh rippled along its radius, (1 + a sin(m phi + 0.4) sin(n theta)),
-    normals from the faces: a second held-out bumpy mirror, made after the candidate
-    scan was tuned on the first (its images crowd differently: an ellipse's curvatures)."""
-    from curved_reflections.addon.geometry.sphere import ellipsoid
-    from curved_reflections.addon.scene import Reflector, vertex_normals
-
-    base = ellipsoid(centre, radii, subdivisions, name)
-    offset = base.vertices - np.asarray(centre, dtype=np.float64)
-    d = offset / np.linalg.norm(offset, axis=1)[:, None]
-    theta, phi = np.arccos(np.clip(d[:, 2], -1.0, 1.0)), np.arctan2(d[:, 1], d[:, 0])
-    vertices = base.vertices + amplitude * (np.sin(lobes[0] * phi + 0.4) * np.sin(lobes[1] * theta))[:, None] * offset
-    return Reflector(name, vertices, base.triangles, vertex_normals(vertices, base.triangles))
-
-
 def scenes(subdivisions: int) -> list:
     """(name, reflectors, {index: AnalyticSurface}, eyes, max_order) of every scene."""
     from curved_reflections.addon.methods.perturbation import AnalyticSurface
@@ -110,9 +95,9 @@ def scenes(subdivisions: int) -> list:
                                         icosphere(pair[1], 0.8, subdivisions, "B")], {}, ((-0.4, -4.8, -0.9),), 2),
         ("bumpy sphere mesh, held out", [bumpy_icosphere(centre, 1.0, subdivisions + 1, 0.04, lobes=(4, 6),
                                                          name="bumpy")], {}, ((2.7, 2.8, -1.5), (-3.3, -1.7, 2.1)), 1),
-        ("rippled ellipsoid mesh, held out", [rippled_ellipsoid((-0.1, 0.15, 0.0), (1.0, 0.85, 0.7), subdivisions + 1,
+        ("rippled ellipsoid mesh, held out", [bench_sbc.rippled_ellipsoid((-0.1, 0.15, 0.0), (1.0, 0.85, 0.7), subdivisions + 1,
                                                                 0.035)], {}, ((1.9, -3.1, 1.7), (-2.6, 2.2, -1.9)), 1),
-        ("rippled ellipsoid mesh, held out 2", [rippled_ellipsoid((0.05, -0.1, 0.1), (0.8, 1.0, 0.9), subdivisions + 1,
+        ("rippled ellipsoid mesh, held out 2", [bench_sbc.rippled_ellipsoid((0.05, -0.1, 0.1), (0.8, 1.0, 0.9), subdivisions + 1,
                                                                   0.045, lobes=(5, 4), name="rippled2")], {},
          ((-3.0, -2.4, 0.9), (2.2, 2.9, 1.6)), 1),
     ]

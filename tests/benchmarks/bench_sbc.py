@@ -205,6 +205,22 @@ def ellipsoid_reflector(rng):
     return Reflector("HeldOutEllipsoid", centre + (unit.vertices * radii) @ rotation.T, unit.triangles, normals)
 
 
+def rippled_ellipsoid(centre, radii, subdivisions: int, amplitude: float, lobes=(6, 3), name: str = "rippled"):
+    """An ellipsoid mesh rippled along its radius, (1 + a sin(m phi + 0.4) sin(n theta)),
+    normals from the faces: a held-out mirror that is not a quadric (bench_perturbation.py:
+    made after its candidate scan was tuned on the bumpy sphere; bench_octree.py: no
+    constant of the morphing blend was chosen on it)."""
+    from curved_reflections.addon.geometry.sphere import ellipsoid
+    from curved_reflections.addon.scene import Reflector, vertex_normals
+
+    base = ellipsoid(centre, radii, subdivisions, name)
+    offset = base.vertices - np.asarray(centre, dtype=np.float64)
+    d = offset / np.linalg.norm(offset, axis=1)[:, None]
+    theta, phi = np.arccos(np.clip(d[:, 2], -1.0, 1.0)), np.arctan2(d[:, 1], d[:, 0])
+    vertices = base.vertices + amplitude * (np.sin(lobes[0] * phi + 0.4) * np.sin(lobes[1] * theta))[:, None] * offset
+    return Reflector(name, vertices, base.triangles, vertex_normals(vertices, base.triangles))
+
+
 def superellipsoid_reflector(rng, exponent: float = 3.0):
     """Held-out: |x/a|^p + |y/b|^p + |z/c|^p = 1 (p = 3, convex, flattish faces), exact normals."""
     from curved_reflections.addon import Reflector

@@ -18,19 +18,36 @@ def _run(source: str, function: str, names: dict) -> None:
         exec(statement.strip().rstrip(";"), {"sqrt": math.sqrt, "max": max}, names)
 
 
+def _solved(source: str, rows, values) -> np.ndarray:
+    """The generated solver's answer for equations ``rows`` . c = ``values``."""
+    names = {}
+    _run(source, "fit_clear", names)
+    for row, value in zip(rows, values):
+        names.update({f"r{i}": float(x) for i, x in enumerate(row)}, value=float(value))
+        _run(source, "fit_add", names)
+    _run(source, "fit_solve", names)
+    return np.array([names[f"fit_b{i}"] for i in range(rows.shape[1])])
+
+
 def test_generated_normal_equations_solve_least_squares():
     rng = np.random.default_rng(3)
     unknowns = 6
     rows, values = rng.normal(size=(12, unknowns)), rng.normal(size=12)
     source = normal_equations_glsl(unknowns)
-    names = {}
-    _run(source, "fit_clear", names)
-    for row, value in zip(rows, values):
-        names.update({f"r{i}": float(row[i]) for i in range(unknowns)}, value=float(value))
-        _run(source, "fit_add", names)
-    _run(source, "fit_solve", names)
-    solved = np.array([names[f"fit_b{i}"] for i in range(unknowns)])
+    solved = _solved(source, rows, values)
     expected = np.linalg.lstsq(rows, values, rcond=None)[0]
     np.testing.assert_allclose(solved, expected, rtol=1e-7, atol=1e-9)
     assert source.count("fit_m") > unknowns * (unknowns + 1) // 2  # one scalar per entry, no arrays
     assert "[" not in source
+
+
+def test_generated_normal_equations_add_the_ridge_per_unknown():
+    """Nine unknowns, the last three held by a ridge (the blend's quadric terms, morph_surface.FIT_RIDGE)."""
+    rng = np.random.default_rng(4)
+    unknowns, ridge = 9, np.array([1e-10] * 6 + [0.5] * 3)
+    rows, values = rng.normal(size=(12, unknowns)), rng.normal(size=12)
+    source = normal_equations_glsl(unknowns, ridge)
+    solved = _solved(source, rows, values)
+    expected = np.linalg.solve(rows.T @ rows + np.diag(ridge), rows.T @ values)
+    np.testing.assert_allclose(solved, expected, rtol=1e-7, atol=1e-9)
+    assert not np.allclose(solved, np.linalg.lstsq(rows, values, rcond=None)[0], atol=1e-3)

@@ -3,7 +3,7 @@
 
 The four nodes' first reflector points of one image, blended with the eye's weights,
 lie near the mirror but not on it, and the reflection law does not hold there. A
-quadratic surface is fitted through the nodes' images (with their normals), and the
+quadric surface is fitted through the nodes' images (with their normals), and the
 reflection point of the desired eye is solved on it by Newton's method; the refined
 point replaces the blend where it stays within reach of the nodes' images
 (:mod:`.morphing`, ``MorphingGrid._blend``; the GLSL twin is ``glsl/morph_blend.glsl``).
@@ -22,6 +22,12 @@ MIN_SURFACE_NODES = 3
 SURFACE_ITERATIONS = 8
 #: The refined point may lie this far (in units of the nodes' images' spread) from the blend.
 SURFACE_REACH = 2.0
+#: Weight (squared) pulling the quadric's three terms in the height toward zero, in the
+#: fit's normal equations: where four nodes' images do not pin them (three nodes, images
+#: close together, float32 on the GPU) the fit falls back toward the quadratic height field.
+#: Measured on sbc_fig3's views, 9x9x5 (p99 px): 1e-4: 3.2, 1e-3: 3.0; on two held-out
+#: non-quadric mirrors (bench_morphing.py) 1e-3 was the better of the two.
+QUADRIC_RIDGE = 1e-3
 #: A node's image joins the surface fit where its normal is within about 78 degrees of
 #: the nodes' weighted normal (cosine above this).
 SURFACE_NORMAL_MIN = 0.2
@@ -33,14 +39,22 @@ def refine_on_local_surface(images, present, eyes, points, eye, weights):
     Our refinement of the paper's blend (SBC VI blends the four first reflector points
     linearly, an error quadratic in the grid spacing). Each node's image x_i of point p
     seen from node eye n_i comes with the mirror normal there: by the law of reflection
-    it bisects the directions to n_i and to p. Around the blend, in the frame of the
-    blended normal, a height field h(a, b) = c0 + c1 a + c2 b + c3 a^2/2 + c4 ab + c5 b^2/2
-    is fitted (least squares) to the images' heights and slopes (3 equations per node),
-    and Newton's method finds the point of that surface where its normal bisects the
-    directions to the desired eye and to p. The result is exact for a quadratic mirror
-    and third order in the spread of the images elsewhere. Needs MIN_SURFACE_NODES nodes
-    (two give as many equations as unknowns: measured, their fits are often wrong);
-    where it fails or leaves the images' neighbourhood, ``ok`` is False.
+    it bisects the directions to n_i and to p. Around the blend, in the frame (a, b, h)
+    of the blended normal, a quadric written as a height field,
+
+        h = c0 + c1 a + c2 b + c3 a^2/2 + c4 ab + c5 b^2/2 + c6 h^2 + c7 ah + c8 bh,
+
+    is fitted (least squares, linear in c: 3 equations per node, the height and the
+    two slopes the normal gives) to the images, and Newton's method finds the point of
+    that surface where its normal bisects the directions to the desired eye and to p.
+    The last three terms make the fit exact for any quadric mirror (a sphere, an
+    ellipsoid, a cylinder), where the quadratic height field alone (c6 = c7 = c8 = 0)
+    erred by many pixels on images spread over a sizeable part of a sphere (its height
+    deviates from the osculating paraboloid by r^4 / 8R^3); on other surfaces they take
+    up part of the third-order terms. ``QUADRIC_RIDGE`` keeps them small where the
+    images do not pin them. Needs MIN_SURFACE_NODES nodes (two give fewer equations
+    than the quadratic's unknowns: measured, their fits are often wrong); where it fails
+    or leaves the images' neighbourhood, ``ok`` is False.
 
     images (Q, N, 3), present (Q, N) bool, eyes (N, 3) node positions, points (Q, 3),
     eye (3,), weights (Q, N) (zero where absent); N nodes: 4 of a tetrahedron, 8 of a
@@ -86,21 +100,23 @@ def _fit_and_reflect(images, present, usable, normals, normal, nz, origin, point
         slope_a = -np.einsum("qnd,qd->qn", normals, t1) / nz
         slope_b = -np.einsum("qnd,qd->qn", normals, t2) / nz
     zero, one = np.zeros_like(a), np.ones_like(a)
+    slope_a, slope_b = np.nan_to_num(slope_a), np.nan_to_num(slope_b)
+    # h = q + c6 h^2 + c7 ah + c8 bh at each image, and its slopes: F = h - q - c6 h^2 - c7 ah
+    # - c8 bh has gradient (-q_a - c7 h, -q_b - c8 h, 1 - 2 c6 h - c7 a - c8 b) along the
+    # normal, whose slope -n_a / n_h = -F_a / F_h is linear in c.
     rows = np.concatenate([
-        np.stack([one, a, b, 0.5 * a * a, a * b, 0.5 * b * b], axis=2),
-        np.stack([zero, one, zero, a, b, zero], axis=2),
-        np.stack([zero, zero, one, zero, a, b], axis=2)], axis=1)  # (Q, 12, 6)
+        np.stack([one, a, b, 0.5 * a * a, a * b, 0.5 * b * b, h * h, a * h, b * h], axis=2),
+        np.stack([zero, one, zero, a, b, zero, 2 * slope_a * h, h + slope_a * a, slope_a * b], axis=2),
+        np.stack([zero, zero, one, zero, a, b, 2 * slope_b * h, slope_b * a, h + slope_b * b], axis=2)],
+        axis=1)  # (Q, 12, 9)
     rhs = np.concatenate([h, slope_a, slope_b], axis=1)
     mask = np.tile(usable, 3).astype(np.float64)
-    rows, rhs = rows * mask[..., None], np.nan_to_num(rhs) * mask
-    normal_matrix = np.einsum("qri,qrj->qij", rows, rows) + 1e-10 * np.eye(6)
+    rows, rhs = rows * mask[..., None], rhs * mask
+    normal_matrix = np.einsum("qri,qrj->qij", rows, rows) + np.diag(FIT_RIDGE)
     coefficients = solve_spd(normal_matrix, np.einsum("qri,qr->qi", rows, rhs))
 
     def surface(k, u, v):
-        c = coefficients[k]
-        height = c[:, 0] + c[:, 1] * u + c[:, 2] * v + 0.5 * c[:, 3] * u * u + c[:, 4] * u * v + 0.5 * c[:, 5] * v * v
-        du = c[:, 1] + c[:, 3] * u + c[:, 4] * v
-        dv = c[:, 2] + c[:, 4] * u + c[:, 5] * v
+        height, du, dv = quadric_height(coefficients[k], u, v)
         x = origin[k] + spread[k, None] * (u[:, None] * t1[k] + v[:, None] * t2[k] + height[:, None] * normal[k])
         return x, t1[k] + du[:, None] * normal[k], t2[k] + dv[:, None] * normal[k]
 
@@ -133,6 +149,25 @@ def _fit_and_reflect(images, present, usable, normals, normal, nz, origin, point
     ok = ((np.abs(residual(every, u, v)).max(axis=1) < 1e-8) & (u * u + v * v <= SURFACE_REACH ** 2)
           & np.isfinite(x).all(axis=1))
     return x, ok, fitted_normal
+
+
+#: The normal equations' diagonal: 1e-10 for the quadratic's six terms (as every fit
+#: here), QUADRIC_RIDGE for the quadric's three.
+FIT_RIDGE = np.array([1e-10] * 6 + [QUADRIC_RIDGE] * 3)
+
+
+def quadric_height(c, u, v):
+    """Height h(u, v) of the fitted quadric (:func:`refine_on_local_surface`; c (Q, 9))
+    and its slopes (h_u, h_v): the root of c6 h^2 - (1 - c7 u - c8 v) h + q(u, v) = 0
+    near q, written 2q / (B + sqrt(B^2 - 4 c6 q)), which does not cancel when c6 is
+    small; the slopes by implicit differentiation."""
+    quadratic = c[:, 0] + c[:, 1] * u + c[:, 2] * v + 0.5 * c[:, 3] * u * u + c[:, 4] * u * v + 0.5 * c[:, 5] * v * v
+    linear = 1.0 - c[:, 7] * u - c[:, 8] * v
+    height = 2.0 * quadratic / (linear + np.sqrt(np.maximum(linear * linear - 4.0 * c[:, 6] * quadratic, 0.0)))
+    along_h = linear - 2.0 * c[:, 6] * height
+    du = (c[:, 1] + c[:, 3] * u + c[:, 4] * v + c[:, 7] * height) / along_h
+    dv = (c[:, 2] + c[:, 4] * u + c[:, 5] * v + c[:, 8] * height) / along_h
+    return height, du, dv
 
 
 def _unit(v):
