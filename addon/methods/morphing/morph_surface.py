@@ -18,23 +18,26 @@ from ...geometry.vectors import cross
 
 #: Nodes with an image (and a usable normal) a local surface is fitted to, at least.
 MIN_SURFACE_NODES = 3
-#: Newton iterations of the reflection law on the local quadratic surface.
+#: Newton iterations of the reflection law on the local quadric surface.
 SURFACE_ITERATIONS = 8
 #: The refined point may lie this far (in units of the nodes' images' spread) from the blend.
 SURFACE_REACH = 2.0
 #: Weight (squared) pulling the quadric's three terms in the height toward zero, in the
-#: fit's normal equations: where four nodes' images do not pin them (three nodes, images
-#: close together, float32 on the GPU) the fit falls back toward the quadratic height field.
-#: Measured on sbc_fig3's views, 9x9x5 (p99 px): 1e-4: 3.2, 1e-3: 3.0; on two held-out
-#: non-quadric mirrors (bench_morphing.py) 1e-3 was the better of the two.
-QUADRIC_RIDGE = 1e-3
+#: fit's normal equations: where the nodes' images do not pin them (three nodes, images
+#: close together, images off by the node cameras' accuracy, float32 on the GPU) the fit
+#: falls back toward the quadratic height field. Measured on sbc_fig3 (9x9x5 grid; p99 px
+#: against the exact solver, bench_morphing.py's views / label disagreement with Cycles,
+#: bench_morph_animation.py): 1e-10: 6.1 px; 1e-3: 2.9 px / 2.2 %; 1e-2: 2.8 px / 1.9 %;
+#: 1e-1: 4.7 px / 1.6 %; the quadratic height field (no quadric terms): 14.2 px / 1.9 %.
+#: Weaker ridges moved the far floor's reflection near the ball's horizon off Cycles'.
+QUADRIC_RIDGE = 1e-2
 #: A node's image joins the surface fit where its normal is within about 78 degrees of
 #: the nodes' weighted normal (cosine above this).
 SURFACE_NORMAL_MIN = 0.2
 
 
 def refine_on_local_surface(images, present, eyes, points, eye, weights):
-    """The reflection point of ``eye`` on a quadratic fitted to the nodes' images.
+    """The reflection point of ``eye`` on a quadric fitted to the nodes' images.
 
     Our refinement of the paper's blend (SBC VI blends the four first reflector points
     linearly, an error quadratic in the grid spacing). Each node's image x_i of point p

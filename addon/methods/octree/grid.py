@@ -8,7 +8,7 @@ section 6). The grid, its rigid frame, the matching of images across nodes, the
 renderer's GPU pass and the bake cache are those of the tetrahedral grid (SBC paper VI,
 :mod:`...morphing`), which succeeded this method: only the cell (a cube of eight nodes, not a
 tetrahedron of four), the weights (trilinear, not barycentric) and what a node holds differ.
-Like the tetrahedral grid, the blend is refined on the quadratic surface fitted to the
+Like the tetrahedral grid, the blend is refined on the quadric surface fitted to the
 eight images (``morph_surface``): the paper's blend alone errs quadratically in the cell size.
 """
 
