@@ -301,8 +301,8 @@ def summary(results: dict) -> str:
                    f"{_f(lin['error_p95'])} px with the paper's linear blend; coverage {_f(100 * s['coverage'], 1)} %.")
         out.append(f"- p99 {_f(s['error_p99'])} px (issue 17's target p99 <= 1 px: "
                    f"{'met' if s['error_p99'] <= 1 else '**not met**'}); over the reflections seen less than 72.5 "
-                   f"degrees off the mirror's normal (the coverage's *facing*), p99 {_f(s['error_p99_facing'])} px: "
-                   "the rest are the sphere's rim, where a reflection point moves fastest with the normal.")
+                   f"degrees off the mirror's normal (the coverage's *facing*; the others are the sphere's rim, where a "
+                   f"reflection point moves fastest with the normal), p99 {_f(s['error_p99_facing'])} px.")
     ideal = bake["cpu_seconds"] / max(bake["processes"], 1)
     out.append(f"- Bake: {_f(bake['seconds'], 1)} s wall on {bake['processes']} processes (goal < 60 s: "
                f"{'met' if bake['seconds'] < 60 else '**not met**'}); the nodes' CPU time, "
