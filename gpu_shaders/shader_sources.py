@@ -42,7 +42,8 @@ def normal_equations_glsl(unknowns: int, ridge=None) -> str:
         return " - ".join([first] + [f"{x} * {y}" for x, y in products])
 
     ridge = [1e-10] * unknowns if ridge is None else list(ridge)
-    clear = [f"  {m(i, j)} = {f'{ridge[i]:.9e}' if i == j else '0.0'};" for i, j in lower] + [f"  {b(i)} = 0.0;" for i in terms]
+    clear = ([f"  {m(i, j)} = {f'{ridge[i]:.9e}' if i == j else '0.0'};" for i, j in lower]
+             + [f"  {b(i)} = 0.0;" for i in terms])
     add = [f"  {m(i, j)} += r{i} * r{j};" for i, j in lower] + [f"  {b(i)} += r{i} * value;" for i in terms]
     solve = []
     for j in terms:  # m = L L^T, L over m's lower triangle

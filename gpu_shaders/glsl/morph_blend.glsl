@@ -15,8 +15,9 @@
  *      widened charts where its regular images have none (remedy 2);
  *   2. the matches are blended with the eye's barycentric or trilinear weights, the
  *      weights of missing nodes left out where the others weigh PARTIAL_WEIGHT or more;
- *   3. our refinement: a quadric, written as a height field, fitted to the nodes' reflector points and
- *      the normals the law of reflection gives them (refine_on_local_surface), and
+ *   3. our refinement: a quadric, written as a height field, fitted to the nodes'
+ *      reflector points and the normals the law of reflection gives them
+ *      (refine_on_local_surface), and
  *      Newton's method for the point of it whose normal bisects the directions to the
  *      eye and to the vertex; the Jacobian is analytic here (float32 has no room for the
  *      numpy twin's finite differences);
