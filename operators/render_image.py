@@ -47,6 +47,9 @@ from .render_inputs import BOUNDS_MARGIN, reflector_properties, world_color
 
 #: Node projections an animation keeps queued on the prefetching thread (one runs).
 PREFETCHED_NODES = 2
+#: Frames ahead whose cells an animation's prefetch serves first, the camera's last move
+#: extrapolated.
+PREDICTED_FRAMES = 6
 
 
 @dataclass
@@ -101,6 +104,7 @@ class FrameState:
     grids: list = field(default_factory=list)
     renderer: object = None
     reflector_set: object = None  # ReflectorSet of the captured reflectors (key[0])
+    last_eye: object = None  # the last frame's camera position (the prefetch extrapolates it)
     frames: int = 0
     reused: int = 0
 
@@ -176,7 +180,8 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
         sbc = build_sample_based_camera(state.reflector_set, view, bounds, max_order=max_order,
                                         downsample=downsample, accuracy_px=accuracy_px)
     if animating:
-        _prefetch_nodes(state.renderer.morph, view)
+        _prefetch_nodes(state.renderer.morph, view, state.last_eye)
+        state.last_eye = view.eye
     built_at = time.perf_counter()
     image = state.renderer.render(view, sbc, world_color(scene), trace_edges=trace_edges, trace_gaps=trace_gaps)
     end = time.perf_counter()
@@ -190,18 +195,20 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
     return ReflectionRender(image, view, seconds, stats, sbc)
 
 
-def _prefetch_nodes(morph, view) -> None:
+def _prefetch_nodes(morph, view, last_eye) -> None:
     """Upload the node images a worker projected during the last frame, and start the next
     ones around this frame's camera (``MorphPass.prefetch``): a frame's band trace and
     capture keep one core busy and leave the other to the worker, and an octree grid's
     node costs 0.2 s of numpy (sbc_fig3), four or eight of them a frame that enters a new
-    cell (docs/benchmarks/octree_animation.md). Only the grids whose nodes the main thread
-    projects the same way (``exact``), so that a frame's image does not depend on which
-    nodes were ready."""
+    cell (docs/benchmarks/octree_animation.md). The cells the camera reaches in the next
+    PREDICTED_FRAMES frames, if it keeps its last move, go first. Only the grids whose
+    nodes the main thread projects the same way (``exact``), so that a frame's image does
+    not depend on which nodes were ready."""
     from .live_workers import prefetcher
 
+    ahead = () if last_eye is None else [view.eye + n * (view.eye - last_eye) for n in range(1, PREDICTED_FRAMES + 1)]
     morph.collect()
-    morph.prefetch(view, prefetcher().submit, max_pending=PREFETCHED_NODES, exact=True)
+    morph.prefetch(view, prefetcher().submit, max_pending=PREFETCHED_NODES, exact=True, ahead=ahead)
 
 
 def clip_start_message(name: str) -> str:

@@ -361,7 +361,7 @@ class MorphPass(FramePass):
             self._uniforms[n_nodes] = gpu.types.GPUUniformBuf(gpu.types.Buffer('FLOAT', size))
         return self._uniforms[n_nodes]
 
-    def prefetch(self, view, submit, max_pending: int = 1, exact: bool = False) -> int:
+    def prefetch(self, view, submit, max_pending: int = 1, exact: bool = False, ahead=()) -> int:
         """Start projecting nodes not yet on the GPU around each covering grid's eye (the
         4 x 4 x 4 nodes of its cell and the cells beside it, nearest first), so that
         moving on rarely waits: ``submit(function, *args)`` runs the projection (in numpy,
@@ -369,13 +369,15 @@ class MorphPass(FramePass):
         at once, and a prefetch never evicts. :meth:`collect` uploads the finished ones.
         ``exact``: only grids whose nodes the main thread would project the same way
         (``projects_nodes_on_gpu`` false), so that a render is the same whether a node was
-        prefetched or not. Returns how many were started."""
+        prefetched or not. ``ahead``: world-space eyes the next views are expected at,
+        soonest first (an animation's camera, extrapolated): the nodes of their cells go
+        first. Returns how many were started."""
         started = 0
         for k, (_, _, _, frame) in self.covering(view):
-            grid = self.grids[k][0]
+            grid, matrix = self.grids[k]
             if exact and grid.projects_nodes_on_gpu:
                 continue
-            for node in grid.grid.nodes_around(morph_grid.to_frame(frame, view.eye[None])[0]):
+            for node in _nodes_ahead(grid, matrix, frame, view.eye, ahead):
                 key = (k, int(node))
                 if len(self._pending) >= max_pending:
                     return started
@@ -433,3 +435,17 @@ class MorphPass(FramePass):
         for slot, texture in enumerate(self._results[k][:self._active[k]]):
             found[slot] = self.meshes.read(texture)[0]
         return found
+
+
+def _nodes_ahead(grid, matrix, frame, eye, ahead) -> list:
+    """The nodes :meth:`MorphPass.prefetch` considers, in order: those of the cells holding
+    the eyes ``ahead`` (soonest first; eyes outside the grid are skipped), then the nodes
+    around ``eye`` (``nodes_around``, nearest first), each once."""
+    order = []
+    for eye_ahead in ahead:
+        try:
+            order.extend(int(n) for n in grid.locate_view(eye_ahead, matrix)[1])
+        except morphing.ViewOutsideGrid:
+            continue
+    order.extend(int(n) for n in grid.grid.nodes_around(morph_grid.to_frame(frame, np.asarray(eye)[None])[0]))
+    return list(dict.fromkeys(order))

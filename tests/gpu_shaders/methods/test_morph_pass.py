@@ -120,6 +120,15 @@ def test_nodes_are_projected_once_and_kept(mirror):
     morph.blend(moved)
     assert morph.counts["node_projections"] == projected  # its nodes were prefetched
 
+    # An animation's prefetch serves the cells its camera is about to enter first.
+    fresh, _ = _pass(mirror, [_cloud(600)])
+    fresh.blend(first)
+    far = np.array([0.4, -2.3, 0.3]) + grid.grid.spacing * np.array([0.0, 0.0, 2.6])  # three cells up
+    ahead_nodes = {int(n) for n in grid.check_view(_view(far))[1]}
+    assert not any((0, node) in fresh.nodes for node in ahead_nodes)
+    assert fresh.prefetch(first, _run_now, max_pending=len(ahead_nodes), ahead=[far]) == len(ahead_nodes)
+    assert fresh.collect() == len(ahead_nodes) and all((0, node) in fresh.nodes for node in ahead_nodes)
+
     one_node = 2 * 3 * morph.meshes.width * morph.meshes.height * 16
     small, _ = _pass(mirror, [_cloud(600)], budget_mb=4.5 * one_node / 2 ** 20)
     small.blend(first)
