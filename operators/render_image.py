@@ -181,7 +181,7 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
                                         downsample=downsample, accuracy_px=accuracy_px)
     if animating:
         _prefetch_nodes(state.renderer.morph, view, state.last_eye)
-        state.last_eye = view.eye
+        state.last_eye = view.eye if view.is_perspective else None
     built_at = time.perf_counter()
     image = state.renderer.render(view, sbc, world_color(scene), trace_edges=trace_edges, trace_gaps=trace_gaps)
     end = time.perf_counter()
@@ -206,7 +206,8 @@ def _prefetch_nodes(morph, view, last_eye) -> None:
     not depend on which nodes were ready."""
     from .live_workers import prefetcher
 
-    ahead = () if last_eye is None else [view.eye + n * (view.eye - last_eye) for n in range(1, PREDICTED_FRAMES + 1)]
+    ahead = () if last_eye is None or not view.is_perspective else [
+        view.eye + n * (view.eye - last_eye) for n in range(1, PREDICTED_FRAMES + 1)]
     morph.collect()
     morph.prefetch(view, prefetcher().submit, max_pending=PREFETCHED_NODES, exact=True, ahead=ahead)
 
