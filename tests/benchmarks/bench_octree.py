@@ -66,17 +66,20 @@ def scenes(n_points: int, quick: bool):
     found = [("sbc_fig3", mirror, matrix, lambda rng: B.make_points("sbc_fig3", [mirror], meshes, bounds,
                                                                      n_points, rng)[0])]
     if not quick:
-        ellipsoid = B.ellipsoid_reflector(np.random.default_rng(SEED))
-        lo, hi = ellipsoid.bounds
-        box = (lo - B.HELD_OUT_MARGIN, hi + B.HELD_OUT_MARGIN)
-        found.append(("ellipsoid (held out)", ellipsoid, np.eye(4),
-                      lambda rng: B.make_points("ellipsoid", [ellipsoid], [], box, n_points, rng)[0]))
-        rippled = B.rippled_ellipsoid((0.0, 0.0, 1.0), (1.2, 0.8, 0.9), 5, 0.04, lobes=(4, 3), name="HeldOutRippled")
-        lo, hi = rippled.bounds
-        rippled_box = (lo - B.HELD_OUT_MARGIN, hi + B.HELD_OUT_MARGIN)
-        found.append(("rippled ellipsoid (held out, not a quadric)", rippled, np.eye(4),
-                      lambda rng: B.make_points("rippled", [rippled], [], rippled_box, n_points, rng)[0]))
+        found.append(_held_out("ellipsoid (held out)", B.ellipsoid_reflector(np.random.default_rng(SEED)),
+                               n_points))
+        found.append(_held_out("rippled ellipsoid (held out, not a quadric)",
+                               B.rippled_ellipsoid((0.0, 0.0, 1.0), (1.2, 0.8, 0.9), 5, 0.04, lobes=(4, 3),
+                                                   name="HeldOutRippled"), n_points))
     return found
+
+
+def _held_out(name: str, mirror, n_points: int):
+    """A scene of ``scenes`` for a mirror alone, its object matrix the identity: points in its
+    bounds widened by ``bench_sbc.HELD_OUT_MARGIN``."""
+    lo, hi = mirror.bounds
+    box = (lo - B.HELD_OUT_MARGIN, hi + B.HELD_OUT_MARGIN)
+    return name, mirror, np.eye(4), lambda rng: B.make_points(mirror.name, [mirror], [], box, n_points, rng)[0]
 
 
 def measure_scene(name, mirror, matrix, sample, settings, args) -> dict:
