@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 GLSL_DIR = Path(__file__).resolve().parent / "glsl"
 
 
@@ -22,9 +24,9 @@ def normal_equations_glsl(unknowns: int, ridge=None) -> str:
     ``fit_add(r0, .., r<n-1>, value)`` per equation (row . c = value), then
     ``fit_solve()``, which leaves c in ``fit_b0`` .. ``fit_b<n-1>``.
 
-    The normal equations (``ridge`` added to their diagonal, one value per unknown, by
-    default 1e-10 each, as the numpy twin's) are
-    solved by Cholesky factorisation, written out term by term: llvmpipe kept the same
+    The normal equations (``ridge`` added to them: one value per unknown for their
+    diagonal, by default 1e-10 each, as the numpy twin's, or a symmetric matrix, a
+    penalty on combinations of unknowns) are solved by Cholesky factorisation, written out term by term: llvmpipe kept the same
     code written with arrays and loops in memory, and the morphing blend, which fits
     one surface per vertex and frame, ran 2.3x slower (``glsl/morph_blend.glsl``).
     """
@@ -41,8 +43,9 @@ def normal_equations_glsl(unknowns: int, ridge=None) -> str:
         """``first - a0 * b0 - a1 * b1 ...`` for the (a, b) name pairs ``products``."""
         return " - ".join([first] + [f"{x} * {y}" for x, y in products])
 
-    ridge = [1e-10] * unknowns if ridge is None else list(ridge)
-    clear = ([f"  {m(i, j)} = {f'{ridge[i]:.9e}' if i == j else '0.0'};" for i, j in lower]
+    ridge = np.full(unknowns, 1e-10) if ridge is None else np.asarray(ridge, dtype=np.float64)
+    penalty = ridge if ridge.ndim == 2 else np.diag(ridge)
+    clear = ([f"  {m(i, j)} = {penalty[i, j]:.9e};" for i, j in lower]
              + [f"  {b(i)} = 0.0;" for i in terms])
     add = [f"  {m(i, j)} += r{i} * r{j};" for i, j in lower] + [f"  {b(i)} += r{i} * value;" for i in terms]
     solve = []

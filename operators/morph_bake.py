@@ -153,7 +153,7 @@ def load_morphing(reflector, matrix, scene, reflector_index: int = 0):
     """The baked grid for this reflector as it is now, or None (runtime mode) with the reason recorded."""
     try:
         grid = bake.load_for(reflector, matrix, reflector_settings(scene, reflector.name), cache_directory(scene),
-                             reflector_index)
+                             reflector_index, polish=scene.curved_reflections.morph_polish_nodes)
     except SceneInputError as error:
         _REFLECTOR_STATUS[reflector.name] = f"{error.problem}"
         return None

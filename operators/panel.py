@@ -149,6 +149,7 @@ class VIEW3D_PT_curved_reflections(bpy.types.Panel):
         morph.active = morphing
         morph.prop(scene_settings, "morph_grid")
         morph.prop(scene_settings, "morph_margin")
+        morph.prop(scene_settings, "morph_polish_nodes")
         morph.prop(scene_settings, "morph_gpu_budget_mb")
         if morphing:
             _morphing_section(layout.box(), scene)

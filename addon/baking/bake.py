@@ -184,7 +184,9 @@ def bake_grid(reflector: Reflector, matrix, settings: MorphSettings, cache_dir, 
                       time.perf_counter() - start, node_seconds, node_cpu, nbytes, processes, _peak_rss_mb())
 
 
-def load_for(reflector: Reflector, matrix, settings: MorphSettings, cache_dir, reflector_index: int = 0):
-    """The baked grid matching this reflector's current geometry and settings (CacheError else)."""
+def load_for(reflector: Reflector, matrix, settings: MorphSettings, cache_dir, reflector_index: int = 0,
+             polish: bool = False):
+    """The baked grid matching this reflector's current geometry and settings (CacheError
+    else); ``polish``: its nodes' grazing and extended images are polished on the mirror."""
     local = reflector_in_frame(reflector, rigid_frame(matrix))
-    return bake_cache.load_grid(cache_dir, local, bake_cache.cache_key(local, settings), reflector_index)
+    return bake_cache.load_grid(cache_dir, local, bake_cache.cache_key(local, settings), reflector_index, polish)

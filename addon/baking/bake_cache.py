@@ -49,7 +49,7 @@ import numpy as np
 
 from ..errors import SceneInputError
 from ..methods.octree import OctreeGrid, build_octree_node, octree_node_arrays, octree_node_from_arrays
-from ..methods.morphing.morphing import ENGINE_VERSION, MorphingGrid
+from ..methods.morphing.morphing import ENGINE_VERSION, MirrorOnDemand, MorphingGrid
 from ..methods.morphing.morph_grid import (NODE_INSIDE, OCTREE, TETRAHEDRAL, MorphSettings, NodeCamera, TetrahedralGrid,
                                            build_node)
 from ..scene import Reflector
@@ -310,9 +310,11 @@ class _LazyNodes:
         return camera
 
 
-def load_grid(cache_dir, local_reflector: Reflector, key: str, reflector_index: int = 0) -> MorphingGrid:
+def load_grid(cache_dir, local_reflector: Reflector, key: str, reflector_index: int = 0,
+              polish: bool = False) -> MorphingGrid:
     """The baked grid of this reflector (in its rigid frame) for this key; CacheError
-    (missing / stale / corrupt) else."""
+    (missing / stale / corrupt) else. ``polish``: its nodes' grazing and extended images
+    are polished on the mirror (``MorphingGrid.mirror``)."""
     reflector_name = local_reflector.name
     directory = grid_directory(cache_dir, reflector_name, key)
     if not (directory / MANIFEST).is_file():
@@ -346,7 +348,8 @@ def load_grid(cache_dir, local_reflector: Reflector, key: str, reflector_index: 
                          "finish it (runtime mode until then)")
     kind = GRID_KINDS[settings.kind]
     return kind.grid(reflector_name, reflector_index, grid, settings, status,
-                     _LazyNodes(directory, reflector_name, key, kind.from_arrays), size)
+                     _LazyNodes(directory, reflector_name, key, kind.from_arrays), size,
+                     mirror=MirrorOnDemand(local_reflector, settings) if polish else None)
 
 
 def cache_state(cache_dir, local_reflector: Reflector, key: str) -> str:

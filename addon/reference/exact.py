@@ -97,7 +97,8 @@ def _solve_chunk(reflector_set, view, points, offset) -> dict:
                              _foot(reflector_set, points[candidates_point], candidates_triangle)])
     candidates_point = np.concatenate([candidates_point, candidates_point])
     candidates_triangle = np.concatenate([candidates_triangle, candidates_triangle])
-    uv, converged, orientation = _newton(reflector_set, view, points[candidates_point], candidates_triangle, starts)
+    uv, converged, orientation = newton_in_triangles(reflector_set, view, points[candidates_point], candidates_triangle,
+                                                     starts)
     u, v = uv[:, 0], uv[:, 1]
     inside = converged & (u >= -INSIDE_TOLERANCE) & (v >= -INSIDE_TOLERANCE) & (u + v <= 1 + INSIDE_TOLERANCE)
     point, triangle, u, v = candidates_point[inside], candidates_triangle[inside], u[inside], v[inside]
@@ -184,8 +185,8 @@ def half_vector_may_meet_cone(to_a, turn_a, to_b, turn_b, cone_axis, cone_cos) -
     return ~bounded | (spread >= np.pi / 2) | (alignment >= np.cos(np.minimum(spread, np.pi / 2)))
 
 
-def _newton(reflector_set: ReflectorSet, view: View, points: np.ndarray, triangles: np.ndarray,
-            starts: np.ndarray):
+def newton_in_triangles(reflector_set: ReflectorSet, view: View, points: np.ndarray, triangles: np.ndarray,
+                        starts: np.ndarray, iterations: int = NEWTON_ITERATIONS):
     """Newton's method on the reflection law in each triangle's barycentric (u, v).
 
     The residual is the difference between the half vector and the normal (turned
@@ -219,7 +220,7 @@ def _newton(reflector_set: ReflectorSet, view: View, points: np.ndarray, triangl
     # Pairs leave the active set once converged, or once Newton has carried them well
     # outside their triangle (their root, if any, belongs to a neighbour).
     active = np.arange(len(triangles))
-    for iteration in range(NEWTON_ITERATIONS):
+    for iteration in range(iterations):
         a = uv[active]
         g = residual(a, active)
         jacobian = np.stack([(residual(a + du, active) - residual(a - du, active)) / (2 * h),

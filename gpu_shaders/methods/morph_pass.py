@@ -108,7 +108,7 @@ def blend_shader(n_nodes: int = 4, regular: int = SLOTS, widened: int = SLOTS):
         info.image(k, 'RGBA32F', 'FLOAT_2D', f"result{k}", qualifiers={'WRITE'})
     info.local_group_size(LOCAL_SIZE, 1)
     info.compute_source(glsl_source("morph_blend.glsl", blend_defines(n_nodes, regular, widened),
-                                    normal_equations_glsl(9, morph_surface.FIT_RIDGE)))
+                                    normal_equations_glsl(9, morph_surface.FIT_PENALTY)))
     return gpu.shader.create_from_info(info)
 
 

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import functools
 import importlib.util
 import json
 import math
@@ -242,7 +243,11 @@ def report(results: dict) -> str:
         f"{args['face_resolution']} px, accuracy {args['accuracy_px']} face px. *linear*: the paper's barycentric "
         "blend of the four "
         "first reflector points; *surface*: ours, the blend refined on a quadric fitted to the four nodes' images "
-        "and normals (`refine_on_local_surface`). Error: desired-view px from each projected image to the exact "
+        "and normals (`refine_on_local_surface`)"
+        + ("; the nodes' grazing and extended images polished on the mirror (*Polish Node Images*, "
+           "`image_polish.py`)" if args.get("polish") else "; the nodes' images as their cameras give them "
+           "(*Polish Node Images* off, the default)")
+        + ". Error: desired-view px from each projected image to the exact "
         "visible reflection (`addon/reference/exact.py`). Coverage: exact visible reflections that are projected; "
         "in parentheses, those seen less than 72.5 degrees off the mirror's normal (the rim of the sphere, a cell or "
         "two wide in every node's ray map, reflects much of the scene at grazing angles and is not projected). "
@@ -323,6 +328,8 @@ def parse_args(argv=None):
                         "(default: MorphSettings' default)")
     parser.add_argument("--bake-grid", default="9,9,5")
     parser.add_argument("--processes", type=int, default=2)
+    parser.add_argument("--polish", action="store_true", help="polish the nodes' grazing and extended images on "
+                        "the mirror (the scene's Polish Node Images)")
     parser.add_argument("--bake-only", action="store_true", help="measure the bake alone (no error sweep, no "
                         "exact solve); writes morphing_bake.json and leaves morphing.md as it is")
     parser.add_argument("--quick", action="store_true", help="smallest run: grids 3x3x2 and 5x5x3, 2 views, "
@@ -381,7 +388,8 @@ def main(argv=None) -> int:
         "sweep": [],
     }
     for g in args.grids:
-        cell = measure_grid(morphing.grid_on_demand, mirror, matrix, settings_for[g], views, view_points, exact, args)
+        cell = measure_grid(functools.partial(morphing.grid_on_demand, polish=args.polish), mirror, matrix,
+                            settings_for[g], views, view_points, exact, args)
         results["sweep"].append(cell)
         s = cell["blends"]["surface"]
         _log(f"grid {g}: surface p50/p95/p99 {s['error_p50']:.2f}/{s['error_p95']:.2f}/{s['error_p99']:.2f} px, "

@@ -8,6 +8,7 @@ import re
 
 import numpy as np
 
+from curved_reflections.addon.methods.morphing.morph_surface import sphere_prior
 from curved_reflections.gpu_shaders.shader_sources import normal_equations_glsl
 
 
@@ -42,7 +43,7 @@ def test_generated_normal_equations_solve_least_squares():
 
 
 def test_generated_normal_equations_add_the_ridge_per_unknown():
-    """Nine unknowns, the last three held by a ridge (the blend's quadric terms, morph_surface.FIT_RIDGE)."""
+    """Nine unknowns, the last three held by a ridge per unknown."""
     rng = np.random.default_rng(4)
     unknowns, ridge = 9, np.array([1e-10] * 6 + [0.5] * 3)
     rows, values = rng.normal(size=(12, unknowns)), rng.normal(size=12)
@@ -51,3 +52,16 @@ def test_generated_normal_equations_add_the_ridge_per_unknown():
     expected = np.linalg.solve(rows.T @ rows + np.diag(ridge), rows.T @ values)
     np.testing.assert_allclose(solved, expected, rtol=1e-7, atol=1e-9)
     assert not np.allclose(solved, np.linalg.lstsq(rows, values, rcond=None)[0], atol=1e-3)
+
+
+def test_generated_normal_equations_add_a_penalty_matrix():
+    """A symmetric penalty on combinations of unknowns (the blend's sphere prior,
+    morph_surface.FIT_PENALTY) is added to the normal equations whole."""
+    rng = np.random.default_rng(6)
+    penalty = sphere_prior(0.5)
+    rows, values = rng.normal(size=(12, 9)), rng.normal(size=12)
+    solved = _solved(normal_equations_glsl(9, penalty), rows, values)
+    np.testing.assert_allclose(solved, np.linalg.solve(rows.T @ rows + penalty, rows.T @ values), rtol=1e-7,
+                               atol=1e-9)
+    diagonal_only = np.linalg.solve(rows.T @ rows + np.diag(np.diag(penalty)), rows.T @ values)
+    assert not np.allclose(solved, diagonal_only, atol=1e-3)

@@ -324,9 +324,13 @@ def bake_reflector(reflector: Reflector, settings: MorphSettings) -> tuple[Refle
     the scene's points lie, and a ray leaving the box is not cut short for points beyond).
     """
     grid = grid_for(reflector, settings)
+    return extended_mirror(reflector, settings), grid, (grid.lo - grid.spacing, grid.hi + grid.spacing)
+
+
+def extended_mirror(reflector: Reflector, settings: MorphSettings) -> ReflectorSet:
+    """The reflector with its open edges extended (remedy 1), as every node camera sees it."""
     lo, hi = reflector.bounds
-    extended = extend_reflector(reflector, settings.extension * float(np.max(hi - lo)))
-    return ReflectorSet([extended]), grid, (grid.lo - grid.spacing, grid.hi + grid.spacing)
+    return ReflectorSet([extend_reflector(reflector, settings.extension * float(np.max(hi - lo)))])
 
 
 class NodesOnDemand(dict):

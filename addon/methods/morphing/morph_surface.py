@@ -22,14 +22,15 @@ MIN_SURFACE_NODES = 3
 SURFACE_ITERATIONS = 8
 #: The refined point may lie this far (in units of the nodes' images' spread) from the blend.
 SURFACE_REACH = 2.0
-#: Weight (squared) pulling the quadric's three terms in the height toward zero, in the
-#: fit's normal equations: where the nodes' images do not pin them (three nodes, images
-#: close together, images off by the node cameras' accuracy, float32 on the GPU) the fit
-#: falls back toward the quadratic height field. Measured on sbc_fig3 (9x9x5 grid; p99 px
-#: against the exact solver, bench_morphing.py's views / label disagreement with Cycles,
-#: bench_morph_animation.py): 1e-10: 6.1 px; 1e-3: 2.9 px / 2.2 %; 1e-2: 2.8 px / 1.9 %;
-#: 1e-1: 4.7 px / 1.6 %; the quadratic height field (no quadric terms): 14.2 px / 1.9 %.
-#: Weaker ridges moved the far floor's reflection near the ball's horizon off Cycles'.
+#: Weight (squared) pulling the quadric's three terms in the height toward the sphere of
+#: the quadratic's mean curvature (:func:`sphere_prior`), in the fit's normal equations:
+#: where the nodes' images do not pin them (three nodes, images close together, images
+#: off by the node cameras' accuracy, float32 on the GPU) the fit falls back toward that
+#: sphere. Measured on sbc_fig3 (9x9x5 grid; p99 px against the exact solver on
+#: bench_morphing.py's views, with the nodes' images polished, image_polish.py): 1e-2:
+#: 0.72 px, 1.5 % label disagreement with Cycles (bench_morph_animation.py); 1e-1:
+#: 0.99 px before the grazing images were polished (1e-2: 1.05 px). Pulled toward zero
+#: (the paraboloid) instead, as before, close views were biased by 1.5 px: p99 2.8 px.
 QUADRIC_RIDGE = 1e-2
 #: A node's image joins the surface fit where its normal is within about 78 degrees of
 #: the nodes' weighted normal (cosine above this).
@@ -54,8 +55,8 @@ def refine_on_local_surface(images, present, eyes, points, eye, weights):
     ellipsoid, a cylinder), where the quadratic height field alone (c6 = c7 = c8 = 0)
     erred by many pixels on images spread over a sizeable part of a sphere (its height
     deviates from the osculating paraboloid by r^4 / 8R^3); on other surfaces they take
-    up part of the third-order terms. ``QUADRIC_RIDGE`` keeps them small where the
-    images do not pin them. Needs MIN_SURFACE_NODES nodes (two give fewer equations
+    up part of the third-order terms. ``QUADRIC_RIDGE`` holds them near a sphere's
+    where the images do not pin them. Needs MIN_SURFACE_NODES nodes (two give fewer equations
     than the quadratic's unknowns: measured, their fits are often wrong); where it fails
     or leaves the images' neighbourhood, ``ok`` is False.
 
@@ -115,7 +116,7 @@ def _fit_and_reflect(images, present, usable, normals, normal, nz, origin, point
     rhs = np.concatenate([h, slope_a, slope_b], axis=1)
     mask = np.tile(usable, 3).astype(np.float64)
     rows, rhs = rows * mask[..., None], rhs * mask
-    normal_matrix = np.einsum("qri,qrj->qij", rows, rows) + np.diag(FIT_RIDGE)
+    normal_matrix = np.einsum("qri,qrj->qij", rows, rows) + FIT_PENALTY
     coefficients = solve_spd(normal_matrix, np.einsum("qri,qr->qi", rows, rhs))
 
     def surface(k, u, v):
@@ -154,9 +155,22 @@ def _fit_and_reflect(images, present, usable, normals, normal, nz, origin, point
     return x, ok, fitted_normal
 
 
-#: The normal equations' diagonal: 1e-10 for the quadratic's six terms (as every fit
-#: here), QUADRIC_RIDGE for the quadric's three.
-FIT_RIDGE = np.array([1e-10] * 6 + [QUADRIC_RIDGE] * 3)
+def sphere_prior(weight: float) -> np.ndarray:
+    """(9, 9) penalty added to the fit's normal equations: ``weight`` times
+    (c6 - (c3 + c5) / 4)^2 + c7^2 + c8^2, plus 1e-10 on the diagonal (as every fit here).
+
+    It pulls the quadric's three terms toward the sphere that has the quadratic's mean
+    curvature: a sphere |x - C|^2 = R^2 in any frame (a, b, h) reads h = (a^2 + b^2 + h^2
+    - 2 a C_a - 2 b C_b + const) / 2 C_h, so c3 = c5 = 2 c6 and c7 = c8 = 0. A pull
+    toward zero (the paraboloid) instead biased close views, whose nodes' images spread
+    over a large part of the mirror, by 1.5 px on a sphere.
+    """
+    row = np.zeros(9)
+    row[[3, 5, 6]] = -0.25, -0.25, 1.0
+    return weight * (np.outer(row, row) + np.diag([0.0] * 7 + [1.0, 1.0])) + 1e-10 * np.eye(9)
+
+
+FIT_PENALTY = sphere_prior(QUADRIC_RIDGE)
 
 
 def quadric_height(c, u, v):

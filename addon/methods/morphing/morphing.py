@@ -26,7 +26,9 @@ Ambiguous points (section VI, Fig. 15): seen by some of the four nodes, not by o
 2. *Extended leaf frustums*: where a node has no image of a point that another node
    sees, its camera leaves are asked again with their chart widened by
    ``EXTENDED_CHART`` (the leaf's ray-field patch extrapolated beyond its rays; its tail
-   polynomial is the first reflector point).
+   polynomial is the first reflector point). Ours: the extrapolated image is then
+   polished on the mirror (``image_polish.py``), and dropped where the mirror has no
+   reflection near it; so are the node's regular images seen at a grazing angle.
 
 Images are matched across nodes by mutually nearest first reflector point (within
 ``MATCH_FRACTION`` of the reflector's size plus ``MorphingGrid.match_slope`` times the
@@ -44,7 +46,9 @@ import numpy as np
 
 from ..sbc.bsp import CAMERA_LEAF
 from .morph_grid import (NODE_OK, MorphSettings, NodesOnDemand, TetrahedralGrid, _StatusOnDemand, bake_reflector,
+                         extended_mirror,
                          from_frame, rigid_frame, to_frame)
+from .image_polish import polish_grazing, polish_images
 from .morph_surface import refine_on_local_surface
 from ..sbc.ray_patch import RayPatches, solve_charts
 from ..sbc.sbc import SampleBasedCamera, descend_tree, in_band
@@ -88,15 +92,31 @@ class ViewOutsideGrid(Exception):
 
 
 def grid_on_demand(reflector: Reflector, settings: MorphSettings, reflector_index: int = 0,
-                   blend: str = "surface", nodes: NodesOnDemand | None = None) -> MorphingGrid:
+                   blend: str = "surface", nodes: NodesOnDemand | None = None, polish: bool = False) -> MorphingGrid:
     """A MorphingGrid of ``reflector`` (in its rigid frame) whose nodes are built when a
-    view first needs them (:class:`NodesOnDemand`; pass ``nodes`` to share them between grids)."""
+    view first needs them (:class:`NodesOnDemand`; pass ``nodes`` to share them between
+    grids); ``polish``: the nodes' grazing and extended images are polished on the mirror."""
     reflector_set, grid, bounds = bake_reflector(reflector, settings)
     if nodes is None:
         nodes = NodesOnDemand(reflector_set, grid.node_positions(), bounds, settings)
     lo, hi = reflector.bounds
     return MorphingGrid(reflector.name, reflector_index, grid, settings, _StatusOnDemand(nodes), nodes,
-                        float(np.max(hi - lo)), blend=blend)
+                        float(np.max(hi - lo)), blend=blend,
+                        mirror=MirrorOnDemand(reflector, settings, reflector_set) if polish else None)
+
+
+class MirrorOnDemand:
+    """The extended mirror the nodes of one grid were built from (``morph_grid.extended_mirror``),
+    its BVH built on first use: a baked grid loads without it, and only a node projection
+    that polishes extended images needs it."""
+
+    def __init__(self, reflector: Reflector, settings: MorphSettings, mirror=None):
+        self.reflector, self.settings, self._mirror = reflector, settings, mirror
+
+    def __call__(self):
+        if self._mirror is None:
+            self._mirror = extended_mirror(self.reflector, self.settings)
+        return self._mirror
 
 
 # --- projection -----------------------------------------------------------------------
@@ -147,6 +167,11 @@ class MorphingGrid:
     #: The cache fault (``bake_cache.CacheError``) met reading one of its nodes: the grid
     #: is not used again (its reflector is drawn in runtime mode) until loaded anew.
     failure: object = field(default=None, repr=False, compare=False)
+    #: ``() -> ReflectorSet``: the mirror the node cameras were built from (frame
+    #: coordinates; :class:`MirrorOnDemand`), on which the nodes' grazing and extended
+    #: images are polished (the scene's *Polish Node Images*); None: they are used as
+    #: the node cameras give them (extended images as the widened charts extrapolate them).
+    mirror: object = field(default=None, repr=False, compare=False)
     _static: dict = field(default_factory=dict, repr=False)
     #: Images of one point at two nodes match within MATCH_FRACTION of the mirror plus
     #: this times the nodes' distance (a class attribute, not a field).
@@ -214,7 +239,10 @@ class MorphingGrid:
         if not parts:
             return np.full((len(points), 0, 3), np.nan)
         images = np.concatenate(parts, axis=0).transpose(1, 0, 2)
-        return compact_images(images, self._duplicate_tolerance(node, images))
+        images = compact_images(images, self._duplicate_tolerance(node, images))
+        if self.mirror is not None:
+            images = polish_grazing(self.mirror(), self.grid.node_positions()[node], points, images)
+        return images
 
     @property
     def projects_nodes_on_gpu(self) -> bool:
@@ -230,7 +258,8 @@ class MorphingGrid:
         everything :meth:`_matched_images` reads of a node, for every point at once, so
         that it serves every tetrahedron the node belongs to. ``face_images`` as for
         :meth:`_node_images` (``project_face``: numpy, for a thread without the GPU)."""
-        parts = [self._node_images(node, points, face_images), self._extended_images(node, points)]
+        regular = self._node_images(node, points, face_images)
+        parts = [regular, self._extended_images(node, points, regular)]
         return np.concatenate([pad_images(part[:, :slots], slots) for part in parts], axis=1)
 
     def _duplicate_tolerance(self, node: int, images: np.ndarray) -> np.ndarray:
@@ -244,8 +273,10 @@ class MorphingGrid:
         return np.maximum(DUPLICATE_PIXELS * pixel_angle * np.nan_to_num(distance), DUPLICATE_FRACTION
                           * self.reflector_size)
 
-    def _extended_images(self, node: int, points: np.ndarray):
-        """Remedy 2: reflector points from camera leaves with widened charts, (P, K, 3)."""
+    def _extended_images(self, node: int, points: np.ndarray, regular: np.ndarray):
+        """Remedy 2: reflector points from camera leaves with widened charts, (P, K, 3),
+        but those of the node's ``regular`` images (P, K', 3) of the same points (the
+        widened chart holds the regular one), polished on the mirror (:attr:`mirror`)."""
         camera = self.nodes[node]
         parts = []
         for sbc in camera.faces:
@@ -256,7 +287,13 @@ class MorphingGrid:
         if not parts:
             return np.full((len(points), 0, 3), np.nan)
         images = np.stack(parts, axis=1)
-        return compact_images(images, self._duplicate_tolerance(node, images))
+        images = compact_images(images, self._duplicate_tolerance(node, images))
+        tolerance = self._duplicate_tolerance(node, images)
+        near = np.linalg.norm(images[:, :, None] - regular[:, None], axis=3) <= tolerance[..., None]
+        images = np.where(near.any(axis=2)[..., None], np.nan, images)
+        if self.mirror is not None:
+            images = polish_images(self.mirror(), self.grid.node_positions()[node], points, images)
+        return compact_images(images, np.zeros(images.shape[:2]))
 
     def _matched_images(self, points, nodes, weights):
         """(N, P, K, 3) images matched across the N nodes of the eye's cell (4 for a
@@ -280,7 +317,7 @@ class MorphingGrid:
             rows = np.flatnonzero(missing.any(axis=1))
             how[n] = np.where(np.isfinite(found[..., 0]), ALL_NODES, NOT_PROJECTED)
             if len(rows):
-                extended = self._extended_images(int(nodes[n]), points[rows])
+                extended = self._extended_images(int(nodes[n]), points[rows], images[n][rows])
                 again = _match(reference[rows], extended, threshold[rows])
                 fill = missing[rows] & np.isfinite(again[..., 0])
                 found[rows] = np.where(fill[..., None], again, found[rows])

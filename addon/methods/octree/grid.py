@@ -78,7 +78,7 @@ class OctreeGrid(MorphingGrid):
         images = self.nodes[node].octree.images(points, IMAGES)
         return compact_images(images, self._duplicate_tolerance(node, images))
 
-    def _extended_images(self, node: int, points: np.ndarray):
+    def _extended_images(self, node: int, points: np.ndarray, regular: np.ndarray):
         """A ray octree has no leaf charts to widen (the tetrahedral grid's remedy 2)."""
         return np.full((len(points), 0, 3), np.nan)
 

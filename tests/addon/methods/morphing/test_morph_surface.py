@@ -4,6 +4,7 @@ fitted to the nodes' images is exact on quadric mirrors, where the quadratic hei
 it extends erred, and its slopes are the derivatives of its height."""
 
 import numpy as np
+import pytest
 
 from curved_reflections.addon.geometry.sphere import sphere_reflection
 from curved_reflections.addon.methods.morphing import morph_surface
@@ -25,37 +26,56 @@ def _sphere_case(rng, count=400):
             np.tile(weights, (keep.sum(), 1)), truth[keep])
 
 
-def _refined_with_ridge(ridge, images, nodes, points, eye, weights):
-    """refine_on_local_surface with the quadric's three terms held by ``ridge``."""
-    saved = morph_surface.FIT_RIDGE.copy()
+def _refined_with_penalty(penalty, images, nodes, points, eye, weights):
+    """refine_on_local_surface with ``penalty`` (9, 9) added to the fit's normal equations."""
+    saved = morph_surface.FIT_PENALTY
     try:
-        morph_surface.FIT_RIDGE[6:] = ridge
+        morph_surface.FIT_PENALTY = penalty
         refined, ok, _, _ = morph_surface.refine_on_local_surface(images, np.ones(weights.shape, bool), nodes,
                                                                   points, eye, weights)
     finally:
-        morph_surface.FIT_RIDGE[:] = saved
+        morph_surface.FIT_PENALTY = saved
     return refined, ok
+
+
+def _error_p99(refined, ok, truth):
+    return np.percentile(np.linalg.norm(refined - truth, axis=1)[ok], 99)
 
 
 def test_quadric_fit_finds_the_exact_reflection_on_a_sphere():
     images, nodes, points, eye, weights, truth = _sphere_case(np.random.default_rng(5))
     present = np.ones(weights.shape, bool)
     refined, ok, normal, _ = morph_surface.refine_on_local_surface(images, present, nodes, points, eye, weights)
-    error = np.linalg.norm(refined - truth, axis=1)[ok]
-    assert ok.mean() > 0.95 and len(error) > 150
-    # QUADRIC_RIDGE's pull (it serves noisy images) leaves about 1e-3 of the radius here,
-    # a fifth of a pixel seen from half a radius at 400 px per unit angle.
-    assert np.percentile(error, 99) < 2e-3
+    assert ok.mean() > 0.95 and ok.sum() > 150
+    # The default pulls the quadric's three terms toward a sphere, which a sphere meets:
+    # exact, as unheld.
+    assert _error_p99(refined, ok, truth) < 1e-4
     np.testing.assert_allclose(normal[ok], refined[ok], atol=1e-2)  # the sphere's normal is radial
-    # Unpinned, the fit is exact; the blend alone, and the quadratic height field (the
-    # three terms pinned to zero), are far off.
-    free, ok_free = _refined_with_ridge(1e-10, images, nodes, points, eye, weights)
-    free_error = np.percentile(np.linalg.norm(free - truth, axis=1)[ok_free], 99)
-    assert free_error < 1e-4
+    free = _refined_with_penalty(1e-10 * np.eye(9), images, nodes, points, eye, weights)
+    assert _error_p99(*free, truth) < 1e-4
+    # The blend alone is far off; the quadratic height field (the three terms pinned to
+    # zero) is 10x off, and a pull toward zero of the default's weight about 1e-3 of the
+    # radius (the pull that biased close views by 1.5 px on bench_morphing.py's ball).
     blend = np.einsum("qn,qnd->qd", weights, images)
     assert np.percentile(np.linalg.norm(blend - truth, axis=1), 50) > 1e-2
-    quadratic, ok_quadratic = _refined_with_ridge(1e12, images, nodes, points, eye, weights)
-    assert np.percentile(np.linalg.norm(quadratic - truth, axis=1)[ok_quadratic], 99) > 10 * free_error
+    quadratic = _refined_with_penalty(np.diag([1e-10] * 6 + [1e12] * 3), images, nodes, points, eye, weights)
+    assert _error_p99(*quadratic, truth) > 1e-3
+    toward_zero = _refined_with_penalty(np.diag([1e-10] * 6 + [morph_surface.QUADRIC_RIDGE] * 3), images, nodes,
+                                        points, eye, weights)
+    assert _error_p99(*toward_zero, truth) > 5e-4
+
+
+def test_sphere_prior_penalises_only_what_a_sphere_is_not():
+    """c6 - (c3 + c5) / 4, c7 and c8 are zero for every sphere in any frame; the penalty
+    of any coefficients is that weight times their squares."""
+    penalty = morph_surface.sphere_prior(2.0)
+    sphere_like = np.array([0.3, -0.2, 0.1, 0.8, 0.0, 0.8, 0.4, 0.0, 0.0])
+    assert sphere_like @ penalty @ sphere_like == pytest.approx(1e-10 * sphere_like @ sphere_like, abs=1e-12)
+    flattened = sphere_like * np.array([1, 1, 1, 1, 1, 1, 0, 1, 1])  # the paraboloid: c6 = 0
+    assert flattened @ penalty @ flattened == pytest.approx(2.0 * 0.4 ** 2, rel=1e-6)
+    tilted = sphere_like + np.array([0, 0, 0, 0, 0, 0, 0, 0.3, 0])
+    assert tilted @ penalty @ tilted == pytest.approx(2.0 * 0.3 ** 2, rel=1e-6)
+    np.testing.assert_allclose(penalty, penalty.T)
 
 
 def test_quadric_height_slopes_are_its_derivatives():

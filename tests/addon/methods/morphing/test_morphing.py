@@ -263,3 +263,41 @@ def test_nodes_around_a_point_are_its_cell_and_the_cells_beside_it_nearest_first
     assert cell_corners <= set(around.tolist()) and int(around[0]) in cell_corners  # the nearest is the cell's
     assert np.all(np.abs(positions - point).max(axis=1) < 3.0)  # no node past the neighbouring cells
     assert len(grid.nodes_around(np.array([0.2, 0.1, 3.9]))) == 27  # at a corner of the grid: 3 x 3 x 3
+
+
+def test_a_nodes_extended_and_grazing_images_are_the_mirrors_reflections(sphere, small_grids):
+    """With a mirror to polish on (the scene's Polish Node Images), ``node_slots`` moves
+    the widened charts' images and the regular ones seen at a grazing angle onto the
+    exact reflection points of the mesh (image_polish.py); as the charts give them, the
+    extended images are off."""
+    import dataclasses
+
+    rough_grid = small_grids["surface"]
+    assert rough_grid.mirror is None  # Polish Node Images is off by default
+    grid = dataclasses.replace(rough_grid, mirror=M.MirrorOnDemand(sphere, rough_grid.settings), _static={})
+    _, nodes, _, _ = grid.locate_view([-2.0, -2.4, 0.3], np.eye(4))
+    points = np.random.default_rng(6).uniform([-2.5, -2.5, -0.5], [2.5, 2.5, 2.8], (1500, 3))
+    points = points[np.linalg.norm(points - CENTRE, axis=1) > 1.05]
+    reference = ReflectorSet([sphere])
+    polished_count, off_count = 0, 0
+    for node in nodes:
+        eye = grid.grid.node_positions()[node]
+        exact = solve_reflections(reference, look_at_view(eye, CENTRE), points)
+        slots = grid.node_slots(int(node), points, 3)
+        rough = rough_grid.node_slots(int(node), points, 3)
+
+        def off_the_mirror(images):
+            """Distance of each finite image to the nearest exact reflection of its point."""
+            rows, columns = np.nonzero(np.isfinite(images[..., 0]))
+            return np.array([np.min(np.linalg.norm(exact.position[exact.point == p] - images[p, k], axis=1),
+                                    initial=np.inf) for p, k in zip(rows, columns)]), (rows, columns)
+
+        extended, _ = off_the_mirror(slots[:, 3:])
+        assert (extended < 1e-8).all()
+        charted, _ = off_the_mirror(rough[:, 3:])
+        off_count += (charted > 1e-4).sum()
+        regular, where = off_the_mirror(slots[:, :3])
+        moved = np.linalg.norm(slots[:, :3] - rough[:, :3], axis=2)[where] > 0
+        assert (regular[moved] < 1e-8).all()
+        polished_count += len(extended) + moved.sum()
+    assert polished_count > 50 and off_count > 10

@@ -1,0 +1,124 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""A node's grazing and extended-frustum images, polished on the mirror its camera was built from.
+
+Remedy 2 of the morphing blend (SBC paper VI, ``morphing.py``) asks a node camera's
+leaf for an image its rays do not bracket: the leaf's chart widened by
+``EXTENDED_CHART``, its ray patch extrapolated. Those images lie off the mirror's true
+reflection points by up to 0.07 of the ball's radius (sbc_fig3, p99 of how far the
+polish moves them), and they made most of the blend's error over a pixel: on
+bench_morphing.py's views, p99 2.8 px as extrapolated, 1.1 px with every extended image
+replaced by the sphere's closed-form one. Polished here, each is the exact reflection
+point on the surface model the reference solver uses (flat triangles, interpolated
+normals), once per node and point set, not per frame.
+
+The node's regular images, interpolated between its rays (0.5 face pixels), are off
+too where the node sees the mirror at a grazing angle; the blend of a cell whose nodes
+do not all see an image (remedy 3) rests on those. Polishing the regular images seen
+more than ``GRAZING_COS`` off the normal as well (35 % of them there) took the p99 from
+1.05 to 0.72 px (every regular image: 0.48 px, for three times the work).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...geometry.raytrace import ReflectorSet
+from ...reference.exact import INSIDE_TOLERANCE, newton_in_triangles
+from ...view import look_at_view
+
+#: Triangles tried per image: the one the ray from the node through the image meets,
+#: then the ones through Newton's root while it lies outside the triangle it was found in.
+POLISH_ROUNDS = 3
+#: Newton iterations per triangle: the images start within a triangle or two of their
+#: root, where the reference solver's 24 (from a triangle's centroid) are rarely needed.
+POLISH_ITERATIONS = 8
+#: The rays are first traced this far past the image (a fraction of the mirror's
+#: diagonal), a far smaller BVH descent than to infinity, and on only where they found
+#: nothing (an image off the surface toward the eye, seen at a grazing angle).
+RAY_REACH = 0.05
+#: A node's regular image is polished where the cosine between the mirror's normal and
+#: the direction to the node is below this (about 60 degrees off the normal).
+GRAZING_COS = 0.5
+
+
+def polish_grazing(mirror: ReflectorSet, eye: np.ndarray, points: np.ndarray, images: np.ndarray) -> np.ndarray:
+    """(P, K, 3) a node's regular ``images``, those seen from ``eye`` at a grazing angle
+    (the normal the law of reflection gives them: the bisector of the directions to the
+    eye and to the point) polished (:func:`polish_images`), the others as they are, as
+    is any the polish does not place."""
+    to_eye = _unit(np.asarray(eye, dtype=np.float64) - images)
+    normal = _unit(to_eye + _unit(points[:, None] - images))
+    with np.errstate(invalid="ignore"):
+        grazing = np.einsum("pkd,pkd->pk", normal, to_eye) < GRAZING_COS
+    polished = polish_images(mirror, eye, points, np.where(grazing[..., None], images, np.nan))
+    return np.where(np.isfinite(polished[..., :1]), polished, images)
+
+
+def polish_images(mirror: ReflectorSet, eye: np.ndarray, points: np.ndarray, images: np.ndarray) -> np.ndarray:
+    """(P, K, 3) ``images`` of ``points`` (P, 3) seen from ``eye``, each moved to the
+    mirror's reflection point of its point near it, NaN where none is found.
+
+    Newton's method on the law of reflection in a triangle's barycentric coordinates
+    (``reference.exact.newton_in_triangles``) starts where the ray from the eye through
+    the image meets the mirror (:func:`_triangles_under`); where its root lies outside
+    that triangle, the ray through the root (or where Newton gave up) picks the next
+    one, among its ring first, up to ``POLISH_ROUNDS``. An image not placed by then has no reflection near it: the
+    widened chart extrapolated past the node's horizon, and the blend leaves that node
+    out (remedy 3) rather than mix in a point off the mirror's law.
+    """
+    eye = np.asarray(eye, dtype=np.float64)
+    rows, slots = np.nonzero(np.isfinite(images[..., 0]))
+    polished = np.full(images.shape, np.nan)
+    if len(rows) == 0:
+        return polished
+    view = look_at_view(eye, eye + np.array([1.0, 0.0, 0.0]), name="node")
+    target = images[rows, slots].copy()
+    pending = np.arange(len(rows))
+    triangle = None
+    for _ in range(POLISH_ROUNDS):
+        found, triangle, start = _triangles_under(mirror, eye, points[rows[pending]], target[pending], triangle)
+        pending, triangle, start = pending[found], triangle[found], start[found]
+        if len(pending) == 0:
+            break
+        uv, converged, _ = newton_in_triangles(mirror, view, points[rows[pending]], triangle, start,
+                                               iterations=POLISH_ITERATIONS)
+        root, normal = mirror.surface(triangle, np.column_stack([1.0 - uv.sum(axis=1), uv]))
+        inside = converged & (uv.min(axis=1) >= -INSIDE_TOLERANCE) & (uv.sum(axis=1) <= 1 + INSIDE_TOLERANCE)
+        # Both ends on one side of the surface: at a silhouette the half vector can meet
+        # the interpolated normal with the eye just behind it (a grazing ray, no image).
+        seen = np.einsum("rd,rd->r", normal, eye - root) * np.einsum("rd,rd->r", normal, points[rows[pending]] - root)
+        placed = inside & (seen > 0)
+        polished[rows[pending[placed]], slots[pending[placed]]] = root[placed]
+        target[pending] = root
+        # Newton gives up on a root far outside its triangle, where it left it heading.
+        pending, triangle = pending[~inside], triangle[~inside]
+        if len(pending) == 0:
+            break
+    return polished
+
+
+def _triangles_under(mirror: ReflectorSet, eye, points, targets, near):
+    """(found (R,), triangle (R,), barycentric (u, v) (R, 2)) of the mirror under each
+    target: where the ray from the eye through it meets the mirror (the ring of ``near``
+    first, where given), else, for a target off the surface past the mirror's silhouette
+    as seen from the eye, where the line along the normal the law of reflection gives it
+    (the bisector of the directions to the eye and to the point) does."""
+    offset = targets - eye
+    reach = np.linalg.norm(offset, axis=1)
+    origins, directions = np.tile(eye, (len(offset), 1)), offset / np.maximum(reach, 1e-300)[:, None]
+    if near is None:
+        hits = mirror.intersect(origins, directions, t_guess=reach + RAY_REACH * mirror.scale)
+    else:
+        hits = mirror.intersect_near(origins, directions, near_triangles=near)
+    found, triangle, start = hits.hit.copy(), hits.triangle.copy(), hits.barycentric[:, 1:].copy()
+    missed = np.flatnonzero(~found)
+    if len(missed):
+        normal = _unit(_unit(eye - targets[missed]) + _unit(points[missed] - targets[missed]))
+        back = RAY_REACH * mirror.scale
+        along = mirror.intersect(targets[missed] + back * normal, -normal, t_max=2.0 * back)
+        found[missed], triangle[missed], start[missed] = along.hit, along.triangle, along.barycentric[:, 1:]
+    return found, triangle, start
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-300)
