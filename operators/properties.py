@@ -142,6 +142,7 @@ class CurvedReflectionsSceneSettings(bpy.types.PropertyGroup):
                     "traced once per node): reflections near a mirror's rim land within a pixel of the exact "
                     "ones instead of a few, and a node's first projection takes 2-3 times longer",
         default=False,
+        update=_reflector_toggled,  # the grids are loaded again, with or without the mirror to polish on
     )
     morph_cache_dir: StringProperty(
         name="Cache Folder",

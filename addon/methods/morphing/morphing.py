@@ -26,9 +26,10 @@ Ambiguous points (section VI, Fig. 15): seen by some of the four nodes, not by o
 2. *Extended leaf frustums*: where a node has no image of a point that another node
    sees, its camera leaves are asked again with their chart widened by
    ``EXTENDED_CHART`` (the leaf's ray-field patch extrapolated beyond its rays; its tail
-   polynomial is the first reflector point). Ours: the extrapolated image is then
-   polished on the mirror (``image_polish.py``), and dropped where the mirror has no
-   reflection near it; so are the node's regular images seen at a grazing angle.
+   polynomial is the first reflector point). Ours, with the scene's *Polish Node
+   Images* (:attr:`MorphingGrid.mirror`): the extrapolated image is then polished on
+   the mirror (``image_polish.py``), or dropped where the mirror has no reflection near
+   it, and the node's regular images seen at a grazing angle are polished too.
 
 Images are matched across nodes by mutually nearest first reflector point (within
 ``MATCH_FRACTION`` of the reflector's size plus ``MorphingGrid.match_slope`` times the
@@ -46,8 +47,7 @@ import numpy as np
 
 from ..sbc.bsp import CAMERA_LEAF
 from .morph_grid import (NODE_OK, MorphSettings, NodesOnDemand, TetrahedralGrid, _StatusOnDemand, bake_reflector,
-                         extended_mirror,
-                         from_frame, rigid_frame, to_frame)
+                         extended_mirror, from_frame, rigid_frame, to_frame)
 from .image_polish import polish_grazing, polish_images
 from .morph_surface import refine_on_local_surface
 from ..sbc.ray_patch import RayPatches, solve_charts
@@ -108,7 +108,7 @@ def grid_on_demand(reflector: Reflector, settings: MorphSettings, reflector_inde
 class MirrorOnDemand:
     """The extended mirror the nodes of one grid were built from (``morph_grid.extended_mirror``),
     its BVH built on first use: a baked grid loads without it, and only a node projection
-    that polishes extended images needs it."""
+    that polishes needs it."""
 
     def __init__(self, reflector: Reflector, settings: MorphSettings, mirror=None):
         self.reflector, self.settings, self._mirror = reflector, settings, mirror
@@ -275,8 +275,9 @@ class MorphingGrid:
 
     def _extended_images(self, node: int, points: np.ndarray, regular: np.ndarray):
         """Remedy 2: reflector points from camera leaves with widened charts, (P, K, 3),
-        but those of the node's ``regular`` images (P, K', 3) of the same points (the
-        widened chart holds the regular one), polished on the mirror (:attr:`mirror`)."""
+        less those that repeat one of the node's ``regular`` images (P, K', 3) of the same
+        points (a widened chart holds its regular one too), polished on the mirror where
+        the grid has one (:attr:`mirror`)."""
         camera = self.nodes[node]
         parts = []
         for sbc in camera.faces:
