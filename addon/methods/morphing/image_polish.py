@@ -16,6 +16,10 @@ too where the node sees the mirror at a grazing angle; the blend of a cell whose
 do not all see an image (remedy 3) rests on those. Polishing the regular images seen
 more than ``GRAZING_COS`` off the normal as well (35 % of them there) took the p99 from
 1.05 to 0.72 px (every regular image: 0.48 px, for three times the work).
+
+The scene's *Polish Node Images* turns this on (``MorphingGrid.mirror``); it is off by
+default: it makes a node's first projection of a point set 2-3x slower in numpy, and
+Render Image's Morphing animation 1.7x slower (docs/benchmarks/morph_animation.md).
 """
 
 from __future__ import annotations
@@ -34,7 +38,8 @@ POLISH_ROUNDS = 3
 POLISH_ITERATIONS = 8
 #: The rays are first traced this far past the image (a fraction of the mirror's
 #: diagonal), a far smaller BVH descent than to infinity, and on only where they found
-#: nothing (an image off the surface toward the eye, seen at a grazing angle).
+#: nothing (an image off the surface toward the eye, seen at a grazing angle); also how
+#: far off the surface the fallback's normal line starts.
 RAY_REACH = 0.05
 #: A node's regular image is polished where the cosine between the mirror's normal and
 #: the direction to the node is below this (about 60 degrees off the normal).
@@ -62,9 +67,10 @@ def polish_images(mirror: ReflectorSet, eye: np.ndarray, points: np.ndarray, ima
     (``reference.exact.newton_in_triangles``) starts where the ray from the eye through
     the image meets the mirror (:func:`_triangles_under`); where its root lies outside
     that triangle, the ray through the root (or where Newton gave up) picks the next
-    one, among its ring first, up to ``POLISH_ROUNDS``. An image not placed by then has no reflection near it: the
-    widened chart extrapolated past the node's horizon, and the blend leaves that node
-    out (remedy 3) rather than mix in a point off the mirror's law.
+    one, among its ring first, up to ``POLISH_ROUNDS``. An image not placed by then has
+    no reflection near it: the widened chart extrapolated past the node's horizon, and
+    the blend leaves that node out (remedy 3) rather than mix in a point off the
+    mirror's law.
     """
     eye = np.asarray(eye, dtype=np.float64)
     rows, slots = np.nonzero(np.isfinite(images[..., 0]))
