@@ -27,6 +27,12 @@ def normalized(v: np.ndarray) -> np.ndarray:
     return v / np.maximum(lengths(v), 1e-300)[:, None]
 
 
+def unit(v: np.ndarray) -> np.ndarray:
+    """Vectors along the last axis of an array of any shape scaled to unit length (zero
+    vectors stay zero); :func:`normalized` for (n, k) rows."""
+    return v / np.maximum(np.sqrt(np.einsum("...j,...j->...", v, v)), 1e-300)[..., None]
+
+
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise cross products of (n, 3) arrays, (n, 3)."""
     out = np.empty(np.broadcast_shapes(a.shape, b.shape))

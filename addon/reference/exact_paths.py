@@ -48,7 +48,7 @@ from ..geometry.bvh import descend
 from .exact import (CONE_SLACK, INSIDE_TOLERANCE, _first_hit_of_view_ray, _foot, first_of_duplicates,
                     half_vector_may_meet_cone, turn_toward)
 from ..geometry.raytrace import ReflectorSet, reflect
-from ..geometry.vectors import cross, dot, lengths, normalized
+from ..geometry.vectors import cross, dot, lengths, normalized, unit
 from ..view import View
 
 NEWTON_ITERATIONS = 30
@@ -320,10 +320,6 @@ def _facet_table(reflector_set: ReflectorSet, triangles: np.ndarray, orientation
             axis_u, cross(reflector_set.face_normals[triangles], axis_u)]
 
 
-def _unit(v):
-    return v / np.maximum(np.sqrt(np.einsum("...j,...j->...", v, v)), 1e-300)[..., None]
-
-
 def _residual(w, table, eye):
     """Reflection-law residuals (..., N, 4) at parameters w (..., N, 4) of the pairs in ``table``.
 
@@ -335,7 +331,7 @@ def _residual(w, table, eye):
 
     def facet(base, uv):
         x = column(base) + uv[..., :1] * column(base + 1) + uv[..., 1:] * column(base + 2)
-        n = _unit(column(base + 3) + uv[..., :1] * column(base + 4) + uv[..., 1:] * column(base + 5))
+        n = unit(column(base + 3) + uv[..., :1] * column(base + 4) + uv[..., 1:] * column(base + 5))
         return x, n
 
     def in_plane(base, r):
@@ -344,9 +340,9 @@ def _residual(w, table, eye):
 
     x1, n1 = facet(0, w[..., :2])
     x2, n2 = facet(8, w[..., 2:])
-    across = _unit(x2 - x1)
-    half1 = _unit(_unit(eye - x1) + across)
-    half2 = _unit(_unit(table[:, 48:51] - x2) - across)
+    across = unit(x2 - x1)
+    half1 = unit(unit(eye - x1) + across)
+    half2 = unit(unit(table[:, 48:51] - x2) - across)
     return np.concatenate([in_plane(0, half1 - n1), in_plane(8, half2 - n2)], axis=-1)
 
 

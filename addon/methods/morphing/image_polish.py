@@ -27,6 +27,8 @@ from __future__ import annotations
 import numpy as np
 
 from ...geometry.raytrace import ReflectorSet
+from ...geometry.vectors import unit
+from .morph_surface import law_normals
 from ...reference.exact import INSIDE_TOLERANCE, newton_in_triangles
 from ...view import look_at_view
 
@@ -51,10 +53,9 @@ def polish_grazing(mirror: ReflectorSet, eye: np.ndarray, points: np.ndarray, im
     (the normal the law of reflection gives them: the bisector of the directions to the
     eye and to the point) polished (:func:`polish_images`), the others as they are, as
     is any the polish does not place."""
-    to_eye = _unit(np.asarray(eye, dtype=np.float64) - images)
-    normal = _unit(to_eye + _unit(points[:, None] - images))
     with np.errstate(invalid="ignore"):
-        grazing = np.einsum("pkd,pkd->pk", normal, to_eye) < GRAZING_COS
+        grazing = np.einsum("pkd,pkd->pk", law_normals(eye, points[:, None], images),
+                            unit(np.asarray(eye, dtype=np.float64) - images)) < GRAZING_COS
     polished = polish_images(mirror, eye, points, np.where(grazing[..., None], images, np.nan))
     return np.where(np.isfinite(polished[..., :1]), polished, images)
 
@@ -119,12 +120,9 @@ def _triangles_under(mirror: ReflectorSet, eye, points, targets, near):
     found, triangle, start = hits.hit.copy(), hits.triangle.copy(), hits.barycentric[:, 1:].copy()
     missed = np.flatnonzero(~found)
     if len(missed):
-        normal = _unit(_unit(eye - targets[missed]) + _unit(points[missed] - targets[missed]))
+        normal = law_normals(eye, points[missed], targets[missed])
         back = RAY_REACH * mirror.scale
         along = mirror.intersect(targets[missed] + back * normal, -normal, t_max=2.0 * back)
         found[missed], triangle[missed], start[missed] = along.hit, along.triangle, along.barycentric[:, 1:]
     return found, triangle, start
 
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-300)

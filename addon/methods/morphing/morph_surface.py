@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...geometry.spd_solve import solve_spd
-from ...geometry.vectors import cross
+from ...geometry.vectors import cross, unit
 
 #: Nodes with an image (and a usable normal) a local surface is fitted to, at least.
 MIN_SURFACE_NODES = 3
@@ -69,10 +69,8 @@ def refine_on_local_surface(images, present, eyes, points, eye, weights):
     q = len(images)
     total = np.maximum(weights.sum(axis=1), 1e-300)
     origin = np.einsum("qn,qnd->qd", weights, images) / total[:, None]
-    to_eye = _unit(eyes[None] - images)
-    to_point = _unit(points[:, None] - images)
-    normals = _unit(to_eye + to_point)
-    normal = _unit(np.einsum("qn,qnd->qd", weights, normals))
+    normals = law_normals(eyes[None], points[:, None], images)
+    normal = unit(np.einsum("qn,qnd->qd", weights, normals))
     nz = np.einsum("qnd,qd->qn", normals, normal)
     usable = present & (nz > SURFACE_NORMAL_MIN)
     x, ok, fitted_normal = origin.copy(), np.zeros(q, bool), normal.copy()
@@ -94,7 +92,7 @@ def _fit_and_reflect(images, present, usable, normals, normal, nz, origin, point
     rows not yet converged only."""
     q = len(images)
     helper = np.where(np.abs(normal[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
-    t1 = _unit(cross(normal, helper))
+    t1 = unit(cross(normal, helper))
     t2 = cross(normal, t1)
     offset = images - origin[:, None]
     a, b, h = (np.einsum("qnd,qd->qn", offset, axis) for axis in (t1, t2, normal))
@@ -126,7 +124,7 @@ def _fit_and_reflect(images, present, usable, normals, normal, nz, origin, point
 
     def residual(k, u, v):
         x, ta, tb = surface(k, u, v)
-        bisector = _unit(eye[None] - x) + _unit(points[k] - x)
+        bisector = unit(eye[None] - x) + unit(points[k] - x)
         return np.stack([np.einsum("qd,qd->q", bisector, ta), np.einsum("qd,qd->q", bisector, tb)], axis=1)
 
     u, v = np.zeros(q), np.zeros(q)
@@ -148,7 +146,7 @@ def _fit_and_reflect(images, present, usable, normals, normal, nz, origin, point
             break
     every = np.arange(q)
     x, ta, tb = surface(every, u, v)
-    fitted_normal = _unit(cross(ta, tb))
+    fitted_normal = unit(cross(ta, tb))
     fitted_normal *= np.where(np.einsum("qd,qd->q", fitted_normal, normal) < 0, -1.0, 1.0)[:, None]
     ok = ((np.abs(residual(every, u, v)).max(axis=1) < 1e-8) & (u * u + v * v <= SURFACE_REACH ** 2)
           & np.isfinite(x).all(axis=1))
@@ -173,6 +171,13 @@ def sphere_prior(weight: float) -> np.ndarray:
 FIT_PENALTY = sphere_prior(QUADRIC_RIDGE)
 
 
+def law_normals(eyes, points, images):
+    """The mirror's normal the law of reflection gives each image x of a point p seen
+    from an eye n: the bisector of the directions from x to n and to p (``eyes`` and
+    ``points`` broadcast against ``images``)."""
+    return unit(unit(np.asarray(eyes, dtype=np.float64) - images) + unit(points - images))
+
+
 def quadric_height(c, u, v):
     """Height h(u, v) of the fitted quadric (:func:`refine_on_local_surface`; c (Q, 9))
     and its slopes (h_u, h_v): the root of c6 h^2 - (1 - c7 u - c8 v) h + q(u, v) = 0
@@ -185,7 +190,3 @@ def quadric_height(c, u, v):
     du = (c[:, 1] + c[:, 3] * u + c[:, 4] * v + c[:, 7] * height) / along_h
     dv = (c[:, 2] + c[:, 4] * u + c[:, 5] * v + c[:, 8] * height) / along_h
     return height, du, dv
-
-
-def _unit(v):
-    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-300)
