@@ -166,10 +166,12 @@ def load_grids(scene, reflectors, bake_missing: bool = False) -> list:
     it is not star-shaped) whose baked grid matches it; the others are drawn in runtime mode
     (:func:`load_morphing` records why). With ``bake_missing`` (Render Image) a reflector
     set to Morphing or Octree mode whose grid is missing, stale or unfinished is baked first, in
-    this process, on every core. The grids' nodes project on the GPU."""
+    this process, on every core. The grids' nodes project, and their images are
+    polished (*Polish Node Images*), on the GPU."""
     from ..gpu_shaders.methods.morph_source import GPUFaceImages
+    from ..gpu_shaders.methods.polish_gpu import GPUImagePolish
 
-    faces = GPUFaceImages()
+    faces, polish = GPUFaceImages(), GPUImagePolish()
     grids = []
     for index, reflector in enumerate(reflectors):
         obj = scene.objects.get(reflector.name)
@@ -181,7 +183,7 @@ def load_grids(scene, reflectors, bake_missing: bool = False) -> list:
                 and _bake_if_missing(reflector, matrix, scene):
             grid = load_morphing(reflector, matrix, scene, index)
         if grid is not None:
-            grid.face_images = faces
+            grid.face_images, grid.image_polish = faces, polish
             grids.append((grid, matrix))
     return grids
 

@@ -26,6 +26,7 @@ from .bvh import build_bvh, descend, ray_box_test
 from ..errors import SceneInputError
 from ..scene import Reflector, smooth_pieces
 from .segments import expand_ranges
+from .triangle_grid import TriangleGrid, edge_neighbours
 from .vectors import cross, cross_rows, dot_rows
 
 RAY_CHUNK = 1 << 16
@@ -36,6 +37,8 @@ SELF_HIT_EPSILON = 1e-9
 SEAL_TESTED_VERTICES = 4096
 #: ... and a diffuse vertex holds it open only this share of its diagonal or more inside.
 SEAL_DEPTH = 1e-4
+#: How far from the surface (a share of the scene's size) ``triangle_grid`` finds a triangle.
+NEAR_SURFACE = 0.05
 
 
 @dataclass(frozen=True)
@@ -333,6 +336,27 @@ class ReflectorSet:
         centre = 0.5 * (self.vertices.min(axis=0) + self.vertices.max(axis=0))
         offset = self.vertices - centre
         return centre, float(np.sqrt(np.max(np.einsum("vd,vd->v", offset, offset))))
+
+    @functools.cached_property
+    def triangle_grid(self) -> TriangleGrid:
+        """A triangle near any point within ``NEAR_SURFACE`` of the scene's size from the
+        surface (``triangle_grid.py``), built on first use."""
+        return TriangleGrid(self.vertices, self.triangles, NEAR_SURFACE * self.scale)
+
+    @functools.cached_property
+    def closed_sides(self) -> np.ndarray:
+        """(T,) int8: +1 where a triangle's winding normal (e1 x e2) points out of the
+        solid its reflector closes, -1 where it points in, 0 on a reflector that closes
+        none (``closed_surfaces.winding``). An eye on a closed mirror's inner side of a
+        face sees that face through the rest of the mirror, or from inside it."""
+        sides = np.array([closed_surfaces.winding(r.vertices, r.triangles) for r in self.reflectors], dtype=np.int8)
+        return sides[self.owner]
+
+    @functools.cached_property
+    def edge_neighbours(self) -> np.ndarray:
+        """(T, 3) the triangle across the edge opposite each corner, -1 on an open edge
+        (``triangle_grid.edge_neighbours``)."""
+        return edge_neighbours(self.welded_triangles)
 
     @functools.cached_property
     def fans(self) -> tuple[np.ndarray, np.ndarray]:

@@ -32,6 +32,7 @@ from collections import OrderedDict
 import numpy as np
 
 from ...addon.methods.morphing import morph_grid, morph_surface, morphing
+from ...addon.methods.morphing.image_polish import polish_images
 from ...addon.baking.bake_cache import CacheError
 from ...addon.geometry.closed_surfaces import ConvexMirrors
 from ..frame_pass import FramePass
@@ -386,7 +387,7 @@ class MorphPass(FramePass):
                 if self.nodes.nbytes + (len(self._pending) + 1) * self._node_bytes() > self.nodes.budget_bytes:
                     return started
                 self._pending[key] = (frame, submit(grid.node_slots, int(node), self._points_in_frame(frame), SLOTS,
-                                                    morphing.project_face))
+                                                    morphing.project_face, polish_images))
                 started += 1
         return started
 

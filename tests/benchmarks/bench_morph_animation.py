@@ -48,7 +48,7 @@ MIRROR = "MirrorSphere"
 
 
 def measure(width: int, height: int, grid: tuple, frames: int, degrees: float, sampled: int, samples: int,
-            images: Path | None = None, mode: str = "MORPHING") -> dict:
+            images: Path | None = None, mode: str = "MORPHING", polish: str | None = None) -> dict:
     import bpy
 
     from curved_reflections.operators import demo_scenes, reference_render as rr
@@ -60,10 +60,12 @@ def measure(width: int, height: int, grid: tuple, frames: int, degrees: float, s
     scene = demo_scenes.build("sbc_fig3", bpy.context.scene, width, height)
     scene.curved_reflections.max_order = 1
     scene.curved_reflections.morph_grid = grid
+    if polish is not None:
+        scene.curved_reflections.morph_polish_nodes = polish == "on"
     animation_runs.orbit(scene, bpy.data.objects[MIRROR], frames, degrees)  # inside the grid
     settings = bpy.data.objects[MIRROR].curved_reflections
     result = {"width": width, "height": height, "grid": grid, "frames": frames, "degrees": degrees, "samples": samples,
-              "mode": mode}
+              "mode": mode, "polish": scene.curved_reflections.morph_polish_nodes}
     with tempfile.TemporaryDirectory() as folder:
         folder = Path(folder)
         scene.curved_reflections.morph_cache_dir = str(folder / "cache")
@@ -109,7 +111,7 @@ def report(result: dict, command: str) -> str:
         f"sbc_fig3 at {result['width']}x{result['height']}, the mirror ball in {label} mode, its "
         f"{'x'.join(map(str, result['grid']))} grid baked first in {result['bake_seconds']:.1f} s (not in the "
         f"times below); the camera circles the ball at 2.3 radii inside the grid, {result['degrees']:g} degrees a "
-        f"frame, {result['frames']} frames.",
+        f"frame, {result['frames']} frames; Polish Node Images {'on' if result['polish'] else 'off'}.",
         "",
         "| ours s/frame | Workbench s/frame | ratio |",
         "|---:|---:|---:|",
@@ -146,6 +148,8 @@ def parse_args(argv):
     parser.add_argument("--images", type=Path, default=None,
                         help="folder for the sampled frames side by side (Cycles, Morphing, Runtime)")
     parser.add_argument("--quick", action="store_true", help="small: 160x120, a 3x3x2 grid, 3 frames, 1 sampled")
+    parser.add_argument("--polish", choices=("on", "off"), default=None,
+                        help="the scene's Polish Node Images (default: as a new scene has it)")
     args = parser.parse_args(argv)
     args.out = args.out or OUT_OF_MODE[args.mode]
     if args.quick:
@@ -159,7 +163,7 @@ def main(argv=None) -> int:
     bench_sbc.import_package()
     command = bench_draw.command_line("bench_morph_animation.py", argv)
     result = measure(args.width, args.height, tuple(args.grid), args.frames, args.orbit_degrees, args.sampled,
-                     args.samples, args.images, args.mode)
+                     args.samples, args.images, args.mode, args.polish)
     text = report(result, command)
     return bench_draw.write_report(args.out, text)
 

@@ -244,9 +244,9 @@ def report(results: dict) -> str:
         "blend of the four "
         "first reflector points; *surface*: ours, the blend refined on a quadric fitted to the four nodes' images "
         "and normals (`refine_on_local_surface`)"
-        + ("; the nodes' grazing and extended images polished on the mirror (*Polish Node Images*, "
-           "`image_polish.py`)" if args.get("polish") else "; the nodes' images as their cameras give them "
-           "(*Polish Node Images* off, the default)")
+        + ("; the nodes' grazing and extended images polished on the mirror (*Polish Node Images*, the "
+           "default; `image_polish.py`)" if args.get("polish", True) else "; the nodes' images as their cameras "
+           "give them (*Polish Node Images* off)")
         + ". Error: desired-view px from each projected image to the exact "
         "visible reflection (`addon/reference/exact.py`). Coverage: exact visible reflections that are projected; "
         "in parentheses, those seen less than 72.5 degrees off the mirror's normal (the rim of the sphere, a cell or "
@@ -328,8 +328,9 @@ def parse_args(argv=None):
                         "(default: MorphSettings' default)")
     parser.add_argument("--bake-grid", default="9,9,5")
     parser.add_argument("--processes", type=int, default=2)
-    parser.add_argument("--polish", action="store_true", help="polish the nodes' grazing and extended images on "
-                        "the mirror (the scene's Polish Node Images)")
+    parser.add_argument("--no-polish", dest="polish", action="store_false", help="leave the nodes' grazing and "
+                        "extended images as their cameras give them (the scene's Polish Node Images off; on by "
+                        "default)")
     parser.add_argument("--bake-only", action="store_true", help="measure the bake alone (no error sweep, no "
                         "exact solve); writes morphing_bake.json and leaves morphing.md as it is")
     parser.add_argument("--quick", action="store_true", help="smallest run: grids 3x3x2 and 5x5x3, 2 views, "

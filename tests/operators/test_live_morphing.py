@@ -31,7 +31,8 @@ def fig3_morphing(empty_scene, registered, gpu_ready, monkeypatch):
     def grid_on_demand(reflector, matrix, scene, reflector_index=0):
         local = morph_grid.reflector_in_frame(reflector, morph_grid.rigid_frame(matrix))
         morph_bake._REFLECTOR_STATUS[reflector.name] = "morphing (baked grid loaded)"
-        return morphing.grid_on_demand(local, SETTINGS, reflector_index)
+        return morphing.grid_on_demand(local, SETTINGS, reflector_index,
+                                       polish=scene.curved_reflections.morph_polish_nodes)
 
     monkeypatch.setattr(morph_bake, "load_morphing", grid_on_demand)
     morph_bake._REFLECTOR_STATUS.clear()
@@ -113,6 +114,10 @@ def test_render_image_draws_from_the_grid_on_the_gpu(fig3_morphing):
     assert morphed.stats["methods"] == {"MirrorSphere": "MORPHING"}
     assert "n_rays" not in morphed.stats  # no camera built (the on-demand grid builds its nodes meanwhile)
     assert state.renderer.morph.counts == {"blends": 1, "node_projections": 4}
+    # Polish Node Images is on by default: the four nodes' grazing and widened-chart
+    # images were polished on the GPU (two dispatches a node where it has both).
+    grid = state.renderer.morph.grids[0][0]
+    assert grid.mirror is not None and grid.image_polish.dispatches >= 4
     # The test grid is coarse (48-pixel faces, 7 x 7 x 5 nodes): measured, 2.0 % of the
     # image (the ball fills about half of it) differs from the runtime camera's (3.2 %
     # before images were matched across nodes by MATCH_SLOPE, 2.2 % before the strip along

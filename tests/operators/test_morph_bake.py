@@ -68,12 +68,11 @@ def test_bake_load_stale_and_clear(empty_scene, morph_ops):
     grid = morph_ops.load_morphing(reflector, matrix, empty_scene)
     assert grid is not None and grid.grid.shape == (2, 2, 2)
     assert "Ball: morphing (baked grid loaded)" in morph_ops.morph_status(empty_scene)
-    # Polish Node Images gives the loaded grid the mirror its nodes were built from.
-    assert grid.mirror is None
-    empty_scene.curved_reflections.morph_polish_nodes = True
-    polished = morph_ops.load_morphing(reflector, matrix, empty_scene)
-    assert len(polished.mirror().triangles) == len(reflector.triangles)  # a closed ball: no strip added
+    # Polish Node Images (on by default) gives the loaded grid the mirror its nodes were built from.
+    assert len(grid.mirror().triangles) == len(reflector.triangles)  # a closed ball: no strip added
     empty_scene.curved_reflections.morph_polish_nodes = False
+    assert morph_ops.load_morphing(reflector, matrix, empty_scene).mirror is None
+    empty_scene.curved_reflections.morph_polish_nodes = True
     from curved_reflections.addon import look_at_view
     from curved_reflections.addon.methods.morphing.morphing import ViewOutsideGrid
 

@@ -48,15 +48,16 @@ RAY_REACH = 0.05
 GRAZING_COS = 0.5
 
 
-def polish_grazing(mirror: ReflectorSet, eye: np.ndarray, points: np.ndarray, images: np.ndarray) -> np.ndarray:
+def polish_grazing(mirror: ReflectorSet, eye: np.ndarray, points: np.ndarray, images: np.ndarray,
+                   polish=None) -> np.ndarray:
     """(P, K, 3) a node's regular ``images``, those seen from ``eye`` at a grazing angle
     (the normal the law of reflection gives them: the bisector of the directions to the
-    eye and to the point) polished (:func:`polish_images`), the others as they are, as
-    is any the polish does not place."""
+    eye and to the point) polished (by ``polish``, of :func:`polish_images`' signature:
+    by default that function), the others as they are, as is any the polish does not place."""
     with np.errstate(invalid="ignore"):
         grazing = np.einsum("pkd,pkd->pk", law_normals(eye, points[:, None], images),
                             unit(np.asarray(eye, dtype=np.float64) - images)) < GRAZING_COS
-    polished = polish_images(mirror, eye, points, np.where(grazing[..., None], images, np.nan))
+    polished = (polish or polish_images)(mirror, eye, points, np.where(grazing[..., None], images, np.nan))
     return np.where(np.isfinite(polished[..., :1]), polished, images)
 
 
@@ -94,7 +95,7 @@ def polish_images(mirror: ReflectorSet, eye: np.ndarray, points: np.ndarray, ima
         # Both ends on one side of the surface: at a silhouette the half vector can meet
         # the interpolated normal with the eye just behind it (a grazing ray, no image).
         seen = np.einsum("rd,rd->r", normal, eye - root) * np.einsum("rd,rd->r", normal, points[rows[pending]] - root)
-        placed = inside & (seen > 0)
+        placed = inside & (seen > 0) & outside_closed_mirror(mirror, triangle, root, eye, points[rows[pending]])
         polished[rows[pending[placed]], slots[pending[placed]]] = root[placed]
         target[pending] = root
         # Newton gives up on a root far outside its triangle, where it left it heading.
@@ -102,6 +103,18 @@ def polish_images(mirror: ReflectorSet, eye: np.ndarray, points: np.ndarray, ima
         if len(pending) == 0:
             break
     return polished
+
+
+def outside_closed_mirror(mirror: ReflectorSet, triangles, roots, eye, points) -> np.ndarray:
+    """(R,) bool: the eye and the point lie on the outer side of each root's triangle
+    where its mirror closes a solid (``ReflectorSet.closed_sides``), anywhere where it
+    closes none. A root on a closed mirror's far side satisfies the law of reflection
+    for the surface seen from inside: the path runs through the mirror, and the root is
+    no image (an image past the node's horizon, Newton carried round the rim)."""
+    sides = mirror.closed_sides[triangles]
+    face = mirror.face_normals[triangles]
+    return (sides == 0) | ((sides * np.einsum("rd,rd->r", face, eye - roots) > 0)
+                           & (sides * np.einsum("rd,rd->r", face, points - roots) > 0))
 
 
 def _triangles_under(mirror: ReflectorSet, eye, points, targets, near):

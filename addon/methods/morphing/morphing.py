@@ -172,6 +172,11 @@ class MorphingGrid:
     #: images are polished (the scene's *Polish Node Images*); None: they are used as
     #: the node cameras give them (extended images as the widened charts extrapolate them).
     mirror: object = field(default=None, repr=False, compare=False)
+    #: How images are polished on the :attr:`mirror`: ``(mirror, eye, points, images) ->
+    #: polished images`` (``image_polish.polish_images``'s signature). ``None``: that
+    #: function, in numpy; the viewport passes the GPU's
+    #: (``gpu_shaders/methods/polish_gpu.GPUImagePolish``).
+    image_polish: object = field(default=None, repr=False, compare=False)
     _static: dict = field(default_factory=dict, repr=False)
     #: Images of one point at two nodes match within MATCH_FRACTION of the mirror plus
     #: this times the nodes' distance (a class attribute, not a field).
@@ -226,9 +231,10 @@ class MorphingGrid:
 
     # images at the four nodes, matched to one another
 
-    def _node_images(self, node: int, points: np.ndarray, face_images=None):
+    def _node_images(self, node: int, points: np.ndarray, face_images=None, polish=None):
         """(P, K, 3) distinct first reflector points of each point at one node, NaN padded;
-        ``face_images`` projects a face (default: the grid's own, numpy where it has none)."""
+        ``face_images`` projects a face (default: the grid's own, numpy where it has none),
+        ``polish`` polishes images (default: the grid's :attr:`image_polish`)."""
         camera = self.nodes[node]
         face_images = face_images or self.face_images or project_face
         parts = []
@@ -241,7 +247,8 @@ class MorphingGrid:
         images = np.concatenate(parts, axis=0).transpose(1, 0, 2)
         images = compact_images(images, self._duplicate_tolerance(node, images))
         if self.mirror is not None:
-            images = polish_grazing(self.mirror(), self.grid.node_positions()[node], points, images)
+            images = polish_grazing(self.mirror(), self.grid.node_positions()[node], points, images,
+                                    polish or self.image_polish or polish_images)
         return images
 
     @property
@@ -251,15 +258,16 @@ class MorphingGrid:
         from it by float32's rounding."""
         return self.face_images is not None
 
-    def node_slots(self, node: int, points: np.ndarray, slots: int, face_images=None) -> np.ndarray:
+    def node_slots(self, node: int, points: np.ndarray, slots: int, face_images=None, polish=None) -> np.ndarray:
         """(P, 2 slots, 3): the first ``slots`` distinct images of each point (frame
         coordinates) at one node, then the first ``slots`` of its widened charts (remedy
         2), NaN padded. What the GPU blend keeps per node (``gpu_shaders/methods/morph_pass.py``):
         everything :meth:`_matched_images` reads of a node, for every point at once, so
         that it serves every tetrahedron the node belongs to. ``face_images`` as for
-        :meth:`_node_images` (``project_face``: numpy, for a thread without the GPU)."""
-        regular = self._node_images(node, points, face_images)
-        parts = [regular, self._extended_images(node, points, regular)]
+        :meth:`_node_images` (``project_face``: numpy, for a thread without the GPU), and
+        ``polish`` (``image_polish.polish_images``: numpy)."""
+        regular = self._node_images(node, points, face_images, polish)
+        parts = [regular, self._extended_images(node, points, regular, polish)]
         return np.concatenate([pad_images(part[:, :slots], slots) for part in parts], axis=1)
 
     def _duplicate_tolerance(self, node: int, images: np.ndarray) -> np.ndarray:
@@ -273,11 +281,11 @@ class MorphingGrid:
         return np.maximum(DUPLICATE_PIXELS * pixel_angle * np.nan_to_num(distance), DUPLICATE_FRACTION
                           * self.reflector_size)
 
-    def _extended_images(self, node: int, points: np.ndarray, regular: np.ndarray):
+    def _extended_images(self, node: int, points: np.ndarray, regular: np.ndarray, polish=None):
         """Remedy 2: reflector points from camera leaves with widened charts, (P, K, 3),
         less those that repeat one of the node's ``regular`` images (P, K', 3) of the same
         points (a widened chart holds its regular one too), polished on the mirror where
-        the grid has one (:attr:`mirror`)."""
+        the grid has one (:attr:`mirror`; ``polish`` as for :meth:`_node_images`)."""
         camera = self.nodes[node]
         parts = []
         for sbc in camera.faces:
@@ -293,7 +301,8 @@ class MorphingGrid:
         near = np.linalg.norm(images[:, :, None] - regular[:, None], axis=3) <= tolerance[..., None]
         images = np.where(near.any(axis=2)[..., None], np.nan, images)
         if self.mirror is not None:
-            images = polish_images(self.mirror(), self.grid.node_positions()[node], points, images)
+            polish = polish or self.image_polish or polish_images
+            images = polish(self.mirror(), self.grid.node_positions()[node], points, images)
         return compact_images(images, np.zeros(images.shape[:2]))
 
     def _matched_images(self, points, nodes, weights):

@@ -1,0 +1,162 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Polish Node Images on the GPU: ``glsl/image_polish.glsl``, the float32 twin of
+``addon/methods/morphing/image_polish.polish_images`` (``MorphingGrid.image_polish``).
+
+In numpy the polish cost more than the node's projection itself (a BVH descent per
+image to find its triangle, then Newton in float64: 0.2 s for a node's 5,600 grazing
+and widened-chart images of 20k points, docs/benchmarks/morph_animation.md), and
+Render Image's Morphing animation went from 1.7x to 3x Workbench. Here one dispatch
+answers every image of a node: the shader walks from a grid cell's triangle across the
+mirror's edges instead of descending a BVH, so it needs two flat tables of the mirror
+(``ReflectorSet.triangle_grid``, ``ReflectorSet.edge_neighbours``), uploaded once per
+mirror.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from ...addon.reference import exact
+from ..shader_sources import glsl_source
+
+#: Invocations per work group (along x).
+LOCAL_SIZE = 64
+#: Result texels per row.
+WORK_WIDTH = 1024
+#: Triangles tried per image, as ``image_polish.POLISH_ROUNDS``: the one under the image,
+#: then the one under Newton's root while it lies outside the triangle it was found in.
+ROUNDS = 4
+#: Newton iterations per triangle (the numpy twin's ``POLISH_ITERATIONS``; float32
+#: converges no further after these).
+ITERATIONS = 10
+#: Edges crossed, at most, from a grid cell's triangle to the one under a point.
+LOCATE_STEPS = 24
+#: Central differences of the residual, in barycentric units (float32: 1e-7 would round away).
+DIFFERENCE_STEP = 1e-3
+#: A step is at most half a triangle, as in ``exact.newton_in_triangles``.
+MAX_STEP = 0.5
+#: A point lies in a triangle where no barycentric weight is below minus this.
+INSIDE_TOLERANCE = 1e-4
+#: Converged: a step shorter than this (barycentric units) ...
+STEP_TOLERANCE = 1e-6
+#: ... and, to be kept, a residual (unit vectors' difference) below this: about 1e-4 of
+#: a radian, 1e-4 of the mirror's curvature radius along the surface.
+RESIDUAL_TOLERANCE = 1e-4
+
+
+def polish_defines() -> dict:
+    return {"ROUNDS": ROUNDS, "ITERATIONS": ITERATIONS, "LOCATE_STEPS": LOCATE_STEPS,
+            "DIFFERENCE_STEP": f"{DIFFERENCE_STEP:.9e}", "MAX_STEP": f"{MAX_STEP:.9e}",
+            "STEP_TOLERANCE": f"{STEP_TOLERANCE:.9e}", "RESIDUAL_TOLERANCE": f"{RESIDUAL_TOLERANCE:.9e}",
+            "INSIDE_TOLERANCE": f"{INSIDE_TOLERANCE:.9e}", "BACKTRACK_HALVINGS": exact.BACKTRACK_HALVINGS,
+            "ABANDON_DISTANCE": f"{exact.ABANDON_DISTANCE:.9e}", "ABANDON_AFTER": exact.ABANDON_AFTER}
+
+
+@functools.cache
+def polish_shader():
+    """The compute shader of the polish, built on first use."""
+    import gpu
+
+    info = gpu.types.GPUShaderCreateInfo()
+    info.push_constant('INT', "n_rows")
+    info.push_constant('INT', "work_width")
+    info.push_constant('INT', "mirror_width")
+    info.push_constant('INT', "cells_width")
+    info.sampler(0, 'FLOAT_2D', "work")
+    info.sampler(1, 'FLOAT_2D', "mirror")
+    info.sampler(2, 'FLOAT_2D', "cells")
+    info.sampler(3, 'FLOAT_2D', "params")
+    info.image(0, 'RGBA32F', 'FLOAT_2D', "result", qualifiers={'WRITE'})
+    info.local_group_size(LOCAL_SIZE, 1)
+    info.compute_source(glsl_source("image_polish.glsl", polish_defines()))
+    return gpu.shader.create_from_info(info)
+
+
+def mirror_texels(mirror) -> tuple[np.ndarray, np.ndarray]:
+    """(T * 6, 4) the shader's ``mirror`` table, relative to ``mirror_centre`` (corners
+    with the neighbours across the opposite edges, corner normals, the first with the
+    triangle's ``closed_sides``), and the grid's cells four to a texel ((C / 4, 4), -1
+    where empty)."""
+    centre = mirror_centre(mirror)
+    corners = mirror.vertices[mirror.triangles] - centre  # (T, 3, 3)
+    texels = np.zeros((len(mirror.triangles), 6, 4))
+    texels[:, :3, :3] = corners
+    texels[:, :3, 3] = mirror.edge_neighbours
+    texels[:, 3:, :3] = mirror.normals[mirror.triangles]
+    texels[:, 3, 3] = mirror.closed_sides
+    cells = mirror.triangle_grid.cells.reshape(-1).astype(np.float32)
+    cells = np.concatenate([cells, np.full(-len(cells) % 4, -1.0, np.float32)]).reshape(-1, 4)
+    return texels.reshape(-1, 4).astype(np.float32), cells
+
+
+def mirror_centre(mirror) -> np.ndarray:
+    lo, hi = mirror.vertices.min(axis=0), mirror.vertices.max(axis=0)
+    return 0.5 * (lo + hi)
+
+
+class GPUImagePolish:
+    """``image_polish.polish_images`` on the GPU, for a grid's ``image_polish``: the
+    mirror's tables are uploaded on first use and kept (the last mirror polished). Needs
+    the GPU: call from the main thread."""
+
+    def __init__(self):
+        self._mirror = None
+        self._textures = None
+        self.dispatches = 0
+
+    def __call__(self, mirror, eye, points, images) -> np.ndarray:
+        """(P, K, 3) as ``polish_images(mirror, eye, points, images)``."""
+        rows, slots = np.nonzero(np.isfinite(images[..., 0]))
+        polished = np.full(images.shape, np.nan)
+        if len(rows) == 0:
+            return polished
+        centre = mirror_centre(mirror)
+        found = self._dispatch(mirror, np.asarray(eye, dtype=np.float64) - centre,
+                               points[rows] - centre, images[rows, slots] - centre)
+        placed = found[:, 3] > 0.5
+        polished[rows[placed], slots[placed]] = found[placed, :3].astype(np.float64) + centre
+        return polished
+
+    def _tables(self, mirror):
+        from ..gpu_data import data_texture
+
+        if self._mirror is not mirror:
+            texels, cells = mirror_texels(mirror)
+            self._textures = (data_texture(texels), data_texture(cells))
+            self._mirror = mirror
+        return self._textures
+
+    def _dispatch(self, mirror, eye, points, images) -> np.ndarray:
+        """(R, 4) float32: (reflection point, 1) of each row, else zeros."""
+        import gpu
+
+        from ..gpu_data import data_texture, read_texture
+
+        mirror_texture, cells_texture = self._tables(mirror)
+        grid = mirror.triangle_grid
+        params = data_texture(np.array([[*eye, 0.0], [*(grid.origin - mirror_centre(mirror)), grid.cell],
+                                        [*grid.shape, 0.0]]))
+        n_rows = len(points)
+        width = min(WORK_WIDTH, n_rows)
+        height = -(-n_rows // width)
+        work = np.zeros((height * width, 2, 4), np.float32)
+        work[:n_rows, 0, :3], work[:n_rows, 1, :3] = points, images
+        work_texture = data_texture(work.reshape(height, 2 * width, 4))
+        result = gpu.types.GPUTexture((width, height), format='RGBA32F')
+        shader = polish_shader()
+        shader.bind()
+        shader.uniform_int("n_rows", n_rows)
+        shader.uniform_int("work_width", width)
+        shader.uniform_int("mirror_width", mirror_texture.width)
+        shader.uniform_int("cells_width", cells_texture.width)
+        shader.uniform_sampler("work", work_texture)
+        shader.uniform_sampler("mirror", mirror_texture)
+        shader.uniform_sampler("cells", cells_texture)
+        shader.uniform_sampler("params", params)
+        shader.image("result", result)
+        gpu.compute.dispatch(shader, -(-width // LOCAL_SIZE), height, 1)
+        self.dispatches += 1
+        return read_texture(result, width, height).reshape(-1, 4)[:n_rows]
+
