@@ -3,10 +3,11 @@
 surface, by table lookup, and each triangle's neighbours across its edges.
 
 A search for a reflection point that starts near its answer (a node image polished on
-the GPU, ``gpu_shaders/methods/polish_gpu.py``) needs only a triangle to start in and a
-way to step to the next one while Newton's iterate leaves the triangle it is in: a
-uniform grid of cells, each holding a triangle through or near it, and the edge
-adjacency. Both are flat integer tables a shader reads.
+the GPU, ``gpu_shaders/methods/polish_gpu.py``) needs only a triangle to start from and
+a way to walk to the triangle under a point: a uniform grid of cells, each holding a
+triangle through or near it, and the edge adjacency. Both are flat integer tables a
+shader reads. Built in blocks of triangles, so that a million-triangle mirror's
+temporaries stay small (the grid itself is at most ``MAX_CELLS`` cells a side).
 """
 
 from __future__ import annotations
@@ -20,6 +21,13 @@ CELL_PER_EDGE = 1.0
 #: Samples per triangle edge (a barycentric lattice) when registering a triangle in the
 #: cells it crosses.
 EDGE_SAMPLES = 3
+#: Dilation passes, at most (each over every cell): with cells of at least 1/128 of the
+#: mirror, 8 cells reach 6 % of its size along the axes, 3.6 % diagonally.
+MAX_DILATION = 8
+#: Triangles registered at a time.
+BLOCK = 1 << 16
+#: Triangles whose edges give the median edge length, at most (evenly strided).
+EDGE_SAMPLE_TRIANGLES = 100_000
 
 
 class TriangleGrid:
@@ -28,20 +36,25 @@ class TriangleGrid:
 
     def __init__(self, vertices: np.ndarray, triangles: np.ndarray, reach: float):
         """``reach``: how far off the surface (in the mirror's units) a point still finds
-        a triangle: the grid is dilated by that many cells."""
-        corners = np.asarray(vertices, dtype=np.float64)[triangles]
-        edges = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2)
-        lo, hi = corners.reshape(-1, 3).min(axis=0), corners.reshape(-1, 3).max(axis=0)
+        a triangle: the grid is dilated by that many cells (``MAX_DILATION`` at most)."""
+        vertices = np.asarray(vertices, dtype=np.float64)
+        triangles = np.asarray(triangles, dtype=np.int64)
+        lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+        sampled = vertices[triangles[::max(1, len(triangles) // EDGE_SAMPLE_TRIANGLES)]]
+        edges = np.linalg.norm(sampled - np.roll(sampled, 1, axis=1), axis=2)
         size = float(np.max(hi - lo))
         self.cell = max(CELL_PER_EDGE * float(np.median(edges)), size / MAX_CELLS, 1e-12)
         # Each pass grows the grid by one cell along the axes, by 1/sqrt(3) cell diagonally.
-        dilation = int(np.ceil(np.sqrt(3.0) * reach / self.cell))
+        dilation = min(int(np.ceil(np.sqrt(3.0) * reach / self.cell)), MAX_DILATION)
         self.origin = lo - (dilation + 0.5) * self.cell
         self.shape = (np.floor((hi - self.origin) / self.cell).astype(np.int64) + dilation + 1)
         cells = np.full(int(np.prod(self.shape)), -1, dtype=np.int32)
         weights = _lattice(EDGE_SAMPLES)
-        samples = np.einsum("sk,tkd->tsd", weights, corners).reshape(-1, 3)
-        cells[self._flat_index(samples)] = np.repeat(np.arange(len(triangles), dtype=np.int32), len(weights))
+        for start in range(0, len(triangles), BLOCK):
+            corners = vertices[triangles[start:start + BLOCK]]
+            samples = np.einsum("sk,tkd->tsd", weights, corners).reshape(-1, 3)
+            cells[self._flat_index(samples)] = np.repeat(np.arange(start, start + len(corners), dtype=np.int32),
+                                                        len(weights))
         self.cells = cells.reshape(tuple(self.shape))
         for _ in range(dilation):
             self._dilate()

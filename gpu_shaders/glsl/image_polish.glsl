@@ -92,8 +92,8 @@ vec2 residual(vec2 uv)
   return vec2(dot(r, axis_u), dot(r, axis_v));
 }
 
-/* (u, v) of x projected onto the loaded triangle's plane, clamped into the triangle. */
-vec2 plane_barycentric(vec3 x)
+/* (u, v) of x projected onto the loaded triangle's plane. */
+vec2 plane_coordinates(vec3 x)
 {
   vec3 offset = x - v0;
   float a = dot(e1, e1);
@@ -101,8 +101,13 @@ vec2 plane_barycentric(vec3 x)
   float c = dot(e2, e2);
   float p = dot(offset, e1);
   float q = dot(offset, e2);
-  float det = max(a * c - b * b, 1e-30);
-  vec2 uv = clamp(vec2(c * p - b * q, a * q - b * p) / det, 0.0, 1.0);
+  return vec2(c * p - b * q, a * q - b * p) / max(a * c - b * b, 1e-30);
+}
+
+/* The same, clamped into the triangle. */
+vec2 plane_barycentric(vec3 x)
+{
+  vec2 uv = clamp(plane_coordinates(x), 0.0, 1.0);
   return uv / max(uv.x + uv.y, 1.0);
 }
 
@@ -112,13 +117,7 @@ int locate(int t, vec3 x)
 {
   for (int k = 0; k < LOCATE_STEPS; k++) {
     load_triangle(t);
-    vec3 offset = x - v0;
-    float a = dot(e1, e1);
-    float b = dot(e1, e2);
-    float c = dot(e2, e2);
-    float p = dot(offset, e1);
-    float q = dot(offset, e2);
-    vec2 uv = vec2(c * p - b * q, a * q - b * p) / max(a * c - b * b, 1e-30);
+    vec2 uv = plane_coordinates(x);
     vec3 w = vec3(1.0 - uv.x - uv.y, uv.x, uv.y);
     float low = min(w.x, min(w.y, w.z));
     if (low >= -INSIDE_TOLERANCE) {

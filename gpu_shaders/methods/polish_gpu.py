@@ -3,18 +3,20 @@
 ``addon/methods/morphing/image_polish.polish_images`` (``MorphingGrid.image_polish``).
 
 In numpy the polish cost more than the node's projection itself (a BVH descent per
-image to find its triangle, then Newton in float64: 0.2 s for a node's 5,600 grazing
-and widened-chart images of 20k points, docs/benchmarks/morph_animation.md), and
-Render Image's Morphing animation went from 1.7x to 3x Workbench. Here one dispatch
-answers every image of a node: the shader walks from a grid cell's triangle across the
-mirror's edges instead of descending a BVH, so it needs two flat tables of the mirror
+image to find its triangle, then Newton in float64: 0.2-0.3 s for a node's 10-15k
+grazing and widened-chart images of 20k points), and Render Image's Morphing animation
+went from 1.7x to 2.6-3x Workbench. Here one dispatch answers every image of a node
+(5-10 ms on llvmpipe): the shader walks from a grid cell's triangle across the mirror's
+edges instead of descending a BVH, so it needs two flat tables of the mirror
 (``ReflectorSet.triangle_grid``, ``ReflectorSet.edge_neighbours``), uploaded once per
-mirror.
+mirror (docs/benchmarks/morphing.md). Triangle indices travel as float32, exact below
+2**24 triangles.
 """
 
 from __future__ import annotations
 
 import functools
+from collections import OrderedDict
 
 import numpy as np
 
@@ -23,6 +25,8 @@ from ..shader_sources import glsl_source
 
 #: Invocations per work group (along x).
 LOCAL_SIZE = 64
+#: Mirrors whose tables stay on the GPU.
+MIRRORS_KEPT = 4
 #: Result texels per row.
 WORK_WIDTH = 1024
 #: Triangles tried per image, as ``image_polish.POLISH_ROUNDS``: the one under the image,
@@ -31,8 +35,10 @@ ROUNDS = 4
 #: Newton iterations per triangle (the numpy twin's ``POLISH_ITERATIONS``; float32
 #: converges no further after these).
 ITERATIONS = 10
-#: Edges crossed, at most, from a grid cell's triangle to the one under a point.
-LOCATE_STEPS = 24
+#: Edges crossed, at most, from a grid cell's triangle to the one under a point (a
+#: cell's triangle lies up to ``triangle_grid.MAX_DILATION`` cells off, a cell a few
+#: edges long on a dense mirror).
+LOCATE_STEPS = 64
 #: Central differences of the residual, in barycentric units (float32: 1e-7 would round away).
 DIFFERENCE_STEP = 1e-3
 #: A step is at most half a triangle, as in ``exact.newton_in_triangles``.
@@ -80,15 +86,14 @@ def mirror_texels(mirror) -> tuple[np.ndarray, np.ndarray]:
     triangle's ``closed_sides``), and the grid's cells four to a texel ((C / 4, 4), -1
     where empty)."""
     centre = mirror_centre(mirror)
-    corners = mirror.vertices[mirror.triangles] - centre  # (T, 3, 3)
-    texels = np.zeros((len(mirror.triangles), 6, 4))
-    texels[:, :3, :3] = corners
+    texels = np.zeros((len(mirror.triangles), 6, 4), np.float32)
+    texels[:, :3, :3] = mirror.vertices[mirror.triangles] - centre
     texels[:, :3, 3] = mirror.edge_neighbours
     texels[:, 3:, :3] = mirror.normals[mirror.triangles]
     texels[:, 3, 3] = mirror.closed_sides
     cells = mirror.triangle_grid.cells.reshape(-1).astype(np.float32)
     cells = np.concatenate([cells, np.full(-len(cells) % 4, -1.0, np.float32)]).reshape(-1, 4)
-    return texels.reshape(-1, 4).astype(np.float32), cells
+    return texels.reshape(-1, 4), cells
 
 
 def mirror_centre(mirror) -> np.ndarray:
@@ -97,13 +102,13 @@ def mirror_centre(mirror) -> np.ndarray:
 
 
 class GPUImagePolish:
-    """``image_polish.polish_images`` on the GPU, for a grid's ``image_polish``: the
-    mirror's tables are uploaded on first use and kept (the last mirror polished). Needs
-    the GPU: call from the main thread."""
+    """``image_polish.polish_images`` on the GPU, for a grid's ``image_polish``: a
+    mirror's tables are uploaded on first use and kept (the last ``capacity`` mirrors:
+    one per reflector in a grid mode). Needs the GPU: call from the main thread."""
 
-    def __init__(self):
-        self._mirror = None
-        self._textures = None
+    def __init__(self, capacity: int = MIRRORS_KEPT):
+        self.capacity = int(capacity)
+        self._tables_of: OrderedDict = OrderedDict()  # id(mirror) -> (mirror, textures)
         self.dispatches = 0
 
     def __call__(self, mirror, eye, points, images) -> np.ndarray:
@@ -120,13 +125,17 @@ class GPUImagePolish:
         return polished
 
     def _tables(self, mirror):
+        """The mirror's textures, uploaded on first use; the last ``capacity`` mirrors kept."""
         from ..gpu_data import data_texture
 
-        if self._mirror is not mirror:
+        entry = self._tables_of.pop(id(mirror), None)
+        if entry is None or entry[0] is not mirror:
             texels, cells = mirror_texels(mirror)
-            self._textures = (data_texture(texels), data_texture(cells))
-            self._mirror = mirror
-        return self._textures
+            entry = (mirror, (data_texture(texels), data_texture(cells)))
+            while len(self._tables_of) >= self.capacity:
+                self._tables_of.popitem(last=False)
+        self._tables_of[id(mirror)] = entry
+        return entry[1]
 
     def _dispatch(self, mirror, eye, points, images) -> np.ndarray:
         """(R, 4) float32: (reflection point, 1) of each row, else zeros."""
