@@ -32,7 +32,6 @@ from collections import OrderedDict
 import numpy as np
 
 from ...addon.methods.morphing import morph_grid, morph_surface, morphing
-from ...addon.methods.morphing.image_polish import polish_images
 from ...addon.baking.bake_cache import CacheError
 from ...addon.geometry.closed_surfaces import ConvexMirrors
 from ..frame_pass import FramePass
@@ -296,7 +295,8 @@ class MorphPass(FramePass):
         if key not in self.nodes:
             pending = self._pending.pop(key, None)
             if pending is not None and np.array_equal(pending[0], frame):
-                slots = pending[1].result()  # being prefetched: wait for it rather than start again
+                # Being prefetched: wait for it rather than start again.
+                slots = self._polished(k, node, frame, pending[1].result())
             else:
                 slots = self.grids[k][0].node_slots(int(node), self._points_in_frame(frame), SLOTS)
             self.nodes.put(key, slots, self.meshes.width, self.meshes.height, keep)
@@ -366,8 +366,9 @@ class MorphPass(FramePass):
         """Start projecting nodes not yet on the GPU around each covering grid's eye (the
         4 x 4 x 4 nodes of its cell and the cells beside it, nearest first), so that
         moving on rarely waits: ``submit(function, *args)`` runs the projection (in numpy,
-        no GPU: on a worker thread) and returns a ``Future``; at most ``max_pending`` run
-        at once, and a prefetch never evicts. :meth:`collect` uploads the finished ones.
+        no GPU: on a worker thread; ``MorphingGrid.unpolished_images``) and returns a
+        ``Future``; at most ``max_pending`` run at once, and a prefetch never evicts.
+        :meth:`collect` polishes the finished ones (on the GPU) and uploads them.
         ``exact``: only grids whose nodes the main thread would project the same way
         (``projects_nodes_on_gpu`` false), so that a render is the same whether a node was
         prefetched or not. ``ahead``: world-space eyes the next views are expected at,
@@ -386,8 +387,8 @@ class MorphPass(FramePass):
                     continue
                 if self.nodes.nbytes + (len(self._pending) + 1) * self._node_bytes() > self.nodes.budget_bytes:
                     return started
-                self._pending[key] = (frame, submit(grid.node_slots, int(node), self._points_in_frame(frame), SLOTS,
-                                                    morphing.project_face, polish_images))
+                self._pending[key] = (frame, submit(grid.unpolished_images, int(node), self._points_in_frame(frame),
+                                                    morphing.project_face))
                 started += 1
         return started
 
@@ -410,15 +411,22 @@ class MorphPass(FramePass):
             del self._pending[key]
             k = key[0]
             try:
-                slots = future.result()
+                images = future.result()
             except CacheError as error:
                 self.grids[k][0].failure = error
                 continue
             if self._frames[k] is not None and np.array_equal(self._frames[k], frame) and key not in self.nodes:
+                slots = self._polished(k, key[1], frame, images)
                 self.nodes.put(key, slots, self.meshes.width, self.meshes.height)
                 self.counts["node_projections"] += 1
                 uploaded += 1
         return uploaded
+
+    def _polished(self, k: int, node: int, frame: np.ndarray, images: tuple) -> np.ndarray:
+        """The node slots of a prefetched node's ``unpolished_images``, polished here, on
+        the main thread (the grid's GPU polish: milliseconds, where the worker's numpy
+        polish took 0.2-0.3 s a node)."""
+        return self.grids[k][0].polished_slots(node, self._points_in_frame(frame), images, SLOTS)
 
     def _node_bytes(self) -> int:
         return 2 * SLOTS * self.meshes.width * self.meshes.height * 16

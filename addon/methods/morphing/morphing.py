@@ -235,6 +235,10 @@ class MorphingGrid:
         """(P, K, 3) distinct first reflector points of each point at one node, NaN padded;
         ``face_images`` projects a face (default: the grid's own, numpy where it has none),
         ``polish`` polishes images (default: the grid's :attr:`image_polish`)."""
+        return self._polished_regular(node, points, self._camera_images(node, points, face_images), polish)
+
+    def _camera_images(self, node: int, points: np.ndarray, face_images=None):
+        """:meth:`_node_images` before the polish."""
         camera = self.nodes[node]
         face_images = face_images or self.face_images or project_face
         parts = []
@@ -245,11 +249,15 @@ class MorphingGrid:
         if not parts:
             return np.full((len(points), 0, 3), np.nan)
         images = np.concatenate(parts, axis=0).transpose(1, 0, 2)
-        images = compact_images(images, self._duplicate_tolerance(node, images))
-        if self.mirror is not None:
-            images = polish_grazing(self.mirror(), self.grid.node_positions()[node], points, images,
-                                    polish or self.image_polish or polish_images)
-        return images
+        return compact_images(images, self._duplicate_tolerance(node, images))
+
+    def _polished_regular(self, node: int, points: np.ndarray, images: np.ndarray, polish=None):
+        """A node's regular ``images``, those seen at a grazing angle polished on the
+        :attr:`mirror` where the grid has one (``image_polish.polish_grazing``)."""
+        if self.mirror is None:
+            return images
+        return polish_grazing(self.mirror(), self.grid.node_positions()[node], points, images,
+                              polish or self.image_polish or polish_images)
 
     @property
     def projects_nodes_on_gpu(self) -> bool:
@@ -266,8 +274,25 @@ class MorphingGrid:
         that it serves every tetrahedron the node belongs to. ``face_images`` as for
         :meth:`_node_images` (``project_face``: numpy, for a thread without the GPU), and
         ``polish`` (``image_polish.polish_images``: numpy)."""
-        regular = self._node_images(node, points, face_images, polish)
-        parts = [regular, self._extended_images(node, points, regular, polish)]
+        return self.polished_slots(node, points, self.unpolished_images(node, points, face_images), slots, polish)
+
+    def unpolished_images(self, node: int, points: np.ndarray, face_images=None) -> tuple:
+        """(regular, widened-chart) images of a node as :meth:`node_slots` finds them,
+        before the polish: what a worker thread without the GPU computes of a node
+        (``face_images``: ``project_face``), for :meth:`polished_slots` to finish on the
+        main thread, on the GPU (:meth:`node_slots` is the two in one). The widened
+        charts' repeats of a regular image are dropped against the unpolished regular
+        images (the polish moves an image by less than the tolerance)."""
+        regular = self._camera_images(node, points, face_images)
+        return regular, self._widened_images(node, points, regular)
+
+    def polished_slots(self, node: int, points: np.ndarray, images: tuple, slots: int, polish=None) -> np.ndarray:
+        """:meth:`node_slots` of a node's :meth:`unpolished_images`: polished (by
+        ``polish``, default the grid's :attr:`image_polish`) where the grid has a
+        :attr:`mirror`."""
+        regular, extended = images
+        parts = [self._polished_regular(node, points, regular, polish),
+                 self._polished_extended(node, points, extended, polish)]
         return np.concatenate([pad_images(part[:, :slots], slots) for part in parts], axis=1)
 
     def _duplicate_tolerance(self, node: int, images: np.ndarray) -> np.ndarray:
@@ -286,6 +311,10 @@ class MorphingGrid:
         less those that repeat one of the node's ``regular`` images (P, K', 3) of the same
         points (a widened chart holds its regular one too), polished on the mirror where
         the grid has one (:attr:`mirror`; ``polish`` as for :meth:`_node_images`)."""
+        return self._polished_extended(node, points, self._widened_images(node, points, regular), polish)
+
+    def _widened_images(self, node: int, points: np.ndarray, regular: np.ndarray):
+        """:meth:`_extended_images` before the polish."""
         camera = self.nodes[node]
         parts = []
         for sbc in camera.faces:
@@ -299,7 +328,11 @@ class MorphingGrid:
         images = compact_images(images, self._duplicate_tolerance(node, images))
         tolerance = self._duplicate_tolerance(node, images)
         near = np.linalg.norm(images[:, :, None] - regular[:, None], axis=3) <= tolerance[..., None]
-        images = np.where(near.any(axis=2)[..., None], np.nan, images)
+        return np.where(near.any(axis=2)[..., None], np.nan, images)
+
+    def _polished_extended(self, node: int, points: np.ndarray, images: np.ndarray, polish=None):
+        """Widened-chart ``images`` polished on the :attr:`mirror` where the grid has one
+        (those with no reflection near them dropped), compacted."""
         if self.mirror is not None:
             polish = polish or self.image_polish or polish_images
             images = polish(self.mirror(), self.grid.node_positions()[node], points, images)

@@ -72,14 +72,14 @@ class OctreeGrid(MorphingGrid):
         """Ray octrees project in numpy on any thread (``face_images`` is unused)."""
         return False
 
-    def _node_images(self, node: int, points: np.ndarray, face_images=None, polish=None):
+    def _camera_images(self, node: int, points: np.ndarray, face_images=None):
         """(P, K, 3) distinct first reflector points of each point at one node (its ray
-        octree, whose images are traced: ``face_images`` and ``polish`` are the
+        octree, whose images are traced and never polished: ``face_images`` is the
         tetrahedral grid's and unused here)."""
         images = self.nodes[node].octree.images(points, IMAGES)
         return compact_images(images, self._duplicate_tolerance(node, images))
 
-    def _extended_images(self, node: int, points: np.ndarray, regular: np.ndarray, polish=None):
+    def _widened_images(self, node: int, points: np.ndarray, regular: np.ndarray):
         """A ray octree has no leaf charts to widen (the tetrahedral grid's remedy 2)."""
         return np.full((len(points), 0, 3), np.nan)
 

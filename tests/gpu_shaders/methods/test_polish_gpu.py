@@ -67,17 +67,24 @@ def test_the_shader_drops_an_image_past_the_horizon(polish, case):
     assert polish.dispatches == before
 
 
+SPHERE = icosphere((0.0, 0.0, 0.0), 1.0, 3, name="Mirror")
+SETTINGS = morph_grid.MorphSettings(grid=(3, 3, 3), face_resolution=32)
+
+
+def _points(n=1500, seed=4):
+    points = np.random.default_rng(seed).uniform(-4.0, 4.0, (3 * n, 3))
+    return points[np.linalg.norm(points, axis=1) > 1.3][:n]
+
+
 def test_a_grid_polishing_on_the_gpu_gives_the_numpy_grids_node_images(polish):
-    sphere = icosphere((0.0, 0.0, 0.0), 1.0, 3, name="Mirror")
-    settings = morph_grid.MorphSettings(grid=(3, 3, 3), face_resolution=32)
-    grid = M.grid_on_demand(sphere, settings, polish=True)
+    grid = M.grid_on_demand(SPHERE, SETTINGS, polish=True)
     grid.image_polish = polish
-    rng = np.random.default_rng(4)
-    points = rng.uniform(-4.0, 4.0, (4000, 3))
-    points = points[np.linalg.norm(points, axis=1) > 1.3][:1500]
+    points = _points()
     node = int(np.argmax(np.linalg.norm(grid.grid.node_positions(), axis=1)))  # a corner, outside the ball
     before = polish.dispatches
-    on_gpu = grid.node_slots(node, points, 3)
+    # As the viewport's prefetch does it: projected in numpy on a worker thread, polished
+    # on the GPU once collected on the main thread.
+    on_gpu = grid.polished_slots(node, points, grid.unpolished_images(node, points, M.project_face), 3)
     assert polish.dispatches == before + 2  # the grazing regular images, then the widened charts'
     in_numpy = grid.node_slots(node, points, 3, polish=P.polish_images)
     both = np.isfinite(on_gpu[..., 0]) & np.isfinite(in_numpy[..., 0])
@@ -87,6 +94,21 @@ def test_a_grid_polishing_on_the_gpu_gives_the_numpy_grids_node_images(polish):
     # slots after it shifted), the rest by 2e-6 at most.
     agree = np.linalg.norm(on_gpu[both] - in_numpy[both], axis=1) < 1e-4
     assert agree.mean() > 0.99
-    unpolished = M.grid_on_demand(sphere, settings, nodes=grid.nodes).node_slots(node, points, 3)
+    unpolished = M.grid_on_demand(SPHERE, SETTINGS, nodes=grid.nodes).node_slots(node, points, 3)
     moved = np.linalg.norm(unpolished - in_numpy, axis=2)
     assert np.nanmax(moved) > 1e-3  # the polish changed something the GPU had to match
+
+
+def test_prefetched_nodes_are_polished_on_the_gpu_when_collected(polish):
+    from test_morph_pass import _cloud, _pass, _run_now, _view
+    from test_morph_source import SETTINGS as PASS_SETTINGS  # the morph pass tests' 7 x 7 x 7 grid
+
+    grid = M.grid_on_demand(SPHERE, PASS_SETTINGS, polish=True)
+    grid.image_polish = polish
+    morph, _ = _pass((SPHERE, grid), [_cloud(600)])
+    view = _view((0.4, -2.3, 0.3))
+    morph.blend(view)
+    before = polish.dispatches
+    assert morph.prefetch(view, _run_now, max_pending=2) == 2
+    assert polish.dispatches == before  # the worker's part polishes nothing
+    assert morph.collect() == 2 and polish.dispatches >= before + 2
