@@ -112,6 +112,19 @@ class View:
         directions /= np.linalg.norm(directions, axis=1, keepdims=True)
         return origins, directions
 
+    def window_points(self, pixels: np.ndarray, depth: np.ndarray) -> np.ndarray:
+        """World points (K, 3) at pixel positions (K, 2) and window depths (K,) in [0, 1]
+        (a depth buffer's values: OpenGL's default depth range), NaN where the depth is
+        1 (the far plane: nothing drawn there)."""
+        pixels = np.asarray(pixels, dtype=np.float64)
+        depth = np.asarray(depth, dtype=np.float64)
+        ndc = np.column_stack([pixels[:, 0] / self.width * 2.0 - 1.0, pixels[:, 1] / self.height * 2.0 - 1.0,
+                               2.0 * depth - 1.0, np.ones(len(pixels))])
+        world = ndc @ self._inverse_view_projection.T
+        points = world[:, :3] / world[:, 3:4]
+        points[depth >= 1.0] = np.nan
+        return points
+
     def pixel_grid(self, downsample: int = 1) -> np.ndarray:
         """Centres of the down-sampled pixels, (H/d * W/d, 2), row-major from the bottom row.
 

@@ -58,6 +58,17 @@ def read_texture(texture, width: int, height: int) -> np.ndarray:
     return np.asarray(data, dtype=np.float32).reshape(height, width, 4)
 
 
+def read_depth(framebuffer, width: int, height: int) -> np.ndarray:
+    """(H, W) float32 window depths of a framebuffer's depth attachment, rows bottom to
+    top. Through ``GPUFrameBuffer.read_depth``: a depth texture's own ``read()`` returned
+    its texels in another order on llvmpipe (none of row-major, flipped or transposed
+    matched the depths of exactly traced points)."""
+    with framebuffer.bind():
+        data = framebuffer.read_depth(0, 0, width, height)
+    data.dimensions = width * height
+    return np.asarray(data, dtype=np.float32).reshape(height, width)
+
+
 @contextlib.contextmanager
 def saved_state():
     """Restore viewport, depth test, depth writes and blending (a draw handler's state)."""

@@ -91,7 +91,7 @@ from . import draw_shaders
 from .methods import projection
 from .draw_geometry import prepare_geometry
 from .frame_pass import REFLECTION_COSINE
-from .gpu_data import data_texture, read_texture, saved_state, vertex_buffer
+from .gpu_data import data_texture, read_depth, read_texture, saved_state, vertex_buffer
 from .methods.iterative_draw import IterativePass
 from .methods.morph_pass import DEFAULT_BUDGET_MB, MorphPass
 from .methods.perturbation_pass import PerturbationPass
@@ -579,7 +579,8 @@ class ReflectionRenderer:
             return 0
         if len(pixels) + len(doubtful) <= MAX_TRACED_FRACTION * targets.width * targets.height:
             pixels = np.concatenate([pixels, doubtful])  # distinct: band pixels have no reflection
-        rgba = traced_rgba(self.band_tracer, view, pixels, max_order, _rgba(world_color))
+        surface = view.window_points(pixels + 0.5, read_depth(targets.prepass, *size)[pixels[:, 1], pixels[:, 0]])
+        rgba = traced_rgba(self.band_tracer, view, pixels, max_order, _rgba(world_color), surface)
         targets.traced = traced_texture(*size, pixels, rgba)
         return int(len(pixels))
 

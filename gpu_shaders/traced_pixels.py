@@ -26,12 +26,15 @@ from ..addon.geometry import band_trace
 from ..addon.view import View
 
 
-def traced_rgba(tracer, view: View, pixels: np.ndarray, max_order: int, world_color) -> np.ndarray:
+def traced_rgba(tracer, view: View, pixels: np.ndarray, max_order: int, world_color,
+                surface_points: np.ndarray | None = None) -> np.ndarray:
     """(K, 4) float32 what the composite reads for integer ``pixels`` (K, 2) (x, y, rows
     bottom to top): the traced linear RGB through their centres, and as alpha, as a drawn
     reflection's, 1 + the distance from the mirror along the reflected ray (inf where the
-    world shows: attenuation, SBC V-D)."""
-    colors = tracer.trace(view, np.asarray(pixels) + 0.5, max_order, world_color, on_mirrors=True)
+    world shows: attenuation, SBC V-D). ``surface_points``: where the pre-pass saw the
+    mirror on each pixel (``BandTracer.trace``)."""
+    colors = tracer.trace(view, np.asarray(pixels) + 0.5, max_order, world_color, on_mirrors=True,
+                          surface_points=surface_points)
     return np.concatenate([colors[:, :3], 1.0 + np.minimum(colors[:, 3:4], 1e30)], axis=1).astype(np.float32)
 
 

@@ -29,6 +29,18 @@ def test_pixel_rays_pass_through_their_pixels():
     np.testing.assert_allclose(np.linalg.norm(directions, axis=1), 1.0)
 
 
+def test_window_points_undo_the_projection_to_pixels_and_depth():
+    view = look_at_view([3, -4, 2], [0, 0, 0.5], width=200, height=100)
+    points = np.random.default_rng(1).uniform(-1.0, 1.0, (300, 3))
+    pixels, depth = view.to_pixels(points)
+    window = 0.5 * depth + 0.5  # a depth buffer's [0, 1]
+    np.testing.assert_allclose(view.window_points(pixels, window), points, atol=1e-9)
+    # float32 depth, as read back from the GPU: about 1e-4 of the distance here
+    rounded = view.window_points(pixels, window.astype(np.float32))
+    assert np.max(np.linalg.norm(rounded - points, axis=1)) < 1e-3
+    assert np.isnan(view.window_points(pixels[:2], np.ones(2))).all()  # the cleared far plane
+
+
 def test_pixel_grid_centres_of_downsampled_pixels():
     view = look_at_view([0, -5, 0], [0, 0, 0], width=8, height=4)
     grid = view.pixel_grid(2)

@@ -43,6 +43,24 @@ def test_mirror_pixels_traced_with_the_mirrors_first_see_what_the_whole_scene_sh
     assert np.isfinite(whole[:, 3]).sum() > 50  # reflections of the floor and the blob among them
 
 
+def test_eye_rays_started_near_the_pre_pass_surface_see_what_the_bvh_finds():
+    """Given where the pre-pass's depth puts the mirror on each pixel (here the exact hit,
+    moved as float32 depth would move it, and unknown on some), the traced colours are
+    those of the BVH's first hits."""
+    reflectors, meshes = _scene()
+    tracer = BandTracer(reflectors, meshes)
+    view = look_at_view((0.5, -4.0, 1.5), (0.0, 0.0, 0.0), fov_y_deg=40.0, width=64, height=48)
+    ys, xs = np.mgrid[0:48, 0:64]
+    pixels = np.c_[xs.ravel(), ys.ravel()] + 0.5
+    hits = tracer.intersect(*view.pixel_rays(pixels), mirrors_only=True)
+    pixels, surface = pixels[hits.hit], hits.position[hits.hit]
+    surface = surface + np.random.default_rng(3).normal(scale=1e-4, size=surface.shape)
+    surface[::5] = np.nan
+    world = (0.05, 0.1, 0.2, 1.0)
+    np.testing.assert_allclose(tracer.trace(view, pixels, 2, world, on_mirrors=True, surface_points=surface),
+                               tracer.trace(view, pixels, 2, world, on_mirrors=True))
+
+
 def test_mirrors_and_diffuse_meshes_traced_apart_hit_as_one_set_would():
     """The tracer keeps the mirrors' set (shared with the caller's when given, so a big
     mirror's tree is built once) and the diffuse meshes' apart; their nearest hits are
