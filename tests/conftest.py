@@ -72,3 +72,29 @@ def gpu_ready():
     import gpu
 
     return gpu
+
+
+@pytest.fixture(scope="session")
+def sphere_reflections():
+    """A sphere mesh (centre (0, 0, 1), radius 1), points around it and their exact
+    reflection points seen from ``eye`` (one per point: the sphere is convex), NaN
+    where none is seen: what a polish of node images is checked against, in numpy
+    (``test_image_polish.py``) and on the GPU (``test_polish_gpu.py``)."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from curved_reflections.addon import look_at_view
+    from curved_reflections.addon.geometry.raytrace import ReflectorSet
+    from curved_reflections.addon.geometry.sphere import icosphere
+    from curved_reflections.addon.reference.exact import solve_reflections
+
+    centre, eye = np.array([0.0, 0.0, 1.0]), np.array([0.3, -3.0, 1.6])
+    mirror = ReflectorSet([icosphere(centre, 1.0, 4, "Sphere")])
+    points = np.random.default_rng(11).uniform([-2.5, -2.5, -0.5], [2.5, 2.5, 2.8], (600, 3))
+    points = points[np.linalg.norm(points - centre, axis=1) > 1.2]
+    exact = solve_reflections(mirror, look_at_view(eye, centre), points)
+    exact = exact.select(exact.seen_by_eye & exact.sees_point)
+    truth = np.full((len(points), 3), np.nan)
+    truth[exact.point] = exact.position
+    return SimpleNamespace(mirror=mirror, points=points, truth=truth, centre=centre, eye=eye)

@@ -7,13 +7,10 @@ on the GPU gives the node images a grid polishing in numpy gives."""
 import numpy as np
 import pytest
 
-from curved_reflections.addon import look_at_view
-from curved_reflections.addon.geometry.raytrace import ReflectorSet
 from curved_reflections.addon.geometry.sphere import icosphere
 from curved_reflections.addon.methods.morphing import image_polish as P
 from curved_reflections.addon.methods.morphing import morph_grid
 from curved_reflections.addon.methods.morphing import morphing as M
-from curved_reflections.addon.reference.exact import solve_reflections
 
 CENTRE = np.array([0.0, 0.0, 1.0])
 EYE = np.array([0.3, -3.0, 1.6])
@@ -27,17 +24,10 @@ def polish(gpu_ready):
 
 
 @pytest.fixture(scope="module")
-def case():
-    """The sphere mesh, points around it and their exact reflection points from EYE."""
-    mirror = ReflectorSet([icosphere(CENTRE, 1.0, 4, "Sphere")])
-    rng = np.random.default_rng(11)
-    points = rng.uniform([-2.5, -2.5, -0.5], [2.5, 2.5, 2.8], (600, 3))
-    points = points[np.linalg.norm(points - CENTRE, axis=1) > 1.2]
-    exact = solve_reflections(mirror, look_at_view(EYE, CENTRE), points)
-    exact = exact.select(exact.seen_by_eye & exact.sees_point)
-    truth = np.full((len(points), 3), np.nan)
-    truth[exact.point] = exact.position
-    return mirror, points, truth
+def case(sphere_reflections):
+    """The sphere mesh, points around it and their exact reflection points seen from EYE."""
+    assert np.array_equal(sphere_reflections.eye, EYE) and np.array_equal(sphere_reflections.centre, CENTRE)
+    return sphere_reflections.mirror, sphere_reflections.points, sphere_reflections.truth
 
 
 def test_the_shader_places_images_where_the_reference_solver_does(polish, case):

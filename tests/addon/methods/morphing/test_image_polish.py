@@ -6,29 +6,17 @@ them are dropped, and only grazing regular images are touched."""
 import numpy as np
 import pytest
 
-from curved_reflections.addon import look_at_view
-from curved_reflections.addon.geometry.raytrace import ReflectorSet
-from curved_reflections.addon.geometry.sphere import icosphere
 from curved_reflections.addon.methods.morphing import image_polish as P
-from curved_reflections.addon.reference.exact import solve_reflections
 
 CENTRE = np.array([0.0, 0.0, 1.0])
 EYE = np.array([0.3, -3.0, 1.6])
 
 
 @pytest.fixture(scope="module")
-def case():
-    """The sphere mesh, points around it and their exact reflection points seen from EYE
-    (one per point: the sphere is convex)."""
-    mirror = ReflectorSet([icosphere(CENTRE, 1.0, 4, "Sphere")])
-    rng = np.random.default_rng(11)
-    points = rng.uniform([-2.5, -2.5, -0.5], [2.5, 2.5, 2.8], (600, 3))
-    points = points[np.linalg.norm(points - CENTRE, axis=1) > 1.2]
-    exact = solve_reflections(mirror, look_at_view(EYE, CENTRE), points)
-    exact = exact.select(exact.seen_by_eye & exact.sees_point)
-    truth = np.full((len(points), 3), np.nan)
-    truth[exact.point] = exact.position
-    return mirror, points, truth
+def case(sphere_reflections):
+    """The sphere mesh, points around it and their exact reflection points seen from EYE."""
+    assert np.array_equal(sphere_reflections.eye, EYE) and np.array_equal(sphere_reflections.centre, CENTRE)
+    return sphere_reflections.mirror, sphere_reflections.points, sphere_reflections.truth
 
 
 def _cosines(truth):
