@@ -63,17 +63,24 @@ def smooth_pieces(triangles: np.ndarray, n_vertices: int) -> np.ndarray:
     continuous across them; across a sharp edge (split vertices) it jumps, and so do the
     reflected rays. A piece is a connected set of triangles through shared vertices: the
     mirror surfaces over which the reflected ray field is continuous. Connected
-    components by minimum-label propagation with pointer jumping (whole arrays; a few
-    dozen passes even for long thin pieces).
+    components by hooking roots to the lowest and pointer jumping (Shiloach and Vishkin;
+    whole arrays, a number of passes that grows with the logarithm of a piece's size).
     """
     triangles = np.asarray(triangles, dtype=np.int64)
     label = np.arange(n_vertices)
-    corners = triangles.reshape(-1)
     while True:
-        lowest = np.repeat(label[triangles].min(axis=1), 3)
+        # Hook every corner's root to the lowest root of its triangle, then jump each
+        # vertex to its new root: whole trees merge in a pass (log-many passes), where
+        # moving each vertex's own label took a pass per ring (30 s of a 1.3M-triangle
+        # mirror's 40 s ReflectorSet).
+        roots = label[triangles]
         merged = label.copy()
-        np.minimum.at(merged, corners, lowest)
-        merged = merged[merged]
+        np.minimum.at(merged, roots.reshape(-1), np.repeat(roots.min(axis=1), 3))
+        while True:
+            jumped = merged[merged]
+            if np.array_equal(jumped, merged):
+                break
+            merged = jumped
         if np.array_equal(merged, label):
             break
         label = merged

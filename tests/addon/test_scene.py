@@ -53,6 +53,36 @@ def test_scene_bounds_cover_everything_with_margin():
         scene_bounds([])
 
 
+def test_smooth_pieces_are_the_connected_components_of_any_mesh():
+    """Random triangles over few vertices (many pieces of every size) and a long strip
+    (one piece, 20k triangles end to end): the pieces a plain union-find gives."""
+    from curved_reflections.addon.scene import smooth_pieces
+
+    rng = np.random.default_rng(7)
+    strip = np.array([[k, k + 1, k + 2] for k in range(20_000)])
+    np.testing.assert_array_equal(smooth_pieces(strip, 20_002), np.zeros(20_000))
+    triangles = rng.integers(0, 3000, (1200, 3))
+    parent = list(range(3000))
+
+    def root(v):
+        while parent[v] != v:
+            v = parent[v]
+        return v
+
+    for a, b, c in triangles:
+        for u in (b, c):
+            ra, ru = root(a), root(u)
+            parent[max(ra, ru)] = min(ra, ru)
+    expected = np.array([root(a) for a, _, _ in triangles])
+    pieces = smooth_pieces(triangles, 3000)
+    # The same partition, numbered in order of first triangle.
+    _, first, inverse = np.unique(expected, return_index=True, return_inverse=True)
+    renumber = np.empty(len(first), dtype=np.int64)
+    renumber[np.argsort(first, kind="stable")] = np.arange(len(first))
+    np.testing.assert_array_equal(pieces, renumber[inverse])
+    assert 20 < pieces.max() < 1200
+
+
 def test_smooth_pieces_follow_shared_vertices_not_positions():
     """Two quads meeting along an edge are one piece where they share its vertices and
     two where the edge is sharp (its vertices split, same positions)."""
