@@ -62,7 +62,7 @@ class TriangleGrid:
     def nearby(self, points: np.ndarray) -> np.ndarray:
         """(P,) a triangle through or near the cell of each point, -1 where none (off the
         grid, or farther than ``reach`` from the surface)."""
-        index = np.floor((np.asarray(points, dtype=np.float64) - self.origin) / self.cell)
+        index = self._cell_of(points)
         with np.errstate(invalid="ignore"):
             inside = np.all((index >= 0) & (index < self.shape), axis=1)
         found = np.full(len(index), -1, dtype=np.int64)
@@ -70,8 +70,12 @@ class TriangleGrid:
         found[inside] = self.cells[cells[:, 0], cells[:, 1], cells[:, 2]]
         return found
 
+    def _cell_of(self, points: np.ndarray) -> np.ndarray:
+        """(P, 3) float: the integer cell coordinates of each point (NaN stays NaN)."""
+        return np.floor((np.asarray(points, dtype=np.float64) - self.origin) / self.cell)
+
     def _flat_index(self, points: np.ndarray) -> np.ndarray:
-        index = np.clip(np.floor((points - self.origin) / self.cell).astype(np.int64), 0, self.shape - 1)
+        index = np.clip(self._cell_of(points).astype(np.int64), 0, self.shape - 1)
         return np.ravel_multi_index(index.T, tuple(self.shape))
 
     def _dilate(self) -> None:

@@ -80,12 +80,10 @@ def polish_shader():
     return gpu.shader.create_from_info(info)
 
 
-def mirror_texels(mirror) -> tuple[np.ndarray, np.ndarray]:
-    """(T * 6, 4) the shader's ``mirror`` table, relative to ``mirror_centre`` (corners
-    with the neighbours across the opposite edges, corner normals, the first with the
-    triangle's ``closed_sides``), and the grid's cells four to a texel ((C / 4, 4), -1
-    where empty)."""
-    centre = mirror_centre(mirror)
+def mirror_texels(mirror, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(T * 6, 4) the shader's ``mirror`` table, relative to ``centre`` (corners with the
+    neighbours across the opposite edges, corner normals, the first with the triangle's
+    ``closed_sides``), and the grid's cells four to a texel ((C / 4, 4), -1 where empty)."""
     texels = np.zeros((len(mirror.triangles), 6, 4), np.float32)
     texels[:, :3, :3] = mirror.vertices[mirror.triangles] - centre
     texels[:, :3, 3] = mirror.edge_neighbours
@@ -97,6 +95,7 @@ def mirror_texels(mirror) -> tuple[np.ndarray, np.ndarray]:
 
 
 def mirror_centre(mirror) -> np.ndarray:
+    """The centre of the mirror's box: the shader's positions are relative to it (float32)."""
     lo, hi = mirror.vertices.min(axis=0), mirror.vertices.max(axis=0)
     return 0.5 * (lo + hi)
 
@@ -117,36 +116,40 @@ class GPUImagePolish:
         polished = np.full(images.shape, np.nan)
         if len(rows) == 0:
             return polished
-        centre = mirror_centre(mirror)
-        found = self._dispatch(mirror, np.asarray(eye, dtype=np.float64) - centre,
+        tables = self._tables(mirror)
+        centre = tables[2]
+        found = self._dispatch(tables, np.asarray(eye, dtype=np.float64) - centre,
                                points[rows] - centre, images[rows, slots] - centre)
         placed = found[:, 3] > 0.5
         polished[rows[placed], slots[placed]] = found[placed, :3].astype(np.float64) + centre
         return polished
 
-    def _tables(self, mirror):
-        """The mirror's textures, uploaded on first use; the last ``capacity`` mirrors kept."""
+    def _tables(self, mirror) -> tuple:
+        """(mirror texture, cells texture, centre, the grid's two rows of ``params``) of
+        a mirror, made and uploaded on first use; the last ``capacity`` mirrors kept."""
         from ..gpu_data import data_texture
 
         entry = self._tables_of.pop(id(mirror), None)
         if entry is None or entry[0] is not mirror:
-            texels, cells = mirror_texels(mirror)
-            entry = (mirror, (data_texture(texels), data_texture(cells)))
+            centre = mirror_centre(mirror)
+            texels, cells = mirror_texels(mirror, centre)
+            grid = mirror.triangle_grid
+            grid_rows = [[*(grid.origin - centre), grid.cell], [*grid.shape, 0.0]]
+            entry = (mirror, (data_texture(texels), data_texture(cells), centre, grid_rows))
             while len(self._tables_of) >= self.capacity:
                 self._tables_of.popitem(last=False)
         self._tables_of[id(mirror)] = entry
         return entry[1]
 
-    def _dispatch(self, mirror, eye, points, images) -> np.ndarray:
-        """(R, 4) float32: (reflection point, 1) of each row, else zeros."""
+    def _dispatch(self, tables: tuple, eye, points, images) -> np.ndarray:
+        """(R, 4) float32: (reflection point, 1) of each row, else zeros; positions
+        relative to the centre in ``tables`` (:meth:`_tables`)."""
         import gpu
 
         from ..gpu_data import data_texture, read_texture
 
-        mirror_texture, cells_texture = self._tables(mirror)
-        grid = mirror.triangle_grid
-        params = data_texture(np.array([[*eye, 0.0], [*(grid.origin - mirror_centre(mirror)), grid.cell],
-                                        [*grid.shape, 0.0]]))
+        mirror_texture, cells_texture, _, grid_rows = tables
+        params = data_texture(np.array([[*eye, 0.0], *grid_rows]))
         n_rows = len(points)
         width = min(WORK_WIDTH, n_rows)
         height = -(-n_rows // width)

@@ -17,9 +17,12 @@ do not all see an image (remedy 3) rests on those. Polishing the regular images 
 more than ``GRAZING_COS`` off the normal as well (35 % of them there) took the p99 from
 1.05 to 0.72 px (every regular image: 0.48 px, for three times the work).
 
-The scene's *Polish Node Images* turns this on (``MorphingGrid.mirror``); it is off by
-default: it makes a node's first projection of a point set 2-3x slower in numpy, and
-Render Image's Morphing animation 1.7x slower (docs/benchmarks/morph_animation.md).
+The scene's *Polish Node Images* (``MorphingGrid.mirror``, on by default) turns this
+on. This is the numpy twin, which the engine's own projection (``MorphingGrid.project``)
+and the tests use; it costs 0.2-0.3 s a node, more than the node's projection itself.
+The renderer polishes with its GPU twin (``gpu_shaders/methods/polish_gpu.py``, 5-10 ms
+a node; docs/benchmarks/morphing.md), and the viewport's worker threads leave the polish
+to it (``MorphingGrid.unpolished_images``).
 """
 
 from __future__ import annotations

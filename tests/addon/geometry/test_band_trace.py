@@ -61,6 +61,23 @@ def test_eye_rays_started_near_the_pre_pass_surface_see_what_the_bvh_finds():
                                tracer.trace(view, pixels, 2, world, on_mirrors=True))
 
 
+def test_a_few_eye_rays_on_a_big_mirror_skip_building_its_cell_grid():
+    """The grid costs a pass over every triangle: a handful of rays descend the BVH
+    instead (the same hits), and the grid is built only once the rays make up for it."""
+    reflectors, meshes = _scene()
+    tracer = BandTracer(reflectors, meshes)
+    view = look_at_view((0.5, -4.0, 1.5), (0.0, 0.0, 0.0), fov_y_deg=40.0, width=64, height=48)
+    pixels = np.array([[32.5, 24.5], [30.5, 22.5]])
+    surface = tracer.intersect(*view.pixel_rays(pixels), mirrors_only=True).position
+    world = (0.05, 0.1, 0.2, 1.0)
+    few = tracer.trace(view, pixels, 1, world, on_mirrors=True, surface_points=surface)
+    assert "triangle_grid" not in vars(tracer.mirrors)  # 2 rays, 1,280 triangles
+    np.testing.assert_allclose(few, tracer.trace(view, pixels, 1, world, on_mirrors=True))
+    many = np.repeat(pixels, 70, axis=0)
+    tracer.trace(view, many, 1, world, on_mirrors=True, surface_points=np.repeat(surface, 70, axis=0))
+    assert "triangle_grid" in vars(tracer.mirrors)
+
+
 def test_mirrors_and_diffuse_meshes_traced_apart_hit_as_one_set_would():
     """The tracer keeps the mirrors' set (shared with the caller's when given, so a big
     mirror's tree is built once) and the diffuse meshes' apart; their nearest hits are
