@@ -55,11 +55,11 @@ def _log(text: str) -> None:
 
 def grid_maker(kind: str):
     """``grid_on_demand(local, settings, blend=, nodes=)`` of one kind, as a new scene
-    draws it (the tetrahedral grid's nodes polished: *Polish Node Images*, on by default)."""
+    draws it: *Polish Node Images* on, its default."""
     from curved_reflections.addon.methods.morphing import morphing
     from curved_reflections.addon.methods.octree import octree_grid_on_demand
 
-    return octree_grid_on_demand if kind == "octree" else functools.partial(morphing.grid_on_demand, polish=True)
+    return functools.partial(octree_grid_on_demand if kind == "octree" else morphing.grid_on_demand, polish=True)
 
 
 def scenes(n_points: int, quick: bool):

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..morphing.morph_grid import (NODE_OK, OCTREE, MorphSettings, NodesOnDemand, _StatusOnDemand, bake_reflector,
                                    rigid_frame, to_frame)
-from ..morphing.morphing import MorphingGrid, ViewOutsideGrid, compact_images
+from ..morphing.morphing import MirrorOnDemand, MorphingGrid, ViewOutsideGrid, compact_images
 from ...scene import Reflector
 from .node import build_octree_node
 
@@ -50,12 +50,6 @@ class OctreeGrid(MorphingGrid):
     :class:`...morphing.MorphingGrid` (``project``, ``check_view``, ``node_slots``), which
     the renderer's GPU pass and the operators use for both kinds of grid."""
 
-    #: Images match within MATCH_FRACTION alone: a cube's eight nodes leave a node whose
-    #: image moved farther out of the blend, and the surface fitted to the other seven is
-    #: the more accurate (bench_octree.py, demo ball: p99 1.0 px; 3.5 px with the
-    #: tetrahedral grid's slope, for 3 % more reflections answered).
-    match_slope = 0.0
-
     def locate_view(self, eye_world, matrix):
         """Cell, its eight nodes and the eye's trilinear weights; ViewOutsideGrid where unusable."""
         frame = rigid_frame(matrix)
@@ -79,21 +73,36 @@ class OctreeGrid(MorphingGrid):
         images = self.nodes[node].octree.images(points, IMAGES)
         return compact_images(images, self._duplicate_tolerance(node, images))
 
+    def _polished_regular(self, node: int, points: np.ndarray, images: np.ndarray, polish=None):
+        """A ray octree's regular images are traced (its refinement stops within
+        ``ray_octree.CONVERGED`` of the law): the polish has nothing to move."""
+        return images
+
     def _widened_images(self, node: int, points: np.ndarray, regular: np.ndarray):
-        """A ray octree has no leaf charts to widen (the tetrahedral grid's remedy 2)."""
-        return np.full((len(points), 0, 3), np.nan)
+        """Remedy 2 of a ray octree, which has no leaf charts to widen: where a point has
+        no image at this node, the mirror point of its nearest ray
+        (``RayOctree.near_misses``), for :meth:`_polished_extended` to place on the mirror
+        (*Polish Node Images*); none where the grid has no mirror to polish on."""
+        if self.mirror is None:
+            return np.full((len(points), 0, 3), np.nan)
+        missing = ~np.isfinite(regular[..., 0]).any(axis=1)
+        images = np.full((len(points), 1, 3), np.nan)
+        images[missing, 0] = self.nodes[node].octree.near_misses(points[missing])
+        return images
 
 
 def octree_grid_on_demand(reflector: Reflector, settings: MorphSettings, reflector_index: int = 0,
-                          blend: str = "surface", nodes: NodesOnDemand | None = None) -> OctreeGrid:
+                          blend: str = "surface", nodes: NodesOnDemand | None = None,
+                          polish: bool = False) -> OctreeGrid:
     """An :class:`OctreeGrid` of ``reflector`` (in its rigid frame) whose nodes are built
-    when a view first needs them (tests, benchmarks, trying a reflector); ``blend`` and
-    ``nodes`` as for ``morphing.grid_on_demand``."""
+    when a view first needs them (tests, benchmarks, trying a reflector); ``blend``,
+    ``nodes`` and ``polish`` as for ``morphing.grid_on_demand``."""
     settings = dataclasses.replace(settings, kind=OCTREE)
     reflector_set, grid, bounds = bake_reflector(reflector, settings)
     if nodes is None:
         nodes = NodesOnDemand(reflector_set, grid.node_positions(), bounds, settings, build=build_octree_node)
     lo, hi = reflector.bounds
     return OctreeGrid(reflector.name, reflector_index, grid, settings, _StatusOnDemand(nodes), nodes,
-                      float(np.max(hi - lo)), blend=blend)
+                      float(np.max(hi - lo)), blend=blend,
+                      mirror=MirrorOnDemand(reflector, settings, reflector_set) if polish else None)
 

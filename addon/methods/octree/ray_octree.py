@@ -137,8 +137,33 @@ class RayOctree:
         return np.concatenate([self._images(points[k:k + CHUNK_POINTS], count)
                                for k in range(0, len(points), CHUNK_POINTS)] or [np.zeros((0, count, 3))])
 
+    def near_misses(self, points: np.ndarray) -> np.ndarray:
+        """(P, 3) the first reflector point of each point's nearest ray (its first seed),
+        NaN where it has none: for points without an image (:meth:`images`), mostly
+        reflected between the ray map's last rays and the mirror's silhouette, beyond the
+        refinement's extrapolation (EXTRAPOLATE_CELLS), where a polish on the mirror
+        starts (:mod:`.grid`'s remedy 2)."""
+        points = np.asarray(points, dtype=np.float64)
+        found = np.full((len(points), 3), np.nan)
+        for k in range(0, len(points), CHUNK_POINTS):
+            owner, ray, _ = self._seed_rays(points[k:k + CHUNK_POINTS], 1)
+            found[k + owner] = self.origins[ray]
+        return found
+
     def _images(self, points: np.ndarray, count: int) -> np.ndarray:
         found = np.full((len(points), count, 3), np.nan)
+        seed_owner, seed_ray, slot = self._seed_rays(points, count)
+        x, ok = self._refine(points[seed_owner], seed_ray)
+        found[seed_owner[ok], slot[ok]] = x[ok]
+        for k in range(1, count):  # two seeds that refined to the same image
+            same = np.linalg.norm(found[:, :k] - found[:, k:k + 1], axis=2) <= SAME_IMAGE * self.reflector_size
+            found[same.any(axis=1), k] = np.nan
+        order = np.argsort(np.isnan(found[..., 0]), axis=1, kind="stable")  # images first
+        return np.take_along_axis(found, order[..., None], axis=1)
+
+    def _seed_rays(self, points: np.ndarray, count: int):
+        """Up to ``count`` seed rays per point (:meth:`_seeds`) among its leaf's candidates:
+        (point, ray, slot) rows."""
         owner, ray = self._candidates(points, np.broadcast_to(self.centre, points.shape))
         beyond = self.beyond(points)
         if beyond[owner].any():
@@ -148,15 +173,9 @@ class RayOctree:
             again_owner, again_ray = self._candidates(points[first_owner], self.origins[first_ray])
             owner, ray = np.r_[owner, first_owner[again_owner]], np.r_[ray, again_ray]
         if len(owner) == 0:
-            return found
-        seed_owner, seed_ray, slot = self._seeds(points, owner, ray, count)
-        x, ok = self._refine(points[seed_owner], seed_ray)
-        found[seed_owner[ok], slot[ok]] = x[ok]
-        for k in range(1, count):  # two seeds that refined to the same image
-            same = np.linalg.norm(found[:, :k] - found[:, k:k + 1], axis=2) <= SAME_IMAGE * self.reflector_size
-            found[same.any(axis=1), k] = np.nan
-        order = np.argsort(np.isnan(found[..., 0]), axis=1, kind="stable")  # images first
-        return np.take_along_axis(found, order[..., None], axis=1)
+            empty = np.zeros(0, np.int64)
+            return empty, empty, empty
+        return self._seeds(points, owner, ray, count)
 
     def _candidates(self, points: np.ndarray, targets: np.ndarray):
         """(point, ray) rows: every ray listed in the finest occupied leaf of every point
