@@ -343,7 +343,7 @@ class MorphPass(FramePass):
             shader.uniform_int("positions_width", self.meshes.width)
             if self._active[k] > 1 or widened:  # slot 0 alone needs no row offset: compiled out
                 shader.uniform_int("slot_rows", self.meshes.height)
-            shader.uniform_float("match_slope", grid.match_slope)
+            shader.uniform_float("match_slope", morphing.MATCH_SLOPE)
             shader.uniform_sampler("vertex_positions", self.meshes.positions)
             for n, texture in enumerate(textures):
                 shader.uniform_sampler(f"node{n}", texture)

@@ -33,7 +33,7 @@ Ambiguous points (section VI, Fig. 15): seen by some of the four nodes, not by o
    grazing angle are polished too.
 
 Images are matched across nodes by mutually nearest first reflector point (within
-``MATCH_FRACTION`` of the reflector's size plus ``MorphingGrid.match_slope`` times the
+``MATCH_FRACTION`` of the reflector's size plus ``MATCH_SLOPE`` times the
 nodes' distance) to the image of the heaviest node that has one. A node still without a
 matching image is left out and the others' weights are renormalised if they hold at
 least ``PARTIAL_WEIGHT`` of the total; below that the image is dropped (its triangles
@@ -66,7 +66,7 @@ EXTENDED_CHART = 1.25
 #: demo ball 26,652 -> 27,034, held-out ellipsoid 24,880 -> 25,607 (2.0 gave nearly as many).
 POLISHED_CHART = 4.0
 #: Images of one point at two nodes match when their reflector points are this close
-#: (fraction of the reflector's size), plus ``MorphingGrid.match_slope`` times the
+#: (fraction of the reflector's size), plus ``MATCH_SLOPE`` times the
 #: distance between the two nodes, and each is the other's nearest (:func:`_match`).
 MATCH_FRACTION = 0.2
 #: A reflection point moves by up to about half the eye's move on a convex mirror seen
@@ -98,17 +98,20 @@ class ViewOutsideGrid(Exception):
 
 
 def grid_on_demand(reflector: Reflector, settings: MorphSettings, reflector_index: int = 0,
-                   blend: str = "surface", nodes: NodesOnDemand | None = None, polish: bool = False) -> MorphingGrid:
+                   blend: str = "surface", nodes: NodesOnDemand | None = None, polish: bool = False,
+                   grid_class: type | None = None, build=None) -> MorphingGrid:
     """A MorphingGrid of ``reflector`` (in its rigid frame) whose nodes are built when a
     view first needs them (:class:`NodesOnDemand`; pass ``nodes`` to share them between
-    grids); ``polish``: the nodes' grazing and extended images are polished on the mirror."""
+    grids); ``polish``: the nodes' grazing and extended images are polished on the mirror.
+    ``grid_class`` and ``build`` (a node's builder) serve another kind of grid
+    (``methods/octree``); by default the tetrahedral grid's."""
     reflector_set, grid, bounds = bake_reflector(reflector, settings)
     if nodes is None:
-        nodes = NodesOnDemand(reflector_set, grid.node_positions(), bounds, settings)
+        nodes = NodesOnDemand(reflector_set, grid.node_positions(), bounds, settings, build=build)
     lo, hi = reflector.bounds
-    return MorphingGrid(reflector.name, reflector_index, grid, settings, _StatusOnDemand(nodes), nodes,
-                        float(np.max(hi - lo)), blend=blend,
-                        mirror=MirrorOnDemand(reflector, settings, reflector_set) if polish else None)
+    return (grid_class or MorphingGrid)(reflector.name, reflector_index, grid, settings, _StatusOnDemand(nodes),
+                                        nodes, float(np.max(hi - lo)), blend=blend,
+                                        mirror=MirrorOnDemand(reflector, settings, reflector_set) if polish else None)
 
 
 class MirrorOnDemand:
@@ -186,7 +189,6 @@ class MorphingGrid:
     _static: dict = field(default_factory=dict, repr=False)
     #: Images of one point at two nodes match within MATCH_FRACTION of the mirror plus
     #: this times the nodes' distance (a class attribute, not a field).
-    match_slope = MATCH_SLOPE
 
     def __post_init__(self):
         if self.blend not in ("surface", "linear"):
@@ -360,7 +362,7 @@ class MorphingGrid:
         how = np.zeros((len(nodes), len(points), k_max), np.int8)
         for n in range(len(nodes)):
             threshold = (MATCH_FRACTION * self.reflector_size
-                         + self.match_slope * np.linalg.norm(eyes[n] - eyes[reference_node], axis=1))[:, None]
+                         + MATCH_SLOPE * np.linalg.norm(eyes[n] - eyes[reference_node], axis=1))[:, None]
             found = _match(reference, images[n], threshold)
             missing = np.isfinite(reference[..., 0]) & ~np.isfinite(found[..., 0])
             rows = np.flatnonzero(missing.any(axis=1))

@@ -18,9 +18,8 @@ import dataclasses
 
 import numpy as np
 
-from ..morphing.morph_grid import (NODE_OK, OCTREE, MorphSettings, NodesOnDemand, _StatusOnDemand, bake_reflector,
-                                   rigid_frame, to_frame)
-from ..morphing.morphing import MirrorOnDemand, MorphingGrid, ViewOutsideGrid, compact_images
+from ..morphing.morph_grid import NODE_OK, OCTREE, MorphSettings, NodesOnDemand, rigid_frame, to_frame
+from ..morphing.morphing import MorphingGrid, ViewOutsideGrid, compact_images, grid_on_demand
 from ...scene import Reflector
 from .node import build_octree_node
 
@@ -97,12 +96,5 @@ def octree_grid_on_demand(reflector: Reflector, settings: MorphSettings, reflect
     """An :class:`OctreeGrid` of ``reflector`` (in its rigid frame) whose nodes are built
     when a view first needs them (tests, benchmarks, trying a reflector); ``blend``,
     ``nodes`` and ``polish`` as for ``morphing.grid_on_demand``."""
-    settings = dataclasses.replace(settings, kind=OCTREE)
-    reflector_set, grid, bounds = bake_reflector(reflector, settings)
-    if nodes is None:
-        nodes = NodesOnDemand(reflector_set, grid.node_positions(), bounds, settings, build=build_octree_node)
-    lo, hi = reflector.bounds
-    return OctreeGrid(reflector.name, reflector_index, grid, settings, _StatusOnDemand(nodes), nodes,
-                      float(np.max(hi - lo)), blend=blend,
-                      mirror=MirrorOnDemand(reflector, settings, reflector_set) if polish else None)
-
+    return grid_on_demand(reflector, dataclasses.replace(settings, kind=OCTREE), reflector_index, blend=blend,
+                          nodes=nodes, polish=polish, grid_class=OctreeGrid, build=build_octree_node)
