@@ -217,3 +217,20 @@ def turned_away(vertices: np.ndarray, corners: np.ndarray, winding: np.ndarray, 
 
 def _angle(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.arctan2(lengths(cross(u, v)), dot(u, v))
+
+
+def reflects_outside(mirror, triangles: np.ndarray, roots: np.ndarray, normals: np.ndarray, eye: np.ndarray,
+                     points: np.ndarray) -> np.ndarray:
+    """(R,) bool: a root of the law of reflection (on ``mirror``'s ``triangles``, with
+    its interpolated normal) is a reflection: the eye (a point toward it) and the point
+    lie on one side of the surface there, and on the outer side of the root's triangle
+    where its mirror closes a solid (``ReflectorSet.closed_sides``; any side where it
+    closes none). At a silhouette the half vector can meet the interpolated normal with
+    the eye just behind the surface (a grazing ray, no image); a root on a closed
+    mirror's far side satisfies the law for the surface seen from inside, a path that
+    runs through the mirror (an image past a node's horizon, Newton carried round the rim)."""
+    one_side = dot(normals, eye - roots) * dot(normals, points - roots) > 0
+    sides = mirror.closed_sides[triangles]
+    face = mirror.face_normals[triangles]
+    outside = (sides == 0) | ((sides * dot(face, eye - roots) > 0) & (sides * dot(face, points - roots) > 0))
+    return one_side & outside

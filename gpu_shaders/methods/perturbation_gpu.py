@@ -21,7 +21,7 @@ import functools
 
 import numpy as np
 
-from ...addon.methods.perturbation import candidates, projector
+from ...addon.methods.perturbation import answers, candidates, projector
 from ..reflected_meshes import FOUND_CODE
 from ..shader_sources import glsl_source
 
@@ -47,7 +47,7 @@ def step_defines() -> dict:
             "BEHIND_START": f"{p.BEHIND_START:.9e}", "GRAZING_COSINE": f"{p.GRAZING_COSINE:.9e}",
             "MODEL_SAFETY": f"{p.MODEL_SAFETY:.9e}",
             "REFINE_ROUNDS": p.REFINE_ROUNDS, "MAX_MISSES": p.MAX_MISSES,
-            "SAME_IMAGE_PX": f"{p.SAME_IMAGE_PX:.9e}", "FOUND_CODE": f"{float(FOUND_CODE):.1f}"}
+            "SAME_IMAGE_PX": f"{answers.SAME_IMAGE_PX:.9e}", "FOUND_CODE": f"{float(FOUND_CODE):.1f}"}
 
 
 @functools.cache

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...geometry.closed_surfaces import reflects_outside
 from ...geometry.raytrace import ReflectorSet
 from ...geometry.vectors import unit
 from .morph_surface import law_normals
@@ -95,10 +96,7 @@ def polish_images(mirror: ReflectorSet, eye: np.ndarray, points: np.ndarray, ima
                                                iterations=POLISH_ITERATIONS)
         root, normal = mirror.surface(triangle, np.column_stack([1.0 - uv.sum(axis=1), uv]))
         inside = converged & (uv.min(axis=1) >= -INSIDE_TOLERANCE) & (uv.sum(axis=1) <= 1 + INSIDE_TOLERANCE)
-        # Both ends on one side of the surface: at a silhouette the half vector can meet
-        # the interpolated normal with the eye just behind it (a grazing ray, no image).
-        seen = np.einsum("rd,rd->r", normal, eye - root) * np.einsum("rd,rd->r", normal, points[rows[pending]] - root)
-        placed = inside & (seen > 0) & outside_closed_mirror(mirror, triangle, root, eye, points[rows[pending]])
+        placed = inside & reflects_outside(mirror, triangle, root, normal, eye, points[rows[pending]])
         polished[rows[pending[placed]], slots[pending[placed]]] = root[placed]
         target[pending] = root
         # Newton gives up on a root far outside its triangle, where it left it heading.
@@ -106,18 +104,6 @@ def polish_images(mirror: ReflectorSet, eye: np.ndarray, points: np.ndarray, ima
         if len(pending) == 0:
             break
     return polished
-
-
-def outside_closed_mirror(mirror: ReflectorSet, triangles, roots, eye, points) -> np.ndarray:
-    """(R,) bool: the eye and the point lie on the outer side of each root's triangle
-    where its mirror closes a solid (``ReflectorSet.closed_sides``), anywhere where it
-    closes none. A root on a closed mirror's far side satisfies the law of reflection
-    for the surface seen from inside: the path runs through the mirror, and the root is
-    no image (an image past the node's horizon, Newton carried round the rim)."""
-    sides = mirror.closed_sides[triangles]
-    face = mirror.face_normals[triangles]
-    return (sides == 0) | ((sides * np.einsum("rd,rd->r", face, eye - roots) > 0)
-                           & (sides * np.einsum("rd,rd->r", face, points - roots) > 0))
 
 
 def _triangles_under(mirror: ReflectorSet, eye, points, targets, near):

@@ -13,8 +13,8 @@ Per view (section III):
    COARSE_CONVEX-th on a convex mirror) are the point's candidate images; each then
    *hops*: a first-order step from its seed predicts the pixel, and the seed there
    (else the last one on the way) is taken, until the seed stays. Along a non-convex
-   mirror's silhouette, where its images crowd, seeds at every pixel of a band are
-   searched as well (``rim.py``).
+   mirror's silhouette, where its images crowd, seeds at every second pixel of a band
+   are searched as well (``rim.py``).
 3. *Perturbation*: from the point p on the seed's outgoing ray closest to the vertex
    p', the path Jacobian and Hessian give the reflector points of the path to p'
    (eq. 4, ``path_derivatives.py``; orders 2 and more in one system).
@@ -28,6 +28,10 @@ Per view (section III):
    from it (up to REFINE_ROUNDS times). An answer still above the bound, or whose
    pixel falls outside the seeds' footprint of its history (an image beyond the
    mirror's silhouette), is not given: never drawn at a wrong place.
+6. *Newton on the mesh*: on a mirror that bends both ways, the candidates whose series
+   did not converge (dropped in 4, refused in 5) start Newton's method on the law of
+   reflection in their seed's triangle (``mesh_polish.py``); a root the eye and the
+   point both see is an exact answer (:meth:`PerturbationMethod._polished`).
 """
 
 from __future__ import annotations
@@ -41,7 +45,9 @@ from ...projection import NOT_PROJECTED, PERTURBATION_ANSWER, Projection
 from ...geometry.raytrace import ReflectorSet
 from ...geometry.vectors import dot, normalized
 from ...view import View
-from .candidates import MAX_IMAGES, candidate_images
+from .answers import ranked, repeats
+from .candidates import candidate_images
+from .mesh_polish import walk_to_roots
 from .path_derivatives import perturb
 from .rim import RimBand
 from .seeds import SeedPaths, seed_paths_to, seed_quadrics, trace_seed_paths
@@ -80,8 +86,9 @@ NEIGHBOUR_CELLS = ((-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (1, 1), (1, -1), 
 #: On such a mirror an answer is given when the step from a seed traced through its own
 #: pixel moves it by at most this (px) (``PerturbationMethod._confirm``; adaptive seeds only).
 CONFIRM_PX = 1.0
-#: Two answers of one point and history closer than this (px) are one image.
-SAME_IMAGE_PX = 1.0
+#: A root found on the mesh (``_polished``) is seen where the eye's ray through its pixel
+#: meets the mirror within this share of the mirrors' size of it.
+SAME_POINT = 1e-6
 #: The longest step trusted, against the distance from the seed's last bounce (radians).
 MAX_RELATIVE_STEP = 0.3
 #: Reflections more grazing than this (cosine to the normal) are not drawn
@@ -118,6 +125,8 @@ class PerturbationStats:
     grid_seeds: int = 0
     adaptive_seeds: int = 0
     refused: int = 0
+    #: Answers found by Newton's method on the mesh where the series did not converge.
+    polished: int = 0
     per_history: dict = field(default_factory=dict)
 
 
@@ -178,7 +187,7 @@ class PerturbationMethod:
             band = self.rim_band(view, group) if self.settings.adaptive_seeds and group.coarse == COARSE else None
             if band is not None:
                 answers = tuple(np.concatenate(pair) for pair in zip(answers, self._answer_group(view, band, points)))
-            answers = _ranked(len(points), *answers)
+            answers = ranked(len(points), *answers)
             self.stats.per_history[group.history] = int(sum(np.isfinite(a[:, 0]).sum() for a in answers[0]))
             for rank in range(len(answers[0])):
                 histories.append(group.history)
@@ -230,15 +239,15 @@ class PerturbationMethod:
         return group
 
     def rim_band(self, view: View, group: SeedGroup) -> SeedGroup | None:
-        """The seeds of ``group``'s history at every pixel of its rim band (``rim.py``),
-        scanned at each seed; None when the band has none."""
+        """The seeds of ``group``'s history at every second pixel of its rim band
+        (``rim.py``), scanned at each seed; None when the band has none."""
         rim = RimBand.around(group.grid, group.origin, group.stride)
         pixels = rim.pixels(view.width, view.height)
         traced = self._traced_in(view, group.history, pixels)
         self.stats.grid_seeds += len(pixels)
         if len(traced.pixels) == 0:
             return None
-        band = self._group(group.history, traced, 1)
+        band = self._group(group.history, traced, rim.step)
         inner = np.zeros(band.grid.shape, dtype=bool)
         cell = _cells(band, band.seeds.pixels)
         inner[cell[:, 1], cell[:, 0]] = rim.touches_interior(band.seeds.pixels)
@@ -305,6 +314,7 @@ class PerturbationMethod:
         shortest = far[np.r_[True, point_of[far][1:] != point_of[far][:-1]]] if len(far) else far
         keep = local.copy()
         keep[shortest] = True
+        dropped = point_of[~keep], seed_of[~keep]
         point_of, seed_of, model_error = point_of[keep], seed_of[keep], model_error[keep]
         first, last, estimate, pixel = first[keep], last[keep], estimate[keep], pixel[keep]
         ok = np.ones(len(point_of), dtype=bool)
@@ -316,7 +326,12 @@ class PerturbationMethod:
         ok &= (estimate <= max(self.settings.accuracy_px, 1e-9)) & _in_footprint(group, pixel) \
             & view.in_view(np.nan_to_num(first))
         self.stats.refused += int((~ok).sum())
-        return point_of[ok], first[ok], last[ok], pixel[ok]
+        answers = point_of[ok], first[ok], last[ok], pixel[ok]
+        if crowded and len(group.history) == 1 and group.history[0] not in self.analytic:
+            polished = self._polished(view, group, points, np.concatenate([point_of[~ok], dropped[0]]),
+                                      np.concatenate([seed_of[~ok], dropped[1]]), answers)
+            answers = tuple(np.concatenate(pair) for pair in zip(answers, polished))
+        return answers
 
     def _refine(self, view, group: SeedGroup, targets, seed_pixel, model_error, answer) -> None:
         """Adaptive seeds (in place on ``answer``: first, last, estimate, pixel): where the
@@ -372,6 +387,30 @@ class PerturbationMethod:
         first[rows], last[rows], estimate[rows], pixel[rows] = f[good], l[good], e[good], p[good]
         confirmed[rows] = True
         return confirmed
+
+    def _polished(self, view, group: SeedGroup, points, point_of, seed_of, answers):
+        """Answers of the candidates whose series did not converge (``point_of``,
+        ``seed_of``: dropped and refused), by Newton's method on the mesh from their
+        seeds (``mesh_polish``), as ``_answer_group``'s; the images ``answers`` (its own
+        so far) give are not traced again (:func:`answers.repeats`). A root is kept where
+        the eye's ray through its pixel meets the mirror there first, with the group's
+        history, and its reflected ray reaches the point before any reflector (it is then
+        a visible exact reflection), inside the history's footprint and the view."""
+        seeds = group.seeds
+        roots = walk_to_roots(self.reflector_set, view, points, point_of, seeds.triangles[seed_of, 0],
+                              seeds.barycentric[seed_of, 0, 1:])
+        rows = np.flatnonzero(np.isfinite(roots[:, 0]))
+        pixel = view.to_pixels(roots[rows])[0]
+        new = ~repeats(np.concatenate([answers[0], point_of[rows]]), np.concatenate([answers[3], pixel]),
+                       np.arange(len(answers[0]) + len(rows)))[len(answers[0]):]
+        rows, pixel = rows[new], pixel[new]
+        traced = self._traced_in(view, group.history, pixel)
+        rows, pixel = rows[traced.ray], pixel[traced.ray]
+        root, target = roots[rows], points[point_of[rows]]
+        seen = (np.linalg.norm(traced.points[:, 0] - root, axis=1) <= SAME_POINT * self.reflector_set.scale) \
+            & (traced.head >= np.linalg.norm(target - root, axis=1)) & _in_footprint(group, pixel) & view.in_view(root)
+        self.stats.polished += int(seen.sum())
+        return point_of[rows[seen]], root[seen], root[seen], pixel[seen]
 
     def _hop(self, view, group, points, point_of, seed_of):
         """Move each candidate to the grid seed at its predicted pixel, until it stays.
@@ -565,28 +604,6 @@ def _in_footprint(group: SeedGroup, pixel) -> np.ndarray:
     """(K,) bool: a grid seed of the history lies within one cell of the pixel."""
     cell = _cells(group, np.nan_to_num(pixel, nan=-1e9))
     return np.any([_grid_at(group.grid, cell + (dj, di)) >= 0 for di in (-1, 0, 1) for dj in (-1, 0, 1)], axis=0)
-
-
-def _ranked(n_points, point_of, first, last, pixel):
-    """Answers per image rank: ([first (P, 3)] * ranks, [last (P, 3)] * ranks); one point's
-    answers closer than SAME_IMAGE_PX are one image."""
-    order = np.lexsort((pixel[:, 1], pixel[:, 0], point_of))
-    point_of, first, last, pixel = point_of[order], first[order], last[order], pixel[order]
-    keep = np.ones(len(point_of), dtype=bool)
-    for lag in range(1, MAX_IMAGES):
-        same = (point_of[lag:] == point_of[:-lag]) \
-            & (np.linalg.norm(pixel[lag:] - pixel[:-lag], axis=1) < SAME_IMAGE_PX)
-        keep[lag:] &= ~same
-    point_of, first, last = point_of[keep], first[keep], last[keep]
-    rank = np.arange(len(point_of)) - np.searchsorted(point_of, point_of)
-    firsts, lasts = [], []
-    for r in range(int(rank.max()) + 1 if len(rank) else 0):
-        f, l = np.full((n_points, 3), np.nan), np.full((n_points, 3), np.nan)
-        on = rank == r
-        f[point_of[on]], l[point_of[on]] = first[on], last[on]
-        firsts.append(f)
-        lasts.append(l)
-    return firsts, lasts
 
 
 def _as_projection(view, points, histories, rows) -> Projection:
