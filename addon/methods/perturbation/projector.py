@@ -83,6 +83,11 @@ MAX_MISSES = 8
 #: scans the grid alone), a candidate is also stepped from the grid seeds in these cells
 #: around its own (``_with_neighbours``).
 NEIGHBOUR_CELLS = ((-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (1, 1), (1, -1), (-1, 1))
+#: ... and the grid seeds in the ring around those (two cells from the candidate's) start
+#: Newton's method on the mesh (``_polished``): of the images still missed on a tuning
+#: mirror's view, 20 of 24 were found walking from a seed within 2.5 cells. Tuning mirrors,
+#: two views each: 99.2 / 99.6 / 99.7 / 98.8 -> 99.3 / 99.7 / 99.8 / 99.5 %, 5 -> 6 s a view.
+POLISH_RING_CELLS = tuple((a, b) for a in range(-2, 3) for b in range(-2, 3) if max(abs(a), abs(b)) == 2)
 #: On such a mirror an answer is given when the step from a seed traced through its own
 #: pixel moves it by at most this (px) (``PerturbationMethod._confirm``; adaptive seeds only).
 CONFIRM_PX = 1.0
@@ -295,7 +300,11 @@ class PerturbationMethod:
         point_of, seed_of = candidate_images(group, points)
         seed_of = self._hop(view, group, points, point_of, seed_of)
         crowded = self.settings.adaptive_seeds and group.coarse != COARSE_CONVEX  # the numpy path, bending both ways
+        ring = point_of[:0], seed_of[:0]
         if crowded:
+            several = np.bincount(point_of)[point_of] > 1
+            if group.inner is None:  # the grid's seeds (the rim band's lie RIM_STEP px apart)
+                ring = _around(group, point_of[several], seed_of[several], POLISH_RING_CELLS)
             point_of, seed_of = _with_neighbours(group, point_of, seed_of)
         # Candidates that hopped onto one seed are one image.
         _, first_of = np.unique(point_of * len(group.seeds.pixels) + seed_of, return_index=True)
@@ -328,8 +337,8 @@ class PerturbationMethod:
         self.stats.refused += int((~ok).sum())
         answers = point_of[ok], first[ok], last[ok], pixel[ok]
         if crowded and len(group.history) == 1 and group.history[0] not in self.analytic:
-            polished = self._polished(view, group, points, np.concatenate([point_of[~ok], dropped[0]]),
-                                      np.concatenate([seed_of[~ok], dropped[1]]), answers)
+            polished = self._polished(view, group, points, np.concatenate([point_of[~ok], dropped[0], ring[0]]),
+                                      np.concatenate([seed_of[~ok], dropped[1], ring[1]]), answers)
             answers = tuple(np.concatenate(pair) for pair in zip(answers, polished))
         return answers
 
@@ -577,12 +586,18 @@ def _with_neighbours(group: SeedGroup, point_of, seed_of):
     (its hops and steps reach one of them), and the step from a seed beside it reaches
     the other. A point with one candidate has one image there."""
     crowded = np.flatnonzero(np.bincount(point_of)[point_of] > 1)
-    cell = _cells(group, group.seeds.pixels[seed_of[crowded]])
-    points, seeds = [point_of], [seed_of]
-    for offset in NEIGHBOUR_CELLS:
-        beside = _grid_at(group.grid, cell + np.array(offset))
-        points.append(point_of[crowded[beside >= 0]])
-        seeds.append(beside[beside >= 0])
+    beside = _around(group, point_of[crowded], seed_of[crowded], NEIGHBOUR_CELLS)
+    return np.concatenate([point_of, beside[0]]), np.concatenate([seed_of, beside[1]])
+
+
+def _around(group: SeedGroup, point_of, seed_of, offsets):
+    """(point_of, seed_of) of the grid seeds at ``offsets`` (cells) from each candidate's seed."""
+    cell = _cells(group, group.seeds.pixels[seed_of])
+    points, seeds = [point_of[:0]], [seed_of[:0]]
+    for offset in offsets:
+        at = _grid_at(group.grid, cell + np.array(offset))
+        points.append(point_of[at >= 0])
+        seeds.append(at[at >= 0])
     return np.concatenate(points), np.concatenate(seeds)
 
 
