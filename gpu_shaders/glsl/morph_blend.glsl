@@ -10,7 +10,7 @@
  * regular images, then SLOTS images of the widened leaf charts, in the grid's rigid
  * frame). Per frame:
  *   1. the reference images are those of the heaviest node that has any; every node's
- *      image nearest to each reference image within `match_distance` plus `match_slope`
+ *      image nearest to each reference image within `match_distance` plus MATCH_SLOPE
  *      times the two nodes' distance, and mutually nearest, is its match, from its
  *      widened charts where its regular images have none (remedy 2);
  *   2. the matches are blended with the eye's barycentric or trilinear weights, the
@@ -32,8 +32,8 @@
  * code of a branch or a loop iteration whether or not any invocation takes it, so loops
  * over slots that no node fills cost as much as filled ones (a convex mirror's nodes
  * fill one of three: the blend took 1.5x as long).
- * Push constants: n_vertices, positions_width, slot_rows (rows of one slot in a node
- * texture) and match_slope (MorphingGrid.match_slope). The view's parameters, in the uniform block `frame` (struct MorphFrame,
+ * Push constants: n_vertices, positions_width and slot_rows (rows of one slot in a node
+ * texture). The view's parameters, in the uniform block `frame` (struct MorphFrame,
  * gpu_shaders/methods/morph_pass.py): frame_from_shifted and shifted_from_frame (the grid's rigid
  * frame and the renderer's shift), view_projection (of shifted points), the eye in the
  * frame and match_distance, per node its position in the frame and weight (`nodes`), and
@@ -183,7 +183,7 @@ void main()
       vec3 blended = vec3(0.0);
       for (int n = 0; n < NODES; n++) {
         float threshold = frame.eye_match.w
-                          + match_slope * distance(frame.nodes[n].xyz, frame.nodes[reference].xyz);
+                          + MATCH_SLOPE * distance(frame.nodes[n].xyz, frame.nodes[reference].xyz);
         vec4 found = match_node(n, images[n], texel, own.xyz, threshold, images[reference],
                                 int(frame.node_slots[reference].x));
         matched[n] = found.xyz;

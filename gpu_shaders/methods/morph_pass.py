@@ -78,7 +78,7 @@ def blend_defines(n_nodes: int = 4, regular: int = SLOTS, widened: int = SLOTS) 
     whose nodes fill at most ``regular`` and ``widened`` image slots."""
     m = morph_surface
     return {"SLOTS": SLOTS, "REGULAR_SLOTS": regular, "WIDENED_SLOTS": widened, "NODES": n_nodes,
-            "PARTIAL_WEIGHT": f"{morphing.PARTIAL_WEIGHT:.9e}",
+            "PARTIAL_WEIGHT": f"{morphing.PARTIAL_WEIGHT:.9e}", "MATCH_SLOPE": f"{morphing.MATCH_SLOPE:.9e}",
             "SURFACE_NORMAL_MIN": f"{m.SURFACE_NORMAL_MIN:.9e}", "MIN_SURFACE_NODES": m.MIN_SURFACE_NODES,
             "SURFACE_ITERATIONS": m.SURFACE_ITERATIONS, "SURFACE_REACH": f"{m.SURFACE_REACH:.9e}",
             "SURFACE_RESIDUAL": f"{SURFACE_RESIDUAL:.9e}", "SURFACE_SETTLED": f"{SURFACE_SETTLED:.9e}",
@@ -98,7 +98,6 @@ def blend_shader(n_nodes: int = 4, regular: int = SLOTS, widened: int = SLOTS):
     info.push_constant('INT', "n_vertices")
     info.push_constant('INT', "positions_width")
     info.push_constant('INT', "slot_rows")
-    info.push_constant('FLOAT', "match_slope")
     info.typedef_source(FRAME_STRUCT.replace("NODES", str(n_nodes)))
     info.uniform_buf(0, "MorphFrame", "frame")
     info.sampler(0, 'FLOAT_2D', "vertex_positions")
@@ -343,7 +342,6 @@ class MorphPass(FramePass):
             shader.uniform_int("positions_width", self.meshes.width)
             if self._active[k] > 1 or widened:  # slot 0 alone needs no row offset: compiled out
                 shader.uniform_int("slot_rows", self.meshes.height)
-            shader.uniform_float("match_slope", morphing.MATCH_SLOPE)
             shader.uniform_sampler("vertex_positions", self.meshes.positions)
             for n, texture in enumerate(textures):
                 shader.uniform_sampler(f"node{n}", texture)

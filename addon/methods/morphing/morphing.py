@@ -187,8 +187,6 @@ class MorphingGrid:
     #: (``gpu_shaders/methods/polish_gpu.GPUImagePolish``).
     image_polish: object = field(default=None, repr=False, compare=False)
     _static: dict = field(default_factory=dict, repr=False)
-    #: Images of one point at two nodes match within MATCH_FRACTION of the mirror plus
-    #: this times the nodes' distance (a class attribute, not a field).
 
     def __post_init__(self):
         if self.blend not in ("surface", "linear"):

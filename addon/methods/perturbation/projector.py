@@ -81,7 +81,7 @@ REFINE_ROUNDS = 12
 MAX_MISSES = 8
 #: On a mirror that bends both ways, with adaptive seeds (the numpy path; the GPU twin
 #: scans the grid alone), a candidate is also stepped from the grid seeds in these cells
-#: around its own (``_with_neighbours``).
+#: around its own (``_answer_group``).
 NEIGHBOUR_CELLS = ((-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (1, 1), (1, -1), (-1, 1))
 #: ... and the grid seeds in the ring around those (two cells from the candidate's) start
 #: Newton's method on the mesh (``_polished``): of the images still missed on a tuning
@@ -302,10 +302,14 @@ class PerturbationMethod:
         crowded = self.settings.adaptive_seeds and group.coarse != COARSE_CONVEX  # the numpy path, bending both ways
         ring = point_of[:0], seed_of[:0]
         if crowded:
+            # A point with one candidate has one image there; two images a few pixels apart
+            # can share one candidate (its hops and steps reach one of them), and the step
+            # from a seed beside it reaches the other.
             several = np.bincount(point_of)[point_of] > 1
             if group.inner is None:  # the grid's seeds (the rim band's lie RIM_STEP px apart)
                 ring = _around(group, point_of[several], seed_of[several], POLISH_RING_CELLS)
-            point_of, seed_of = _with_neighbours(group, point_of, seed_of)
+            beside = _around(group, point_of[several], seed_of[several], NEIGHBOUR_CELLS)
+            point_of, seed_of = np.concatenate([point_of, beside[0]]), np.concatenate([seed_of, beside[1]])
         # Candidates that hopped onto one seed are one image.
         _, first_of = np.unique(point_of * len(group.seeds.pixels) + seed_of, return_index=True)
         point_of, seed_of = point_of[first_of], seed_of[first_of]
@@ -578,16 +582,6 @@ def _model_errors(seeds: SeedPaths, quadrics: list, grid: np.ndarray) -> np.ndar
                 np.maximum.at(error, s, np.where(turned > 1e-12, ratio, 0.0))
             seen[s] = True
     return np.where(seen, error, 1.0)
-
-
-def _with_neighbours(group: SeedGroup, point_of, seed_of):
-    """The candidates and, for those of points with several, the grid seeds around
-    their seed (NEIGHBOUR_CELLS): two images a few pixels apart can share one candidate
-    (its hops and steps reach one of them), and the step from a seed beside it reaches
-    the other. A point with one candidate has one image there."""
-    crowded = np.flatnonzero(np.bincount(point_of)[point_of] > 1)
-    beside = _around(group, point_of[crowded], seed_of[crowded], NEIGHBOUR_CELLS)
-    return np.concatenate([point_of, beside[0]]), np.concatenate([seed_of, beside[1]])
 
 
 def _around(group: SeedGroup, point_of, seed_of, offsets):
