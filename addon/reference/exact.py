@@ -190,57 +190,97 @@ def newton_in_triangles(reflector_set: ReflectorSet, view: View, points: np.ndar
     """Newton's method on the reflection law in each triangle's barycentric (u, v).
 
     The residual is the difference between the half vector and the normal (turned
-    toward the eye), expressed in two axes of the triangle's plane. The Jacobian is
-    taken by central differences; steps are limited to half a triangle.
+    toward the eye), expressed in two axes of the triangle's plane; its Jacobian is
+    analytic (:class:`_ReflectionLaw`). Steps are limited to half a triangle.
     """
-    corners = reflector_set.triangles[triangles]
-    v0, e1, e2 = reflector_set.v0[triangles], reflector_set.e1[triangles], reflector_set.e2[triangles]
-    n0, n1, n2 = (reflector_set.normals[corners[:, k]] for k in range(3))
-    face = reflector_set.face_normals[triangles]
-    axis_u = normalized(e1)
-    axis_v = cross(face, axis_u)
-    centroid = v0 + (e1 + e2) / 3
-    orientation = np.where(dot(view.directions_to_eye(centroid), face) >= 0, 1.0, -1.0)
-
-    def residual(uv, k):
-        """Residual of the pairs ``k`` at their barycentric ``uv``."""
-        x = v0[k] + uv[:, :1] * e1[k] + uv[:, 1:] * e2[k]
-        n = n0[k] + uv[:, :1] * (n1[k] - n0[k]) + uv[:, 1:] * (n2[k] - n0[k])
-        n = normalized(n) * orientation[k, None]
-        to_point = points[k] - x
-        to_point = normalized(to_point)
-        half = view.directions_to_eye(x) + to_point
-        half = normalized(half)
-        r = half - n
-        return np.stack([dot(r, axis_u[k]), dot(r, axis_v[k])], axis=1)
-
+    law = _ReflectionLaw(reflector_set, view, points, triangles)
     uv = np.array(starts, dtype=np.float64)
-    h = 1e-7
-    du, dv = np.array([h, 0.0]), np.array([0.0, h])
     # Pairs leave the active set once converged, or once Newton has carried them well
     # outside their triangle (their root, if any, belongs to a neighbour).
     active = np.arange(len(triangles))
     for iteration in range(iterations):
         a = uv[active]
-        g = residual(a, active)
-        jacobian = np.stack([(residual(a + du, active) - residual(a - du, active)) / (2 * h),
-                             (residual(a + dv, active) - residual(a - dv, active)) / (2 * h)], axis=2)
+        g, jacobian = law.residual(a, active, with_jacobian=True)
         det = jacobian[:, 0, 0] * jacobian[:, 1, 1] - jacobian[:, 0, 1] * jacobian[:, 1, 0]
         safe = np.where(np.abs(det) > 1e-300, det, 1e-300)
         step = np.stack([jacobian[:, 1, 1] * g[:, 0] - jacobian[:, 0, 1] * g[:, 1],
                          -jacobian[:, 1, 0] * g[:, 0] + jacobian[:, 0, 0] * g[:, 1]], axis=1) / safe[:, None]
         length = lengths(step)
         step *= np.minimum(1.0, 0.5 / np.maximum(length, 1e-300))[:, None]
-        a = _backtrack(residual, active, a, step, lengths(g))
+        a = _backtrack(law.residual, active, a, step, lengths(g))
         uv[active] = a
         far_outside = (a.min(axis=1) < -ABANDON_DISTANCE) | (a.sum(axis=1) > 1 + ABANDON_DISTANCE)
         keep = (length > NEWTON_TOLERANCE) & ~(far_outside & (iteration >= ABANDON_AFTER))
         active = active[keep]
         if len(active) == 0:
             break
-    everything = np.arange(len(triangles))
-    converged = lengths(residual(uv, everything)) < 1e-9
-    return uv, converged, orientation
+    converged = lengths(law.residual(uv, np.arange(len(triangles)))) < 1e-9
+    return uv, converged, law.orientation
+
+
+class _ReflectionLaw:
+    """The reflection law's residual at barycentric (u, v) of (point, triangle) pairs, and
+    its exact Jacobian.
+
+    With x = v0 + u e1 + v e2, the unit directions d_e (to the eye) and d_p (to the
+    point), h = unit(d_e + d_p) and n = unit(n0 + u (n1 - n0) + v (n2 - n0)) turned
+    toward the eye, the residual is (h - n) in the triangle's axes. Each derivative is
+    the chain rule through a normalisation, d unit(w) = (dw - w^ (w^ . dw)) / |w|:
+    d d_e = -(e1 - d_e (d_e . e1)) / |e - x| (zero for an orthographic view), likewise
+    d_p, and dn along n1 - n0. One evaluation costs about two residuals, where central
+    differences cost four more.
+    """
+
+    def __init__(self, reflector_set: ReflectorSet, view: View, points: np.ndarray, triangles: np.ndarray):
+        corners = reflector_set.triangles[triangles]
+        self.view, self.points = view, points
+        self.v0, self.e1, self.e2 = (reflector_set.v0[triangles], reflector_set.e1[triangles],
+                                     reflector_set.e2[triangles])
+        self.n0 = reflector_set.normals[corners[:, 0]]
+        self.dn1 = reflector_set.normals[corners[:, 1]] - self.n0
+        self.dn2 = reflector_set.normals[corners[:, 2]] - self.n0
+        face = reflector_set.face_normals[triangles]
+        self.axis_u = normalized(self.e1)
+        self.axis_v = cross(face, self.axis_u)
+        centroid = self.v0 + (self.e1 + self.e2) / 3
+        self.orientation = np.where(dot(view.directions_to_eye(centroid), face) >= 0, 1.0, -1.0)
+
+    def residual(self, uv: np.ndarray, k: np.ndarray, with_jacobian: bool = False):
+        """(K, 2) residual of the pairs ``k`` at their ``uv``; with its (K, 2, 2) Jacobian
+        (rows: residual axis, columns: u, v) if asked."""
+        u, v = uv[:, :1], uv[:, 1:]
+        e1, e2, dn1, dn2 = self.e1[k], self.e2[k], self.dn1[k], self.dn2[k]
+        x = self.v0[k] + u * e1 + v * e2
+        n_raw = self.n0[k] + u * dn1 + v * dn2
+        n_length = lengths(n_raw)[:, None]
+        n = n_raw / n_length * self.orientation[k, None]
+        to_point = self.points[k] - x
+        point_distance = lengths(to_point)[:, None]
+        d_p = to_point / point_distance
+        d_e = self.view.directions_to_eye(x)
+        s = d_e + d_p
+        s_length = lengths(s)[:, None]
+        h = s / s_length
+        r = h - n
+        axis_u, axis_v = self.axis_u[k], self.axis_v[k]
+        g = np.stack([dot(r, axis_u), dot(r, axis_v)], axis=1)
+        if not with_jacobian:
+            return g
+        eye_distance = lengths(self.view.eye - x)[:, None] if self.view.is_perspective else None
+        jacobian = np.empty((len(k), 2, 2))
+        for column, (dx, dn) in enumerate(((e1, dn1), (e2, dn2))):
+            ds = -_across(d_p, dx) / point_distance
+            if eye_distance is not None:
+                ds -= _across(d_e, dx) / eye_distance
+            dr = _across(h, ds) / s_length - _across(n, dn) / n_length * self.orientation[k, None]
+            jacobian[:, 0, column] = dot(dr, axis_u)
+            jacobian[:, 1, column] = dot(dr, axis_v)
+        return g, jacobian
+
+
+def _across(unit_rows: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """The part of each row of ``w`` perpendicular to the unit row of ``unit_rows``."""
+    return w - unit_rows * dot(unit_rows, w)[:, None]
 
 
 def _backtrack(residual, active, start, step, size, halvings: int = BACKTRACK_HALVINGS):

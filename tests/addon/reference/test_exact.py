@@ -6,9 +6,9 @@ import pytest
 
 from curved_reflections.addon import Reflector, View, look_at_view
 from curved_reflections.addon.geometry import shapes
-from curved_reflections.addon.reference.exact import solve_reflections
+from curved_reflections.addon.reference.exact import _ReflectionLaw, solve_reflections
 from curved_reflections.addon.geometry.raytrace import ReflectorSet, reflect
-from curved_reflections.addon.geometry.sphere import icosphere, sphere_reflection
+from curved_reflections.addon.geometry.sphere import bumpy_icosphere, icosphere, sphere_reflection
 
 CENTER = np.array([0.0, 0.0, 1.0])
 EYE = np.array([6.0, -5.0, 3.0])
@@ -154,3 +154,26 @@ def test_points_hugging_the_mirror_keep_their_reflections(view, height):
     count = solve_reflections(reflectors, view, points).count_per_point(len(points))
     assert clearly_seen.sum() > 400
     assert (count[clearly_seen] == 0).mean() <= 0.005
+
+
+@pytest.mark.parametrize("orthographic", [False, True])
+def test_the_reflection_laws_jacobian_is_its_derivative(orthographic):
+    """Newton's Jacobian is analytic (a chain rule through three normalisations): it must
+    match central differences of the residual on a bumpy mesh, for either kind of view."""
+    mirror = ReflectorSet([bumpy_icosphere(CENTER, 1.0, 4, 0.04, lobes=(4, 3))])
+    view = look_at_view(EYE, CENTER)
+    if orthographic:
+        projection = np.diag([0.3, 0.3, -0.1, 1.0])
+        projection[2, 3] = -1.0
+        view = View(view.view_matrix, projection, view.width, view.height)
+    rng = np.random.default_rng(4)
+    triangles = rng.integers(0, len(mirror.triangles), 400)
+    points = _random_points_around(CENTER, 400, 1.5, 4.0, seed=4)
+    uv = rng.uniform(0.0, 0.5, (400, 2))
+    law, rows = _ReflectionLaw(mirror, view, points, triangles), np.arange(400)
+    _, jacobian = law.residual(uv, rows, with_jacobian=True)
+    h = 1e-6
+    numeric = np.stack([(law.residual(uv + d, rows) - law.residual(uv - d, rows)) / (2 * h)
+                        for d in (np.array([h, 0.0]), np.array([0.0, h]))], axis=2)
+    assert np.abs(numeric).max() > 0.1
+    assert np.abs(jacobian - numeric).max() < 1e-7
