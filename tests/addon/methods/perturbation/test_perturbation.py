@@ -332,8 +332,9 @@ def test_from_the_grid_alone_a_bumpy_mirror_is_seeded_finer_until_its_steps_can_
 def test_a_bumpy_mirrors_crowded_images_along_its_silhouette_are_found_in_its_rim_band(monkeypatch):
     """Toward its silhouette a bumpy mirror shows a point up to five times in a band a few
     pixels wide, past the grid's last row of seeds; the rim band's seeds at every second
-    pixel find them (``rim.py``): 99.8 % of the 537 exact images here against 98.0 %
-    without. On the benchmark's bumpy sphere every image missed without it lay in that band."""
+    pixel find them (``rim.py``): 100 % of the 537 exact images here against 99.4 %
+    without (98.0 % before Newton's walk on the mesh from the grid's seeds reached some of
+    them). On the benchmark's bumpy sphere every image missed without it lay in that band."""
     from curved_reflections.addon.geometry.sphere import bumpy_icosphere
     from curved_reflections.addon.methods.perturbation import projector, rim
 
@@ -347,7 +348,7 @@ def test_a_bumpy_mirrors_crowded_images_along_its_silhouette_are_found_in_its_ri
     band = method.rim_band(view, method.grid_groups(view)[0])
     monkeypatch.setattr(projector.PerturbationMethod, "rim_band", lambda self, view, group: None)
     without, _ = _match(method.project(view, points), wanted)
-    assert coverage >= 0.99 and coverage >= without + 0.012, (without, coverage)  # 0.998, 0.980
+    assert coverage >= 0.99 and coverage >= without + 0.004, (without, coverage)  # 1.0, 0.994
     assert np.percentile(errors[errors <= 1.0], 99) <= 0.5
     assert band.stride == rim.RIM_STEP == 2 and band.coarse == 1 and band.inner.any()
 
@@ -381,9 +382,11 @@ def test_images_the_series_cannot_reach_are_found_by_newton_on_the_mesh(monkeypa
 def test_seeds_two_cells_from_a_crowded_points_candidates_start_newton_too(monkeypatch):
     """A bumpier mirror still: the grid seeds in the ring two cells from a crowded
     point's candidates (``projector.POLISH_RING_CELLS``) reach images neither the steps
-    nor the candidates' own seeds do: 98.97 % of the 776 exact images against 98.58 %."""
+    nor the candidates' own seeds do: 99.74 % of the 776 exact images against 99.10 %.
+    Walking four triangles from each start (``mesh_polish.WALK_TRIANGLES`` was 4) found
+    99.23 %: next to the silhouette a pixel spans several foreshortened triangles."""
     from curved_reflections.addon.geometry.sphere import bumpy_icosphere
-    from curved_reflections.addon.methods.perturbation import projector
+    from curved_reflections.addon.methods.perturbation import mesh_polish, projector
 
     bumpy = ReflectorSet([bumpy_icosphere(CENTRE, 1.0, 5, 0.05, lobes=(4, 6))])
     view = _view(eye=(-2.2, -2.5, 2.0))
@@ -393,9 +396,33 @@ def test_seeds_two_cells_from_a_crowded_points_candidates_start_newton_too(monke
     method = PerturbationMethod(bumpy, {}, PerturbationSettings(accuracy_px=0.5))
     coverage, errors = _match(method.project(view, points), wanted)
     assert len(projector.POLISH_RING_CELLS) == 16
+    monkeypatch.setattr(mesh_polish, "WALK_TRIANGLES", 4)
+    shorter, _ = _match(method.project(view, points), wanted)
+    monkeypatch.undo()
     monkeypatch.setattr(projector, "POLISH_RING_CELLS", ())
     without, _ = _match(method.project(view, points), wanted)
-    assert coverage >= without + 0.003, (without, coverage)  # 0.9897, 0.9858
+    assert coverage >= without + 0.004, (without, coverage)  # 0.9974, 0.9910
+    assert coverage >= shorter + 0.003, (shorter, coverage)  # 0.9974, 0.9923
+    assert np.percentile(errors[errors <= 1.0], 99) <= 0.5
+
+
+def test_the_seed_a_candidate_hopped_away_from_starts_newton_too(monkeypatch):
+    """Near a fold a candidate's first-order hops can carry it cells away from its
+    image, onto another image's seeds; the seed it was found at starts Newton on the mesh
+    (``projector._left_by_hops``): 98.51 % of the 740 exact images here against 98.24 %."""
+    from curved_reflections.addon.geometry.sphere import bumpy_icosphere
+    from curved_reflections.addon.methods.perturbation import projector
+
+    bumpy = ReflectorSet([bumpy_icosphere(CENTRE, 1.0, 5, 0.05, lobes=(5, 6))])
+    view = _view(eye=(1.0, -3.0, -1.2))
+    points = _points_around(bumpy, 600, np.random.default_rng(61))
+    exact = solve_reflections(bumpy, view, points)
+    wanted = [(exact.point[s], exact.pixel[s], None) for s in np.flatnonzero(exact.visible)]
+    method = PerturbationMethod(bumpy, {}, PerturbationSettings(accuracy_px=0.5))
+    coverage, errors = _match(method.project(view, points), wanted)
+    monkeypatch.setattr(projector, "_left_by_hops", lambda point_of, found_at, seed_of: (point_of[:0], found_at[:0]))
+    without, _ = _match(method.project(view, points), wanted)
+    assert coverage >= without + 0.002, (without, coverage)  # 0.9851, 0.9824
     assert np.percentile(errors[errors <= 1.0], 99) <= 0.5
 
 
