@@ -306,7 +306,7 @@ class PerturbationMethod:
         # too. Of the images still missed on the tuning mirrors away from the rim, most had
         # a candidate within a cell before its hops (coverage 99.30 / 99.74 / 99.80 /
         # 99.45 -> 99.63 / 99.74 / 99.80 / 99.60 %, 0.3 s a view).
-        ring = _left_by_hops(point_of, found_at, seed_of)
+        walk_from = _left_by_hops(point_of, found_at, seed_of)
         if crowded:
             # A point with one candidate has one image there; two images a few pixels apart
             # can share one candidate (its hops and steps reach one of them), and the step
@@ -314,7 +314,7 @@ class PerturbationMethod:
             several = np.bincount(point_of)[point_of] > 1
             if group.inner is None:  # the grid's seeds (the rim band's lie RIM_STEP px apart)
                 around = _around(group, point_of[several], seed_of[several], POLISH_RING_CELLS)
-                ring = tuple(np.concatenate(pair) for pair in zip(ring, around))
+                walk_from = tuple(np.concatenate(pair) for pair in zip(walk_from, around))
             beside = _around(group, point_of[several], seed_of[several], NEIGHBOUR_CELLS)
             point_of, seed_of = np.concatenate([point_of, beside[0]]), np.concatenate([seed_of, beside[1]])
         # Candidates that hopped onto one seed are one image.
@@ -348,8 +348,8 @@ class PerturbationMethod:
         self.stats.refused += int((~ok).sum())
         answers = point_of[ok], first[ok], last[ok], pixel[ok]
         if crowded and len(group.history) == 1 and group.history[0] not in self.analytic:
-            polished = self._polished(view, group, points, np.concatenate([point_of[~ok], dropped[0], ring[0]]),
-                                      np.concatenate([seed_of[~ok], dropped[1], ring[1]]), answers)
+            polished = self._polished(view, group, points, np.concatenate([point_of[~ok], dropped[0], walk_from[0]]),
+                                      np.concatenate([seed_of[~ok], dropped[1], walk_from[1]]), answers)
             answers = tuple(np.concatenate(pair) for pair in zip(answers, polished))
         return answers
 
