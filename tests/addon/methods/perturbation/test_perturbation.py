@@ -379,9 +379,9 @@ def test_images_the_series_cannot_reach_are_found_by_newton_on_the_mesh(monkeypa
     assert polished >= 15 and method.stats.polished == 0  # 45 images no step gave
 
 
-def test_seeds_two_cells_from_a_crowded_points_candidates_start_newton_too(monkeypatch):
-    """A bumpier mirror still: the grid seeds in the ring two cells from a crowded
-    point's candidates (``projector.POLISH_RING_CELLS``) reach images neither the steps
+def test_seeds_two_cells_from_a_points_candidates_start_newton_too(monkeypatch):
+    """A bumpier mirror still: the grid seeds in the ring two cells from a point's
+    candidates (``projector.POLISH_RING_CELLS``) reach images neither the steps
     nor the candidates' own seeds do: 99.74 % of the 776 exact images against 99.10 %.
     Walking four triangles from each start (``mesh_polish.WALK_TRIANGLES`` was 4) found
     99.23 %: next to the silhouette a pixel spans several foreshortened triangles."""
@@ -409,7 +409,10 @@ def test_seeds_two_cells_from_a_crowded_points_candidates_start_newton_too(monke
 def test_the_seed_a_candidate_hopped_away_from_starts_newton_too(monkeypatch):
     """Near a fold a candidate's first-order hops can carry it cells away from its
     image, onto another image's seeds; the seed it was found at starts Newton on the mesh
-    (``projector._left_by_hops``): 98.51 % of the 740 exact images here against 98.24 %."""
+    (``projector._left_by_hops``): 99.19 % of the 740 exact images here against 98.92 %.
+    An image the grid's scan missed also lies a few cells from a point's only candidate
+    here: the ring of every candidate (``POLISH_RING_CELLS``) finds it, and coverage was
+    98.51 % with the ring of crowded points' candidates only."""
     from curved_reflections.addon.geometry.sphere import bumpy_icosphere
     from curved_reflections.addon.methods.perturbation import projector
 
@@ -422,7 +425,7 @@ def test_the_seed_a_candidate_hopped_away_from_starts_newton_too(monkeypatch):
     coverage, errors = _match(method.project(view, points), wanted)
     monkeypatch.setattr(projector, "_left_by_hops", lambda point_of, found_at, seed_of: (point_of[:0], found_at[:0]))
     without, _ = _match(method.project(view, points), wanted)
-    assert coverage >= without + 0.002, (without, coverage)  # 0.9851, 0.9824
+    assert coverage >= 0.99 and coverage >= without + 0.002, (without, coverage)  # 0.9919, 0.9892
     assert np.percentile(errors[errors <= 1.0], 99) <= 0.5
 
 
