@@ -314,9 +314,9 @@ class PerturbationMethod:
             if group.inner is None:  # the grid's seeds (the rim band's lie RIM_STEP px apart)
                 around = _around(group, point_of, seed_of, POLISH_RING_CELLS)
                 walk_from = tuple(np.concatenate(pair) for pair in zip(walk_from, around))
-            # A point with one candidate has one image there; two images a few pixels apart
-            # can share one candidate (its hops and steps reach one of them), and the step
-            # from a seed beside it reaches the other.
+            # Two images a few pixels apart can share one candidate (its hops and steps reach
+            # one of them); the step from a seed beside it reaches the other. Stepping around
+            # a point's only candidate too cost about 3 s a view more (docs/overview.md).
             several = np.bincount(point_of)[point_of] > 1
             beside = _around(group, point_of[several], seed_of[several], NEIGHBOUR_CELLS)
             point_of, seed_of = np.concatenate([point_of, beside[0]]), np.concatenate([seed_of, beside[1]])
