@@ -16,7 +16,7 @@ from curved_reflections.addon.methods.perturbation import (AnalyticSurface, Pert
 from curved_reflections.addon.methods.perturbation.seeds import seed_paths_to, seed_quadrics
 from curved_reflections.addon.projection import PERTURBATION_ANSWER
 from curved_reflections.addon.geometry.raytrace import ReflectorSet
-from curved_reflections.addon.geometry.sphere import ellipsoid, icosphere, sphere_reflection
+from curved_reflections.addon.geometry.sphere import bumpy_icosphere, ellipsoid, icosphere, sphere_reflection
 from curved_reflections.addon.view import look_at_view
 
 CENTRE = np.array([-0.4, 0.3, 0.2])
@@ -215,6 +215,18 @@ def _match(projection, pixels_of, histories=None):
     return float(np.mean(covered)), np.array(errors)
 
 
+def _bumpy_scene(amplitude, lobes, eye, seed):
+    """A bumpy sphere mesh (radius 1 at CENTRE, 5 subdivisions) seen from ``eye``: the
+    method with adaptive seeds at 0.5 px, the view, 600 points around it and their
+    visible exact reflections as ``_match`` wants them."""
+    bumpy = ReflectorSet([bumpy_icosphere(CENTRE, 1.0, 5, amplitude, lobes=lobes)])
+    view = _view(eye=eye)
+    points = _points_around(bumpy, 600, np.random.default_rng(seed))
+    exact = solve_reflections(bumpy, view, points)
+    wanted = [(exact.point[s], exact.pixel[s], None) for s in np.flatnonzero(exact.visible)]
+    return PerturbationMethod(bumpy, {}, PerturbationSettings(accuracy_px=0.5)), view, points, wanted
+
+
 @pytest.mark.parametrize("analytic", [True, False])
 def test_points_in_a_convex_mirrors_shadow_get_no_image_and_those_beside_it_their_grazing_one(analytic):
     """Behind a sphere, where the eye's line to a point crosses it, the point has no
@@ -290,8 +302,6 @@ def test_second_order_projection_against_the_exact_solver():
 def test_a_convex_mirror_is_scanned_coarser_than_a_bumpy_one():
     """One image per point on a convex mirror: the candidate scan skips more seeds."""
     from curved_reflections.addon.methods.perturbation import projector
-    from curved_reflections.addon.geometry.sphere import bumpy_icosphere
-
     view = _view()
     convex = PerturbationMethod(ReflectorSet([_egg_mesh()])).grid_groups(view)
     exact = PerturbationMethod(ReflectorSet([_egg_mesh()]), {0: _egg_surface()}).grid_groups(view)
@@ -305,7 +315,6 @@ def test_from_the_grid_alone_a_bumpy_mirror_is_seeded_finer_until_its_steps_can_
     grid steps were refused over a third of its images: the quadric fitted at a seed misses the
     surface a spacing away. ``fine_enough`` traces its seeds at half the spacing until the
     model term allows a step (here to 2 px); a sphere's mesh keeps its grid."""
-    from curved_reflections.addon.geometry.sphere import bumpy_icosphere
     from curved_reflections.addon.methods.perturbation import projector
 
     bumpy = ReflectorSet([bumpy_icosphere(CENTRE, 1.1, 5, 0.04, lobes=(4, 3))])
@@ -335,15 +344,9 @@ def test_a_bumpy_mirrors_crowded_images_along_its_silhouette_are_found_in_its_ri
     pixel find them (``rim.py``): 100 % of the 537 exact images here against 99.4 %
     without (98.0 % before Newton's walk on the mesh from the grid's seeds reached some of
     them). On the benchmark's bumpy sphere every image missed without it lay in that band."""
-    from curved_reflections.addon.geometry.sphere import bumpy_icosphere
     from curved_reflections.addon.methods.perturbation import projector, rim
 
-    bumpy = ReflectorSet([bumpy_icosphere(CENTRE, 1.0, 5, 0.03, lobes=(3, 5))])
-    view = _view(eye=(-1.6, 3.0, -1.1))
-    points = _points_around(bumpy, 600, np.random.default_rng(41))
-    exact = solve_reflections(bumpy, view, points)
-    wanted = [(exact.point[s], exact.pixel[s], None) for s in np.flatnonzero(exact.visible)]
-    method = PerturbationMethod(bumpy, {}, PerturbationSettings(accuracy_px=0.5))
+    method, view, points, wanted = _bumpy_scene(0.03, (3, 5), (-1.6, 3.0, -1.1), 41)
     coverage, errors = _match(method.project(view, points), wanted)
     band = method.rim_band(view, method.grid_groups(view)[0])
     monkeypatch.setattr(projector.PerturbationMethod, "rim_band", lambda self, view, group: None)
@@ -358,15 +361,9 @@ def test_images_the_series_cannot_reach_are_found_by_newton_on_the_mesh(monkeypa
     converge (dropped as not local, or refused); Newton's method on the mesh from their
     seeds (``mesh_polish.py``) finds those images exactly: 99.7 % of the 614 exact
     images here against 97.2 % without, answers no farther off."""
-    from curved_reflections.addon.geometry.sphere import bumpy_icosphere
     from curved_reflections.addon.methods.perturbation import projector
 
-    bumpy = ReflectorSet([bumpy_icosphere(CENTRE, 1.0, 5, 0.045, lobes=(5, 4))])
-    view = _view(eye=(2.4, -2.6, 1.5))
-    points = _points_around(bumpy, 600, np.random.default_rng(43))
-    exact = solve_reflections(bumpy, view, points)
-    wanted = [(exact.point[s], exact.pixel[s], None) for s in np.flatnonzero(exact.visible)]
-    method = PerturbationMethod(bumpy, {}, PerturbationSettings(accuracy_px=0.5))
+    method, view, points, wanted = _bumpy_scene(0.045, (5, 4), (2.4, -2.6, 1.5), 43)
     coverage, errors = _match(method.project(view, points), wanted)
     polished = method.stats.polished
     def none_polished(self, view, group, points, point_of, seed_of, answers):
@@ -385,15 +382,9 @@ def test_seeds_two_cells_from_a_points_candidates_start_newton_too(monkeypatch):
     nor the candidates' own seeds do: 99.74 % of the 776 exact images against 99.10 %.
     Walking four triangles from each start (``mesh_polish.WALK_TRIANGLES`` was 4) found
     99.23 %: next to the silhouette a pixel spans several foreshortened triangles."""
-    from curved_reflections.addon.geometry.sphere import bumpy_icosphere
     from curved_reflections.addon.methods.perturbation import mesh_polish, projector
 
-    bumpy = ReflectorSet([bumpy_icosphere(CENTRE, 1.0, 5, 0.05, lobes=(4, 6))])
-    view = _view(eye=(-2.2, -2.5, 2.0))
-    points = _points_around(bumpy, 600, np.random.default_rng(47))
-    exact = solve_reflections(bumpy, view, points)
-    wanted = [(exact.point[s], exact.pixel[s], None) for s in np.flatnonzero(exact.visible)]
-    method = PerturbationMethod(bumpy, {}, PerturbationSettings(accuracy_px=0.5))
+    method, view, points, wanted = _bumpy_scene(0.05, (4, 6), (-2.2, -2.5, 2.0), 47)
     coverage, errors = _match(method.project(view, points), wanted)
     assert len(projector.POLISH_RING_CELLS) == 16
     monkeypatch.setattr(mesh_polish, "WALK_TRIANGLES", 4)
@@ -413,15 +404,9 @@ def test_the_seed_a_candidate_hopped_away_from_starts_newton_too(monkeypatch):
     An image the grid's scan missed also lies a few cells from a point's only candidate
     here: the ring of every candidate (``POLISH_RING_CELLS``) finds it, and coverage was
     98.51 % with the ring of crowded points' candidates only."""
-    from curved_reflections.addon.geometry.sphere import bumpy_icosphere
     from curved_reflections.addon.methods.perturbation import projector
 
-    bumpy = ReflectorSet([bumpy_icosphere(CENTRE, 1.0, 5, 0.05, lobes=(5, 6))])
-    view = _view(eye=(1.0, -3.0, -1.2))
-    points = _points_around(bumpy, 600, np.random.default_rng(61))
-    exact = solve_reflections(bumpy, view, points)
-    wanted = [(exact.point[s], exact.pixel[s], None) for s in np.flatnonzero(exact.visible)]
-    method = PerturbationMethod(bumpy, {}, PerturbationSettings(accuracy_px=0.5))
+    method, view, points, wanted = _bumpy_scene(0.05, (5, 6), (1.0, -3.0, -1.2), 61)
     coverage, errors = _match(method.project(view, points), wanted)
     monkeypatch.setattr(projector, "_left_by_hops", lambda point_of, found_at, seed_of: (point_of[:0], found_at[:0]))
     without, _ = _match(method.project(view, points), wanted)
