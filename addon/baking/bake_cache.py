@@ -28,7 +28,7 @@ with a message for the user, never a traceback. A node file found damaged when i
 read is renamed ``*.damaged``: the grid then reads as incomplete, and the next bake
 builds that node again.
 
-Nodes are read lazily (the four of the current tetrahedron, a few kept), as the paper
+Nodes are read lazily (the eight of the current tetrahedron's cube, a few kept), as the paper
 keeps only two layers of its grid in memory.
 """
 
@@ -61,8 +61,8 @@ MANIFEST = "grid.npz"
 INSIDE_SUFFIX = ".inside"
 #: Suffix a damaged node file is renamed to when it is read.
 DAMAGED_SUFFIX = ".damaged"
-#: Nodes kept in memory by a loaded grid (a tetrahedron needs four, an octree cell eight;
-#: neighbours come next).
+#: Nodes kept in memory by a loaded grid (a view reads its cell's eight: a tetrahedron's
+#: four and the rest of its cube, or an octree cell's; neighbours come next).
 NODES_IN_MEMORY = 16
 #: Largest difference (in reflector sizes; unit normals: absolute) between the baked and
 #: the current geometry in the rigid frame for a cache to be used.

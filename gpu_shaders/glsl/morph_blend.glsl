@@ -4,8 +4,10 @@
  * invocation per diffuse vertex, every frame.
  *
  * The NODES nodes of the cell holding the eye (SBC paper, Popescu, Sacks, Mei 2006,
- * section VI: the 4 of a tetrahedron; Martin & Popescu 2004, section 6: the 8 of a cube,
- * addon/methods/octree) have each projected the vertex once (their first reflector
+ * section VI: the 4 of a tetrahedron, then the other nodes of its cube outside the mirror,
+ * which only join the fit of step 3 (MorphingGrid.locate_view); Martin & Popescu 2004,
+ * section 6: the 8 of a cube, addon/methods/octree; the first BLEND_NODES are blended
+ * with the eye's weights) have each projected the vertex once (their first reflector
  * points, `node0` .. `node<NODES - 1>`, kept while the diffuse geometry stays: SLOTS
  * regular images, then SLOTS images of the widened leaf charts, in the grid's rigid
  * frame). Per frame:
@@ -14,7 +16,8 @@
  *      times the two nodes' distance, and mutually nearest, is its match, from its
  *      widened charts where its regular images have none (remedy 2);
  *   2. the matches are blended with the eye's barycentric or trilinear weights, the
- *      weights of missing nodes left out where the others weigh PARTIAL_WEIGHT or more;
+ *      weights of missing nodes left out where the others weigh PARTIAL_WEIGHT or more
+ *      (the fit's other nodes weigh 0 and may be missing);
  *   3. our refinement: a quadric, written as a height field, fitted to the nodes'
  *      reflector points and the normals the law of reflection gives them
  *      (refine_on_local_surface), and
@@ -55,18 +58,33 @@ vec4 node_image(int n, int slot, ivec2 texel)
   if (n == 3) {
     return texelFetch(node3, at, 0);
   }
+#endif
+#if NODES > 5
   if (n == 4) {
     return texelFetch(node4, at, 0);
   }
+#endif
+#if NODES > 6
   if (n == 5) {
     return texelFetch(node5, at, 0);
   }
+#endif
+#if NODES > 7
   if (n == 6) {
     return texelFetch(node6, at, 0);
   }
-  return texelFetch(node7, at, 0);
-#else
+#endif
+  /* The last node. */
+#if NODES == 4
   return texelFetch(node3, at, 0);
+#elif NODES == 5
+  return texelFetch(node4, at, 0);
+#elif NODES == 6
+  return texelFetch(node5, at, 0);
+#elif NODES == 7
+  return texelFetch(node6, at, 0);
+#else
+  return texelFetch(node7, at, 0);
 #endif
 }
 
@@ -189,7 +207,7 @@ void main()
         matched[n] = found.xyz;
         present[n] = found.w > 0.5;
         w[n] = present[n] ? frame.nodes[n].w : 0.0;
-        all_present = all_present && found.w > 0.5;
+        all_present = all_present && (found.w > 0.5 || n >= BLEND_NODES);
         total += w[n];
         blended += w[n] * found.xyz;
       }

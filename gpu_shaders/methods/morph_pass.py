@@ -16,7 +16,8 @@ is literal:
 - **every frame**: where the eye is (``MorphingGrid.check_view``: a lookup in the grid),
   then one compute dispatch per grid (``glsl/morph_blend.glsl``, the float32 twin of
   ``MorphingGrid._matched_images`` and ``_blend``) matches and blends the four nodes'
-  images and refines them on the local surface, into one answer texture per image slot,
+  images and refines them on the local surface fitted to the images of every node of
+  the tetrahedron's cube, into one answer texture per image slot,
   and the reflected meshes are drawn from those (``reflected_meshes.ReflectedMeshes``,
   as the iterative search's). Entering a tetrahedron whose nodes are on the GPU costs
   the CPU nothing but the uniforms; a node neither on the GPU nor prefetched is projected
@@ -72,12 +73,15 @@ def frame_floats(n_nodes: int) -> int:
     return 3 * 16 + 4 + 8 * n_nodes
 
 
-def blend_defines(n_nodes: int = 4, regular: int = SLOTS, widened: int = SLOTS) -> dict:
+def blend_defines(n_nodes: int = 4, regular: int = SLOTS, widened: int = SLOTS, blend_nodes: int = 4) -> dict:
     """The engine's constants, as the blend shader's ``#define`` s, for cells of
-    ``n_nodes`` nodes (4: a tetrahedron of the SBC grid; 8: a cube of the octree grid)
-    whose nodes fill at most ``regular`` and ``widened`` image slots."""
+    ``n_nodes`` nodes, the first ``blend_nodes`` blended (``MorphingGrid.blend_nodes``:
+    a tetrahedron of the SBC grid, 4, and up to 4 more of its cube for the surface fit; 8
+    of 8: a cube of the octree grid) whose nodes fill at most ``regular`` and ``widened``
+    image slots."""
     m = morph_surface
     return {"SLOTS": SLOTS, "REGULAR_SLOTS": regular, "WIDENED_SLOTS": widened, "NODES": n_nodes,
+            "BLEND_NODES": min(blend_nodes, n_nodes),
             "PARTIAL_WEIGHT": f"{morphing.PARTIAL_WEIGHT:.9e}", "MATCH_SLOPE": f"{morphing.MATCH_SLOPE:.9e}",
             "SURFACE_NORMAL_MIN": f"{m.SURFACE_NORMAL_MIN:.9e}", "MIN_SURFACE_NODES": m.MIN_SURFACE_NODES,
             "SURFACE_ITERATIONS": m.SURFACE_ITERATIONS, "SURFACE_REACH": f"{m.SURFACE_REACH:.9e}",
@@ -86,8 +90,9 @@ def blend_defines(n_nodes: int = 4, regular: int = SLOTS, widened: int = SLOTS) 
 
 
 @functools.cache
-def blend_shader(n_nodes: int = 4, regular: int = SLOTS, widened: int = SLOTS):
-    """The compute shader of the blend for cells of ``n_nodes`` nodes that fill at most
+def blend_shader(n_nodes: int = 4, regular: int = SLOTS, widened: int = SLOTS, blend_nodes: int = 4):
+    """The compute shader of the blend for cells of ``n_nodes`` nodes, the first
+    ``blend_nodes`` blended (:func:`blend_defines`), that fill at most
     ``regular`` and ``widened`` image slots (1 to :data:`SLOTS`, 0 to :data:`SLOTS`),
     built on first use: llvmpipe pays for every loop iteration over slots, filled or not
     (``glsl/morph_blend.glsl``), so each pair gets its own (a convex mirror's cells use
@@ -106,7 +111,7 @@ def blend_shader(n_nodes: int = 4, regular: int = SLOTS, widened: int = SLOTS):
     for k in range(SLOTS):
         info.image(k, 'RGBA32F', 'FLOAT_2D', f"result{k}", qualifiers={'WRITE'})
     info.local_group_size(LOCAL_SIZE, 1)
-    info.compute_source(glsl_source("morph_blend.glsl", blend_defines(n_nodes, regular, widened),
+    info.compute_source(glsl_source("morph_blend.glsl", blend_defines(n_nodes, regular, widened, blend_nodes),
                                     normal_equations_glsl(9, morph_surface.FIT_PENALTY)))
     return gpu.shader.create_from_info(info)
 
@@ -260,7 +265,7 @@ class MorphPass(FramePass):
 
     def covering(self, view) -> list:
         """(grid index, (tetrahedron, nodes, weights, frame)) of each grid whose
-        reflector ``view`` can be drawn from (``MorphingGrid.check_view``), its four
+        reflector ``view`` can be drawn from (``MorphingGrid.check_view``), its cell's
         nodes' images on the GPU (projected now where missing). A grid whose cache turns
         out damaged records the fault (``MorphingGrid.failure``) and is left out from
         then on: its reflector is drawn in runtime mode."""
@@ -333,7 +338,7 @@ class MorphPass(FramePass):
             self._drawn.append(k)
             if self._active[k] == 0:
                 continue  # no node sees the mirror from any vertex: nothing to blend or draw
-            shader = blend_shader(len(nodes), self._active[k], widened)
+            shader = blend_shader(len(nodes), self._active[k], widened, grid.blend_nodes)
             uniforms = self._frame_buffer(len(nodes))
             uniforms.update(gpu.types.Buffer('FLOAT', len(values), values))
             shader.bind()

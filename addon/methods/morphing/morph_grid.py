@@ -218,6 +218,14 @@ class TetrahedralGrid:
         return cells * 6 + perm, nodes, weights, inside
 
 
+    def cell_nodes(self, tet: int) -> np.ndarray:
+        """(8,) the nodes of the cell (cube) that holds tetrahedron ``tet`` (of :meth:`locate`)."""
+        nx, ny, _ = self.shape
+        cell = int(tet) // 6
+        ijk = np.array([cell % (nx - 1), (cell // (nx - 1)) % (ny - 1), cell // ((nx - 1) * (ny - 1))])
+        corners = ijk + np.stack(np.meshgrid(*[np.arange(2)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+        return self.node_index(corners)
+
     def _cell(self, f: np.ndarray) -> np.ndarray:
         """(P, 3) integer cell (lowest corner node) of grid coordinates ``f``, clamped to the grid."""
         return np.clip(np.floor(f).astype(np.int64), 0, np.asarray(self.shape) - 2)
@@ -336,7 +344,7 @@ def extended_mirror(reflector: Reflector, settings: MorphSettings) -> ReflectorS
 class NodesOnDemand(dict):
     """Node cameras of a grid built on first use, instead of baked: a grid to try a
     reflector with, and what tests and benchmarks measure morphing with (a view only
-    ever uses the nodes of its cell: four, or eight for ray octrees). ``cpu_seconds`` sums the builds."""
+    ever uses the nodes of its cell: eight). ``cpu_seconds`` sums the builds."""
 
     def __init__(self, reflector_set: ReflectorSet, positions: np.ndarray, bounds, settings: MorphSettings,
                  build=None):

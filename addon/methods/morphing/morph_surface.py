@@ -3,7 +3,8 @@
 
 The four nodes' first reflector points of one image, blended with the eye's weights,
 lie near the mirror but not on it, and the reflection law does not hold there. A
-quadric surface is fitted through the nodes' images (with their normals), and the
+quadric surface is fitted through the images of the cell's nodes (the tetrahedron's
+cube: eight, or fewer where some lie inside the mirror; with their normals), and the
 reflection point of the desired eye is solved on it by Newton's method; the refined
 point replaces the blend where it stays within reach of the nodes' images
 (:mod:`.morphing`, ``MorphingGrid._blend``; the GLSL twin is ``glsl/morph_blend.glsl``).

@@ -49,6 +49,9 @@ class OctreeGrid(MorphingGrid):
     :class:`...morphing.MorphingGrid` (``project``, ``check_view``, ``node_slots``), which
     the renderer's GPU pass and the operators use for both kinds of grid."""
 
+    #: A cube's eight nodes are all blended, with the eye's trilinear weights.
+    blend_nodes = 8
+
     def locate_view(self, eye_world, matrix):
         """Cell, its eight nodes and the eye's trilinear weights; ViewOutsideGrid where unusable."""
         frame = rigid_frame(matrix)

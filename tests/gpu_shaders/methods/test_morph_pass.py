@@ -74,43 +74,48 @@ def _pass(mirror, meshes, budget_mb=256.0):
 def test_gpu_blend_is_the_numpy_blend(request, grid, eye):
     """Same vertices answered, same pixels within 0.05 px: the float32 match, blend and
     surface refinement (analytic Newton) against the float64 engine, for the four nodes
-    of a tetrahedron and the eight of an octree grid's cube."""
+    of a tetrahedron (with the rest of its cube for the surface fit) and the eight of an
+    octree grid's cube."""
     mirror = request.getfixturevalue(grid)
     morph, geometry = _pass(mirror, [_cloud()])
     view = _view(eye)
     assert morph.blend(view) == [0]
-    assert morph.counts["node_projections"] == (8 if grid == "octree_mirror" else 4)
+    assert morph.counts["node_projections"] == 8  # the eye's cube, outside the mirror
     found = morph.read(0)
     expected = mirror[1].project(geometry.vertices, view)
     compared = 0
     for k in range(min(len(found), len(expected.groups))):
         ours, theirs = np.isfinite(found[k][:, 0]), expected.valid[k]
         both = ours & theirs
-        assert (ours != theirs).sum() <= max(2, 0.002 * theirs.sum())
         pixels, _ = view.to_pixels(found[k][both])
         errors = np.linalg.norm(pixels - expected.pixels[k][both], axis=1)
-        assert np.percentile(errors, 99) < 0.05 and errors.max() < 0.5
+        # Decided apart: answered by one side only, or a fit whose residual passes its
+        # bound in float32 and not in float64 (a vertex the cell's images see spread
+        # over a third of this coarse grid's sphere), the linear blend taken instead.
+        assert (ours != theirs).sum() + (errors > 0.5).sum() <= max(2, 0.002 * theirs.sum())
+        assert np.percentile(errors, 99) < 0.05
         compared += both.sum()
     assert compared > 500
 
 
 def test_nodes_are_projected_once_and_kept(mirror):
-    """A second view in the same tetrahedron, then one in a neighbouring tetrahedron
-    whose nodes were prefetched, project no node; the budget keeps the nodes in use."""
+    """A second view in the same tetrahedron, then one in a neighbouring cell whose
+    nodes were prefetched, project no node; the budget keeps the nodes in use (a
+    tetrahedron's four and the rest of its cube, which the surface fit reads)."""
     morph, _ = _pass(mirror, [_cloud(600)])
     first = _view((0.4, -2.3, 0.3))
     morph.blend(first)
-    assert morph.counts["node_projections"] == 4 and len(morph.nodes) == 4
+    assert morph.counts["node_projections"] == 8 and len(morph.nodes) == 8
     morph.blend(_view((0.41, -2.29, 0.31)))
-    assert morph.counts["node_projections"] == 4
+    assert morph.counts["node_projections"] == 8
     # Prefetching: the numpy projection of the nodes around the eye, handed to `submit`
     # (here run at once), uploaded by collect().
     assert morph.prefetch(first, _run_now, max_pending=2) == 2 and morph.prefetching == 2
-    assert morph.prefetched and morph.collect() == 2 and morph.counts["node_projections"] == 6
+    assert morph.prefetched and morph.collect() == 2 and morph.counts["node_projections"] == 10
     prefetched = 0
     while morph.prefetch(first, _run_now, max_pending=8):  # the rest of the 4 x 4 x 4 nodes around the eye
         prefetched += morph.collect()
-    assert 20 <= prefetched <= 58 and morph.prefetching == 0
+    assert 20 <= prefetched <= 54 and morph.prefetching == 0
     grid = mirror[1]
     tet = grid.check_view(first)[0]
     step = grid.grid.spacing * np.array([0.6, 0.0, 0.0])
@@ -130,11 +135,11 @@ def test_nodes_are_projected_once_and_kept(mirror):
     assert fresh.collect() == len(ahead_nodes) and all((0, node) in fresh.nodes for node in ahead_nodes)
 
     one_node = 2 * 3 * morph.meshes.width * morph.meshes.height * 16
-    small, _ = _pass(mirror, [_cloud(600)], budget_mb=4.5 * one_node / 2 ** 20)
+    small, _ = _pass(mirror, [_cloud(600)], budget_mb=8.5 * one_node / 2 ** 20)
     small.blend(first)
-    assert len(small.nodes) == 4 and small.nodes.evictions == 0
+    assert len(small.nodes) == 8 and small.nodes.evictions == 0
     small.blend(moved)
-    assert len(small.nodes) == 4 and small.nodes.evictions > 0  # the old nodes went, the four in use stay
+    assert len(small.nodes) == 8 and small.nodes.evictions > 0  # the old nodes went, the eight in use stay
     assert small.nodes.nbytes <= small.nodes.budget_bytes
 
 
