@@ -113,11 +113,12 @@ def test_render_image_draws_from_the_grid_on_the_gpu(fig3_morphing):
     morphed = render_scene(scene, bpy.context.evaluated_depsgraph_get(), state=state)
     assert morphed.stats["methods"] == {"MirrorSphere": "MORPHING"}
     assert "n_rays" not in morphed.stats  # no camera built (the on-demand grid builds its nodes meanwhile)
-    assert state.renderer.morph.counts == {"blends": 1, "node_projections": 4}
-    # Polish Node Images is on by default: the four nodes' grazing and widened-chart
+    # The camera's tetrahedron and the rest of its cube, whose images the surface fit reads.
+    assert state.renderer.morph.counts == {"blends": 1, "node_projections": 8}
+    # Polish Node Images is on by default: the eight nodes' grazing and widened-chart
     # images were polished on the GPU (two dispatches a node where it has both).
     grid = state.renderer.morph.grids[0][0]
-    assert grid.mirror is not None and grid.image_polish.dispatches >= 4
+    assert grid.mirror is not None and grid.image_polish.dispatches >= 8
     # The test grid is coarse (48-pixel faces, 7 x 7 x 5 nodes): measured, 2.0 % of the
     # image (the ball fills about half of it) differs from the runtime camera's (3.2 %
     # before images were matched across nodes by MATCH_SLOPE, 2.2 % before the strip along
@@ -195,9 +196,9 @@ def test_live_view_prefetches_the_nodes_around_the_eye(fig3_morphing):
     state = live.bake(scene, bpy.context.evaluated_depsgraph_get(), views={"near": near}, wait=True)
     assert _draw(scene, near, "near")[0]
     morph = state.renderer.morph
-    assert morph.counts["node_projections"] == 4 and morph.prefetching == 1
+    assert morph.counts["node_projections"] == 8 and morph.prefetching == 1
     (_, future), = morph._pending.values()
     future.result(timeout=120)
     assert live.process(scene, bpy.context.evaluated_depsgraph_get())  # still work: a node to upload
     assert _draw(scene, near, "near")[0]
-    assert morph.counts["node_projections"] == 5 and morph.prefetching == 1 and len(morph.nodes) == 5
+    assert morph.counts["node_projections"] == 9 and morph.prefetching == 1 and len(morph.nodes) == 9
