@@ -90,9 +90,11 @@ def blend_defines(n_nodes: int = 4, regular: int = SLOTS, widened: int = SLOTS, 
 
 
 @functools.cache
-def blend_shader(n_nodes: int = 4, regular: int = SLOTS, widened: int = SLOTS, blend_nodes: int = 4):
+def blend_shader(n_nodes: int = 4, regular: int = SLOTS, widened: int = SLOTS, blend_nodes: int = 4,
+                 ridge: float = morph_surface.QUADRIC_RIDGE):
     """The compute shader of the blend for cells of ``n_nodes`` nodes, the first
-    ``blend_nodes`` blended (:func:`blend_defines`), that fill at most
+    ``blend_nodes`` blended (:func:`blend_defines`), its surface fit held toward a sphere
+    by ``ridge`` (``MorphingGrid.quadric_ridge``), that fill at most
     ``regular`` and ``widened`` image slots (1 to :data:`SLOTS`, 0 to :data:`SLOTS`),
     built on first use: llvmpipe pays for every loop iteration over slots, filled or not
     (``glsl/morph_blend.glsl``), so each pair gets its own (a convex mirror's cells use
@@ -112,7 +114,7 @@ def blend_shader(n_nodes: int = 4, regular: int = SLOTS, widened: int = SLOTS, b
         info.image(k, 'RGBA32F', 'FLOAT_2D', f"result{k}", qualifiers={'WRITE'})
     info.local_group_size(LOCAL_SIZE, 1)
     info.compute_source(glsl_source("morph_blend.glsl", blend_defines(n_nodes, regular, widened, blend_nodes),
-                                    normal_equations_glsl(9, morph_surface.FIT_PENALTY)))
+                                    normal_equations_glsl(9, morph_surface.sphere_prior(ridge))))
     return gpu.shader.create_from_info(info)
 
 
@@ -338,7 +340,7 @@ class MorphPass(FramePass):
             self._drawn.append(k)
             if self._active[k] == 0:
                 continue  # no node sees the mirror from any vertex: nothing to blend or draw
-            shader = blend_shader(len(nodes), self._active[k], widened, grid.blend_nodes)
+            shader = blend_shader(len(nodes), self._active[k], widened, grid.blend_nodes, grid.quadric_ridge)
             uniforms = self._frame_buffer(len(nodes))
             uniforms.update(gpu.types.Buffer('FLOAT', len(values), values))
             shader.bind()

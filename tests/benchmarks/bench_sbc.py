@@ -205,6 +205,29 @@ def ellipsoid_reflector(rng):
     return Reflector("HeldOutEllipsoid", centre + (unit.vertices * radii) @ rotation.T, unit.triangles, normals)
 
 
+def second_ellipsoid():
+    """Held-out (made 2026-11-28, after the blend's constants were chosen): an ellipsoid of
+    radii 1.1, 1.35, 0.65, coarser than :func:`ellipsoid_reflector` (a level-4 geodesic
+    sphere), turned about z and x, exact normals."""
+    from curved_reflections.addon import Reflector
+    from curved_reflections.addon.geometry.sphere import ellipsoid
+
+    centre = np.array([0.0, 0.0, 1.0])
+    base = ellipsoid(centre, (1.1, 1.35, 0.65), 4, "HeldOutEllipsoidB")
+    rotation = _rotation(2.1, 0.3)
+    return Reflector(base.name, centre + (base.vertices - centre) @ rotation.T, base.triangles,
+                     base.normals @ rotation.T)
+
+
+def rounded_box():
+    """Held-out, not a quadric (made 2026-11-28): the superellipsoid |x/1.2|^4 + |y/0.9|^4
+    + |z/0.8|^4 = 1, a box with rounded edges, smooth, its curvature from near 0 on the
+    faces to about 3.5 on the edges; exact normals."""
+    from curved_reflections.addon.geometry.sphere import superellipsoid
+
+    return superellipsoid((0.0, 0.0, 1.0), (1.2, 0.9, 0.8), 4.0, 5, "HeldOutRoundedBox")
+
+
 def rippled_ellipsoid(centre, radii, subdivisions: int, amplitude: float, lobes=(6, 3), name: str = "rippled"):
     """An ellipsoid mesh rippled along its radius, (1 + a sin(m phi + 0.4) sin(n theta)),
     normals from the faces: a held-out mirror that is not a quadric (bench_perturbation.py:

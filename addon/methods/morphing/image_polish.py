@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""A node's grazing and extended-frustum images, polished on the mirror its camera was built from.
+"""A node's images, regular and extended-frustum, polished on the mirror its camera was built from.
 
 Remedy 2 of the morphing blend (SBC paper VI, ``morphing.py``) asks a node camera's
 leaf for an image its rays do not bracket: the leaf's chart widened by
@@ -12,17 +12,22 @@ point on the surface model the reference solver uses (flat triangles, interpolat
 normals), once per node and point set, not per frame.
 
 The node's regular images, interpolated between its rays (0.5 face pixels), are off
-too where the node sees the mirror at a grazing angle; the blend of a cell whose nodes
-do not all see an image (remedy 3) rests on those. Polishing the regular images seen
-more than ``GRAZING_COS`` off the normal as well (35 % of them there) took the p99 from
-1.05 to 0.72 px (every regular image: 0.48 px, for three times the work).
+too, most where the node sees the mirror at a grazing angle. Polishing the regular
+images seen more than 60 degrees off the normal (35 % of them) took the ball's p99 from
+1.05 to 0.72 px; every regular image, 0.48 px, for three times the work. Since the blend's
+surface is fitted to the images of a whole cube of nodes (``MorphingGrid.locate_view``),
+every image is polished: the fit's pull toward a sphere, which damped the cameras'
+interpolation error, can then be 100 times weaker (``morph_surface.POLISHED_RIDGE``), and
+on the held-out ellipsoids of bench_octree.py the p99 fell from 0.86 and 0.94 px (the
+grazing images polished, the pull at 1e-2) to 0.11 and 0.23 px, the ball's from 0.65 to
+0.39 px.
 
 The scene's *Polish Node Images* (``MorphingGrid.mirror``, on by default) turns this
 on. This is the numpy twin, which the engine's own projection (``MorphingGrid.project``)
-and the tests use; it costs 0.2-0.3 s a node, more than the node's projection itself.
-The renderer polishes with its GPU twin (``gpu_shaders/methods/polish_gpu.py``, 5-10 ms
-a node; docs/benchmarks/morphing.md), and the viewport's worker threads leave the polish
-to it (``MorphingGrid.unpolished_images``).
+and the tests use; it costs about a second a node, more than the node's projection
+itself. The renderer polishes with its GPU twin (``gpu_shaders/methods/polish_gpu.py``,
+milliseconds a node; docs/benchmarks/morphing.md), and the viewport's worker threads
+leave the polish to it (``MorphingGrid.unpolished_images``).
 """
 
 from __future__ import annotations
@@ -31,7 +36,6 @@ import numpy as np
 
 from ...geometry.closed_surfaces import reflects_outside
 from ...geometry.raytrace import ReflectorSet
-from ...geometry.vectors import unit
 from .morph_surface import law_normals
 from ...reference.exact import INSIDE_TOLERANCE, newton_in_triangles
 from ...view import look_at_view
@@ -47,21 +51,15 @@ POLISH_ITERATIONS = 8
 #: nothing (an image off the surface toward the eye, seen at a grazing angle); also how
 #: far off the surface the fallback's normal line starts.
 RAY_REACH = 0.05
-#: A node's regular image is polished where the cosine between the mirror's normal and
-#: the direction to the node is below this (about 60 degrees off the normal).
-GRAZING_COS = 0.5
 
 
-def polish_grazing(mirror: ReflectorSet, eye: np.ndarray, points: np.ndarray, images: np.ndarray,
+def polish_regular(mirror: ReflectorSet, eye: np.ndarray, points: np.ndarray, images: np.ndarray,
                    polish=None) -> np.ndarray:
-    """(P, K, 3) a node's regular ``images``, those seen from ``eye`` at a grazing angle
-    (the normal the law of reflection gives them: the bisector of the directions to the
-    eye and to the point) polished (by ``polish``, of :func:`polish_images`' signature:
-    by default that function), the others as they are, as is any the polish does not place."""
-    with np.errstate(invalid="ignore"):
-        grazing = np.einsum("pkd,pkd->pk", law_normals(eye, points[:, None], images),
-                            unit(np.asarray(eye, dtype=np.float64) - images)) < GRAZING_COS
-    polished = (polish or polish_images)(mirror, eye, points, np.where(grazing[..., None], images, np.nan))
+    """(P, K, 3) a node's regular ``images`` seen from ``eye``, polished (by ``polish``,
+    of :func:`polish_images`' signature: by default that function); one the polish does
+    not place stays as it is (the node's camera saw it: a reflection is there, only not
+    where Newton's method started)."""
+    polished = (polish or polish_images)(mirror, eye, points, images)
     return np.where(np.isfinite(polished[..., :1]), polished, images)
 
 

@@ -33,12 +33,22 @@ SURFACE_REACH = 2.0
 #: 0.99 px before the grazing images were polished (1e-2: 1.05 px). Pulled toward zero
 #: (the paraboloid) instead, as before, close views were biased by 1.5 px: p99 2.8 px.
 QUADRIC_RIDGE = 1e-2
+#: The same weight where every node image is polished on the mirror (the scene's
+#: *Polish Node Images*, ``image_polish.py``) and the fit reads a whole cube of nodes
+#: (``MorphingGrid.locate_view``: 24 equations for 9 coefficients): the images then hold
+#: no camera error to damp, and the pull only biased mirrors that are not spheres.
+#: Measured, bench_octree.py's views, p99 px (ball, held-out ellipsoid, a second one): at
+#: 1e-2 0.52 / 2.18 / 2.89 with a tetrahedron's four nodes, 0.52 / 0.84 / 0.94 with the
+#: cube's eight; at 1e-4 with the eight 0.39 / 0.11 / 0.23; at 1e-5 with the four, the
+#: ball's rose to 1.01. The float32 blend on the GPU solves it as well
+#: (tests/gpu_shaders/methods/test_morph_pass.py).
+POLISHED_RIDGE = 1e-4
 #: A node's image joins the surface fit where its normal is within about 78 degrees of
 #: the nodes' weighted normal (cosine above this).
 SURFACE_NORMAL_MIN = 0.2
 
 
-def refine_on_local_surface(images, present, eyes, points, eye, weights):
+def refine_on_local_surface(images, present, eyes, points, eye, weights, penalty=None):
     """The reflection point of ``eye`` on a quadric fitted to the nodes' images.
 
     Our refinement of the paper's blend (SBC VI blends the four first reflector points
@@ -57,13 +67,15 @@ def refine_on_local_surface(images, present, eyes, points, eye, weights):
     erred by many pixels on images spread over a sizeable part of a sphere (its height
     deviates from the osculating paraboloid by r^4 / 8R^3); on other surfaces they take
     up part of the third-order terms. ``QUADRIC_RIDGE`` holds them near a sphere's
-    where the images do not pin them. Needs MIN_SURFACE_NODES nodes (two give fewer equations
+    where the images do not pin them (``penalty``, default :data:`FIT_PENALTY`: the
+    :func:`sphere_prior` of that weight). Needs MIN_SURFACE_NODES nodes (two give fewer equations
     than the quadratic's unknowns: measured, their fits are often wrong); where it fails
     or leaves the images' neighbourhood, ``ok`` is False.
 
     images (Q, N, 3), present (Q, N) bool, eyes (N, 3) node positions, points (Q, 3),
-    eye (3,), weights (Q, N) (zero where absent); N nodes: 4 of a tetrahedron, 8 of a
-    cube (``methods/octree``). Returns (Q, 3) points, (Q,) ok, (Q, 3) the
+    eye (3,), weights (Q, N) (zero where absent, and for nodes that only join the fit);
+    N nodes: a tetrahedron's 4 and the rest of its cube, 8 of an octree cell
+    (``methods/octree``); ``penalty`` (9, 9). Returns (Q, 3) points, (Q,) ok, (Q, 3) the
     mirror normal there (fitted where ok, else the weighted one) and (Q, 3) the weighted
     normal of the images (the normal at the linear blend).
     """
@@ -81,13 +93,13 @@ def refine_on_local_surface(images, present, eyes, points, eye, weights):
     if len(rows):
         x[rows], ok[rows], fitted_normal[rows] = _fit_and_reflect(
             images[rows], present[rows], usable[rows], normals[rows], normal[rows], nz[rows], origin[rows],
-            points[rows], eye)
+            points[rows], eye, FIT_PENALTY if penalty is None else penalty)
     # Where the fit is not used, the weighted normal of the nodes' images stands for the
     # mirror's normal at the linear blend.
     return x, ok, np.where(ok[:, None], fitted_normal, normal), normal
 
 
-def _fit_and_reflect(images, present, usable, normals, normal, nz, origin, points, eye):
+def _fit_and_reflect(images, present, usable, normals, normal, nz, origin, points, eye, penalty):
     """:func:`refine_on_local_surface` for rows that have enough usable nodes: the
     height-field fit and Newton on it; returns (x, ok, fitted normal). Newton runs on the
     rows not yet converged only."""
@@ -115,7 +127,7 @@ def _fit_and_reflect(images, present, usable, normals, normal, nz, origin, point
     rhs = np.concatenate([h, slope_a, slope_b], axis=1)
     mask = np.tile(usable, 3).astype(np.float64)
     rows, rhs = rows * mask[..., None], rhs * mask
-    normal_matrix = np.einsum("qri,qrj->qij", rows, rows) + FIT_PENALTY
+    normal_matrix = np.einsum("qri,qrj->qij", rows, rows) + penalty
     coefficients = solve_spd(normal_matrix, np.einsum("qri,qr->qi", rows, rhs))
 
     def surface(k, u, v):

@@ -52,8 +52,8 @@ import numpy as np
 from ..sbc.bsp import CAMERA_LEAF
 from .morph_grid import (NODE_OK, MorphSettings, NodesOnDemand, TetrahedralGrid, _StatusOnDemand, bake_reflector,
                          extended_mirror, from_frame, rigid_frame, to_frame)
-from .image_polish import polish_grazing, polish_images
-from .morph_surface import refine_on_local_surface
+from .image_polish import polish_images, polish_regular
+from .morph_surface import POLISHED_RIDGE, QUADRIC_RIDGE, refine_on_local_surface, sphere_prior
 from ..sbc.ray_patch import RayPatches, solve_charts
 from ..sbc.sbc import SampleBasedCamera, descend_tree, in_band
 from ...scene import Reflector
@@ -275,12 +275,20 @@ class MorphingGrid:
         return compact_images(images, self._duplicate_tolerance(node, images))
 
     def _polished_regular(self, node: int, points: np.ndarray, images: np.ndarray, polish=None):
-        """A node's regular ``images``, those seen at a grazing angle polished on the
-        :attr:`mirror` where the grid has one (``image_polish.polish_grazing``)."""
+        """A node's regular ``images``, polished on the :attr:`mirror` where the grid has
+        one (``image_polish.polish_regular``)."""
         if self.mirror is None:
             return images
-        return polish_grazing(self.mirror(), self.grid.node_positions()[node], points, images,
+        return polish_regular(self.mirror(), self.grid.node_positions()[node], points, images,
                               polish or self.image_polish or polish_images)
+
+    @property
+    def quadric_ridge(self) -> float:
+        """The pull of the blend's local quadric toward a sphere (``morph_surface``):
+        weak where every node image is polished on the mirror (exact but for float
+        rounding), :data:`.morph_surface.QUADRIC_RIDGE` where images carry the node
+        cameras' interpolation error."""
+        return POLISHED_RIDGE if self.mirror is not None else QUADRIC_RIDGE
 
     @property
     def projects_nodes_on_gpu(self) -> bool:
@@ -407,7 +415,7 @@ class MorphingGrid:
             refined, ok, normal, weighted_normal = refine_on_local_surface(
                 np.nan_to_num(matched).transpose(1, 2, 0, 3).reshape(-1, n_nodes, 3),
                 present.transpose(1, 2, 0).reshape(-1, n_nodes), eyes, local_points, local_eye,
-                w.transpose(1, 2, 0).reshape(-1, n_nodes))
+                w.transpose(1, 2, 0).reshape(-1, n_nodes), sphere_prior(self.quadric_ridge))
             if self.blend == "surface":
                 ok = ok.reshape(n_points, k_max)
                 blended = np.where(ok[..., None], refined.reshape(n_points, k_max, 3), blended)

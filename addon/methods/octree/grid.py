@@ -19,6 +19,7 @@ import dataclasses
 import numpy as np
 
 from ..morphing.morph_grid import NODE_OK, OCTREE, MorphSettings, NodesOnDemand, rigid_frame, to_frame
+from ..morphing.morph_surface import QUADRIC_RIDGE
 from ..morphing.morphing import MorphingGrid, ViewOutsideGrid, compact_images, grid_on_demand
 from ...scene import Reflector
 from .node import build_octree_node
@@ -51,6 +52,14 @@ class OctreeGrid(MorphingGrid):
 
     #: A cube's eight nodes are all blended, with the eye's trilinear weights.
     blend_nodes = 8
+
+    @property
+    def quadric_ridge(self) -> float:
+        """A ray octree's images are traced, never polished (:meth:`_polished_regular`),
+        each within ``ray_octree.CONVERGED`` of the law: the fit keeps
+        :data:`..morphing.morph_surface.QUADRIC_RIDGE` (measured on bench_octree.py's
+        views, 1e-4 took the held-out ellipsoid's p99 from 0.96 to 1.01 px)."""
+        return QUADRIC_RIDGE
 
     def locate_view(self, eye_world, matrix):
         """Cell, its eight nodes and the eye's trilinear weights; ViewOutsideGrid where unusable."""

@@ -52,13 +52,15 @@ def test_an_image_past_the_horizon_is_dropped(case):
     assert np.isnan(polished).all()
 
 
-def test_only_grazing_images_are_polished(case):
+def test_every_regular_image_is_polished_and_kept_where_no_polish_lands(case):
     mirror, points, truth = case
     has = np.flatnonzero(np.isfinite(truth[:, 0]))
     rough = truth[has] + np.random.default_rng(3).uniform(-0.01, 0.01, (len(has), 3))
-    polished = P.polish_grazing(mirror, EYE, points[has], rough[:, None])[:, 0]
     cosine = _cosines(truth[has])
-    facing, grazing = cosine > P.GRAZING_COS + 0.1, cosine < P.GRAZING_COS - 0.1
-    assert facing.sum() > 50 and grazing.sum() > 20
-    np.testing.assert_array_equal(polished[facing], rough[facing])
-    np.testing.assert_allclose(polished[grazing], truth[has][grazing], atol=1e-8)
+    assert (cosine > 0.6).sum() > 50 and (cosine < 0.4).sum() > 20  # facing and grazing both
+    polished = P.polish_regular(mirror, EYE, points[has], rough[:, None])[:, 0]
+    np.testing.assert_allclose(polished, truth[has], atol=1e-8)
+    # A polish that places nothing leaves the camera's images as they were.
+    untouched = P.polish_regular(mirror, EYE, points[has], rough[:, None],
+                                 polish=lambda m, e, p, images: np.full(images.shape, np.nan))[:, 0]
+    np.testing.assert_array_equal(untouched, rough)

@@ -28,13 +28,8 @@ def _sphere_case(rng, count=400):
 
 def _refined_with_penalty(penalty, images, nodes, points, eye, weights):
     """refine_on_local_surface with ``penalty`` (9, 9) added to the fit's normal equations."""
-    saved = morph_surface.FIT_PENALTY
-    try:
-        morph_surface.FIT_PENALTY = penalty
-        refined, ok, _, _ = morph_surface.refine_on_local_surface(images, np.ones(weights.shape, bool), nodes,
-                                                                  points, eye, weights)
-    finally:
-        morph_surface.FIT_PENALTY = saved
+    refined, ok, _, _ = morph_surface.refine_on_local_surface(images, np.ones(weights.shape, bool), nodes,
+                                                              points, eye, weights, penalty)
     return refined, ok
 
 
