@@ -207,14 +207,14 @@ def ellipsoid_reflector(rng):
 
 def second_ellipsoid():
     """Held-out (made 2026-11-28, after the blend's constants were chosen): an ellipsoid of
-    radii 1.1, 1.35, 0.65, coarser than :func:`ellipsoid_reflector` (a level-4 geodesic
+    radii 1.7, 0.8, 0.6, coarser than :func:`ellipsoid_reflector` (a level-4 geodesic
     sphere), turned about z and x, exact normals."""
     from curved_reflections.addon import Reflector
     from curved_reflections.addon.geometry.sphere import ellipsoid
 
     centre = np.array([0.0, 0.0, 1.0])
-    base = ellipsoid(centre, (1.1, 1.35, 0.65), 4, "HeldOutEllipsoidB")
-    rotation = _rotation(2.1, 0.3)
+    base = ellipsoid(centre, (1.7, 0.8, 0.6), 4, "HeldOutEllipsoidB")
+    rotation = _rotation(0.7, -0.35)
     return Reflector(base.name, centre + (base.vertices - centre) @ rotation.T, base.triangles,
                      base.normals @ rotation.T)
 
