@@ -138,9 +138,9 @@ class CurvedReflectionsSceneSettings(bpy.types.PropertyGroup):
     )
     morph_polish_nodes: BoolProperty(
         name="Polish Node Images",
-        description="Place each morphing node's grazing and extrapolated images exactly on the mirror (on the "
-                    "GPU, once per node): reflections near a mirror's rim land within a pixel of the exact ones "
-                    "instead of a few. Off: the nodes' images as their cameras give them",
+        description="Place each morphing node's images exactly on the mirror (on the GPU, once per node): "
+                    "reflections land within a fraction of a pixel of the exact ones instead of a pixel or more. "
+                    "Off: the nodes' images as their cameras give them",
         default=True,
         update=_reflector_toggled,  # the grids are loaded again, with or without the mirror to polish on
     )

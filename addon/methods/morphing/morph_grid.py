@@ -217,7 +217,6 @@ class TetrahedralGrid:
         cells = cell[:, 0] + (shape[0] - 1) * (cell[:, 1] + (shape[1] - 1) * cell[:, 2])
         return cells * 6 + perm, nodes, weights, inside
 
-
     def cell_nodes(self, tet: int) -> np.ndarray:
         """(8,) the nodes of the cell (cube) that holds tetrahedron ``tet`` (of :meth:`locate`)."""
         nx, ny, _ = self.shape

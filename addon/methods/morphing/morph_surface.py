@@ -37,10 +37,12 @@ QUADRIC_RIDGE = 1e-2
 #: *Polish Node Images*, ``image_polish.py``) and the fit reads a whole cube of nodes
 #: (``MorphingGrid.locate_view``: 24 equations for 9 coefficients): the images then hold
 #: no camera error to damp, and the pull only biased mirrors that are not spheres.
-#: Measured, bench_octree.py's views, p99 px (ball, held-out ellipsoid, a second one): at
-#: 1e-2 0.52 / 2.18 / 2.89 with a tetrahedron's four nodes, 0.52 / 0.84 / 0.94 with the
-#: cube's eight; at 1e-4 with the eight 0.39 / 0.11 / 0.23; at 1e-5 with the four, the
-#: ball's rose to 1.01. The float32 blend on the GPU solves it as well
+#: Measured on bench_octree.py's views, p99 px (the ball, the held-out ellipsoid, an
+#: ellipsoid of radii 1.1, 1.35, 0.65): a tetrahedron's four nodes, every image polished,
+#: 1e-2 0.52 / 2.18 / 2.89, 1e-4 0.91 / 0.83 / 2.81, 1e-5 1.01 / 0.62 / 2.38 (the partial
+#: blends' fits have no spare equation); the cube's eight, grazing images polished, 1e-2
+#: 0.65 / 0.86 / 0.94, 1e-4 0.73 / 0.64 / 0.64; the eight, every image polished, 1e-4
+#: 0.39 / 0.11 / 0.23. The float32 blend on the GPU solves it as well
 #: (tests/gpu_shaders/methods/test_morph_pass.py).
 POLISHED_RIDGE = 1e-4
 #: A node's image joins the surface fit where its normal is within about 78 degrees of

@@ -206,9 +206,10 @@ class MorphingGrid:
         fit (``morph_surface.refine_on_local_surface``) and nothing else. Four nodes give
         the quadric's nine coefficients 12 equations, three (a node that does not see the
         point) only 9, and the fit then leaned on its pull toward a sphere; the cell's
-        eight give 24 and 21. Held-out mirrors' p99 against the exact solver,
-        bench_octree.py's views: ellipsoid 2.23 -> 0.86 px, a second ellipsoid 2.89 ->
-        0.94 px, with 14-15 % more images placed (docs/benchmarks/morphing.md)."""
+        eight give 24 and 21. P99 against the exact solver on bench_octree.py's views
+        (diagnostic runs): the held-out ellipsoid 2.23 -> 0.86 px, an ellipsoid of radii
+        1.1, 1.35, 0.65 2.89 -> 0.94 px, the ball 0.71 -> 0.65 px, 5-13 % more images
+        compared (the run of record: docs/benchmarks/octree.md)."""
         frame = rigid_frame(matrix)
         eye = to_frame(frame, np.asarray(eye_world, dtype=np.float64)[None])
         tet, nodes, weights, inside = self.grid.locate(eye)

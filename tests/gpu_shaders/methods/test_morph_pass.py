@@ -77,10 +77,32 @@ def test_gpu_blend_is_the_numpy_blend(request, grid, eye):
     of a tetrahedron (with the rest of its cube for the surface fit) and the eight of an
     octree grid's cube."""
     mirror = request.getfixturevalue(grid)
+    _assert_gpu_blend_is_numpy_blend(mirror, _view(eye), n_nodes=8)  # the eye's cube, outside the mirror
+
+
+def test_a_cell_with_a_node_inside_the_mirror_blends_over_the_other_seven(mirror):
+    """The cube of this eye's tetrahedron has a corner inside the sphere (never built;
+    the tetrahedron's four are outside): the other seven are fitted, by a shader built
+    for seven."""
+    grid = mirror[1]
+    view = _view((-1.65, 0.75, 0.65))
+    _, nodes, weights, _ = grid.check_view(view)
+    assert len(nodes) == 7 and np.count_nonzero(weights) == 4
+    _assert_gpu_blend_is_numpy_blend(mirror, view, n_nodes=7)
+
+
+def test_the_blend_shader_builds_for_cells_of_four_to_eight_nodes(gpu_ready):
+    """A tetrahedron's cube keeps the nodes outside the mirror (4 to 8; a shader each)."""
+    from curved_reflections.gpu_shaders.methods.morph_pass import blend_shader
+
+    for n_nodes in range(4, 9):
+        assert blend_shader(n_nodes, 1, 1, min(4, n_nodes)) is not None
+
+
+def _assert_gpu_blend_is_numpy_blend(mirror, view, n_nodes):
     morph, geometry = _pass(mirror, [_cloud()])
-    view = _view(eye)
     assert morph.blend(view) == [0]
-    assert morph.counts["node_projections"] == 8  # the eye's cube, outside the mirror
+    assert morph.counts["node_projections"] == n_nodes
     found = morph.read(0)
     expected = mirror[1].project(geometry.vertices, view)
     compared = 0
