@@ -118,14 +118,15 @@ vec4 nearest(vec4 images[SLOTS], const int bound, int count, vec3 reference, flo
 }
 
 /* A node's match of `reference`: among its regular images, else (remedy 2) among its
- * widened charts', fetched only then (most vertices match a regular image). */
+ * widened charts', fetched only then (most vertices match a regular image); a node that
+ * only joins the fit (n >= BLEND_NODES) matches regular images alone (MorphingGrid._matched_images). */
 vec4 match_node(int n, vec4 regular[SLOTS], ivec2 texel, vec3 reference, float threshold, vec4 others[SLOTS],
                 int count_others)
 {
   vec4 found = nearest(regular, REGULAR_SLOTS, int(frame.node_slots[n].x), reference, threshold, others, count_others);
 #if WIDENED_SLOTS > 0
   int widened = int(frame.node_slots[n].y);
-  if (found.w > 0.5 || widened == 0) {
+  if (found.w > 0.5 || widened == 0 || n >= BLEND_NODES) {
     return found;
   }
   vec4 extended[SLOTS];
