@@ -19,7 +19,8 @@ views for every grid. Per view, fresh points; the exact solver (``addon/referenc
 the visible reflections. Only the nodes of the views' tetrahedra are built (lazily; the
 error does not depend on the others). Both blends: the paper's barycentric blend of the
 four first reflector points (``linear``) and ours (``surface``: the blend refined on a
-quadric fitted to the four nodes' images and normals). Error: desired-view pixel
+quadric fitted to the images and normals of the eight nodes of the tetrahedron's cube).
+Error: desired-view pixel
 distance from each projected image to the exact visible reflection; coverage: share of
 exact visible reflections that are projected; false: projected images with no exact
 visible reflection. Projection rate: a second ``project`` call (nodes already in memory),
@@ -258,9 +259,9 @@ def report(results: dict) -> str:
         f"{FOV:.0f} degrees, {args['points']} points each (box, diffuse meshes, near the mirror). Cube faces "
         f"{args['face_resolution']} px, accuracy {args['accuracy_px']} face px. *linear*: the paper's barycentric "
         "blend of the four "
-        "first reflector points; *surface*: ours, the blend refined on a quadric fitted to the four nodes' images "
-        "and normals (`refine_on_local_surface`)"
-        + ("; the nodes' grazing and extended images polished on the mirror (*Polish Node Images*, the "
+        "first reflector points; *surface*: ours, the blend refined on a quadric fitted to the images and normals "
+        "of the eight nodes of the tetrahedron's cube (`refine_on_local_surface`)"
+        + ("; the nodes' images polished on the mirror (*Polish Node Images*, the "
            "default; `image_polish.py`)" if args.get("polish", True) else "; the nodes' images as their cameras "
            "give them (*Polish Node Images* off)")
         + ". Error: desired-view px from each projected image to the exact "
@@ -344,7 +345,7 @@ def parse_args(argv=None):
                         "(default: MorphSettings' default)")
     parser.add_argument("--bake-grid", default="9,9,5")
     parser.add_argument("--processes", type=int, default=2)
-    parser.add_argument("--no-polish", dest="polish", action="store_false", help="leave the nodes' grazing and "
+    parser.add_argument("--no-polish", dest="polish", action="store_false", help="leave the nodes' regular and "
                         "extended images as their cameras give them (the scene's Polish Node Images off; on by "
                         "default)")
     parser.add_argument("--bake-only", action="store_true", help="measure the bake alone (no error sweep, no "
