@@ -17,10 +17,12 @@ images seen more than 60 degrees off the normal (35 % of them) took the ball's p
 1.05 to 0.72 px; every regular image, 0.48 px, for three times the work. Since the blend's
 surface is fitted to the images of a whole cube of nodes (``MorphingGrid.locate_view``),
 every image is polished: the fit's pull toward a sphere, which damped the cameras'
-interpolation error, can then be 100 times weaker (``morph_surface.POLISHED_RIDGE``), and
-on the held-out ellipsoids of bench_octree.py the p99 fell from 0.86 and 0.94 px (the
-grazing images polished, the pull at 1e-2) to 0.11 and 0.23 px, the ball's from 0.65 to
-0.39 px.
+interpolation error, can then be 100 times weaker (``morph_surface.POLISHED_RIDGE``):
+on bench_octree.py's views (diagnostic runs) the held-out ellipsoid's p99 fell from 0.86
+px (grazing images polished, the pull at 1e-2) to 0.11 px, an ellipsoid of radii 1.1,
+1.35, 0.65 from 0.94 to 0.23 px, the ball's from 0.65 to 0.39 px (the run of record,
+docs/benchmarks/octree.md: 0.20 and 0.40 px, the fit-only nodes matching regular images
+alone).
 
 The scene's *Polish Node Images* (``MorphingGrid.mirror``, on by default) turns this
 on. This is the numpy twin, which the engine's own projection (``MorphingGrid.project``)

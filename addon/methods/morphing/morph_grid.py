@@ -28,6 +28,9 @@ CUBE_FACES = (
 #: points whose local coordinates satisfy f[p0] >= f[p1] >= f[p2] for PERMUTATIONS[k].
 PERMUTATIONS = np.array([(0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0)])
 
+#: The eight corners of a grid cell, as (x, y, z) steps from its lowest node.
+CELL_CORNERS = np.array([(i, j, k) for k in (0, 1) for j in (0, 1) for i in (0, 1)])
+
 #: MorphSettings.kind values
 TETRAHEDRAL, OCTREE = "tetrahedral", "octree"
 #: node status codes
@@ -222,8 +225,7 @@ class TetrahedralGrid:
         nx, ny, _ = self.shape
         cell = int(tet) // 6
         ijk = np.array([cell % (nx - 1), (cell // (nx - 1)) % (ny - 1), cell // ((nx - 1) * (ny - 1))])
-        corners = ijk + np.stack(np.meshgrid(*[np.arange(2)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
-        return self.node_index(corners)
+        return self.node_index(ijk + CELL_CORNERS)
 
     def _cell(self, f: np.ndarray) -> np.ndarray:
         """(P, 3) integer cell (lowest corner node) of grid coordinates ``f``, clamped to the grid."""

@@ -18,14 +18,12 @@ import dataclasses
 
 import numpy as np
 
-from ..morphing.morph_grid import NODE_OK, OCTREE, MorphSettings, NodesOnDemand, rigid_frame, to_frame
+from ..morphing.morph_grid import CELL_CORNERS, NODE_OK, OCTREE, MorphSettings, NodesOnDemand, rigid_frame, to_frame
 from ..morphing.morph_surface import QUADRIC_RIDGE
 from ..morphing.morphing import MorphingGrid, ViewOutsideGrid, compact_images, grid_on_demand
 from ...scene import Reflector
 from .node import build_octree_node
 
-#: The eight corners of a cell, as (x, y, z) steps from its lowest node.
-CORNERS = np.array([(i, j, k) for k in (0, 1) for j in (0, 1) for i in (0, 1)])
 #: Images a node keeps of one point (a convex mirror shows it once, a concave one more).
 IMAGES = 3
 
@@ -39,8 +37,8 @@ def locate_cell(grid, point):
     inside = bool(np.all((f >= -tolerance) & (f <= shape - 1 + tolerance)))
     cell = np.clip(np.floor(f).astype(np.int64), 0, shape - 2)
     local = np.clip(f - cell, 0.0, 1.0)
-    weights = np.prod(np.where(CORNERS == 1, local, 1.0 - local), axis=1)
-    nodes = grid.node_index(cell + CORNERS)
+    weights = np.prod(np.where(CELL_CORNERS == 1, local, 1.0 - local), axis=1)
+    nodes = grid.node_index(cell + CELL_CORNERS)
     cell_id = int(cell[0] + (shape[0] - 1) * (cell[1] + (shape[1] - 1) * cell[2]))
     return cell_id, nodes, weights, inside
 
