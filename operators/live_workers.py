@@ -37,7 +37,7 @@ def build_camera(reflector_set, view: View, bounds, settings: tuple, projections
 
     max_order, downsample, accuracy_px = settings
     sbc = build_sample_based_camera(reflector_set, view, bounds, max_order=max_order,
-                                    downsample=downsample, accuracy_px=accuracy_px)
+                                    downsample=downsample, accuracy_px=accuracy_px, first_order_left_out=per_frame)
     return sbc, projections.triangles(CameraSource(sbc), sbc.ray_map.view, sbc, per_frame)
 
 

@@ -178,7 +178,8 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
         lo, hi = scene_bounds(captured.reflectors, captured.meshes)
         bounds = scene_bounds(captured.reflectors, captured.meshes, BOUNDS_MARGIN * float(np.linalg.norm(hi - lo)))
         sbc = build_sample_based_camera(state.reflector_set, view, bounds, max_order=max_order,
-                                        downsample=downsample, accuracy_px=accuracy_px)
+                                        downsample=downsample, accuracy_px=accuracy_px,
+                                        first_order_left_out=per_frame)
     if animating:
         _prefetch_nodes(state.renderer.morph, view, state.last_eye)
         state.last_eye = view.eye if view.is_perspective else None

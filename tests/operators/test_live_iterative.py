@@ -92,7 +92,14 @@ def test_second_order_in_auto_mode_builds_a_camera_for_the_higher_orders(fig3):
     bpy.data.objects["Column1"].curved_reflections.is_reflector = True
     state = live.bake(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
     assert state.cameras[live.CAMERA_KEY].sbc is not None
-    assert {(0, 1), (1, 0)} & {tuple(h) for h in state.cameras[live.CAMERA_KEY].sbc.groups}
+    camera = state.cameras[live.CAMERA_KEY]
+    assert {(0, 1), (1, 0)} & {tuple(h) for h in camera.sbc.groups}
+    # The searched mirrors' first orders are left out of the camera, which is built again
+    # should a pass stop drawing one of them.
+    searched = state.renderer.per_frame_reflectors(camera.view)
+    assert searched and camera.sbc.first_order_left_out == searched
+    assert not {tuple(h) for h in camera.sbc.groups} & {(k,) for k in searched}
+    assert camera.first_orders_drawn(searched) and not camera.first_orders_drawn(frozenset())
     assert live.draw_safely(fig3, live.CAMERA_KEY, _camera_view(fig3))
 
 

@@ -139,6 +139,32 @@ def test_render_honours_each_reflectors_mode(fig3):
     assert differing.mean() < 0.03
 
 
+
+def test_second_orders_of_searched_mirrors_get_a_camera_without_their_first_orders(empty_scene, registered,
+                                                                                  monkeypatch):
+    """Two facing balls, both searched, at Max Order 2: the frame's camera is made for
+    their images of each other alone, and the frame is the one a whole camera gives."""
+    from curved_reflections.operators import render_image
+
+    scene = demo_scenes.build("two_spheres", bpy.context.scene, 96, 64)
+    assert scene.curved_reflections.max_order == 2
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    higher = render_image.render_scene(scene, depsgraph)
+    assert set(higher.stats["methods"].values()) == {"ITERATIVE"}
+    assert higher.camera.first_order_left_out == {0, 1}
+    assert sorted(map(tuple, higher.camera.groups)) == [(0, 1), (1, 0)]
+    build = render_image.build_sample_based_camera
+    monkeypatch.setattr(render_image, "build_sample_based_camera",
+                        lambda *args, first_order_left_out, **kwargs: build(*args, **kwargs))
+    whole = render_image.render_scene(scene, depsgraph)
+    assert {len(h) for h in whole.camera.groups} == {1, 2}
+    assert whole.stats["n_sheets"] > higher.stats["n_sheets"]
+    differing = np.abs(whole.image - higher.image).max(axis=2) > 1e-6
+    assert differing.sum() == 0
+    second = np.abs(whole.image[..., :3] - render_image.render_scene(scene, depsgraph, max_order=1).image[..., :3])
+    assert (second.max(axis=2) > 0.05).sum() > 20  # the second orders are in the frame
+
+
 def test_frame_paths():
     from curved_reflections.operators.render_image import frame_filepath
 

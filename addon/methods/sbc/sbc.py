@@ -85,6 +85,10 @@ class SampleBasedCamera:
     #: Per tree, the surface histories (indices into ``ray_map.surfaces``) whose rays it
     #: holds (``sbc_build.surface_sets``), or None for all of its group's; None: all trees hold all.
     surfaces: list | None = None
+    #: Reflectors whose first-order reflections other methods draw in this view (the
+    #: iterative search, a morphing grid, perturbation): the camera has no tree for them
+    #: (``sbc_build.build_sample_based_camera``), only for the higher orders they start.
+    first_order_left_out: frozenset = frozenset()
 
     @property
     def groups(self) -> list:

@@ -30,8 +30,10 @@ CLASSES = {cls.__name__: cls for cls in (SampleBasedCamera, RayMap, View, BSPTre
 #: Fields recomputed on load rather than stored.
 DERIVED = {"SampleBasedCamera": ("grids",)}
 #: Fields not stored: references to the scene a camera was built in (the reflectors that
-#: polish answers on the true rays); a loaded camera has their default (None).
-TRANSIENT = {"SampleBasedCamera": ("true_rays",)}
+#: polish answers on the true rays), and the first orders left to a frame's per-frame
+#: methods (a stored camera is a grid node's, made for every group); a loaded camera has
+#: their defaults (None, none left out).
+TRANSIENT = {"SampleBasedCamera": ("true_rays", "first_order_left_out")}
 
 
 def _put(out: dict, key: str, value) -> None:

@@ -57,3 +57,27 @@ def test_second_order_projections_match_the_exact_solver(scene):
     assert len(error) > 100
     assert np.percentile(error, 95) <= 1.0 and np.percentile(error, 50) <= 0.25
     assert false <= 0.02 * projected
+
+
+def test_a_camera_for_the_higher_orders_alone_projects_them_as_the_whole_camera(scene):
+    """Both balls' first orders drawn by another method (the iterative search): the camera
+    leaves their groups out, and its second-order answers are the whole camera's."""
+    reflector_set, view, points, _ = scene
+    whole = build_sample_based_camera(reflector_set, view, BOUNDS, max_order=2, downsample=2)
+    higher = build_sample_based_camera(reflector_set, view, BOUNDS, max_order=2, downsample=2,
+                                       first_order_left_out=frozenset({0, 1}))
+    assert higher.first_order_left_out == {0, 1}
+    assert {tuple(h) for h in higher.groups} == {h for h in map(tuple, whole.groups) if len(h) > 1} == {(0, 1), (1, 0)}
+    assert higher.stats["n_sheets"] < whole.stats["n_sheets"]
+    assert higher.stats["n_rays"] == whole.stats["n_rays"]  # the ray map is the same: it finds the second orders
+    mine, theirs = higher.project(points), whole.project(points)
+    # The same sheets, in the same order (a history has one group per sheet).
+    second = [k for k, h in enumerate(theirs.groups) if len(h) > 1]
+    assert [tuple(theirs.groups[k]) for k in second] == [tuple(h) for h in mine.groups]
+    for g, k in enumerate(second):
+        np.testing.assert_array_equal(mine.valid[g], theirs.valid[k])
+        assert mine.valid[g].sum() > 10
+        np.testing.assert_allclose(mine.pixels[g][mine.valid[g]], theirs.pixels[k][theirs.valid[k]], atol=1e-9)
+    only_first = build_sample_based_camera(reflector_set, view, BOUNDS, max_order=2, downsample=2,
+                                           first_order_left_out=frozenset({0}))
+    assert {tuple(h) for h in only_first.groups} == {(1,), (0, 1), (1, 0)}
