@@ -209,7 +209,7 @@ class ReflectionRenderer:
                  edge_fraction: float | None = subdivision.EDGE_FRACTION, *, fresnel_f0=None,
                  attenuation_distance=None, mixed_subdivisions: int = MIXED_SUBDIVISIONS, cull: bool = True,
                  polish: bool = True, iterative=(), morph=(), morph_budget_mb: float = DEFAULT_BUDGET_MB,
-                 perturbation=(), accuracy_px: float = 0.5, reflector_set=None):
+                 perturbation=(), accuracy_px: float = 0.5, reflector_set=None, polish_frames: bool = False):
         self.geometry = prepare_geometry(reflectors, meshes, reflector_colors, reflectivity, edge_fraction,
                                          fresnel_f0, attenuation_distance)
         #: The diffuse meshes on the GPU, placed by the per-frame passes' answers.
@@ -219,7 +219,7 @@ class ReflectionRenderer:
         self.iterative = IterativePass(self.geometry, iterative, self.meshes, len(reflectors))
         #: The reflectors drawn from their morphing grids every frame (views inside a grid).
         self.convex_mirrors = convex = ConvexMirrors(reflectors)  # tested once, for every pass
-        self.morph = MorphPass(self.geometry, morph, self.meshes, morph_budget_mb, accuracy_px, convex)
+        self.morph = MorphPass(self.geometry, morph, self.meshes, morph_budget_mb, accuracy_px, convex, polish_frames)
         #: The reflectors drawn by perturbation (Chen & Arvo 2000), projected per new view.
         self.perturbation = PerturbationPass(self.geometry, reflectors, perturbation, self.meshes,
                                              accuracy_px, reflector_set)

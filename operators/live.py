@@ -165,6 +165,7 @@ def _renew_renderer(state: LiveScene, scene, captured) -> None:
                                         accuracy_px=state.settings[2],
                                         reflector_set=state.reflector_set,
                                         morph_budget_mb=scene.curved_reflections.morph_gpu_budget_mb,
+                                        polish_frames=scene.curved_reflections.morph_polish_frames,
                                         **reflector_properties(captured.reflectors, scene))
     state.captured = captured
     state.world = world_color(scene)

@@ -150,6 +150,9 @@ class VIEW3D_PT_curved_reflections(bpy.types.Panel):
         morph.prop(scene_settings, "morph_grid")
         morph.prop(scene_settings, "morph_margin")
         morph.prop(scene_settings, "morph_polish_nodes")
+        polish_frames = morph.row()
+        polish_frames.active = scene_settings.morph_polish_nodes
+        polish_frames.prop(scene_settings, "morph_polish_frames")
         morph.prop(scene_settings, "morph_gpu_budget_mb")
         if morphing:
             _morphing_section(layout.box(), scene)

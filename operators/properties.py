@@ -144,6 +144,14 @@ class CurvedReflectionsSceneSettings(bpy.types.PropertyGroup):
         default=True,
         update=_reflector_toggled,  # the grids are loaded again, with or without the mirror to polish on
     )
+    morph_polish_frames: BoolProperty(
+        name="Polish Every Frame",
+        description="Move each frame's blended reflections onto the mirror's exact reflection points (on the "
+                    "GPU, about an eighth of the morphing pass): exact on mirrors of any shape, where a blend "
+                    "alone errs by many pixels on mirrors whose curvature changes quickly. Needs Polish Node Images",
+        default=True,
+        update=_reflector_toggled,  # a new renderer, polishing or not
+    )
     morph_cache_dir: StringProperty(
         name="Cache Folder",
         description="Folder for baked morphing grids (empty: the extension's user folder). Set a folder every "

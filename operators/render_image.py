@@ -145,10 +145,11 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
     ensure_gpu()
     captured_at = time.perf_counter()
     properties = reflector_properties(captured.reflectors, scene)
-    # Modes, accuracy and the mirrors' looks may be animated too: they are part of the key.
+    # Modes, accuracy, the mirrors' looks and the polish may be animated too: they are part of the key.
     looks = hashlib.sha1(b"".join(np.ascontiguousarray(v).tobytes() for v in properties.values())).hexdigest()
     modes = tuple(methods.mode_of(scene, r.name) for r in captured.reflectors)
-    key = captured_key(captured) + (modes, float(accuracy_px), looks)
+    polish_frames = bool(settings.morph_polish_frames)
+    key = captured_key(captured) + (modes, float(accuracy_px), looks, polish_frames)
     if state.reflector_set is None or key[0] != state.key[0]:
         state.reflector_set = ReflectorSet(list(captured.reflectors))
     if state.plan is None or key[0] != state.key[0] or key[2:4] != state.key[2:4]:
@@ -163,7 +164,7 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
         state.reflector_set.seal_empty_interiors(captured.meshes)
         state.renderer = ReflectionRenderer(captured.reflectors, captured.meshes, iterative=state.plan.iterative,
                                             morph=state.grids, perturbation=state.plan.perturbation,
-                                            accuracy_px=accuracy_px,
+                                            accuracy_px=accuracy_px, polish_frames=polish_frames,
                                             reflector_set=state.reflector_set, **properties)
     else:
         state.reused += 1

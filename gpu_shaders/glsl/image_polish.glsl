@@ -163,16 +163,10 @@ vec2 newton(vec2 uv)
   return uv;
 }
 
-void main()
+/* The reflection point of p_point near `target` seen from `eye` (both set), as (point,
+ * 1), else zeros. */
+vec4 polish(vec3 target)
 {
-  ivec2 texel = ivec2(gl_GlobalInvocationID.xy);
-  int row = texel.y * work_width + texel.x;
-  if (texel.x >= work_width || row >= n_rows) {
-    return;
-  }
-  p_point = texelFetch(work, ivec2(2 * texel.x, texel.y), 0).xyz;
-  vec3 target = texelFetch(work, ivec2(2 * texel.x + 1, texel.y), 0).xyz;
-  eye = param(0).xyz;
   vec4 answer = vec4(0.0);
   int triangle = grid_triangle(target);
   for (int round_count = 0; round_count < ROUNDS && triangle >= 0; round_count++) {
@@ -202,5 +196,46 @@ void main()
     /* The root lies outside: the next round starts in the triangle under it. */
     target = surface_point(uv);
   }
-  imageStore(result, texel, answer);
+  return answer;
 }
+
+#ifdef FRAME_ANSWERS
+/* A frame's blended answers (morph_blend.glsl), polished where they stand: one
+ * invocation per vertex, its texel of `answers` (reflector point relative to the
+ * renderer's shift, FOUND_CODE; zeros where none) and of `vertex_positions`. `params`
+ * rows 3-5 map the renderer's coordinates to the mirror table's, rows 6-8 back. An
+ * answer the polish does not place is dropped (FRAME_POLISH in morph_pass.py). */
+vec3 affine(int first, vec3 x)
+{
+  return vec3(dot(param(first).xyz, x) + param(first).w, dot(param(first + 1).xyz, x) + param(first + 1).w,
+              dot(param(first + 2).xyz, x) + param(first + 2).w);
+}
+
+void main()
+{
+  ivec2 texel = ivec2(gl_GlobalInvocationID.xy);
+  if (texel.x >= positions_width || texel.y * positions_width + texel.x >= n_rows) {
+    return;
+  }
+  vec4 blended = imageLoad(answers, texel);
+  if (blended.w == 0.0) {
+    return;
+  }
+  eye = param(0).xyz;
+  p_point = affine(3, texelFetch(vertex_positions, texel, 0).xyz);
+  vec4 answer = polish(affine(3, blended.xyz));
+  imageStore(answers, texel, answer.w > 0.5 ? vec4(affine(6, answer.xyz), blended.w) : vec4(0.0));
+}
+#else
+void main()
+{
+  ivec2 texel = ivec2(gl_GlobalInvocationID.xy);
+  int row = texel.y * work_width + texel.x;
+  if (texel.x >= work_width || row >= n_rows) {
+    return;
+  }
+  p_point = texelFetch(work, ivec2(2 * texel.x, texel.y), 0).xyz;
+  eye = param(0).xyz;
+  imageStore(result, texel, polish(texelFetch(work, ivec2(2 * texel.x + 1, texel.y), 0).xyz));
+}
+#endif

@@ -206,8 +206,15 @@ class MorphPass(FramePass):
 
     def __init__(self, geometry, grids, meshes: ReflectedMeshes | None = None,
                  budget_mb: float = DEFAULT_BUDGET_MB, accuracy_px: float | None = None,
-                 convex_mirrors: ConvexMirrors | None = None):
+                 convex_mirrors: ConvexMirrors | None = None, polish_frames: bool = False):
         self.geometry = geometry
+        #: Each frame's blended answers polished on the mirror (:meth:`_polish`), where the
+        #: grid has one (*Polish Node Images*): then every drawn answer lies on the mesh,
+        #: and the hidden-point test applies again.
+        self.polish_frames = bool(polish_frames)
+        if self.polish_frames:
+            self.hidden_fraction = FramePass.hidden_fraction
+        self._own_polish = None  # the tables of mirrors whose grid polishes in numpy
         self._accuracy = accuracy_px
         self._convex = ConvexMirrors() if convex_mirrors is None else convex_mirrors
         self.grids = list(grids)
@@ -355,8 +362,28 @@ class MorphPass(FramePass):
             for slot, texture in enumerate(self._results[k][:self._active[k]]):
                 shader.image(f"result{slot}", texture)
             gpu.compute.dispatch(shader, *self.meshes.work_groups(LOCAL_SIZE))
+            if self.polish_frames and grid.mirror is not None:
+                self._polish(grid, eye, matrices[0], self._results[k][:self._active[k]])
         self.counts["blends"] += 1
         return [self.grids[k][0].reflector_index for k in self._drawn]
+
+    def _polish(self, grid, eye, frame_from_shifted: np.ndarray, answers) -> None:
+        """Move this frame's blended ``answers`` of ``grid`` onto the mirror's reflection
+        points (``polish_gpu.polish_answers``: Newton on the mesh from each blended image,
+        as Polish Node Images does for the nodes' images), dropping those it cannot place.
+        A blend on a mirror that is not a quadric errs by tens of pixels where its
+        curvature changes within a cell (a rounded box, four views: p99 22 px), and
+        polished lands on the exact solver's reflections (``tests/gpu_shaders/methods/
+        test_morph_pass.py``: p99 under 0.01 px; docs/benchmarks/octree.md). About a
+        sixth of the blend's time on the bench's ball (docs/benchmarks/view_change.md)."""
+        from .polish_gpu import GPUImagePolish, polish_answers
+
+        polish = grid.image_polish
+        if not isinstance(polish, GPUImagePolish):
+            polish = self._own_polish = self._own_polish or GPUImagePolish()
+        tables = polish.tables(grid.mirror())
+        for texture in answers:
+            polish_answers(tables, eye, frame_from_shifted, self.meshes, texture)
 
     def _frame_buffer(self, n_nodes: int):
         """The uniform buffer of the blend's parameters for cells of ``n_nodes`` nodes."""

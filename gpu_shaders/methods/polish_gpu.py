@@ -20,6 +20,7 @@ from collections import OrderedDict
 
 import numpy as np
 
+from ...addon.methods.morphing.image_polish import FRAME_POLISH_ROUNDS
 from ...addon.reference import exact
 from ..shader_sources import glsl_source
 
@@ -80,6 +81,56 @@ def polish_shader():
     return gpu.shader.create_from_info(info)
 
 
+@functools.cache
+def frame_polish_shader():
+    """The polish of a frame's blended answers in place (``FRAME_ANSWERS``), built on first use."""
+    import gpu
+
+    info = gpu.types.GPUShaderCreateInfo()
+    info.push_constant('INT', "n_rows")
+    info.push_constant('INT', "positions_width")
+    info.push_constant('INT', "mirror_width")
+    info.push_constant('INT', "cells_width")
+    info.sampler(0, 'FLOAT_2D', "vertex_positions")
+    info.sampler(1, 'FLOAT_2D', "mirror")
+    info.sampler(2, 'FLOAT_2D', "cells")
+    info.sampler(3, 'FLOAT_2D', "params")
+    info.image(0, 'RGBA32F', 'FLOAT_2D', "answers", qualifiers={'READ', 'WRITE'})
+    info.local_group_size(LOCAL_SIZE, 1)
+    info.compute_source(glsl_source("image_polish.glsl", {**polish_defines(), "ROUNDS": FRAME_POLISH_ROUNDS,
+                                                          "FRAME_ANSWERS": 1}))
+    return gpu.shader.create_from_info(info)
+
+
+def polish_answers(tables: tuple, eye, to_mirror: np.ndarray, meshes, answers) -> None:
+    """Polish a frame's answer texture ``answers`` (``meshes``: the renderer's
+    ``ReflectedMeshes``, whose vertices they answer) in place on the mirror of ``tables``
+    (:meth:`GPUImagePolish.tables`), seen from ``eye``; ``to_mirror`` (4, 4) maps the
+    renderer's coordinates to the mirror's (``eye`` is in them). An answer not placed is dropped."""
+    import gpu
+
+    from ..gpu_data import data_texture
+
+    mirror_texture, cells_texture, centre, grid_rows = tables
+    to_table = np.eye(4)
+    to_table[:3, 3] = -centre
+    to_table = to_table @ to_mirror
+    params = data_texture(np.array([[*(np.asarray(eye, dtype=np.float64) - centre), 0.0], *grid_rows,
+                                    *to_table[:3], *np.linalg.inv(to_table)[:3]]))
+    shader = frame_polish_shader()
+    shader.bind()
+    shader.uniform_int("n_rows", meshes.n_vertices)
+    shader.uniform_int("positions_width", meshes.width)
+    shader.uniform_int("mirror_width", mirror_texture.width)
+    shader.uniform_int("cells_width", cells_texture.width)
+    shader.uniform_sampler("vertex_positions", meshes.positions)
+    shader.uniform_sampler("mirror", mirror_texture)
+    shader.uniform_sampler("cells", cells_texture)
+    shader.uniform_sampler("params", params)
+    shader.image("answers", answers)
+    gpu.compute.dispatch(shader, *meshes.work_groups(LOCAL_SIZE))
+
+
 def mirror_texels(mirror, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(T * 6, 4) the shader's ``mirror`` table, relative to ``centre`` (corners with the
     neighbours across the opposite edges, corner normals, the first with the triangle's
@@ -116,7 +167,7 @@ class GPUImagePolish:
         polished = np.full(images.shape, np.nan)
         if len(rows) == 0:
             return polished
-        tables = self._tables(mirror)
+        tables = self.tables(mirror)
         centre = tables[2]
         found = self._dispatch(tables, np.asarray(eye, dtype=np.float64) - centre,
                                points[rows] - centre, images[rows, slots] - centre)
@@ -124,7 +175,7 @@ class GPUImagePolish:
         polished[rows[placed], slots[placed]] = found[placed, :3].astype(np.float64) + centre
         return polished
 
-    def _tables(self, mirror) -> tuple:
+    def tables(self, mirror) -> tuple:
         """(mirror texture, cells texture, centre, the grid's two rows of ``params``) of
         a mirror, made and uploaded on first use; the last ``capacity`` mirrors kept."""
         from ..gpu_data import data_texture
@@ -143,7 +194,7 @@ class GPUImagePolish:
 
     def _dispatch(self, tables: tuple, eye, points, images) -> np.ndarray:
         """(R, 4) float32: (reflection point, 1) of each row, else zeros; positions
-        relative to the centre in ``tables`` (:meth:`_tables`)."""
+        relative to the centre in ``tables`` (:meth:`tables`)."""
         import gpu
 
         from ..gpu_data import data_texture, read_texture

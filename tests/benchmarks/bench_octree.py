@@ -106,15 +106,15 @@ def measure_scene(name, mirror, matrix, sample, settings, args) -> dict:
     for kind in KINDS:
         out["kinds"][kind] = BM.measure_grid(grid_maker(kind), mirror, matrix, replace(settings, kind=kind), views,
                                              view_points, exact, args)
-        s = out["kinds"][kind]["blends"]["surface"]
+        s = BM.headline(out["kinds"][kind]["blends"])
         _log(f"{name} {kind}: p50/p95/p99 {s['error_p50']:.2f}/{s['error_p95']:.2f}/{s['error_p99']:.2f} px, "
              f"coverage {100 * s['coverage']:.1f} %")
     out["finer"] = []
     for grid in args.finer:  # the same views: the finer grid spans the same box
         finer = replace(settings, grid=grid)
         out["finer"].append({"grid": list(grid), "kinds": {
-            kind: BM.measure_grid(grid_maker(kind), mirror, matrix, replace(finer, kind=kind), views, view_points,
-                                  exact, args)["blends"]["surface"] for kind in KINDS}})
+            kind: BM.headline(BM.measure_grid(grid_maker(kind), mirror, matrix, replace(finer, kind=kind), views,
+                                              view_points, exact, args)["blends"]) for kind in KINDS}})
         _log(f"{name} grid {grid}: octree p99 {out['finer'][-1]['kinds']['octree']['error_p99']:.2f} px")
     return out
 
@@ -146,7 +146,9 @@ def report(results: dict) -> str:
         f"octree depth {args['octree_depth']}. {args['views']} views per scene with eyes drawn at random inside "
         f"the grid (between nodes), {BM.WIDTH}x{BM.HEIGHT} px, {args['points']} points per view. Both kinds answer "
         "the same views and points. *linear*: the papers' blends (barycentric over the eye's tetrahedron, "
-        "trilinear over its cube); *surface*: ours, refined on the quadric fitted to the nodes' images. "
+        "trilinear over its cube); *surface*: ours, refined on the quadric fitted to the nodes' images; "
+        "*polished*: the surface blend's images each polished on the mirror (*Polish Every Frame*, the default, "
+        "whose figures the summary gives). "
         "Coverage in parentheses: reflections seen at most 72.5 degrees off the mirror's normal.", "",
         "## Error against the exact solver", "",
         "| scene | grid | blend | views | compared | p50 / p95 / p99 / max px | coverage % (facing) | false % "
@@ -164,7 +166,7 @@ def report(results: dict) -> str:
                     f"| {_f(b['static_points_per_second'] / 1e3, 0)} |")
     finer = [(scene["scene"], row) for scene in results["scenes"] for row in scene.get("finer", [])]
     if finer:
-        lines += ["", "## Finer grids, the same views (surface blend)", "",
+        lines += ["", "## Finer grids, the same views (polished blend)", "",
                   "| scene | grid | kind | p50 / p95 / p99 / max px | coverage % (facing) |", "|---|---|---|---:|---:|"]
         for name, row in finer:
             for kind, b in row["kinds"].items():
@@ -192,8 +194,8 @@ def _met(p99: float) -> str:
 def summary(results: dict) -> list:
     out = []
     for scene in results["scenes"]:
-        octree = scene["kinds"]["octree"]["blends"]["surface"]
-        tetra = scene["kinds"]["tetrahedral"]["blends"]["surface"]
+        octree = BM.headline(scene["kinds"]["octree"]["blends"])
+        tetra = BM.headline(scene["kinds"]["tetrahedral"]["blends"])
         out.append(f"- {scene['scene']}: p99 at views between nodes (target <= 1 px), the tetrahedral grid's "
                    f"{_f(tetra['error_p99'])} px ({_met(tetra['error_p99'])}), the octree grid's "
                    f"{_f(octree['error_p99'])} px ({_met(octree['error_p99'])}); coverage "

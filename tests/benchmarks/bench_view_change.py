@@ -325,18 +325,21 @@ def measure_morph_frames(width: int, height: int, target_vertices: int, frames: 
     from curved_reflections.addon import look_at_view
     from curved_reflections.addon.methods.morphing import morph_grid, morphing
     from curved_reflections.gpu_shaders.methods.morph_source import GPUFaceImages
+    from curved_reflections.gpu_shaders.methods.polish_gpu import GPUImagePolish
     from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
     from curved_reflections.operators.render_inputs import reflector_properties, world_color
 
     scene, _, captured = bench_draw.built_scene("sbc_fig3", width, height)
     mirror = captured.reflectors[0]
     matrix = np.array(bpy.data.objects[mirror.name].matrix_world, dtype=np.float64)
+    # As the scene loads its grid (morph_bake.load_grids): nodes projected and polished on the GPU.
     grid = morphing.grid_on_demand(morph_grid.reflector_in_frame(mirror, morph_grid.rigid_frame(matrix)),
-                                   morph_grid.MorphSettings())
-    grid.face_images = GPUFaceImages()
+                                   morph_grid.MorphSettings(), polish=scene.curved_reflections.morph_polish_nodes)
+    grid.face_images, grid.image_polish = GPUFaceImages(), GPUImagePolish()
     meshes = bench_draw.scaled_meshes(captured.meshes, bench_draw.levels_for(captured, target_vertices))
     renderer = ReflectionRenderer(captured.reflectors, meshes, polish=False, morph=[(grid, matrix)],
                                   accuracy_px=scene.curved_reflections.accuracy_px,
+                                  polish_frames=scene.curved_reflections.morph_polish_frames,
                                   **reflector_properties(captured.reflectors, scene))
     g = renderer.geometry
     world = world_color(scene)
@@ -387,7 +390,8 @@ def measure_morph_frames(width: int, height: int, target_vertices: int, frames: 
     return {"width": width, "height": height, "vertices": int(len(g.vertices)), "triangles": int(len(g.triangles)),
             "frames": frames, "entered": int(sum(a != b for a, b in zip(tetrahedra[1:], tetrahedra[:-1]))),
             "ms": ms, "nodes": renderer.morph.counts["node_projections"], "node_seconds": node_seconds,
-            "node_mb": renderer.morph.nodes.nbytes / 2 ** 20, "answered": int(drawn)}
+            "node_mb": renderer.morph.nodes.nbytes / 2 ** 20, "answered": int(drawn),
+            "polish_frames": renderer.morph.polish_frames}
 
 
 MORPH_HEADING = "## Morphing mode on the GPU (blend every frame)"
@@ -407,7 +411,9 @@ def morph_report(r: dict, command: str) -> list:
         "the GPU). Milliseconds, medians over the frames; *frame* is what the viewport draws (pre-pass, "
         "blend, reflected meshes, composite), *morph pass* the blend and the reflected meshes alone, drawn as "
         "the live view draws them (vertices snapped to the scene's Accuracy, 1 px; the ball is convex, so the "
-        "far sides of closed solids are culled):", "",
+        "far sides of closed solids are culled; the nodes' images polished, *Polish Node Images*, and "
+        + ("each frame's blend polished on the mirror, *Polish Every Frame*" if r["polish_frames"] else
+           "the frames' blends not polished") + ", the defaults' choices):", "",
         "| frame ms | morph pass ms | of which blend ms | plain ms | pass / plain | blend / plain | "
         "frame / plain | vertices with an image |",
         "|---:|---:|---:|---:|---:|---:|---:|---:|",

@@ -24,7 +24,7 @@ def test_quick_benchmark_writes_tables_and_raw_results(tmp_path):
     results = json.loads((tmp_path / "out" / "morphing.json").read_text())
     assert [cell["grid"] for cell in results["sweep"]] == [[3, 3, 2], [5, 5, 3]]
     for cell in results["sweep"]:
-        assert set(cell["blends"]) == {"linear", "surface"}
+        assert set(cell["blends"]) == {"linear", "surface", "polished"}
         for blend in cell["blends"].values():
             if blend["n_views"]:
                 assert blend["n_compared"] > 0

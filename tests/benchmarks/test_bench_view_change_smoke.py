@@ -18,7 +18,7 @@ def test_quick_benchmark_times_both_modes_on_every_view(run_quick, tmp_path):
     assert len(rows) == 6 and rows[0][2] == "yes"
     assert all(float(value) > 0 for row in rows for value in row[3].strip(" |").split(" | "))
     # The Iterative rows: per frame against the plain draw, and the animation against Workbench.
-    iterative = re.findall(r"^\| (sbc_fig3|two_spheres) \| 160x120 \| [\d,]+ \| [\d,]+ \|(( [\d.]+ \|){4})",
+    iterative = re.findall(r"^\| (sbc_fig3|two_spheres) \| 160x120 \| [\d,]+ \| [\d,]+ \| [\d,]+ \|(( [\d.]+ \|){4})",
                            report, flags=re.MULTILINE)
     assert [row[0] for row in iterative] == ["sbc_fig3", "two_spheres"]
     assert all(float(value) > 0 for row in iterative for value in row[1].strip(" |").split(" | "))

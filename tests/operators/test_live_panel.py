@@ -61,11 +61,11 @@ def test_panel_shows_settings_buttons_stats_and_status(empty_scene, registered, 
     assert {"curved_reflections.bake", "curved_reflections.refresh", "curved_reflections.clear"} <= set(log["operators"])
     assert {"is_reflector", "reflectivity", "use_fresnel", "fresnel_f0", "attenuation_distance", "mode", "downsample",
             "accuracy_px", "max_order", "auto_refresh", "morph_grid", "morph_margin", "morph_polish_nodes",
-            "morph_gpu_budget_mb"} <= set(
+            "morph_polish_frames", "morph_gpu_budget_mb"} <= set(
         log["props"])
     # Not applicable: Facing Reflectance without Fresnel, the morphing grid without a morphing reflector.
     assert set(log["greyed"]) == {"fresnel_f0", "morph_grid", "morph_margin", "morph_polish_nodes",
-                                  "morph_gpu_budget_mb"}
+                                  "morph_polish_frames", "morph_gpu_budget_mb"}
     assert ("Not baked: no live reflections", 'INFO') in log["labels"]
 
     bpy.ops.curved_reflections.bake()

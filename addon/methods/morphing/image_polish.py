@@ -45,6 +45,11 @@ from ...view import look_at_view
 #: Triangles tried per image: the one the ray from the node through the image meets,
 #: then the ones through Newton's root while it lies outside the triangle it was found in.
 POLISH_ROUNDS = 3
+#: Triangles tried per blended image polished each frame (``MorphingGrid.polish_frames``):
+#: a blend on a mirror that is not a quadric lands tens of pixels off (bench_octree.py's
+#: rounded box: p99 22 px), and three rounds left 2 % of those images unplaced, eight
+#: one in 7,000 (four views of it, a diagnostic run).
+FRAME_POLISH_ROUNDS = 8
 #: Newton iterations per triangle: the images start within a triangle or two of their
 #: root, where the reference solver's 24 (from a triangle's centroid) are rarely needed.
 POLISH_ITERATIONS = 8
@@ -65,7 +70,8 @@ def polish_regular(mirror: ReflectorSet, eye: np.ndarray, points: np.ndarray, im
     return np.where(np.isfinite(polished[..., :1]), polished, images)
 
 
-def polish_images(mirror: ReflectorSet, eye: np.ndarray, points: np.ndarray, images: np.ndarray) -> np.ndarray:
+def polish_images(mirror: ReflectorSet, eye: np.ndarray, points: np.ndarray, images: np.ndarray,
+                  rounds: int = POLISH_ROUNDS) -> np.ndarray:
     """(P, K, 3) ``images`` of ``points`` (P, 3) seen from ``eye``, each moved to the
     mirror's reflection point of its point near it, NaN where none is found.
 
@@ -73,7 +79,7 @@ def polish_images(mirror: ReflectorSet, eye: np.ndarray, points: np.ndarray, ima
     (``reference.exact.newton_in_triangles``) starts where the ray from the eye through
     the image meets the mirror (:func:`_triangles_under`); where its root lies outside
     that triangle, the ray through the root (or where Newton gave up) picks the next
-    one, among its ring first, up to ``POLISH_ROUNDS``. An image not placed by then has
+    one, among its ring first, up to ``rounds``. An image not placed by then has
     no reflection near it: the widened chart extrapolated past the node's horizon, and
     the blend leaves that node out (remedy 3) rather than mix in a point off the
     mirror's law.
@@ -87,7 +93,7 @@ def polish_images(mirror: ReflectorSet, eye: np.ndarray, points: np.ndarray, ima
     target = images[rows, slots].copy()
     pending = np.arange(len(rows))
     triangle = None
-    for _ in range(POLISH_ROUNDS):
+    for _ in range(rounds):
         found, triangle, start = _triangles_under(mirror, eye, points[rows[pending]], target[pending], triangle)
         pending, triangle, start = pending[found], triangle[found], start[found]
         if len(pending) == 0:

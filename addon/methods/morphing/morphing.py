@@ -52,7 +52,7 @@ import numpy as np
 from ..sbc.bsp import CAMERA_LEAF
 from .morph_grid import (NODE_OK, MorphSettings, NodesOnDemand, TetrahedralGrid, _StatusOnDemand, bake_reflector,
                          extended_mirror, from_frame, rigid_frame, to_frame)
-from .image_polish import polish_images, polish_regular
+from .image_polish import FRAME_POLISH_ROUNDS, polish_images, polish_regular
 from .morph_surface import POLISHED_RIDGE, QUADRIC_RIDGE, refine_on_local_surface, sphere_prior
 from ..sbc.ray_patch import RayPatches, solve_charts
 from ..sbc.sbc import SampleBasedCamera, descend_tree, in_band
@@ -192,6 +192,9 @@ class MorphingGrid:
     #: function, in numpy; the viewport passes the GPU's
     #: (``gpu_shaders/methods/polish_gpu.GPUImagePolish``).
     image_polish: object = field(default=None, repr=False, compare=False)
+    #: Each blended image polished on the :attr:`mirror` from where the blend put it
+    #: (:meth:`_polished_blend`; the renderer's twin: ``MorphPass(polish_frames=)``).
+    polish_frames: bool = field(default=False, compare=False)
     _static: dict = field(default_factory=dict, repr=False)
 
     def __post_init__(self):
@@ -435,6 +438,9 @@ class MorphingGrid:
             front = ((np.einsum("qd,qd->q", normal, local_eye - x) > 0)
                      & (np.einsum("qd,qd->q", normal, local_points - x) > 0))
             usable &= front.reshape(n_points, k_max)
+            if self.polish_frames and self.mirror is not None:
+                blended, placed = self._polished_blend(local_eye, to_frame(frame, points_world), blended, usable)
+                usable &= placed
         remedy = np.where(all_present & (how[:self.blend_nodes] == ALL_NODES).all(axis=0), ALL_NODES,
                           np.where(all_present, EXTENDED_FRUSTUM, PARTIAL)).astype(np.int8)
         world = from_frame(frame, blended.reshape(-1, 3)).reshape(n_points, k_max, 3)
@@ -450,6 +456,17 @@ class MorphingGrid:
             groups=[(self.reflector_index,)] * k_max, reflector_points=world.transpose(1, 0, 2), valid=valid.T,
             pixels=pixels.transpose(1, 0, 2), ray_distance=distance.T, remedy=remedy.T, tetrahedron=tet,
             nodes=np.asarray(nodes), weights=np.asarray(weights))
+
+
+    def _polished_blend(self, eye, points, blended, usable):
+        """(images, placed) the ``usable`` ``blended`` images (P, K, 3) of ``points`` seen
+        from ``eye`` (frame coordinates), polished on the mirror (``image_polish``, up to
+        FRAME_POLISH_ROUNDS triangles each): placed where the polish found a reflection
+        point, which then lies on the mesh as the reference solver's do."""
+        images = np.where(usable[..., None], blended, np.nan)
+        polished = polish_images(self.mirror(), eye, points, images, rounds=FRAME_POLISH_ROUNDS)
+        placed = np.isfinite(polished[..., 0])
+        return np.where(placed[..., None], polished, blended), placed
 
 
 def project_face(sbc: SampleBasedCamera, points: np.ndarray) -> np.ndarray:

@@ -306,3 +306,31 @@ def test_a_nodes_extended_and_grazing_images_are_the_mirrors_reflections(sphere,
     # more images, every one on the mirror's reflection (1183 against 1153 charted; 1006
     # placed from the charts solved as far as unpolished ones).
     assert extended_count > charted_count
+
+
+def test_polished_blends_land_on_the_exact_reflections_of_a_mirror_that_is_not_a_quadric():
+    """A rounded box (superellipsoid of exponent 4: flat faces, tight edges), where the
+    blend's local quadric misses by pixels; each blended image polished on the mirror
+    (``polish_frames``) lands on the exact solver's reflection, and is not lost. Measured:
+    the blend p50 2.6 px, p99 9.2 px; polished, under 1e-4 px, every image kept."""
+    from curved_reflections.addon.geometry.sphere import superellipsoid
+
+    box = superellipsoid(CENTRE, (1.2, 0.9, 0.8), 4.0, 4, "Box")
+    grid = M.grid_on_demand(box, G.MorphSettings(grid=(4, 4, 4), margin=0.8, face_resolution=48), polish=True)
+    view = look_at_view([2.0, -2.3, 1.6], CENTRE, width=320, height=240)
+    points = np.random.default_rng(5).uniform([-2.5, -2.5, -0.5], [2.5, 2.5, 2.8], (2000, 3))
+    points = points[np.max(np.abs(points - CENTRE) / [1.2, 0.9, 0.8], axis=1) > 1.1]
+    exact = solve_reflections(ReflectorSet([box]), view, points)
+    exact = exact.select(exact.visible)
+    pixel = np.full((len(points), 2), np.nan)
+    pixel[exact.point] = exact.pixel
+    errors, answered = {}, {}
+    for polish in (False, True):
+        grid.polish_frames = polish
+        result = grid.project(points, view)
+        both = result.valid[0] & np.isfinite(pixel[:, 0])
+        errors[polish] = np.linalg.norm(result.pixels[0][both] - pixel[both], axis=1)
+        answered[polish] = int(result.valid[0].sum())
+    assert np.percentile(errors[False], 99) > 2.0  # the blend alone
+    assert np.percentile(errors[True], 99) < 0.01 and errors[True].max() < 0.05
+    assert answered[True] >= 0.99 * answered[False] and len(errors[True]) > 300
