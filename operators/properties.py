@@ -147,8 +147,9 @@ class CurvedReflectionsSceneSettings(bpy.types.PropertyGroup):
     morph_polish_frames: BoolProperty(
         name="Polish Every Frame",
         description="Move each frame's blended reflections onto the mirror's exact reflection points (on the "
-                    "GPU, about an eighth of the morphing pass): exact on mirrors of any shape, where a blend "
-                    "alone errs by many pixels on mirrors whose curvature changes quickly. Needs Polish Node Images",
+                    "GPU; on a CPU-emulated GPU it adds about a third to the morphing pass): exact on mirrors of any "
+                    "shape, where a blend alone errs by many pixels on mirrors whose curvature changes quickly. "
+                    "Needs Polish Node Images",
         default=True,
         update=_reflector_toggled,  # a new renderer, polishing or not
     )
