@@ -62,43 +62,26 @@ def polish_defines() -> dict:
 
 
 @functools.cache
-def polish_shader():
-    """The compute shader of the polish, built on first use."""
+def polish_shader(frame_answers: bool = False):
+    """The compute shader of the polish, built on first use: of a list of (point, image)
+    rows into a result texture, or with ``frame_answers`` of a frame's answer texture in
+    place (``FRAME_ANSWERS``: each vertex's blended answer, up to FRAME_POLISH_ROUNDS
+    triangles from it)."""
     import gpu
 
+    width, rows, result, access = (("positions_width", "vertex_positions", "answers", {'READ', 'WRITE'})
+                                   if frame_answers else ("work_width", "work", "result", {'WRITE'}))
     info = gpu.types.GPUShaderCreateInfo()
-    info.push_constant('INT', "n_rows")
-    info.push_constant('INT', "work_width")
-    info.push_constant('INT', "mirror_width")
-    info.push_constant('INT', "cells_width")
-    info.sampler(0, 'FLOAT_2D', "work")
-    info.sampler(1, 'FLOAT_2D', "mirror")
-    info.sampler(2, 'FLOAT_2D', "cells")
-    info.sampler(3, 'FLOAT_2D', "params")
-    info.image(0, 'RGBA32F', 'FLOAT_2D', "result", qualifiers={'WRITE'})
+    for name in ("n_rows", width, "mirror_width", "cells_width"):
+        info.push_constant('INT', name)
+    for slot, name in enumerate((rows, "mirror", "cells", "params")):
+        info.sampler(slot, 'FLOAT_2D', name)
+    info.image(0, 'RGBA32F', 'FLOAT_2D', result, qualifiers=access)
     info.local_group_size(LOCAL_SIZE, 1)
-    info.compute_source(glsl_source("image_polish.glsl", polish_defines()))
-    return gpu.shader.create_from_info(info)
-
-
-@functools.cache
-def frame_polish_shader():
-    """The polish of a frame's blended answers in place (``FRAME_ANSWERS``), built on first use."""
-    import gpu
-
-    info = gpu.types.GPUShaderCreateInfo()
-    info.push_constant('INT', "n_rows")
-    info.push_constant('INT', "positions_width")
-    info.push_constant('INT', "mirror_width")
-    info.push_constant('INT', "cells_width")
-    info.sampler(0, 'FLOAT_2D', "vertex_positions")
-    info.sampler(1, 'FLOAT_2D', "mirror")
-    info.sampler(2, 'FLOAT_2D', "cells")
-    info.sampler(3, 'FLOAT_2D', "params")
-    info.image(0, 'RGBA32F', 'FLOAT_2D', "answers", qualifiers={'READ', 'WRITE'})
-    info.local_group_size(LOCAL_SIZE, 1)
-    info.compute_source(glsl_source("image_polish.glsl", {**polish_defines(), "ROUNDS": FRAME_POLISH_ROUNDS,
-                                                          "FRAME_ANSWERS": 1}))
+    defines = polish_defines()
+    if frame_answers:
+        defines.update(ROUNDS=FRAME_POLISH_ROUNDS, FRAME_ANSWERS=1)
+    info.compute_source(glsl_source("image_polish.glsl", defines))
     return gpu.shader.create_from_info(info)
 
 
@@ -107,28 +90,37 @@ def polish_answers(tables: tuple, eye, to_mirror: np.ndarray, meshes, answers) -
     ``ReflectedMeshes``, whose vertices they answer) in place on the mirror of ``tables``
     (:meth:`GPUImagePolish.tables`), seen from ``eye``; ``to_mirror`` (4, 4) maps the
     renderer's coordinates to the mirror's (``eye`` is in them). An answer not placed is dropped."""
-    import gpu
-
     from ..gpu_data import data_texture
 
-    mirror_texture, cells_texture, centre, grid_rows = tables
+    centre, grid_rows = tables[2:]
     to_table = np.eye(4)
     to_table[:3, 3] = -centre
     to_table = to_table @ to_mirror
     params = data_texture(np.array([[*(np.asarray(eye, dtype=np.float64) - centre), 0.0], *grid_rows,
                                     *to_table[:3], *np.linalg.inv(to_table)[:3]]))
-    shader = frame_polish_shader()
+    _dispatch_polish(tables, params, meshes.n_vertices, meshes.width, meshes.positions, answers,
+                     meshes.work_groups(LOCAL_SIZE), frame_answers=True)
+
+
+def _dispatch_polish(tables: tuple, params, n_rows: int, width: int, rows, result, groups: tuple,
+                     frame_answers: bool = False) -> None:
+    """One dispatch of :func:`polish_shader` over ``n_rows`` rows ``width`` to a texel
+    row of ``rows`` (the work rows, or the vertices' positions), into ``result``."""
+    import gpu
+
+    mirror_texture, cells_texture = tables[:2]
+    shader = polish_shader(frame_answers)
     shader.bind()
-    shader.uniform_int("n_rows", meshes.n_vertices)
-    shader.uniform_int("positions_width", meshes.width)
+    shader.uniform_int("n_rows", n_rows)
+    shader.uniform_int("positions_width" if frame_answers else "work_width", width)
     shader.uniform_int("mirror_width", mirror_texture.width)
     shader.uniform_int("cells_width", cells_texture.width)
-    shader.uniform_sampler("vertex_positions", meshes.positions)
+    shader.uniform_sampler("vertex_positions" if frame_answers else "work", rows)
     shader.uniform_sampler("mirror", mirror_texture)
     shader.uniform_sampler("cells", cells_texture)
     shader.uniform_sampler("params", params)
-    shader.image("answers", answers)
-    gpu.compute.dispatch(shader, *meshes.work_groups(LOCAL_SIZE))
+    shader.image("answers" if frame_answers else "result", result)
+    gpu.compute.dispatch(shader, *groups)
 
 
 def mirror_texels(mirror, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -199,8 +191,7 @@ class GPUImagePolish:
 
         from ..gpu_data import data_texture, read_texture
 
-        mirror_texture, cells_texture, _, grid_rows = tables
-        params = data_texture(np.array([[*eye, 0.0], *grid_rows]))
+        params = data_texture(np.array([[*eye, 0.0], *tables[3]]))
         n_rows = len(points)
         width = min(WORK_WIDTH, n_rows)
         height = -(-n_rows // width)
@@ -208,18 +199,7 @@ class GPUImagePolish:
         work[:n_rows, 0, :3], work[:n_rows, 1, :3] = points, images
         work_texture = data_texture(work.reshape(height, 2 * width, 4))
         result = gpu.types.GPUTexture((width, height), format='RGBA32F')
-        shader = polish_shader()
-        shader.bind()
-        shader.uniform_int("n_rows", n_rows)
-        shader.uniform_int("work_width", width)
-        shader.uniform_int("mirror_width", mirror_texture.width)
-        shader.uniform_int("cells_width", cells_texture.width)
-        shader.uniform_sampler("work", work_texture)
-        shader.uniform_sampler("mirror", mirror_texture)
-        shader.uniform_sampler("cells", cells_texture)
-        shader.uniform_sampler("params", params)
-        shader.image("result", result)
-        gpu.compute.dispatch(shader, -(-width // LOCAL_SIZE), height, 1)
+        _dispatch_polish(tables, params, n_rows, width, work_texture, result, (-(-width // LOCAL_SIZE), height, 1))
         self.dispatches += 1
         return read_texture(result, width, height).reshape(-1, 4)[:n_rows]
 
