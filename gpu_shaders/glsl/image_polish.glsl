@@ -204,7 +204,7 @@ vec4 polish(vec3 target)
  * invocation per vertex, its texel of `answers` (reflector point relative to the
  * renderer's shift, FOUND_CODE; zeros where none) and of `vertex_positions`. `params`
  * rows 3-5 map the renderer's coordinates to the mirror table's, rows 6-8 back. An
- * answer the polish does not place is dropped (FRAME_POLISH in morph_pass.py). */
+ * answer the polish does not place is dropped (polish_gpu.polish_answers, MorphPass._polish). */
 vec3 affine(int first, vec3 x)
 {
   return vec3(dot(param(first).xyz, x) + param(first).w, dot(param(first + 1).xyz, x) + param(first + 1).w,
