@@ -471,7 +471,7 @@ def draw(scene, key, view: View) -> bool:
         return drawn
     camera = state.cameras.get(key)
     current = (camera is not None and camera.generation == state.generation and camera.settings == state.settings
-               and camera.first_orders_drawn(state.renderer.per_frame_reflectors(camera.view)))
+               and camera.first_orders_drawn(state.renderer.per_frame_reflectors))
     if (camera is None or not current or not _same_view(camera.view, view)) and key not in state.jobs:
         if scene.curved_reflections.auto_refresh or camera is None:
             request_view(state, key, view)

@@ -40,11 +40,13 @@ class ViewCamera:
     #: own view is drawn (``live._traced``).
     tracing: Tracing | None = None
 
-    def first_orders_drawn(self, per_frame: frozenset) -> bool:
-        """Whether the per-frame passes (``per_frame``, the reflectors they draw in this
-        view) still draw the first orders the camera left to them: a grid cleared or
-        damaged since hands its reflector back, and the camera is built again."""
-        return self.sbc is None or self.sbc.first_order_left_out <= per_frame
+    def first_orders_drawn(self, per_frame_reflectors) -> bool:
+        """Whether the per-frame passes (``per_frame_reflectors(view)``: the reflectors
+        they draw in a view, asked only of a camera that left some out) still draw the
+        first orders the camera left to them: a grid cleared or damaged since hands its
+        reflector back, and the camera is built again."""
+        left_out = frozenset() if self.sbc is None else self.sbc.first_order_left_out
+        return not left_out or left_out <= per_frame_reflectors(self.view)
 
 
 @dataclass

@@ -382,9 +382,7 @@ class MorphPass(FramePass):
         polish = grid.image_polish
         if not isinstance(polish, GPUImagePolish):
             polish = self._own_polish = self._own_polish or GPUImagePolish()
-        tables = polish.tables(grid.mirror())
-        for texture in answers:
-            polish_answers(tables, eye, frame_from_shifted, self.meshes, texture)
+        polish_answers(polish.tables(grid.mirror()), eye, frame_from_shifted, self.meshes, answers)
 
     def _frame_buffer(self, n_nodes: int):
         """The uniform buffer of the blend's parameters for cells of ``n_nodes`` nodes."""

@@ -86,10 +86,11 @@ def polish_shader(frame_answers: bool = False):
 
 
 def polish_answers(tables: tuple, eye, to_mirror: np.ndarray, meshes, answers) -> None:
-    """Polish a frame's answer texture ``answers`` (``meshes``: the renderer's
-    ``ReflectedMeshes``, whose vertices they answer) in place on the mirror of ``tables``
-    (:meth:`GPUImagePolish.tables`), seen from ``eye``; ``to_mirror`` (4, 4) maps the
-    renderer's coordinates to the mirror's (``eye`` is in them). An answer not placed is dropped."""
+    """Polish a frame's answer textures ``answers`` (one per image slot; ``meshes``: the
+    renderer's ``ReflectedMeshes``, whose vertices they answer) in place on the mirror of
+    ``tables`` (:meth:`GPUImagePolish.tables`), seen from ``eye``; ``to_mirror`` (4, 4)
+    maps the renderer's coordinates to the mirror's (``eye`` is in them). An answer not
+    placed is dropped."""
     from ..gpu_data import data_texture
 
     centre, grid_rows = tables[2:]
@@ -98,8 +99,9 @@ def polish_answers(tables: tuple, eye, to_mirror: np.ndarray, meshes, answers) -
     to_table = to_table @ to_mirror
     params = data_texture(np.array([[*(np.asarray(eye, dtype=np.float64) - centre), 0.0], *grid_rows,
                                     *to_table[:3], *np.linalg.inv(to_table)[:3]]))
-    _dispatch_polish(tables, params, meshes.n_vertices, meshes.width, meshes.positions, answers,
-                     meshes.work_groups(LOCAL_SIZE), frame_answers=True)
+    for texture in answers:
+        _dispatch_polish(tables, params, meshes.n_vertices, meshes.width, meshes.positions, texture,
+                         meshes.work_groups(LOCAL_SIZE), frame_answers=True)
 
 
 def _dispatch_polish(tables: tuple, params, n_rows: int, width: int, rows, result, groups: tuple,

@@ -417,7 +417,8 @@ class MorphingGrid:
         blended = np.einsum("npk,npkd->pkd", w, np.nan_to_num(matched)) / np.maximum(total, 1e-300)[..., None]
         if k_max:
             eyes = self.grid.node_positions()[np.asarray(nodes)]
-            local_points = np.repeat(to_frame(frame, points_world), k_max, axis=0)
+            frame_points = to_frame(frame, points_world)
+            local_points = np.repeat(frame_points, k_max, axis=0)
             local_eye = to_frame(frame, view.eye[None])[0]
             n_nodes = len(nodes)
             refined, ok, normal, weighted_normal = refine_on_local_surface(
@@ -439,7 +440,7 @@ class MorphingGrid:
                      & (np.einsum("qd,qd->q", normal, local_points - x) > 0))
             usable &= front.reshape(n_points, k_max)
             if self.polish_frames and self.mirror is not None:
-                blended, placed = self._polished_blend(local_eye, to_frame(frame, points_world), blended, usable)
+                blended, placed = self._polished_blend(local_eye, frame_points, blended, usable)
                 usable &= placed
         remedy = np.where(all_present & (how[:self.blend_nodes] == ALL_NODES).all(axis=0), ALL_NODES,
                           np.where(all_present, EXTENDED_FRUSTUM, PARTIAL)).astype(np.int8)
