@@ -17,6 +17,12 @@ import numpy as np
 from .errors import SceneInputError
 
 
+#: Views whose matrices differ by less than this (each entry) are the same view: the
+#: live view builds no new camera for them, and a camera's reflected triangles are
+#: drawn at its projected pixels.
+VIEW_TOLERANCE = 1e-6
+
+
 def _homogeneous(points: np.ndarray) -> np.ndarray:
     return np.concatenate([points, np.ones((len(points), 1))], axis=1)
 
@@ -48,6 +54,14 @@ class View:
         object.__setattr__(self, "_view_projection", view_projection)
         object.__setattr__(self, "_inverse_view_projection", np.linalg.inv(view_projection))
         object.__setattr__(self, "_camera_to_world", np.linalg.inv(self.view_matrix))
+
+    def same_as(self, other: "View") -> bool:
+        """Whether ``other`` is this view: the same size, and matrices within
+        :data:`VIEW_TOLERANCE`."""
+        return self is other or ((self.width, self.height) == (other.width, other.height)
+                                 and np.abs(self.view_matrix - other.view_matrix).max() <= VIEW_TOLERANCE
+                                 and np.abs(self.projection_matrix - other.projection_matrix).max()
+                                 <= VIEW_TOLERANCE)
 
     @property
     def is_perspective(self) -> bool:

@@ -12,7 +12,11 @@ method cannot be trusted on.
 
 from __future__ import annotations
 
+import functools
 import math
+from dataclasses import dataclass
+
+from ..addon.frame_settings import FrameSettings
 
 #: 20 degrees: an answer from another sheet of a curved mirror (across a fold, a crease,
 #: another image in the same slot) misses by far more; an interpolated point of a small
@@ -20,11 +24,32 @@ import math
 REFLECTION_COSINE = math.cos(math.radians(20.0))
 
 
+@dataclass(frozen=True)
+class PassInputs:
+    """What a renderer hands each pass it makes (:meth:`FramePass.factory`): its reflected
+    geometry (``draw_geometry.DrawGeometry``) and that geometry on the GPU
+    (``reflected_meshes.ReflectedMeshes``), every reflector of the scene and their
+    ray-tracing set when the caller keeps one, the convexity of each mirror
+    (``closed_surfaces.ConvexMirrors``, tested once for every pass), and the frame's
+    settings."""
+
+    geometry: object
+    meshes: object
+    reflectors: tuple
+    reflector_set: object
+    convex_mirrors: object
+    settings: FrameSettings
+
+
 class FramePass:
     """One method's per-frame GPU work for one renderer. Subclasses implement
-    :meth:`update` and :meth:`answers`, and hold ``methods`` (one per reflector, each with
-    its ``index``) or override :attr:`reflector_indices`; the rest says how the renderer's
-    band trace treats the pass's reflectors and defaults to *not at all*."""
+    :meth:`of_inputs`, :meth:`update` and :meth:`answers`, and hold ``methods`` (one per
+    reflector, each with its ``index``) or override :attr:`reflector_indices`; the rest
+    says how the renderer's band trace treats the pass's reflectors and what work it does
+    off the drawing thread, and defaults to *not at all*."""
+
+    #: The pass's name in statistics and in ``ReflectionRenderer.pass_named``.
+    name = "pass"
 
     #: Whether the method answers by a search per vertex (see :attr:`searched_reflectors`).
     searches = False
@@ -51,6 +76,16 @@ class FramePass:
     #: (``reflected_meshes.SNAP_SHARE``); None: the pass's images are not that accurate
     #: (the blended grids), and are not snapped.
     accuracy_px = None
+
+    @classmethod
+    def factory(cls, methods):
+        """What a renderer calls with its :class:`PassInputs` to make this pass for
+        ``methods`` (the method plan's engines: ``MethodPlan.pass_factories``)."""
+        return functools.partial(cls.of_inputs, tuple(methods))
+
+    @classmethod
+    def of_inputs(cls, methods: tuple, inputs: PassInputs) -> "FramePass":
+        raise NotImplementedError
 
     @property
     def reflector_indices(self) -> list:
@@ -105,3 +140,28 @@ class FramePass:
     def frame_stats(self) -> dict:
         """What a render reports about this pass's last frame (read back from the GPU)."""
         return {}
+
+    def status_counts(self) -> dict:
+        """{reflector index: {"found": n, "unanswered": n}} of the last frame's answers,
+        read back from the GPU (the live statistics; costly: not every frame)."""
+        return {}
+
+    # Work off the drawing thread (the live view and an animation run it between frames).
+
+    def collect(self) -> None:
+        """Take up the work a worker finished since the last call (put it on the GPU)."""
+
+    def prefetch(self, view, submit, **options) -> bool:
+        """Start work ``view`` will need soon on a worker (``submit``, an executor's);
+        returns whether any was started."""
+        return False
+
+    @property
+    def prefetching(self) -> bool:
+        """Whether work started by :meth:`prefetch` is still running."""
+        return False
+
+    @property
+    def prefetched(self) -> bool:
+        """Whether work landed that the next draw should show (the caller redraws)."""
+        return False

@@ -86,25 +86,26 @@ import time
 import numpy as np
 
 from ..addon.geometry import band_trace, subdivision
+from ..addon.frame_settings import FrameSettings
 from ..addon.geometry.closed_surfaces import ConvexMirrors
 from . import draw_shaders
 from .methods import projection
 from .draw_geometry import prepare_geometry
-from .frame_pass import REFLECTION_COSINE
+from .frame_pass import REFLECTION_COSINE, PassInputs
 from .gpu_data import data_texture, read_depth, read_texture, saved_state, vertex_buffer
-from .methods.iterative_draw import IterativePass
-from .methods.morph_pass import DEFAULT_BUDGET_MB, MorphPass
-from .methods.perturbation_pass import PerturbationPass
 from .reflected_meshes import SNAP_SHARE, ReflectedMeshes, snap_grid
 from .traced_pixels import traced_rgba, traced_texture
 from .screen_space import (FULL_SCREEN, box_corners, box_on_screen, camera_position, depth_bias, pixel_box,
                            view_projection)
-from .methods.sbc_triangles import MIXED_SUBDIVISIONS, CachedProjection, CameraProjections, _same_view
+from .methods.sbc_triangles import MIXED_SUBDIVISIONS, CachedProjection, CameraProjections
 
 #: Depth range of the iterative search's first-order reflections (as SBC V-A's g for
 #: max order 1); they never share pixels with another method's, the pre-pass ids keep
 #: each reflection on its own mirror.
 ITERATIVE_ORDER_RANGE = 0.5
+#: A bare renderer's settings (tests, benchmarks): the per-frame passes to half a pixel,
+#: a camera's answers polished, each frame's blend not.
+PLAIN_SETTINGS = FrameSettings(accuracy_px=0.5, polish_frames=False)
 #: A render traces the band along the mirrors' edges that no reflection reached; where
 #: that "band" is more than this share of the image (the camera's near plane cutting a
 #: mirror, the eye on its surface), it is filled by the composite instead of traced, so
@@ -192,39 +193,34 @@ class ReflectionRenderer:
     of the meshes with a sample-based camera is made once per camera
     (:meth:`projection`, cached until another camera's textures are drawn) and
     :meth:`draw` or :meth:`render` draws any view with it. ``cull``: project in each
-    sheet only the vertex chunks that meet the sheet's k-DOP (:mod:`..addon.sheet_bounds`;
-    needs the camera itself, not only its textures). ``polish``: the GPU's ray-list and
-    fold-cell answers are polished on the true rays on the CPU (needs the camera too;
-    exact, but the numpy BVH makes it seconds per camera: the live viewport turns it off).
-    ``iterative``: the star-shaped reflectors the iterative search draws every frame
-    (:mod:`.iterative_draw`); a camera's sheets of their first-order reflections are not
-    projected, and with no other reflector the renderer draws with no camera at all.
-    ``morph``: (``MorphingGrid``, object matrix) of the reflectors drawn from their baked
-    grids every frame where the view is inside the grid (:mod:`.morph_pass`, node images
-    kept on the GPU within ``morph_budget_mb``); likewise left out of a camera's
-    projection made for a view inside the grid.
+    sheet only the vertex chunks that meet the sheet's k-DOP
+    (``addon/methods/sbc/sheet_bounds.py``; needs the camera itself, not only its
+    textures). ``settings`` (:class:`~..addon.frame_settings.FrameSettings`): with
+    ``polish_camera`` the GPU's ray-list and fold-cell answers are polished on the true
+    rays on the CPU (needs the camera too; exact, but the numpy BVH makes it seconds per
+    camera: the live viewport turns it off); the passes read the rest. ``passes``: the
+    factories of the per-frame passes (``MethodPlan.pass_factories``: the iterative
+    search, the baked grids, perturbation, any registered method), each called once with
+    the renderer's :class:`.frame_pass.PassInputs`; a camera's sheets of the first-order
+    reflections they draw in its view are not projected, and where they draw every
+    reflector the renderer draws with no camera at all.
     """
 
     def __init__(self, reflectors, meshes, reflector_colors=None, reflectivity=None,
                  edge_fraction: float | None = subdivision.EDGE_FRACTION, *, fresnel_f0=None,
                  attenuation_distance=None, mixed_subdivisions: int = MIXED_SUBDIVISIONS, cull: bool = True,
-                 polish: bool = True, iterative=(), morph=(), morph_budget_mb: float = DEFAULT_BUDGET_MB,
-                 perturbation=(), accuracy_px: float = 0.5, reflector_set=None, polish_frames: bool = False):
+                 passes=(), settings: FrameSettings = PLAIN_SETTINGS, reflector_set=None):
         self.geometry = prepare_geometry(reflectors, meshes, reflector_colors, reflectivity, edge_fraction,
                                          fresnel_f0, attenuation_distance)
+        self.settings = settings
         #: The diffuse meshes on the GPU, placed by the per-frame passes' answers.
         self.meshes = ReflectedMeshes(self.geometry)
-        #: The star-shaped reflectors drawn by the iterative search every frame
-        #: (``addon.methods.iterative.IterativeReflector`` each); the others by ``textures``.
-        self.iterative = IterativePass(self.geometry, iterative, self.meshes, len(reflectors))
-        #: The reflectors drawn from their morphing grids every frame (views inside a grid).
         self.convex_mirrors = convex = ConvexMirrors(reflectors)  # tested once, for every pass
-        self.morph = MorphPass(self.geometry, morph, self.meshes, morph_budget_mb, accuracy_px, convex, polish_frames)
-        #: The reflectors drawn by perturbation (Chen & Arvo 2000), projected per new view.
-        self.perturbation = PerturbationPass(self.geometry, reflectors, perturbation, self.meshes,
-                                             accuracy_px, reflector_set)
-        #: Every per-frame pass, which the frame code treats alike (:class:`.frame_pass.FramePass`).
-        self.passes = (self.iterative, self.morph, self.perturbation)
+        inputs = PassInputs(self.geometry, self.meshes, tuple(reflectors), reflector_set, convex, settings)
+        #: Every per-frame pass (:class:`.frame_pass.FramePass`), made by the factories
+        #: ``passes`` (``MethodPlan.pass_factories``), which the frame code treats alike.
+        self.passes = tuple(make(inputs) for make in passes)
+        polish = settings.polish_camera
         self.stats = dict(self.geometry.stats)
         self.counts = {"projections": 0, "frames": 0}
         #: The sample-based cameras' reflected triangles, made once per camera.
@@ -277,6 +273,10 @@ class ReflectionRenderer:
             self._targets = FrameTargets(width, height)
         return self._targets
 
+    def pass_named(self, name: str):
+        """The per-frame pass called ``name`` (``FramePass.name``), or None."""
+        return next((frame_pass for frame_pass in self.passes if frame_pass.name == name), None)
+
     def per_frame_reflectors(self, view) -> frozenset:
         """The reflectors whose first-order reflections of ``view`` the per-frame passes
         draw: the searched ones, and those whose grid covers the view."""
@@ -326,7 +326,7 @@ class ReflectionRenderer:
         scissor = pixel_box(rect, targets.width, targets.height, fill_radius + 1) if reflectors_only else None
         targets = self.draw_passes(view, textures, camera, warm=True, mirrors_only=reflectors_only,
                                    accuracy_px=accuracy_px, scissor=scissor)
-        targets.traced = traced.texture() if traced is not None and _same_view(traced.view, view) else None
+        targets.traced = traced.texture() if traced is not None and traced.view.same_as(view) else None
         x, y, width, height = gpu.state.viewport_get()
         # A viewport of the view's size is drawn into where it is; otherwise from (0, 0).
         origin = (x, y) if (width, height) == (targets.width, targets.height) else None
@@ -421,7 +421,7 @@ class ReflectionRenderer:
                     shader.uniform_float("view_size", (float(width), float(height)))
                     shader.uniform_float("snap_grid", snap_grid((width, height), SNAP_SHARE * accuracy_px
                                                                 if warm and accuracy_px else 0.0))
-                    shader.uniform_int("use_camera_pixel", int(_same_view(view, cached.camera_view)))
+                    shader.uniform_int("use_camera_pixel", int(view.same_as(cached.camera_view)))
                     shader.uniform_float("camera", camera_position(view, g.shift))
                     shader.uniform_float("order_range", cached.order_range)
                     shader.uniform_float("reflection_cosine", REFLECTION_COSINE)

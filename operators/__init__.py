@@ -7,7 +7,8 @@ they are registered in module order and unregistered in reverse.
 
 import bpy
 
-from . import bake, demo_scenes, live_handlers, methods, morph_bake, panel, properties, reflectors, render_image
+from . import (bake, demo_scenes, live_handlers, morph_bake, panel, properties, reflectors, render_image, scene_status,
+               star_maps)
 
 _modules = (
     properties,
@@ -33,7 +34,8 @@ def register():
 
 def unregister():
     live_handlers.unregister()
-    methods.forget()
+    scene_status.forget_all()
+    star_maps.forget()
     properties.unregister_pointers()
     for cls in reversed(_classes()):
         bpy.utils.unregister_class(cls)

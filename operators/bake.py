@@ -13,7 +13,7 @@ reported with the object's name, and shown in the panel's status line.
 import bpy
 
 from ..addon.errors import SceneInputError
-from . import live
+from . import live, method_registry
 from .capture import view_from_region
 
 
@@ -39,11 +39,9 @@ def _summary(state) -> str:
     if state.preparing is not None:  # big reflectors made ready on the worker: the status counts the seconds
         return state.status
     stats = state.stats
-    searched = ", ".join(m.name for m in state.plan.iterative)
-    perturbed = ", ".join(m.name for m in state.plan.perturbation)
-    searched = "; ".join(part for part in (f"{searched} searched on the GPU every frame" if searched else "",
-                                           f"{perturbed} by perturbation of paths traced each view" if perturbed
-                                           else "") if part)
+    drawn = [(state.plan.drawn_by(method.name), method.summary) for method in method_registry.registered()
+             if method.summary and method.grid is None]
+    searched = "; ".join(f"{', '.join(names)} {summary}" for names, summary in drawn if names)
     if "rays" not in stats:
         return searched or "building in the background"
     if not stats["rays"] and searched:

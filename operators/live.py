@@ -1,9 +1,10 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Live reflections in the 3D viewport: per-scene state, draw handler, timers, depsgraph handler.
 
-The pipeline of :mod:`.render_image`, split by what changes how often (SBC paper,
-Popescu, Sacks, Mei 2006, section IV: the sample-based camera belongs to one view; V:
-projection runs per draw on the GPU):
+The frame pipeline of :mod:`.frame_pipeline` (the same stages, and the same rule for
+when a view needs a sample-based camera, as Render Image), scheduled by what changes
+how often (SBC paper, Popescu, Sacks, Mei 2006, section IV: the sample-based camera
+belongs to one view; V: projection runs per draw on the GPU):
 
 - **capture** (main thread, needs ``bpy``): the evaluated scene as reflectors and
   diffuse meshes (:mod:`.capture`), and a :class:`ReflectionRenderer` holding the
@@ -27,22 +28,17 @@ projection runs per draw on the GPU):
   after it, with numpy (``camera_source.CameraSource``), and only put on the GPU by
   the first draw after it landed; after a mesh change the next draw projects on the
   GPU (main thread). Not on every redraw.
-- **morphing** (reflectors in Morphing mode with a baked grid, SBC paper VI): their
-  grids are loaded with the capture of the reflectors and drawn by the renderer on
-  every redraw whose view is inside the grid (``gpu_shaders/methods/morph_pass.py``): the four
-  nodes around the eye are blended on the GPU from their images of the vertices, which
-  stay on the GPU once projected, so a view change builds nothing for that reflector.
-  The runtime camera, when another reflector or a higher order still needs one, leaves
-  that reflector's first-order sheets out. A view outside the grid (or orthographic)
-  draws the reflector in runtime mode, and the panel says so.
+- **per-frame passes** (the iterative search, baked morphing grids, perturbation: one
+  per registered method, ``method_registry.py``): drawn by the renderer on every
+  redraw; a view change builds nothing for their reflectors, and the runtime camera,
+  when another reflector or a higher order still needs one, leaves their first-order
+  sheets out. A view outside a reflector's grid draws it in runtime mode, and the panel
+  says so. Work a pass does off the drawing thread (morphing nodes around the eye) runs
+  on a worker between redraws (``FramePass.prefetch``).
 - **traced pixels** (worker thread, once a camera's own view is drawn): the mirror pixels
   of the cells where the camera marks its projection unreliable are ray traced
   (``gpu_shaders/traced_pixels.py``) and drawn over its reflections in that view only:
   a crumpled mirror shows a point many times, and the camera places some images only.
-- **iterative search** (Auto and Iterative mode, ``operators/methods.py``): star-shaped
-  reflectors get their cube maps with the reflectors' capture and are searched on the
-  GPU on every redraw for the region's own view (Roger & Holzschuch 2006): no camera is
-  built for them, and none at all when they are all the reflectors and the order is 1.
 - **draw** (``SpaceView3D`` POST_VIEW handler, every redraw): the reflections of the
   region's view over the reflectors (``reflectors_only``), with the last camera built
   for that region: the cached reflected triangles placed by the current view's
@@ -72,10 +68,14 @@ from ..addon.errors import SceneInputError
 from ..addon.methods.morphing.morphing import ViewOutsideGrid
 from ..addon.scene import scene_bounds
 from ..addon.view import View
-from . import accuracy, live_status, live_workers, methods, morph_bake
-from .live_state import LiveScene, Preparing, Tracing, ViewCamera
+from ..gpu_shaders.methods.projection import SBCTextures
+from ..gpu_shaders.reflection_draw import MAX_TRACED_FRACTION
+from ..gpu_shaders.traced_pixels import trace_doubtful
+from . import accuracy, live_status, live_workers, method_registry, methods, morph_bake
 from .capture import capture_scene, view_from_camera
-from .render_inputs import BOUNDS_MARGIN, reflector_properties, world_color
+from .frame_pipeline import settings_of
+from .live_state import CameraBuild, LiveScene, Preparing, Tracing, ViewCamera
+from .scene_status import status_of
 
 #: Seconds after the last view change before its camera is rebuilt.
 DEBOUNCE_SECONDS = 0.15
@@ -88,8 +88,6 @@ SHADING_TYPES = frozenset({'SOLID', 'MATERIAL'})
 MAX_VIEWS = 8
 #: Seconds between read-backs of the iterative search's unanswered vertices (panel stats).
 COUNT_SECONDS = 2.0
-#: Views whose matrices differ by less than this are the same view (no rebuild).
-VIEW_TOLERANCE = 1e-6
 #: Reflectors of more triangles than this (all together) are made ready for tracing on
 #: the worker when the viewport should not wait: a million-triangle mirror's BVH and seal
 #: took 8 s on the main thread (docs/benchmarks/cliffs.md).
@@ -106,10 +104,9 @@ def state_of(scene) -> LiveScene | None:
     return _states.get(scene.session_uid)
 
 
-def scene_settings(scene) -> tuple:
-    """(max order, down-sampling, accuracy px): what a camera is built with."""
-    s = scene.curved_reflections
-    return int(s.max_order), int(s.downsample), float(s.accuracy_px)
+def scene_settings(scene):
+    """The live view's frame settings of ``scene`` (``frame_pipeline.settings_of``)."""
+    return settings_of(scene, live=True)
 
 
 # --- capture (main thread) -----------------------------------------------------------
@@ -124,9 +121,8 @@ def _capture(state: LiveScene, scene, depsgraph, reflectors: bool, wait: bool = 
     captured = capture_scene(depsgraph, reflectors_as_before=state.captured.reflectors if remesh else None)
     scene_bounds(captured.reflectors, captured.meshes)  # bad input raises here, before any work
     if remesh:
-        state.reflector_set.seal_empty_interiors(captured.meshes)
         state.counts["remeshes"] += 1
-        _renew_renderer(state, scene, captured)
+        _renew_renderer(state, scene, captured, seal=True)
         return True
     triangles = captured.reflector_triangles
     if wait or triangles <= BACKGROUND_TRIANGLES:
@@ -142,34 +138,16 @@ def _adopt(state: LiveScene, scene, captured, reflector_set) -> None:
     """Make ``captured``'s reflectors, ready for tracing in ``reflector_set``, the state's."""
     state.reflector_set = reflector_set
     state.reflector_names = marked_reflectors(scene)
-    state.grids = morph_bake.load_grids(scene, captured.reflectors)
-    state.plan = methods.plan(scene, captured.reflectors, state.settings[2],
-                              baked={grid.reflector_name for grid, _ in state.grids})
-    state.grids = state.plan.drawn_grids(state.grids)
+    state.plan_reflectors(scene, captured)
     state.generation += 1
     state.counts["bakes"] += 1
-    _renew_renderer(state, scene, captured)
+    _renew_renderer(state, scene, captured, seal=False)
 
 
-def _renew_renderer(state: LiveScene, scene, captured) -> None:
-    from ..gpu_shaders.reflection_draw import ReflectionRenderer
-
+def _renew_renderer(state: LiveScene, scene, captured, seal: bool) -> None:
     # A new renderer has no projection: the next draw projects with the view's camera
     # once (SBC V-A), and later draws reuse it until a camera lands or the meshes change.
-    # Interpolated answers only: polishing them on the true rays (the headless render
-    # does) costs seconds per camera with the numpy BVH, on the main thread. Star-shaped
-    # reflectors are searched on the GPU every frame (their maps come from the plan).
-    state.renderer = ReflectionRenderer(captured.reflectors, captured.meshes, polish=False,
-                                        iterative=state.plan.iterative, morph=state.grids,
-                                        perturbation=state.plan.perturbation,
-                                        accuracy_px=state.settings[2],
-                                        reflector_set=state.reflector_set,
-                                        morph_budget_mb=scene.curved_reflections.morph_gpu_budget_mb,
-                                        polish_frames=scene.curved_reflections.morph_polish_frames,
-                                        **reflector_properties(captured.reflectors, scene))
-    state.captured = captured
-    state.world = world_color(scene)
-    state.bounds = scene_bounds(captured.reflectors, captured.meshes)
+    state.new_renderer(scene, captured, seal=seal)
     state.drawing = True
 
 
@@ -209,25 +187,16 @@ def _covering_grids(state: LiveScene, view: View) -> list:
     covering = []
     for grid, matrix in state.grids:
         if grid.failure is not None:
-            morph_bake.note_cache_fault(grid.reflector_name, grid.failure)
+            morph_bake.note_cache_fault(state.scene_status, grid.reflector_name, grid.failure)
             continue
         try:
             grid.check_view(view, matrix)
         except ViewOutsideGrid as error:
-            morph_bake.note_runtime_fallback(error)
+            morph_bake.note_runtime_fallback(state.scene_status, error)
             continue
-        morph_bake.note_morphing_active(grid.reflector_name)
+        morph_bake.note_morphing_active(state.scene_status, grid.reflector_name)
         covering.append((grid, matrix))
     return covering
-
-
-def _needs_camera(state: LiveScene, covering: list, settings: tuple) -> bool:
-    """Whether a sample-based camera must be built: a reflector drawn neither from a grid
-    nor by the iterative search nor by perturbation, or reflections of a higher order
-    where there can be some (those three give first-order ones only)."""
-    drawn = len(covering) + len(state.plan.iterative) + len(state.plan.perturbation)
-    return drawn < len(state.reflector_set.reflectors) or (settings[0] > 1
-                                                           and state.renderer.convex_mirrors.higher_orders)
 
 
 def marked_reflectors(scene) -> frozenset:
@@ -241,32 +210,23 @@ def _inside(bounds, camera_bounds) -> bool:
 # --- cameras (worker thread) ---------------------------------------------------------
 
 
-def _camera_bounds(state: LiveScene) -> tuple:
-    lo, hi = state.bounds
-    margin = BOUNDS_MARGIN * float(np.linalg.norm(hi - lo))
-    return lo - margin, hi + margin
-
-
 def _start(state: LiveScene, key, view: View, wait: bool) -> None:
-    """Build ``view``'s camera: on the worker, or here and now with ``wait``."""
+    """Build ``view``'s camera, if it needs one: on the worker, or here and now with ``wait``."""
     state.requests.pop(key, None)
-    bounds, settings, generation = _camera_bounds(state), state.settings, state.generation
-    covering = _covering_grids(state, view)
+    job, covering = state.camera_job(view), _covering_grids(state, view)
     projections = state.renderer.sbc
-    if not _needs_camera(state, covering, settings):
-        future = Future()
+    future = Future()
+    if job is None:
         future.set_result((None, None))
+    elif wait:
+        try:
+            future.set_result(live_workers.build_camera(job, projections))
+        except Exception as error:  # noqa: BLE001 - reported as the status line
+            future.set_exception(error)
     else:
-        job = (state.reflector_set, view, bounds, settings, projections, state.renderer.per_frame_reflectors(view))
-        if wait:
-            future = Future()
-            try:
-                future.set_result(live_workers.build_camera(*job))
-            except Exception as error:  # noqa: BLE001 - reported as the status line
-                future.set_exception(error)
-        else:
-            future = live_workers.builder().submit(live_workers.build_camera, *job)
-    state.jobs[key] = (future, view, bounds, settings, generation, covering, projections)
+        future = live_workers.builder().submit(live_workers.build_camera, job, projections)
+    bounds = state.camera_bounds() if job is None else job.bounds
+    state.jobs[key] = CameraBuild(future, view, bounds, state.settings, state.generation, covering, projections)
     if future.done():
         _collect(state)
 
@@ -274,7 +234,8 @@ def _start(state: LiveScene, key, view: View, wait: bool) -> None:
 def _collect(state: LiveScene) -> bool:
     """Store the cameras that finished; returns whether any did."""
     finished = False
-    for key, (future, view, bounds, settings, generation, covering, projections) in list(state.jobs.items()):
+    for key, build in list(state.jobs.items()):
+        future = build.future
         if not future.done():
             continue
         del state.jobs[key]
@@ -287,17 +248,17 @@ def _collect(state: LiveScene) -> bool:
             state.report('ERROR', message)
             # Nothing is drawn for this view, and it is not retried until it changes.
             state.cameras.pop(key, None)
-            state.failed[key] = view
+            state.failed[key] = build.view
             continue
-        if generation != state.generation:
+        if build.generation != state.generation:
             continue  # built for reflectors that have changed since
         state.failed.pop(key, None)
-        state.cameras[key] = ViewCamera(view, sbc, bounds, settings, generation, covering,
-                                        last_drawn=time.monotonic(),
-                                        projected=None if projected is None else (projections, projected))
+        state.cameras[key] = ViewCamera(build.view, sbc, build.bounds, build.settings, build.generation,
+                                        build.covering, last_drawn=time.monotonic(),
+                                        projected=None if projected is None else (build.projections, projected))
         state.counts["builds"] += 1
-        live_status.update_stats(state, sbc, covering)
-        live_status.report_visibility(state, sbc, covering)
+        live_status.update_stats(state, sbc, build.covering)
+        live_status.report_visibility(state, build.view, sbc)
     while len(state.cameras) > MAX_VIEWS:
         oldest = min(state.cameras, key=lambda k: state.cameras[k].last_drawn)
         del state.cameras[oldest]
@@ -316,12 +277,13 @@ def bake(scene, depsgraph, views: dict | None = None, wait: bool = False) -> Liv
     """
     state = _states.setdefault(scene.session_uid, LiveScene())
     state.settings = scene_settings(scene)
+    state.scene_status = status_of(scene)
     state.dirty_reflectors = state.dirty_meshes = False
     try:
         ready = _capture(state, scene, depsgraph, reflectors=True, wait=wait)
         if views is None:
             views = {key: camera.view for key, camera in state.cameras.items()}
-            views.update({key: job[1] for key, job in state.jobs.items()})
+            views.update({key: build.view for key, build in state.jobs.items()})
             views.update(state.failed)
             if not views:
                 views = {CAMERA_KEY: view_from_camera(scene.camera, scene, depsgraph)}
@@ -352,23 +314,23 @@ def clear(scene) -> bool:
     """Forget ``scene``'s live state: nothing is drawn until the next bake."""
     state = _states.pop(scene.session_uid, None)
     if state is not None:
-        for future, *_ in state.jobs.values():
-            future.cancel()
+        for build in state.jobs.values():
+            build.future.cancel()
     tag_redraw()
     return state is not None
 
 
 def clear_all() -> None:
     for state in _states.values():
-        for future, *_ in state.jobs.values():
-            future.cancel()
+        for build in state.jobs.values():
+            build.future.cancel()
     _states.clear()
 
 
 def request_view(state: LiveScene, key, view: View) -> None:
     """Ask for ``view``'s camera after the debounce delay (a newer request restarts it)."""
     previous = state.requests.get(key)
-    if previous is None or not _same_view(previous[0], view):
+    if previous is None or not previous[0].same_as(view):
         state.requests[key] = (view, time.monotonic())
     ensure_timer()
 
@@ -403,13 +365,13 @@ def process(scene, depsgraph, wait: bool = False, now: float | None = None) -> b
     except Exception as error:  # noqa: BLE001 - the worker's preparation failed: say so, draw the last
         state.preparing = None
         state.report('ERROR', f"Preparing the reflectors failed: {type(error).__name__}: {error}")
-    morph = None if state.renderer is None else state.renderer.morph
+    passes = () if state.renderer is None else state.renderer.passes
     traced, tracing = _traces_landed(state)
-    if _collect(state) or (morph is not None and morph.prefetched) or traced:
+    if _collect(state) or any(frame_pass.prefetched for frame_pass in passes) or traced:
         tag_redraw()
     checking = _check_when_settled(state, scene, now, wait)
     return bool(state.jobs or state.requests or state.dirty_meshes or state.dirty_reflectors or tracing
-                or state.preparing is not None or (morph is not None and morph.prefetching) or checking)
+                or state.preparing is not None or any(frame_pass.prefetching for frame_pass in passes) or checking)
 
 
 def _check_when_settled(state: LiveScene, scene, now: float, wait: bool) -> bool:
@@ -450,11 +412,11 @@ def draw(scene, key, view: View) -> bool:
     if state is None or state.renderer is None or not state.drawing:
         return False
     failed = state.failed.get(key)
-    if failed is not None and _same_view(failed, view):
+    if failed is not None and failed.same_as(view):
         return False  # the status line says why; a new view or a Refresh tries again
-    covering = _covering_grids(state, view)
-    if not _needs_camera(state, covering, state.settings):
-        # Every reflector is searched or blended on the GPU: nothing to build when the view changes.
+    if state.camera_job(view) is None:
+        # Every reflector is drawn by a per-frame pass: nothing to build when the view changes.
+        covering = _covering_grids(state, view)
         state.stats["morphing"] = ", ".join(grid.reflector_name for grid, _ in covering)
         inside = _reflector_around(state, view)
         if inside is not None:
@@ -465,14 +427,14 @@ def draw(scene, key, view: View) -> bool:
         drawn = _draw_with(state, view, None)
         damaged = [grid for grid, _ in covering if grid.failure is not None]
         for grid in damaged:
-            morph_bake.note_cache_fault(grid.reflector_name, grid.failure)  # the panel names the file
+            morph_bake.note_cache_fault(state.scene_status, grid.reflector_name, grid.failure)  # the panel names the file
         if damaged:
             request_view(state, key, view)  # their reflectors need a camera now
         return drawn
     camera = state.cameras.get(key)
     current = (camera is not None and camera.generation == state.generation and camera.settings == state.settings
                and camera.first_orders_drawn(state.renderer.per_frame_reflectors))
-    if (camera is None or not current or not _same_view(camera.view, view)) and key not in state.jobs:
+    if (camera is None or not current or not camera.view.same_as(view)) and key not in state.jobs:
         if scene.curved_reflections.auto_refresh or camera is None:
             request_view(state, key, view)
     if camera is None:
@@ -487,8 +449,6 @@ def _projection_source(state: LiveScene, camera: ViewCamera | None):
     else the worker's projection, put on the GPU now, while it was made for this
     renderer and its per-frame passes; else (the meshes changed since, or it was
     dropped) the camera's GPU textures, which project on this draw."""
-    from ..gpu_shaders.methods.projection import SBCTextures
-
     if camera is None or camera.sbc is None:
         return None
     if isinstance(camera.source, SBCTextures) or state.renderer.sbc.holds(camera.source):
@@ -506,13 +466,10 @@ def _traced(state: LiveScene, camera: ViewCamera | None, view: View):
     own and they are ready for this renderer (its meshes); else None, and unless they
     are being traced, they start on the worker (``traced_pixels.trace_doubtful``): a
     crumpled mirror's reflections come out exact once the view rests."""
-    from ..gpu_shaders.reflection_draw import MAX_TRACED_FRACTION
-    from ..gpu_shaders.traced_pixels import trace_doubtful
-
-    if camera is None or camera.sbc is None or not _same_view(view, camera.view):
+    if camera is None or camera.sbc is None or not view.same_as(camera.view):
         return None
     if camera.tracing is None or camera.tracing.renderer is not state.renderer:
-        renderer, sbc, max_order, world = state.renderer, camera.sbc, camera.settings[0], state.world
+        renderer, sbc, max_order, world = state.renderer, camera.sbc, camera.settings.max_order, state.world
         # The renderer's tracer is made on the worker too (a tree of the diffuse meshes).
         future = live_workers.tracer().submit(
             lambda: trace_doubtful(renderer.band_tracer, sbc, max_order, world, MAX_TRACED_FRACTION))
@@ -550,23 +507,23 @@ def _draw_with(state: LiveScene, view: View, camera: ViewCamera | None) -> bool:
     projections = state.renderer.counts["projections"]  # a projection made or adopted now counts
     sbc = None if camera is None else camera.sbc
     state.renderer.draw(view, _projection_source(state, camera), state.world, reflectors_only=True, camera=sbc,
-                        accuracy_px=state.settings[2], traced=_traced(state, camera, view))
-    if state.last_view is None or not _same_view(state.last_view[0], view) or state.last_view[2] is not sbc:
+                        accuracy_px=state.settings.accuracy_px, traced=_traced(state, camera, view))
+    if state.last_view is None or not state.last_view[0].same_as(view) or state.last_view[2] is not sbc:
         state.last_view = (view, time.monotonic(), sbc, False)
         ensure_timer()  # the timer checks it once it settles
-    morph = state.renderer.morph
-    if morph.grids:
-        morph.collect()
-        if morph.prefetch(view, live_workers.prefetcher().submit):
-            ensure_timer()  # it redraws when a node is ready, which uploads it and starts the next
+    for frame_pass in state.renderer.passes:
+        frame_pass.collect()
+        if frame_pass.prefetch(view, live_workers.prefetcher().submit):
+            ensure_timer()  # it redraws when the work is ready, which uploads it and starts the next
     if state.renderer.counts["projections"] != projections:
         state.counts["projections"] += 1
         state.stats["projection_ms"] = 1000.0 * state.renderer.stats.get("projection_seconds", 0.0)
     state.stats["draw_ms"] = 1000.0 * (time.perf_counter() - start)
     state.counts["draws"] += 1
-    if state.plan.iterative and time.monotonic() - state.stats.get("counted_at", -COUNT_SECONDS) >= COUNT_SECONDS:
-        # The vertices the search left unanswered, read back now and then (not every frame).
-        counts = state.renderer.iterative.status_counts()
+    if time.monotonic() - state.stats.get("counted_at", -COUNT_SECONDS) >= COUNT_SECONDS:
+        # The vertices the passes left unanswered, read back now and then (not every frame).
+        counts = {index: found for frame_pass in state.renderer.passes
+                  for index, found in frame_pass.status_counts().items()}
         state.stats["unanswered"] = sum(c["unanswered"] for c in counts.values())
         state.stats["searched"] = sum(c["found"] + c["unanswered"] for c in counts.values())
         state.stats["counted_at"] = time.monotonic()
@@ -579,13 +536,8 @@ def _reflector_around(state: LiveScene, view: View) -> str | None:
     if not view.is_perspective:
         return None
     eye = view.eye[None]
-    return next((m.name for m in state.plan.iterative if m.reflector_map.inside(eye)[0]), None)
-
-
-def _same_view(a: View, b: View) -> bool:
-    return ((a.width, a.height) == (b.width, b.height)
-            and np.allclose(a.view_matrix, b.view_matrix, atol=VIEW_TOLERANCE, rtol=0.0)
-            and np.allclose(a.projection_matrix, b.projection_matrix, atol=VIEW_TOLERANCE, rtol=0.0))
+    searched = state.plan.engines_of(method_registry.ITERATIVE)
+    return next((m.name for m in searched if m.reflector_map.inside(eye)[0]), None)
 
 
 # --- Blender callbacks ---------------------------------------------------------------

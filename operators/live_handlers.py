@@ -9,7 +9,7 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
-from . import live, methods, morph_bake, scene_changes
+from . import live, morph_bake, scene_changes, scene_status, star_maps
 from .capture import view_from_region
 
 _draw_handle = None
@@ -103,8 +103,8 @@ def on_setting_changed(context, reflectors: bool = False, meshes: bool = False) 
 def on_load_pre(*_args) -> None:
     """Loading a file drops every live state and morphing status (no state leaks between files)."""
     live.clear_all()
-    morph_bake.forget_statuses()
-    methods.forget()
+    scene_status.forget_all()
+    star_maps.forget()
 
 
 @persistent
@@ -155,5 +155,5 @@ def unregister() -> None:
         for handler in [h for h in handlers if _same_function(h, function)]:
             handlers.remove(handler)
     live.shutdown()
-    morph_bake.forget_statuses()
-    methods.forget()
+    scene_status.forget_all()
+    star_maps.forget()

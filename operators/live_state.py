@@ -7,7 +7,10 @@ from __future__ import annotations
 from concurrent.futures import Future
 from dataclasses import dataclass, field
 
-from . import methods
+from ..addon.frame_settings import FrameSettings
+from ..addon.view import View
+from .frame_pipeline import FramePipeline
+from .scene_status import SceneStatus
 
 
 @dataclass
@@ -28,7 +31,7 @@ class ViewCamera:
     view: View
     sbc: object
     bounds: tuple
-    settings: tuple
+    settings: FrameSettings
     generation: int
     morph: list = field(default_factory=list)  # (MorphingGrid, matrix) of the grids covering the view
     source: object = None  # what the renderer projects with (made on the first draw: needs the GPU)
@@ -50,6 +53,20 @@ class ViewCamera:
 
 
 @dataclass
+class CameraBuild:
+    """A view's camera on its way (``live._start``): what it is built for, and the
+    renderer's projections its reflected triangles are made for on the worker."""
+
+    future: Future  # -> (SampleBasedCamera or None, its projection or None)
+    view: View
+    bounds: tuple
+    settings: FrameSettings
+    generation: int
+    covering: list  # (MorphingGrid, matrix) of the grids covering the view
+    projections: object  # the renderer's CameraProjections
+
+
+@dataclass
 class Preparing:
     """A capture whose reflectors are made ready for tracing on the worker (their BVH and
     seal, ``live_workers.prepare_reflectors``): the last reflections draw meanwhile."""
@@ -61,24 +78,18 @@ class Preparing:
 
 
 @dataclass
-class LiveScene:
-    """Everything live about one scene (keyed by ``scene.session_uid``)."""
+class LiveScene(FramePipeline):
+    """Everything live about one scene (keyed by ``scene.session_uid``): the frame
+    pipeline's capture, plan, grids and renderer, and the scheduling around it."""
 
-    settings: tuple = ()
-    captured: object = None
-    renderer: object = None
-    reflector_set: object = None
     reflector_names: frozenset = frozenset()
-    grids: list = field(default_factory=list)  # (MorphingGrid, matrix) of the baked reflectors in Morphing mode
-    plan: object = field(default_factory=lambda: methods.MethodPlan())  # which method draws each reflector
-    bounds: tuple | None = None
-    world: tuple = (0.0, 0.0, 0.0, 1.0)
     cameras: dict = field(default_factory=dict)  # view key -> ViewCamera
-    jobs: dict = field(default_factory=dict)  # view key -> (Future, View, generation)
+    jobs: dict = field(default_factory=dict)  # view key -> CameraBuild
     requests: dict = field(default_factory=dict)  # view key -> (View, time of the request)
     failed: dict = field(default_factory=dict)  # view key -> View whose camera could not be built
     generation: int = 0  # bumped by every capture of the reflectors: older cameras are stale
     preparing: object = None  # Preparing: a capture whose reflectors are made ready on the worker
+    scene_status: SceneStatus = field(default_factory=SceneStatus)  # the panel's store of this scene
     dirty_reflectors: bool = False
     dirty_meshes: bool = False
     drawing: bool = True  # False after a draw failed, until the next bake or refresh

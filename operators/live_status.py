@@ -4,8 +4,6 @@ statistics, and the reflectors the view does not see."""
 
 from __future__ import annotations
 
-from ..addon.methods.sbc.sbc_build import clip_start_inside
-from .render_image import clip_start_message
 
 
 def update_stats(state, sbc, covering: list) -> None:
@@ -23,24 +21,21 @@ def update_stats(state, sbc, covering: list) -> None:
         "views": len(state.cameras),
         "reflected_triangles": int(len(geometry.triangles)),
         "morphing": ", ".join(grid.reflector_name for grid, _ in covering),
-        "iterative": ", ".join(m.name for m in state.plan.iterative),
-        "perturbation": ", ".join(m.name for m in state.plan.perturbation),
     })
 
 
-def report_visibility(state, sbc, covering: list) -> None:
-    """Reflectors the view does not see: a warning when none is seen (nothing to draw).
-    A reflector drawn from its grid, searched or perturbed counts as seen (its method
-    decides per vertex)."""
+def report_visibility(state, view, sbc) -> None:
+    """Reflectors ``view`` does not see: a warning when none is seen (nothing to draw).
+    A reflector a per-frame pass draws in the view counts as seen (its method decides per
+    vertex); the frame's warnings (``FramePipeline.warnings``) come first."""
     names = [r.name for r in state.captured.reflectors]
     seen = {int(history[0]) for history in ([] if sbc is None else sbc.groups)}
-    seen |= {grid.reflector_index for grid, _ in covering} | state.plan.iterative_indices | {
-        m.index for m in state.plan.perturbation}
+    seen |= state.renderer.per_frame_reflectors(view)
     unseen = [name for k, name in enumerate(names) if k not in seen]
     quoted = ", ".join(repr(n) for n in unseen)
-    clipped = clip_start_inside(state.reflector_set, sbc.ray_map.view) if sbc is not None else []
-    if clipped:
-        state.report('WARNING', clip_start_message(clipped[0]))
+    warnings = state.warnings(view)
+    if warnings:
+        state.report('WARNING', warnings[0])
     elif not seen:
         state.report('WARNING', f"{quoted}: out of view, no reflection to draw (turn the view toward it)")
     elif unseen:

@@ -14,8 +14,8 @@ import threading
 from concurrent.futures import ThreadPoolExecutor
 
 from ..addon.geometry.raytrace import ReflectorSet
-from ..addon.methods.sbc.sbc_build import build_sample_based_camera
-from ..addon.view import View
+from ..gpu_shaders.methods.camera_source import CameraSource
+from .frame_pipeline import CameraJob
 
 #: How much nicer than Blender the threads that build cameras and prefetch morphing
 #: nodes run (Linux, where the nice value is per thread): they yield the cores to the
@@ -27,18 +27,14 @@ BACKGROUND_NICENESS = 10
 _executors: dict = {}
 
 
-def build_camera(reflector_set, view: View, bounds, settings: tuple, projections, per_frame: frozenset):
-    """The view's ray map and BSP trees, then the reflected triangles of the renderer's
-    meshes (``projections``, a ``CameraProjections``; ``per_frame``: the reflectors its
-    per-frame passes draw in ``view``), projected with numpy
-    (``camera_source.CameraSource``): the camera's landing then costs the main thread
-    no projection pass, only the upload (``CameraProjections.adopt``). Returns both."""
-    from ..gpu_shaders.methods.camera_source import CameraSource
-
-    max_order, downsample, accuracy_px = settings
-    sbc = build_sample_based_camera(reflector_set, view, bounds, max_order=max_order,
-                                    downsample=downsample, accuracy_px=accuracy_px, first_order_left_out=per_frame)
-    return sbc, projections.triangles(CameraSource(sbc), sbc.ray_map.view, sbc, per_frame)
+def build_camera(job: CameraJob, projections):
+    """The view's ray map and BSP trees (``frame_pipeline.CameraJob``), then the
+    reflected triangles of the renderer's meshes (``projections``, a
+    ``CameraProjections``) projected with numpy (``camera_source.CameraSource``): the
+    camera's landing then costs the main thread no projection pass, only the upload
+    (``CameraProjections.adopt``). Returns both."""
+    sbc = job.build()
+    return sbc, projections.triangles(CameraSource(sbc), sbc.ray_map.view, sbc, job.first_order_left_out)
 
 
 def prepare_reflectors(reflectors, meshes):

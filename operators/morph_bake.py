@@ -28,14 +28,12 @@ from bpy.app.handlers import persistent
 
 from ..addon.baking import bake, bake_cache
 from ..addon.errors import SceneInputError
-from ..addon.methods.morphing.morph_grid import OCTREE, TETRAHEDRAL, MorphSettings
+from ..addon.methods.morphing.morph_grid import TETRAHEDRAL, MorphSettings
+from ..gpu_shaders.methods.morph_source import GPUFaceImages
+from ..gpu_shaders.methods.polish_gpu import GPUImagePolish
 from . import methods, scene_changes
 from .capture import capture_scene
-
-#: Per scene name: {"running": bool, "done": int, "total": int, "reflector": str, "message": str}
-_STATE: dict = {}
-#: Per reflector name: the last load or bake outcome, shown by the panel.
-_REFLECTOR_STATUS: dict = {}
+from .scene_status import SceneStatus, status_of
 
 
 def cache_root(scene) -> Path:
@@ -98,8 +96,8 @@ def on_save_post(*_args) -> None:
             else:
                 shutil.copytree(old, new)
         except OSError as error:
-            _STATE[scene.name] = {"running": False, "done": 0, "total": 0, "reflector": "",
-                                  "message": f"The morphing grids were not carried to {new}: {error}"}
+            status_of(scene).bake = {"running": False, "done": 0, "total": 0, "reflector": "",
+                                     "message": f"The morphing grids were not carried to {new}: {error}"}
     _SAVED_FROM.clear()
 
 
@@ -107,29 +105,30 @@ def on_save_post(*_args) -> None:
 FACE_RESOLUTION = MorphSettings.face_resolution
 
 
-def morph_settings(scene, mode: str = methods.MORPHING) -> MorphSettings:
+def morph_settings(scene, kind: str = TETRAHEDRAL) -> MorphSettings:
     """The grid settings of ``scene.curved_reflections`` (grid nodes and margin) for a
-    reflector in ``mode``: Octree mode puts ray octrees at the nodes (Martin & Popescu
-    2004), the others panoramic sample-based cameras (SBC paper VI)."""
+    grid of ``kind``: ray octrees at the nodes (Martin & Popescu 2004) or panoramic
+    sample-based cameras (SBC paper VI)."""
     settings = scene.curved_reflections
     return MorphSettings(grid=tuple(settings.morph_grid), margin=float(settings.morph_margin),
-                         face_resolution=FACE_RESOLUTION, kind=OCTREE if mode == methods.OCTREE else TETRAHEDRAL)
+                         face_resolution=FACE_RESOLUTION, kind=kind)
 
 
-def reflector_settings(scene, name: str) -> MorphSettings:
-    """:func:`morph_settings` for the grid the reflector ``name``'s mode needs."""
-    return morph_settings(scene, methods.mode_of(scene, name))
+def reflector_settings(scene, reflector) -> MorphSettings:
+    """:func:`morph_settings` for the grid the reflector's mode needs (``methods.grid_kind_wanted``)."""
+    return morph_settings(scene, methods.grid_kind_wanted(scene, reflector) or TETRAHEDRAL)
 
 
 def morph_status(scene, per_reflector: bool = True) -> str:
     """One line: a bake in progress, else the last bake's outcome and (``per_reflector``)
     the last outcome of bake, clear, load or draw of each reflector."""
-    state = _STATE.get(scene.name)
+    status = status_of(scene)
+    state = status.bake
     if state and state["running"]:
         return f"Baking {state['reflector']}: {state['done']}/{state['total']} nodes (Esc cancels)"
     if not per_reflector:
         return state.get("message", "") if state else ""
-    lines = [f"{name}: {text}" for name, text in sorted(_REFLECTOR_STATUS.items())]
+    lines = [f"{name}: {text}" for name, text in sorted(status.grid_lines.items())]
     if state and state.get("message") and not set(state["message"].split("; ")) <= set(lines):
         lines.insert(0, state["message"])  # what the reflectors' lines do not already say
     return "; ".join(lines) if lines else "No morphing grid baked in this session"
@@ -152,12 +151,12 @@ def morphing_reflectors(context):
 def load_morphing(reflector, matrix, scene, reflector_index: int = 0):
     """The baked grid for this reflector as it is now, or None (runtime mode) with the reason recorded."""
     try:
-        grid = bake.load_for(reflector, matrix, reflector_settings(scene, reflector.name), cache_directory(scene),
+        grid = bake.load_for(reflector, matrix, reflector_settings(scene, reflector), cache_directory(scene),
                              reflector_index, polish=scene.curved_reflections.morph_polish_nodes)
     except SceneInputError as error:
-        _REFLECTOR_STATUS[reflector.name] = f"{error.problem}"
+        status_of(scene).grid_lines[reflector.name] = f"{error.problem}"
         return None
-    _REFLECTOR_STATUS[reflector.name] = "morphing (baked grid loaded)"
+    status_of(scene).grid_lines[reflector.name] = "morphing (baked grid loaded)"
     return grid
 
 
@@ -168,9 +167,6 @@ def load_grids(scene, reflectors, bake_missing: bool = False) -> list:
     set to Morphing or Octree mode whose grid is missing, stale or unfinished is baked first, in
     this process, on every core. The grids' nodes project, and their images are
     polished (*Polish Node Images*), on the GPU."""
-    from ..gpu_shaders.methods.morph_source import GPUFaceImages
-    from ..gpu_shaders.methods.polish_gpu import GPUImagePolish
-
     faces, polish = GPUFaceImages(), GPUImagePolish()
     grids = []
     for index, reflector in enumerate(reflectors):
@@ -192,7 +188,7 @@ def _bake_if_missing(reflector, matrix, scene) -> bool:
     """Bake this reflector's grid where none matching it is whole (the nodes already baked
     are kept); returns whether it baked. A damaged node file is found, and rebuilt by the
     next bake, when it is read."""
-    settings, directory = reflector_settings(scene, reflector.name), cache_directory(scene)
+    settings, directory = reflector_settings(scene, reflector), cache_directory(scene)
     try:
         bake.load_for(reflector, matrix, settings, directory)
     except SceneInputError as error:
@@ -206,24 +202,19 @@ def _bake_if_missing(reflector, matrix, scene) -> bool:
     return False
 
 
-def note_cache_fault(reflector_name: str, error) -> None:
+def note_cache_fault(status: SceneStatus, reflector_name: str, error) -> None:
     """Record a damaged cache met while drawing: runtime mode, and which file."""
-    _REFLECTOR_STATUS[reflector_name] = f"runtime mode: {error.problem}"
+    status.grid_lines[reflector_name] = f"runtime mode: {error.problem}"
 
 
-def note_runtime_fallback(error) -> None:
+def note_runtime_fallback(status: SceneStatus, error) -> None:
     """Record a ViewOutsideGrid (the view left the grid) for the status line: runtime mode is drawn."""
-    _REFLECTOR_STATUS[error.reflector_name] = f"runtime mode: {error.reason}"
+    status.grid_lines[error.reflector_name] = f"runtime mode: {error.reason}"
 
 
-def forget_statuses() -> None:
-    """Drop every reflector's status line (another file is being loaded)."""
-    _REFLECTOR_STATUS.clear()
-
-
-def note_morphing_active(reflector_name: str) -> None:
+def note_morphing_active(status: SceneStatus, reflector_name: str) -> None:
     """Record that the live view draws this reflector from its baked grid."""
-    _REFLECTOR_STATUS[reflector_name] = "morphing: the view is inside the baked grid"
+    status.grid_lines[reflector_name] = "morphing: the view is inside the baked grid"
 
 
 def reflector_modes(scene) -> list[tuple[str, str]]:
@@ -233,7 +224,7 @@ def reflector_modes(scene) -> list[tuple[str, str]]:
     for obj in scene.objects:
         settings = obj.curved_reflections
         if settings.is_reflector and methods.grid_wanted_by_last_plan(scene, obj):
-            lines.append((obj.name, _REFLECTOR_STATUS.get(obj.name, "runtime mode: not baked or loaded yet")))
+            lines.append((obj.name, status_of(scene).grid_lines.get(obj.name, "runtime mode: not baked or loaded yet")))
     return lines
 
 
@@ -265,7 +256,7 @@ class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
     def poll(cls, context):
         if context.scene is None:
             return False
-        state = _STATE.get(context.scene.name)
+        state = status_of(context.scene).bake
         return not (state and state["running"])
 
     def _jobs(self, context):
@@ -285,10 +276,11 @@ class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
             return None
         return jobs
 
-    def _run(self, scene_name, jobs, directory, cancel):
-        """Bake each reflector in turn (on the bake thread, or inline from execute):
-        ``jobs`` are (reflector, object matrix, the settings of the grid its mode needs)."""
-        state = _STATE[scene_name]
+    def _run(self, status: SceneStatus, jobs, directory, cancel):
+        """Bake each reflector in turn (on the bake thread, or inline from execute) and
+        keep the progress in the scene's ``status``: ``jobs`` are (reflector, object
+        matrix, the settings of the grid its mode needs)."""
+        state = status.bake
         outcome = []
         try:
             for reflector, matrix, settings in jobs:
@@ -301,7 +293,7 @@ class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
                                         progress=progress, cancel=cancel,
                                         nodes=bake.parse_node_range(self.nodes, int(np.prod(settings.grid))))
                 if result.cancelled:
-                    _REFLECTOR_STATUS[reflector.name] = ("bake cancelled; the nodes baked are kept, the next bake "
+                    status.grid_lines[reflector.name] = ("bake cancelled; the nodes baked are kept, the next bake "
                                                          "goes on from there")
                     outcome.append(f"{reflector.name}: cancelled")
                     break
@@ -310,7 +302,7 @@ class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
                     done += f", {result.n_skipped} were baked already"
                 if result.directory is None:
                     done += f"; {result.n_baked} of {result.n_nodes} nodes baked, the other ranges still to bake"
-                _REFLECTOR_STATUS[reflector.name] = done
+                status.grid_lines[reflector.name] = done
                 outcome.append(f"{reflector.name}: {done}")
         except (SceneInputError, OSError, ValueError) as error:
             outcome.append(f"bake failed: {error}")
@@ -325,21 +317,21 @@ class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
         if jobs is None:
             return None
         try:
-            jobs = [(reflector, matrix, reflector_settings(context.scene, reflector.name))
+            jobs = [(reflector, matrix, reflector_settings(context.scene, reflector))
                     for reflector, matrix in jobs]
             bake.parse_node_range(self.nodes, int(np.prod(jobs[0][2].grid)))
         except (SceneInputError, ValueError) as error:
             self.report({'ERROR'}, str(error))
             return None
-        _STATE[context.scene.name] = {"running": True, "done": 0, "total": 0, "reflector": jobs[0][0].name,
-                                      "message": ""}
+        status_of(context.scene).bake = {"running": True, "done": 0, "total": 0, "reflector": jobs[0][0].name,
+                                         "message": ""}
         return jobs, cache_directory(context.scene)
 
     def execute(self, context):
         started = self._start(context)
         if started is None:
             return {'CANCELLED'}
-        outcome = self._run(context.scene.name, *started, threading.Event())
+        outcome = self._run(status_of(context.scene), *started, threading.Event())
         failed = any("failed" in line for line in outcome)
         self.report({'ERROR'} if failed else {'INFO'}, "; ".join(outcome))
         _refresh_live(context)
@@ -350,8 +342,8 @@ class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
         if started is None:
             return {'CANCELLED'}
         self._cancel = threading.Event()
-        self._scene_name = context.scene.name
-        self._thread = threading.Thread(target=self._run, args=(self._scene_name, *started, self._cancel),
+        self._status = status_of(context.scene)
+        self._thread = threading.Thread(target=self._run, args=(self._status, *started, self._cancel),
                                         daemon=True)
         self._thread.start()
         wm = context.window_manager
@@ -365,7 +357,7 @@ class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
             self._cancel.set()
         if event.type != 'TIMER':
             return {'PASS_THROUGH'} if event.type != 'ESC' else {'RUNNING_MODAL'}
-        state = _STATE[self._scene_name]
+        state = self._status.bake
         context.window_manager.progress_update(int(100 * state["done"] / max(state["total"], 1)))
         for area in context.screen.areas if context.screen else ():
             area.tag_redraw()
@@ -388,14 +380,14 @@ class CURVED_REFLECTIONS_OT_clear_morphing(bpy.types.Operator):
     bl_options = {'REGISTER'}
 
     def execute(self, context):
-        state = _STATE.get(context.scene.name)
-        if state and state["running"]:
+        status = status_of(context.scene)
+        if status.bake and status.bake["running"]:
             self.report({'ERROR'}, "A bake is running: cancel it first (Esc)")
             return {'CANCELLED'}
         names = [obj.name for obj in context.scene.objects if obj.curved_reflections.is_reflector]
         removed = sum(bake_cache.clear_cache(cache_directory(context.scene), name) for name in names)
         for name in names:
-            _REFLECTOR_STATUS[name] = "no morphing cache (cleared); runtime mode"
+            status.grid_lines[name] = "no morphing cache (cleared); runtime mode"
         self.report({'INFO'}, f"Removed {removed} baked grid(s)")
         _refresh_live(context)
         return {'FINISHED'}

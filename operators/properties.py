@@ -5,7 +5,7 @@ import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, IntVectorProperty,
                        PointerProperty, StringProperty)
 
-from . import scene_changes
+from . import method_registry, scene_changes
 
 
 #: The option that declares a path property's "//" (the .blend file's folder) supported;
@@ -57,21 +57,9 @@ class CurvedReflectionsObjectSettings(bpy.types.PropertyGroup):
     mode: EnumProperty(
         name="Mode",
         description="How this reflector's reflections are computed",
-        items=(
-            ('AUTO', "Auto", "Iterative where the reflector is star-shaped, Morphing where a baked grid covers the "
-                             "view, Runtime otherwise; the panel says which and why"),
-            ('ITERATIVE', "Iterative (GPU)", "Find every vertex's reflection on the GPU each frame (Roger & "
-                                             "Holzschuch 2006); star-shaped reflectors only, others use Runtime"),
-            ('RUNTIME', "Runtime", "Rebuild the sample-based camera for every new view (SBC paper IV)"),
-            ('MORPHING', "Morphing", "Bake a grid of panoramic cameras around the reflector and blend them "
-                                     "as the view moves (SBC paper VI)"),
-            ('OCTREE', "Octree Morphing", "Bake a grid of ray octrees around the reflector and blend the eight "
-                                          "nodes around the view trilinearly as it moves (Martin & Popescu 2004)"),
-            ('PERTURBATION', "Perturbation", "Trace a sparse grid of reflection paths per view and move every "
-                                             "vertex's reflection from the nearest one by its path Jacobian and "
-                                             "Hessian (Chen & Arvo 2000); any smooth reflector"),
-        ),
-        default='AUTO',
+        # The registered methods (method_registry.py); their numbers keep saved files' modes.
+        items=method_registry.enum_items,
+        default=0,  # Auto
         update=_reflector_toggled,
     )
     analytic_shape: EnumProperty(

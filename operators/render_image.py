@@ -1,12 +1,10 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Render the scene camera with curved reflections, offscreen, to a PNG.
 
-The whole pipeline of ``docs/overview.md`` for one frame: capture the evaluated scene
-(:mod:`.capture`), build the camera view's sample-based camera (SBC paper, Popescu,
-Sacks, Mei 2006, sections III-IV; ``addon/methods/sbc/sbc.py``), and draw the scene with its
-reflections on the GPU (section V; ``gpu_shaders/reflection_draw.py``) at the scene's
-render resolution. It works in background mode too (``blender -b``, ``import bpy``):
-the GPU is initialised first when needed (:mod:`.gpu_init`).
+One frame of the pipeline (:mod:`.frame_pipeline`) for the scene camera at the scene's
+render resolution, an animation a loop over the frames that keeps the pipeline between
+them. It works in background mode too (``blender -b``, ``import bpy``): the GPU is
+initialised first when needed (:mod:`.gpu_init`).
 
 :func:`render_scene` is what the operator and ``scripts/demo.py`` call; it returns the
 linear image and the time of each stage. The PNG holds display sRGB values (the
@@ -16,12 +14,11 @@ Settings come from ``scene.curved_reflections`` (down-sampling, accuracy, highes
 order) and, per reflector, ``obj.curved_reflections`` (reflectivity, Fresnel, fade
 distance: :func:`reflector_properties`); reflected rays that leave the scene show the
 world's Background colour. Real objects are drawn by the renderer's pre-pass with the
-same shading as their reflections (a headlight Lambert, ``addon/band_trace.shade``).
+same shading as their reflections (a headlight Lambert, ``addon/geometry/band_trace.py``).
 """
 
 from __future__ import annotations
 
-import hashlib
 import os
 import re
 import time
@@ -34,16 +31,14 @@ from bpy.props import BoolProperty, StringProperty
 
 from ..addon.errors import SceneInputError
 from ..addon.metrics import linear_to_srgb
-from ..addon.geometry.raytrace import ReflectorSet
-from ..addon.methods.sbc.sbc_build import build_sample_based_camera, check_view_outside_reflectors, clip_start_inside
-from ..addon.scene import scene_bounds
+from ..addon.methods.sbc.sbc_build import check_view_outside_reflectors
 from ..addon.view import View
-from . import methods
-from .capture import capture_scene, view_from_camera
+from .capture import view_from_camera
+from .frame_pipeline import FramePipeline, settings_of
 from .gpu_init import ensure_gpu
+from .live_workers import prefetcher
 from .properties import BLEND_RELATIVE
 from .reference_render import write_png
-from .render_inputs import BOUNDS_MARGIN, reflector_properties, world_color
 
 #: Node projections an animation keeps queued on the prefetching thread (one runs).
 PREFETCHED_NODES = 2
@@ -56,8 +51,11 @@ PREDICTED_FRAMES = 6
 class ReflectionRender:
     """One rendered frame: (H, W, 4) float32 linear RGBA, rows bottom to top, and timings.
 
-    ``seconds`` holds ``capture`` (scene and view), ``sbc`` (ray map and BSP trees),
-    ``draw`` (geometry, textures, the passes and the read-back) and ``total``.
+    ``seconds`` holds ``plan`` (the view, the capture and what changed of the pipeline:
+    :meth:`.frame_pipeline.FramePipeline.update`), ``sbc`` (ray map and BSP trees),
+    ``draw`` (the passes, the band trace, the composite and the read-back) and
+    ``total``; ``stats`` the camera's and the renderer's figures, ``methods``
+    ({reflector: method}) and ``warnings`` (messages for the user).
     """
 
     image: np.ndarray
@@ -73,40 +71,14 @@ class ReflectionRender:
         return np.concatenate([rgb, np.ones(rgb.shape[:2] + (1,), np.float32)], axis=2)
 
 
-def captured_key(captured) -> tuple:
-    """(reflectors, meshes) hashes of a capture: a frame whose capture, modes, accuracy
-    and mirror looks match the last one's reuses its renderer (meshes uploaded and
-    subdivided once) and its method plan."""
-    def digest(items, fields) -> str:
-        hasher = hashlib.sha1()
-        for item in items:
-            hasher.update(item.name.encode("utf-8", "surrogatepass"))
-            for name in fields:
-                value = getattr(item, name)
-                if value is not None:
-                    hasher.update(np.ascontiguousarray(value).tobytes())
-        return hasher.hexdigest()
-
-    return (digest(captured.reflectors, ("vertices", "triangles", "normals")),
-            digest(captured.meshes, ("vertices", "triangles", "colors", "uvs", "normals", "image")))
-
-
 @dataclass
-class FrameState:
-    """What frames of one render keep between them: the capture's key, the method plan,
-    the loaded morphing grids and the renderer (shaders, uploaded meshes, reflector maps,
-    the grids' node images) and the reflectors' BVH. Only what changed is made again:
-    moved reflectors are planned (and their BVH built) again, moved meshes get a new
-    renderer."""
+class FrameState(FramePipeline):
+    """What the frames of one render keep between them: the pipeline's capture, plan,
+    grids and renderer (:meth:`FramePipeline.update` makes again only what changed), and
+    the last frame's camera position, which the node prefetch extrapolates."""
 
-    key: tuple = ()
-    plan: object = None
-    grids: list = field(default_factory=list)
-    renderer: object = None
-    reflector_set: object = None  # ReflectorSet of the captured reflectors (key[0])
-    last_eye: object = None  # the last frame's camera position (the prefetch extrapolates it)
+    last_eye: object = None
     frames: int = 0
-    reused: int = 0
 
 
 def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: int | None = None,
@@ -114,111 +86,62 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
                  state: FrameState | None = None) -> ReflectionRender:
     """Render ``scene.camera`` at the render resolution with reflections (offscreen).
 
-    Each reflector is drawn by the method its mode chooses (:mod:`.methods`): the
-    iterative search on the GPU where it is star-shaped (Auto, Iterative), its baked
-    morphing grid where the camera is inside it (Morphing, baked first if it has none
-    that matches; blended on the GPU), a
-    sample-based camera of this view otherwise (built only when some reflector or a
-    higher order needs one). Settings not given come from ``scene.curved_reflections``. The band
-    along each sample-based reflector's visible edge, which its camera cannot reach, is
-    ray traced; ``trace_edges`` also traces the mirror pixels next to a drawn reflection
-    that got none (see ``gpu_shaders/reflection_draw.py``), ``trace_gaps`` every pixel of a
-    mirror drawn from its morphing grid that the blend left without a reflection (exact,
-    and several times slower: see docs/benchmarks/morph_animation.md). ``state`` keeps the
-    renderer and the plan between the frames of an animation, and with it the grids' nodes
-    around the camera are projected ahead on a worker thread while the frame is drawn
-    (:func:`_prefetch_nodes`). Bad input (no camera, no
-    reflector, a reflector without faces, the camera inside a reflector) raises
-    :class:`SceneInputError` naming the object; the GPU is initialised if needed.
+    One frame of the pipeline (:mod:`.frame_pipeline`): each reflector is drawn by the
+    method its mode chooses (:mod:`.methods`), a sample-based camera of this view is
+    built only when some reflector or a higher order needs one. Settings not given come
+    from ``scene.curved_reflections``. The band along each sample-based reflector's
+    visible edge, which its camera cannot reach, is ray traced; ``trace_edges`` also
+    traces the mirror pixels next to a drawn reflection that got none (see
+    ``gpu_shaders/reflection_draw.py``), ``trace_gaps`` every pixel of a mirror drawn
+    from its morphing grid that the blend left without a reflection (exact, and several
+    times slower: see docs/benchmarks/morph_animation.md). ``state`` keeps the pipeline
+    between the frames of an animation, and with it the passes' work for the next
+    frames (the grids' nodes around the camera) runs on a worker thread while the frame
+    is drawn (:func:`_prefetch`). Bad input (no camera, no reflector, a reflector
+    without faces, the camera inside a reflector) raises :class:`SceneInputError`
+    naming the object; the GPU is initialised if needed.
     """
-    from ..gpu_shaders.reflection_draw import ReflectionRenderer
-
-    settings = scene.curved_reflections
-    max_order = settings.max_order if max_order is None else max_order
-    downsample = settings.downsample if downsample is None else downsample
-    accuracy_px = settings.accuracy_px if accuracy_px is None else accuracy_px
+    settings = settings_of(scene, max_order=max_order, downsample=downsample, accuracy_px=accuracy_px)
     animating = state is not None
     state = FrameState() if state is None else state
     start = time.perf_counter()
     view = view_from_camera(scene.camera, scene, depsgraph)
-    captured = capture_scene(depsgraph)
     ensure_gpu()
-    captured_at = time.perf_counter()
-    properties = reflector_properties(captured.reflectors, scene)
-    # Modes, accuracy, the mirrors' looks and the polish may be animated too: they are part of the key.
-    looks = hashlib.sha1(b"".join(np.ascontiguousarray(v).tobytes() for v in properties.values())).hexdigest()
-    modes = tuple(methods.mode_of(scene, r.name) for r in captured.reflectors)
-    polish_frames = bool(settings.morph_polish_frames)
-    key = captured_key(captured) + (modes, float(accuracy_px), looks, polish_frames)
-    if state.reflector_set is None or key[0] != state.key[0]:
-        state.reflector_set = ReflectorSet(list(captured.reflectors))
-    if state.plan is None or key[0] != state.key[0] or key[2:4] != state.key[2:4]:
-        from .morph_bake import load_grids
-
-        state.grids = load_grids(scene, captured.reflectors, bake_missing=True)
-        state.plan = methods.plan(scene, captured.reflectors, accuracy_px,
-                                  baked={grid.reflector_name for grid, _ in state.grids})
-        state.grids = state.plan.drawn_grids(state.grids)
-        state.renderer = None
-    if state.renderer is None or key != state.key:
-        state.reflector_set.seal_empty_interiors(captured.meshes)
-        state.renderer = ReflectionRenderer(captured.reflectors, captured.meshes, iterative=state.plan.iterative,
-                                            morph=state.grids, perturbation=state.plan.perturbation,
-                                            accuracy_px=accuracy_px, polish_frames=polish_frames,
-                                            reflector_set=state.reflector_set, **properties)
-    else:
-        state.reused += 1
-    state.key = key
+    state.update(scene, depsgraph, settings)
     planned_at = time.perf_counter()
-    sbc = None
-    per_frame = state.renderer.per_frame_reflectors(view)
-    if per_frame:
+    job = state.camera_job(view)
+    if job is None or job.first_order_left_out:
         check_view_outside_reflectors(state.reflector_set, view)
-    higher_orders = max_order > 1 and state.renderer.convex_mirrors.higher_orders
-    if len(per_frame) < len(captured.reflectors) or higher_orders:
-        lo, hi = scene_bounds(captured.reflectors, captured.meshes)
-        bounds = scene_bounds(captured.reflectors, captured.meshes, BOUNDS_MARGIN * float(np.linalg.norm(hi - lo)))
-        sbc = build_sample_based_camera(state.reflector_set, view, bounds, max_order=max_order,
-                                        downsample=downsample, accuracy_px=accuracy_px,
-                                        first_order_left_out=per_frame)
+    sbc = None if job is None else job.build()
     if animating:
-        _prefetch_nodes(state.renderer.morph, view, state.last_eye)
+        _prefetch(state.renderer, view, state.last_eye)
         state.last_eye = view.eye if view.is_perspective else None
     built_at = time.perf_counter()
-    image = state.renderer.render(view, sbc, world_color(scene), trace_edges=trace_edges, trace_gaps=trace_gaps)
+    image = state.renderer.render(view, sbc, state.world, trace_edges=trace_edges, trace_gaps=trace_gaps)
     end = time.perf_counter()
     state.frames += 1
-    seconds = {"capture": captured_at - start, "plan": planned_at - captured_at, "sbc": built_at - planned_at,
+    seconds = {"plan": planned_at - start, "sbc": built_at - planned_at,
                "draw": end - built_at, "total": end - start,
                "trace": sbc.stats.get("trace_seconds", float("nan")) if sbc is not None else 0.0}
     stats = {**(sbc.stats if sbc is not None else {}), **state.renderer.stats,
-             "methods": {c.reflector: c.method for c in state.plan.choices},
-             "clip_start_inside": clip_start_inside(state.reflector_set, view) if view.is_perspective else []}
+             "methods": {c.reflector: c.method for c in state.plan.choices}, "warnings": state.warnings(view)}
     return ReflectionRender(image, view, seconds, stats, sbc)
 
 
-def _prefetch_nodes(morph, view, last_eye) -> None:
-    """Upload the node images a worker projected during the last frame, and start the next
-    ones around this frame's camera (``MorphPass.prefetch``): a frame's band trace and
-    capture keep one core busy and leave the other to the worker, and an octree grid's
-    node costs 0.2 s of numpy (sbc_fig3), four or eight of them a frame that enters a new
-    cell (docs/benchmarks/octree_animation.md). The cells the camera reaches in the next
-    PREDICTED_FRAMES frames, if it keeps its last move, go first. Only the grids whose
-    nodes the main thread projects the same way (``exact``), so that a frame's image does
-    not depend on which nodes were ready."""
-    from .live_workers import prefetcher
-
+def _prefetch(renderer, view, last_eye) -> None:
+    """Put on the GPU what the passes' worker finished during the last frame, and start
+    the work of the next frames around this frame's camera (``FramePass.prefetch``): a
+    frame's band trace and capture keep one core busy and leave the other to the worker,
+    and an octree grid's node costs 0.2 s of numpy (sbc_fig3), four or eight of them a
+    frame that enters a new cell (docs/benchmarks/octree_animation.md). The cells the
+    camera reaches in the next PREDICTED_FRAMES frames, if it keeps its last move, go
+    first. Only work the main thread would do the same way (``exact``), so that a
+    frame's image does not depend on which work was ready."""
     ahead = () if last_eye is None or not view.is_perspective else [
         view.eye + n * (view.eye - last_eye) for n in range(1, PREDICTED_FRAMES + 1)]
-    morph.collect()
-    morph.prefetch(view, prefetcher().submit, max_pending=PREFETCHED_NODES, exact=True, ahead=ahead)
-
-
-def clip_start_message(name: str) -> str:
-    """What Render Image and the live view say when the view starts inside a sealed mirror
-    (``sbc_build.clip_start_inside``)."""
-    return (f"{name!r}: the camera's clip start cuts into this mirror (or the camera is on it), and inside "
-            "it reflects nothing: move the camera back or lower its Clip Start")
+    for frame_pass in renderer.passes:
+        frame_pass.collect()
+        frame_pass.prefetch(view, prefetcher().submit, max_pending=PREFETCHED_NODES, exact=True, ahead=ahead)
 
 
 def output_path(filepath: str) -> Path:
@@ -337,8 +260,8 @@ class CURVED_REFLECTIONS_OT_render_image(bpy.types.Operator):
         self.report({'INFO'}, f"Rendered {view.width}x{view.height} with reflections to {str(path)!r} in "
                               f"{seconds['total']:.2f} s (camera {seconds['sbc']:.2f} s, "
                               f"drawing {seconds['draw']:.2f} s)")
-        for name in result.stats.get("clip_start_inside", []):
-            self.report({'WARNING'}, clip_start_message(name))
+        for message in result.stats["warnings"]:
+            self.report({'WARNING'}, message)
         untraced = result.stats.get("untraced_pixels", 0)
         if untraced:
             self.report({'WARNING'}, f"{untraced} mirror pixels without a reflection were filled, not ray traced "

@@ -21,7 +21,7 @@ import functools
 import numpy as np
 
 from ...addon.methods.iterative import search as search_module
-from ..frame_pass import FramePass
+from ..frame_pass import FramePass, PassInputs
 from ..reflected_meshes import FLIPPED_CODE, ReflectedMeshes
 from ..shader_sources import glsl_source
 
@@ -90,7 +90,12 @@ class IterativePass(FramePass):
     star-shaped reflectors (``addon.methods.iterative.IterativeReflector`` each), among
     ``n_reflectors`` of the scene."""
 
+    name = "iterative"
     searches = True
+
+    @classmethod
+    def of_inputs(cls, methods: tuple, inputs: PassInputs) -> "IterativePass":
+        return cls(inputs.geometry, methods, inputs.meshes, len(inputs.reflectors))
 
     def __init__(self, geometry, methods, meshes: ReflectedMeshes | None = None, n_reflectors: int = 1):
         self.geometry = geometry

@@ -35,7 +35,8 @@ import numpy as np
 from ...addon.methods.morphing import morph_grid, morph_surface, morphing
 from ...addon.baking.bake_cache import CacheError
 from ...addon.geometry.closed_surfaces import ConvexMirrors
-from ..frame_pass import FramePass
+from ...addon.frame_settings import DEFAULT_MORPH_BUDGET_MB
+from ..frame_pass import FramePass, PassInputs
 from ..reflected_meshes import FOUND_CODE, ReflectedMeshes
 from ..shader_sources import glsl_source, normal_equations_glsl
 
@@ -45,7 +46,7 @@ SLOTS = 3
 #: Invocations per work group of the blend (along x).
 LOCAL_SIZE = 64
 #: GPU memory for node images, by default (the scene's ``morph_gpu_budget_mb``).
-DEFAULT_BUDGET_MB = 256.0
+DEFAULT_BUDGET_MB = DEFAULT_MORPH_BUDGET_MB
 #: The float32 blend's bound on the reflection law's residual on the fitted surface (the
 #: numpy twin asks 1e-8 of float64 Newton steps; float32 reaches about 1e-7).
 SURFACE_RESIDUAL = 1e-5
@@ -203,6 +204,13 @@ class MorphPass(FramePass):
     #: along the rim then growing (docs/benchmarks/morph_animation.md). The live view keeps
     #: the usual test (compiled out on a convex mirror): a dropped fragment there is a hole.
     rendered_reflection_cosine = math.cos(math.radians(6.0))
+    name = "morphing"
+
+    @classmethod
+    def of_inputs(cls, methods: tuple, inputs: PassInputs) -> "MorphPass":
+        settings = inputs.settings
+        return cls(inputs.geometry, methods, inputs.meshes, settings.morph_budget_mb, settings.accuracy_px,
+                   inputs.convex_mirrors, settings.polish_frames)
 
     def __init__(self, geometry, grids, meshes: ReflectedMeshes | None = None,
                  budget_mb: float = DEFAULT_BUDGET_MB, accuracy_px: float | None = None,

@@ -16,7 +16,7 @@ import numpy as np
 from ...addon.methods.perturbation import PerturbationMethod, PerturbationSettings
 from ...addon.methods.perturbation.projector import grazing
 from ...addon.geometry.raytrace import ReflectorSet
-from ..frame_pass import FramePass
+from ..frame_pass import FramePass, PassInputs
 from ..reflected_meshes import FOUND_CODE, ReflectedMeshes
 
 
@@ -26,7 +26,13 @@ class PerturbationPass(FramePass):
     caller keeps one; ``methods``: the ``addon.methods.perturbation.PerturbationReflector``
     s drawn here)."""
 
+    name = "perturbation"
     searches = True
+
+    @classmethod
+    def of_inputs(cls, methods: tuple, inputs: PassInputs) -> "PerturbationPass":
+        return cls(inputs.geometry, inputs.reflectors, methods, inputs.meshes, inputs.settings.accuracy_px,
+                   inputs.reflector_set)
 
     def __init__(self, geometry, reflectors, methods, meshes: ReflectedMeshes, accuracy_px: float = 0.5,
                  reflector_set: ReflectorSet | None = None):

@@ -89,13 +89,6 @@ CHUNK_VERTICES = 512
 CACHED_PROJECTIONS = 8
 
 
-def _same_view(a, b) -> bool:
-    """Whether two views are exactly the same (size and matrices)."""
-    return a is b or ((a.width, a.height) == (b.width, b.height)
-                      and np.array_equal(np.asarray(a.view_matrix), np.asarray(b.view_matrix))
-                      and np.array_equal(np.asarray(a.projection_matrix), np.asarray(b.projection_matrix)))
-
-
 def _subdivision_caps(source, sheets: list):
     """The largest mixed-triangle sub-grid each of ``sheets`` allows (``None``: the
     renderer's): a source whose points cost much more to project than the GPU pass

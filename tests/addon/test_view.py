@@ -76,3 +76,14 @@ def test_bad_matrices_are_clear_errors(matrix, message):
     with pytest.raises(SceneInputError, match=message) as error:
         View(matrix, np.eye(4), 10, 10, name="Camera.001")
     assert error.value.object_name == "Camera.001"
+
+
+def test_one_view_equality_rule_same_size_and_matrices_within_the_tolerance():
+    from curved_reflections.addon.view import VIEW_TOLERANCE
+
+    view = look_at_view((0.0, -5.0, 1.0), (0.0, 0.0, 1.0), width=64, height=48)
+    nudged = View(view.view_matrix + 0.5 * VIEW_TOLERANCE, view.projection_matrix, 64, 48)
+    moved = View(view.view_matrix + 4.0 * VIEW_TOLERANCE, view.projection_matrix, 64, 48)
+    resized = View(view.view_matrix, view.projection_matrix, 64, 49)
+    assert view.same_as(view) and view.same_as(nudged) and nudged.same_as(view)
+    assert not view.same_as(moved) and not view.same_as(resized)

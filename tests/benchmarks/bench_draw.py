@@ -181,6 +181,7 @@ def measure(kind: str, width: int, height: int, target_vertices: int, repeats: i
     from curved_reflections.addon.scene import scene_bounds
     from curved_reflections.gpu_shaders.methods.projection import SBCTextures
     from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
+    from curved_reflections.addon.frame_settings import FrameSettings
     from curved_reflections.operators.capture import view_from_camera
     from curved_reflections.operators.render_inputs import BOUNDS_MARGIN, reflector_appearance, world_color
 
@@ -196,7 +197,8 @@ def measure(kind: str, width: int, height: int, target_vertices: int, repeats: i
     sbc = build_sample_based_camera(captured.reflectors, view, bounds, max_order=settings.max_order,
                                     downsample=settings.downsample, accuracy_px=settings.accuracy_px)
     colors, reflectivity = reflector_appearance(captured.reflectors, scene)
-    renderer = ReflectionRenderer(captured.reflectors, meshes, colors, reflectivity, polish=False)  # as the viewport
+    renderer = ReflectionRenderer(captured.reflectors, meshes, colors, reflectivity,
+                                  settings=FrameSettings(polish_camera=False))  # as the viewport
     textures = SBCTextures(sbc)
     no_sheet = SBCTextures(build_sample_based_camera(
         captured.reflectors, _looking_away(view), bounds, downsample=settings.downsample))

@@ -83,6 +83,9 @@ def measure(width: int, height: int, steps: int, jumps: int) -> dict:
     from curved_reflections.gpu_shaders.methods.morph_source import GPUFaceImages, MorphSource
     from curved_reflections.gpu_shaders.methods.projection import SBCTextures
     from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
+    from curved_reflections.addon.frame_settings import FrameSettings
+    from curved_reflections.gpu_shaders.methods.morph_pass import MorphPass
+    from curved_reflections.operators.frame_pipeline import settings_of
     from curved_reflections.operators import demo_scenes
     from curved_reflections.operators.capture import capture_scene
     from curved_reflections.operators.gpu_init import ensure_gpu
@@ -98,7 +101,8 @@ def measure(width: int, height: int, steps: int, jumps: int) -> dict:
     bounds = scene_bounds(captured.reflectors, captured.meshes, BOUNDS_MARGIN * float(np.linalg.norm(hi - lo)))
     settings = scene.curved_reflections
     colors, reflectivity = reflector_appearance(captured.reflectors, scene)
-    renderer = ReflectionRenderer(captured.reflectors, captured.meshes, colors, reflectivity, polish=False)  # as live
+    renderer = ReflectionRenderer(captured.reflectors, captured.meshes, colors, reflectivity,
+                                  settings=FrameSettings(polish_camera=False))  # as live
 
     local = morph_grid.reflector_in_frame(mirror, morph_grid.rigid_frame(matrix))
     grid = morphing.grid_on_demand(local, morph_grid.MorphSettings())
@@ -214,6 +218,9 @@ def measure_iterative(kind: str, width: int, height: int, target_vertices: int, 
     from mathutils import Matrix
 
     from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
+    from curved_reflections.addon.frame_settings import FrameSettings
+    from curved_reflections.gpu_shaders.methods.morph_pass import MorphPass
+    from curved_reflections.operators.frame_pipeline import settings_of
     from curved_reflections.operators import methods
     from curved_reflections.operators.capture import view_from_camera
     from curved_reflections.operators.render_inputs import reflector_properties, world_color
@@ -222,11 +229,13 @@ def measure_iterative(kind: str, width: int, height: int, target_vertices: int, 
     start = time.perf_counter()
     plan = methods.plan(scene, captured.reflectors)
     plan_seconds = time.perf_counter() - start
-    assert len(plan.iterative) == len(captured.reflectors), plan.choices
+    assert len(plan.engines_of(methods.ITERATIVE)) == len(captured.reflectors), plan.choices
     levels = bench_draw.levels_for(captured, target_vertices)
     meshes = bench_draw.scaled_meshes(captured.meshes, levels)
-    renderer = ReflectionRenderer(captured.reflectors, meshes, polish=False, iterative=plan.iterative,
+    renderer = ReflectionRenderer(captured.reflectors, meshes, passes=plan.pass_factories(),
+                                  settings=settings_of(scene, live=True),
                                   **reflector_properties(captured.reflectors, scene))
+    searched = renderer.pass_named("iterative")
     g = renderer.geometry
     world = world_color(scene)
     views = _orbit(view_from_camera(scene.camera, scene, depsgraph), orbit_degrees, frames)
@@ -238,13 +247,13 @@ def measure_iterative(kind: str, width: int, height: int, target_vertices: int, 
         return Matrix((np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix) @ translate).tolist())
 
     def reflected_pass(view, cull: bool = True):
-        renderer.iterative.search(view, warm=True)
+        searched.search(view, warm=True)
         gpu.state.depth_test_set('LESS')
         gpu.state.depth_mask_set(True)
-        setup = renderer.reflected_setup(view, renderer.iterative, live=True)
+        setup = renderer.reflected_setup(view, searched, live=True)
         if not cull:
             setup["mirrored"] = frozenset()
-        renderer.meshes.draw(matrix(view), targets, setup, renderer._image, renderer.iterative.answers())
+        renderer.meshes.draw(matrix(view), targets, setup, renderer._image, searched.answers())
         gpu.state.depth_test_set('NONE')
         gpu.state.depth_mask_set(False)
 
@@ -266,9 +275,9 @@ def measure_iterative(kind: str, width: int, height: int, target_vertices: int, 
                 framebuffer.clear(depth=1.0)
                 times["every triangle"].append(bench_draw.timed(lambda: reflected_pass(following, cull=False),
                                                                 framebuffer))
-                times["search"].append(bench_draw.timed(lambda: renderer.iterative.search(view, warm=True), framebuffer))
+                times["search"].append(bench_draw.timed(lambda: searched.search(view, warm=True), framebuffer))
                 times["plain"].append(bench_draw.timed(lambda: plain.draw(view), framebuffer))
-        counts = renderer.iterative.status_counts()
+        counts = searched.status_counts()
     finally:
         offscreen.free()
     ms = {name: 1000.0 * statistics.median(values) for name, values in times.items()}
@@ -327,6 +336,9 @@ def measure_morph_frames(width: int, height: int, target_vertices: int, frames: 
     from curved_reflections.gpu_shaders.methods.morph_source import GPUFaceImages
     from curved_reflections.gpu_shaders.methods.polish_gpu import GPUImagePolish
     from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
+    from curved_reflections.addon.frame_settings import FrameSettings
+    from curved_reflections.gpu_shaders.methods.morph_pass import MorphPass
+    from curved_reflections.operators.frame_pipeline import settings_of
     from curved_reflections.operators.render_inputs import reflector_properties, world_color
 
     scene, _, captured = bench_draw.built_scene("sbc_fig3", width, height)
@@ -337,10 +349,10 @@ def measure_morph_frames(width: int, height: int, target_vertices: int, frames: 
                                    morph_grid.MorphSettings(), polish=scene.curved_reflections.morph_polish_nodes)
     grid.face_images, grid.image_polish = GPUFaceImages(), GPUImagePolish()
     meshes = bench_draw.scaled_meshes(captured.meshes, bench_draw.levels_for(captured, target_vertices))
-    renderer = ReflectionRenderer(captured.reflectors, meshes, polish=False, morph=[(grid, matrix)],
-                                  accuracy_px=scene.curved_reflections.accuracy_px,
-                                  polish_frames=scene.curved_reflections.morph_polish_frames,
+    renderer = ReflectionRenderer(captured.reflectors, meshes, passes=[MorphPass.factory([(grid, matrix)])],
+                                  settings=settings_of(scene, live=True),
                                   **reflector_properties(captured.reflectors, scene))
+    blended = renderer.pass_named("morphing")
     g = renderer.geometry
     world = world_color(scene)
     centre = mirror.vertices.mean(axis=0)
@@ -354,14 +366,14 @@ def measure_morph_frames(width: int, height: int, target_vertices: int, frames: 
     translate[:3, 3] = g.shift
 
     def morph_pass(view):
-        renderer.morph.blend(view)
+        blended.blend(view)
         gpu.state.depth_test_set('LESS')
         gpu.state.depth_mask_set(True)
         view_projection = Matrix((np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix)
                                   @ translate).tolist())
-        renderer.meshes.draw(view_projection, targets, renderer.reflected_setup(view, renderer.morph, live=True),
+        renderer.meshes.draw(view_projection, targets, renderer.reflected_setup(view, blended, live=True),
                              renderer._image,
-                             renderer.morph.answers())
+                             blended.answers())
         gpu.state.depth_test_set('NONE')
         gpu.state.depth_mask_set(False)
 
@@ -381,17 +393,17 @@ def measure_morph_frames(width: int, height: int, target_vertices: int, frames: 
                 times["frame"].append(bench_draw.timed(lambda: renderer.draw(view, None, world, reflectors_only=True),
                                                        framebuffer))
                 times["morph pass"].append(bench_draw.timed(lambda: morph_pass(view), framebuffer))
-                times["blend"].append(bench_draw.timed(lambda: renderer.morph.blend(view), framebuffer))
+                times["blend"].append(bench_draw.timed(lambda: blended.blend(view), framebuffer))
                 times["plain"].append(bench_draw.timed(lambda: plain.draw(view), framebuffer))
-        drawn = np.isfinite(renderer.morph.read(0)[..., 0]).any(axis=0).sum()
+        drawn = np.isfinite(blended.read(0)[..., 0]).any(axis=0).sum()
     finally:
         offscreen.free()
     ms = {name: 1000.0 * statistics.median(values) for name, values in times.items()}
     return {"width": width, "height": height, "vertices": int(len(g.vertices)), "triangles": int(len(g.triangles)),
             "frames": frames, "entered": int(sum(a != b for a, b in zip(tetrahedra[1:], tetrahedra[:-1]))),
-            "ms": ms, "nodes": renderer.morph.counts["node_projections"], "node_seconds": node_seconds,
-            "node_mb": renderer.morph.nodes.nbytes / 2 ** 20, "answered": int(drawn),
-            "polish_frames": renderer.morph.polish_frames}
+            "ms": ms, "nodes": blended.counts["node_projections"], "node_seconds": node_seconds,
+            "node_mb": blended.nodes.nbytes / 2 ** 20, "answered": int(drawn),
+            "polish_frames": blended.polish_frames}
 
 
 MORPH_HEADING = "## Morphing mode on the GPU (blend every frame)"

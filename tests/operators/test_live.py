@@ -189,7 +189,7 @@ def test_a_view_change_is_debounced_built_on_the_worker_and_the_old_camera_draws
     assert live.process(fig3, depsgraph, now=asked + 0.5 * live.DEBOUNCE_SECONDS)  # too early: waits
     assert not state.jobs
     assert live.process(fig3, depsgraph, now=asked + live.DEBOUNCE_SECONDS + 1e-3)  # now on the worker
-    future = state.jobs[live.CAMERA_KEY][0]
+    future = state.jobs[live.CAMERA_KEY].future
     future.result(timeout=60)
     # Collected; and the view drawn meanwhile, settled, is checked (addon/spot_check.py): nothing pending.
     assert not live.process(fig3, depsgraph, now=time.monotonic() + 1.0)
@@ -212,7 +212,7 @@ def test_a_landing_camera_brings_its_reflected_triangles_and_its_first_draw_only
     state = live.state_of(fig3)
     moved = look_at_view((0.8, -6.4, 2.4), (0.0, 0.0, 0.9), fov_y_deg=30.0, width=WIDTH, height=HEIGHT)
     live._start(state, live.CAMERA_KEY, moved, wait=False)
-    state.jobs[live.CAMERA_KEY][0].result(timeout=60)
+    state.jobs[live.CAMERA_KEY].future.result(timeout=60)
     live._collect(state)
     camera = state.cameras[live.CAMERA_KEY]
     assert camera.projected is not None and camera.projected[1].batch is None  # arrays, not yet on the GPU
@@ -302,7 +302,7 @@ def test_big_reflectors_are_made_ready_on_the_worker_while_the_last_reflections_
     assert live.process(fig3, depsgraph)  # lands; the view's camera is rebuilt on the worker
     assert state.preparing is None and state.generation == generation + 1 and state.renderer is not renderer
     assert state.captured.reflectors[0].vertices[:, 0].max() == pytest.approx(1.2, abs=1e-3)
-    state.jobs[live.CAMERA_KEY][0].result(timeout=60)
+    state.jobs[live.CAMERA_KEY].future.result(timeout=60)
     live.process(fig3, depsgraph)
     assert state.cameras[live.CAMERA_KEY] is not camera and _draw(fig3, view)[0]
 
@@ -313,7 +313,7 @@ def test_big_reflectors_are_made_ready_on_the_worker_while_the_last_reflections_
     state.preparing.future.result(timeout=60)
     live.process(fig3, depsgraph)
     assert state.preparing is None and live.CAMERA_KEY in state.jobs and not state.requests
-    state.jobs[live.CAMERA_KEY][0].result(timeout=60)
+    state.jobs[live.CAMERA_KEY].future.result(timeout=60)
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the nice value is per thread on Linux only")

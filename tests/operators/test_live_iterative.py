@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from curved_reflections.addon.view import look_at_view
-from curved_reflections.operators import demo_scenes, live, methods
+from curved_reflections.operators import demo_scenes, live, methods, star_maps
 
 from test_live import HEIGHT, WIDTH, _camera_view, _draw, _pixels_of, _touched
 
@@ -79,7 +79,7 @@ def test_a_torus_in_iterative_mode_is_drawn_in_runtime_mode_and_the_panel_says_w
     assert camera.sbc is not None  # built for the torus
     # The camera's sheets of the searched ball are not projected: the search draws them.
     assert live.draw_safely(fig3, live.CAMERA_KEY, _camera_view(fig3))
-    assert 0 in state.renderer.iterative.reflector_indices
+    assert 0 in state.renderer.pass_named("iterative").reflector_indices
 
 
 def test_second_order_in_auto_mode_builds_a_camera_for_the_higher_orders(fig3):
@@ -106,16 +106,16 @@ def test_second_order_in_auto_mode_builds_a_camera_for_the_higher_orders(fig3):
 
 def test_a_mirror_moved_without_turning_keeps_its_map(fig3, monkeypatch):
     state = live.bake(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
-    before = state.plan.iterative[0].reflector_map
+    before = state.plan.engines_of(methods.ITERATIVE)[0].reflector_map
 
     def no_second_check(*_args, **_kwargs):
         raise AssertionError("the moved mirror was checked again")
 
-    monkeypatch.setattr(methods, "check_star_shaped", no_second_check)
+    monkeypatch.setattr(star_maps, "check_star_shaped", no_second_check)
     bpy.data.objects["MirrorSphere"].location.x += 0.5
     bpy.context.view_layer.update()
     state = live.bake(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
-    after = state.plan.iterative[0].reflector_map
+    after = state.plan.engines_of(methods.ITERATIVE)[0].reflector_map
     np.testing.assert_allclose(after.centre - before.centre, (0.5, 0.0, 0.0), atol=1e-6)
     assert after.texels is before.texels
     assert live.draw_safely(fig3, live.CAMERA_KEY, _camera_view(fig3))
@@ -174,7 +174,7 @@ def test_perturbation_mode_draws_live_with_no_camera_and_the_torus_too(fig3, cap
     assert all(c.sbc is None for c in state.cameras.values())
     drawn, image = _draw(fig3, _camera_view(fig3))
     assert drawn
-    passes = state.renderer.perturbation
+    passes = state.renderer.pass_named("perturbation")
     assert passes.counts["projections"] == 1 and len(passes.answers()) >= 2
     touched = _touched(image)
     cube = _pixels_of(image, "Cube", fig3)
@@ -230,7 +230,7 @@ def test_auto_passes_over_a_method_measured_outside_the_accuracy_until_refresh(f
     [choice] = methods.last_choices(fig3)
     assert choice.method == methods.RUNTIME
     assert "the iterative search measured p95 3.00 px in a view (Accuracy 1 px)" in choice.reason
-    assert not state.plan.iterative
+    assert not state.plan.engines_of(methods.ITERATIVE)
     assert _draw(fig3, view)[0] or state.requests  # a camera is built for it now
     monkeypatch.undo()
     live.refresh(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)

@@ -17,6 +17,8 @@ import pytest
 from curved_reflections.addon.methods.morphing import morph_grid, morphing
 from curved_reflections.addon.view import look_at_view
 from curved_reflections.operators import demo_scenes, live, morph_bake
+from curved_reflections.operators import scene_status
+from curved_reflections.operators.scene_status import status_of
 
 from test_live import HEIGHT, WIDTH, _draw, _pixels_of, _touched
 
@@ -30,12 +32,12 @@ def fig3_morphing(empty_scene, registered, gpu_ready, monkeypatch):
 
     def grid_on_demand(reflector, matrix, scene, reflector_index=0):
         local = morph_grid.reflector_in_frame(reflector, morph_grid.rigid_frame(matrix))
-        morph_bake._REFLECTOR_STATUS[reflector.name] = "morphing (baked grid loaded)"
+        status_of(scene).grid_lines[reflector.name] = "morphing (baked grid loaded)"
         return morphing.grid_on_demand(local, SETTINGS, reflector_index,
                                        polish=scene.curved_reflections.morph_polish_nodes)
 
     monkeypatch.setattr(morph_bake, "load_morphing", grid_on_demand)
-    morph_bake._REFLECTOR_STATUS.clear()
+    scene_status.forget_all()
     return scene
 
 
@@ -114,10 +116,10 @@ def test_render_image_draws_from_the_grid_on_the_gpu(fig3_morphing):
     assert morphed.stats["methods"] == {"MirrorSphere": "MORPHING"}
     assert "n_rays" not in morphed.stats  # no camera built (the on-demand grid builds its nodes meanwhile)
     # The camera's tetrahedron and the rest of its cube, whose images the surface fit reads.
-    assert state.renderer.morph.counts == {"blends": 1, "node_projections": 8}
+    assert state.renderer.pass_named("morphing").counts == {"blends": 1, "node_projections": 8}
     # Polish Node Images is on by default: the eight nodes' grazing and widened-chart
     # images were polished on the GPU (two dispatches a node where it has both).
-    grid = state.renderer.morph.grids[0][0]
+    grid = state.renderer.pass_named("morphing").grids[0][0]
     assert grid.mirror is not None and grid.image_polish.dispatches >= 8
     # The test grid is coarse (48-pixel faces, 7 x 7 x 5 nodes): measured, 1.67 % of the
     # image (before each frame's blend was polished) (the ball fills about half of it) differs from the runtime camera's (2.0 %
@@ -130,11 +132,11 @@ def test_render_image_draws_from_the_grid_on_the_gpu(fig3_morphing):
     # Each frame's blend is polished on the mirror (Polish Every Frame, on by default), so
     # the hidden-point test applies; on this quadric mirror the polish moves images by a
     # fraction of a pixel: 1.73 % of the image differs, 1.70 % with the blend alone.
-    assert state.renderer.morph.polish_frames and state.renderer.morph.hidden_fraction < 1.0
+    assert state.renderer.pass_named("morphing").polish_frames and state.renderer.pass_named("morphing").hidden_fraction < 1.0
     scene.curved_reflections.morph_polish_frames = False
     alone = FrameState()
     blended = render_scene(scene, bpy.context.evaluated_depsgraph_get(), state=alone)
-    assert not alone.renderer.morph.polish_frames and alone.renderer.morph.hidden_fraction == np.inf
+    assert not alone.renderer.pass_named("morphing").polish_frames and alone.renderer.pass_named("morphing").hidden_fraction == np.inf
     assert (np.abs(blended.image[..., :3] - runtime.image[..., :3]).max(axis=2) > 0.05).mean() < 0.03
     scene.curved_reflections.morph_polish_frames = True
     # The band along the silhouette without a reflection and the strip between it and the
@@ -145,10 +147,10 @@ def test_render_image_draws_from_the_grid_on_the_gpu(fig3_morphing):
     assert closer.mean() < differing.mean() + 0.002  # the traced gaps are what the runtime camera draws
     camera.location.x += 0.01
     render_scene(scene, bpy.context.evaluated_depsgraph_get(), state=state)
-    assert state.reused == 2 and state.renderer.morph.counts["blends"] == 3
+    assert state.reused == 2 and state.renderer.pass_named("morphing").counts["blends"] == 3
     # Its nodes project on the GPU: an animation prefetches none on the worker thread,
     # whose numpy projection would differ by float32's rounding.
-    assert state.renderer.morph.prefetching == 0
+    assert state.renderer.pass_named("morphing").prefetching == 0
 
 
 def test_render_image_in_octree_mode_draws_from_ray_octrees_on_the_gpu(fig3_morphing, monkeypatch):
@@ -181,12 +183,12 @@ def test_render_image_in_octree_mode_draws_from_ray_octrees_on_the_gpu(fig3_morp
     state = FrameState()
     octree = render_scene(scene, bpy.context.evaluated_depsgraph_get(), state=state)
     assert octree.stats["methods"] == {"MirrorSphere": "OCTREE"} and "n_rays" not in octree.stats
-    assert isinstance(state.renderer.morph.grids[0][0], OctreeGrid)
-    assert state.renderer.morph.counts == {"blends": 1, "node_projections": 8}
+    assert isinstance(state.renderer.pass_named("morphing").grids[0][0], OctreeGrid)
+    assert state.renderer.pass_named("morphing").counts == {"blends": 1, "node_projections": 8}
     differing = np.abs(octree.image[..., :3] - runtime.image[..., :3]).max(axis=2) > 0.05
     assert differing.mean() < 0.05  # measured: 3.8 % (the rim of the ball, where rays graze)
 
-    morph = state.renderer.morph
+    morph = state.renderer.pass_named("morphing")
     assert morph.prefetching == PREFETCHED_NODES
     for _, future in list(morph._pending.values()):
         future.result(timeout=300)
@@ -206,7 +208,7 @@ def test_live_view_prefetches_the_nodes_around_the_eye(fig3_morphing):
     mirror.curved_reflections.mode = 'MORPHING'
     state = live.bake(scene, bpy.context.evaluated_depsgraph_get(), views={"near": near}, wait=True)
     assert _draw(scene, near, "near")[0]
-    morph = state.renderer.morph
+    morph = state.renderer.pass_named("morphing")
     assert morph.counts["node_projections"] == 8 and morph.prefetching == 1
     (_, future), = morph._pending.values()
     future.result(timeout=120)

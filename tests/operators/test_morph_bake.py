@@ -10,6 +10,9 @@ import bpy
 import numpy as np
 import pytest
 
+from curved_reflections.operators import scene_status
+from curved_reflections.operators.scene_status import status_of
+
 
 @pytest.fixture
 def morph_ops(registered, monkeypatch, tmp_path):
@@ -21,8 +24,7 @@ def morph_ops(registered, monkeypatch, tmp_path):
     added = [cls for cls in morph_bake.classes if not cls.is_registered]
     for cls in added:
         bpy.utils.register_class(cls)
-    morph_bake._STATE.clear()
-    morph_bake._REFLECTOR_STATUS.clear()
+    scene_status.forget_all()
     yield morph_bake
     for cls in reversed(added):
         bpy.utils.unregister_class(cls)
@@ -103,17 +105,17 @@ def test_bake_without_a_morphing_reflector_reports_an_error(empty_scene, morph_o
     _mirror_scene(empty_scene, mode='RUNTIME')
     with pytest.raises(RuntimeError, match="No visible reflector is in Morphing or Octree mode"):
         bpy.ops.curved_reflections.bake_morphing()
-    assert not morph_ops._STATE.get(empty_scene.name, {}).get("running")
+    assert not status_of(empty_scene).bake.get("running")
 
 
 def test_classes_tuple_and_status_while_running(morph_ops, empty_scene):
     assert [cls.bl_idname for cls in morph_ops.classes] == ["curved_reflections.bake_morphing",
                                                             "curved_reflections.clear_morphing"]
-    morph_ops._STATE[empty_scene.name] = {"running": True, "done": 3, "total": 405, "reflector": "Ball",
+    status_of(empty_scene).bake = {"running": True, "done": 3, "total": 405, "reflector": "Ball",
                                           "message": ""}
     assert morph_ops.morph_status(empty_scene) == "Baking Ball: 3/405 nodes (Esc cancels)"
     assert not bpy.ops.curved_reflections.bake_morphing.poll()
-    morph_ops._STATE.clear()
+    status_of(empty_scene).bake = {}
     assert np.prod(tuple(empty_scene.curved_reflections.morph_grid)) == 405
 
 
@@ -191,9 +193,9 @@ def test_a_damaged_node_costs_only_its_reflector_and_a_bake_repairs_it(empty_sce
     state = live.bake(empty_scene, bpy.context.evaluated_depsgraph_get(), views={"v": view}, wait=True)
     assert [grid.reflector_name for grid, _ in state.grids] == ["Ball"]
     drawn, before = _draw(empty_scene, view, "v")
-    assert drawn and state.renderer.morph.counts["blends"] == 1
+    assert drawn and state.renderer.pass_named("morphing").counts["blends"] == 1
 
-    for _, future in state.renderer.morph._pending.values():
+    for _, future in state.renderer.pass_named("morphing")._pending.values():
         future.result(timeout=120)  # the prefetch started by the draw reads node files too
     directory = next(morph_ops.cache_directory(empty_scene).glob("Ball-*"))
     for path in directory.glob("node_*.npz"):
@@ -216,7 +218,7 @@ def test_a_damaged_node_costs_only_its_reflector_and_a_bake_repairs_it(empty_sce
     assert bake_cache.baked_nodes(directory, 8)[0].all()
     state = live.refresh(empty_scene, bpy.context.evaluated_depsgraph_get(), views={"v": view}, wait=True)
     drawn, repaired = _draw(empty_scene, view, "v")
-    assert drawn and state.grids[0][0].failure is None and state.renderer.morph.counts["blends"] == 1
+    assert drawn and state.grids[0][0].failure is None and state.renderer.pass_named("morphing").counts["blends"] == 1
 
 
 def test_render_image_in_morphing_mode_bakes_a_missing_grid_first(empty_scene, morph_ops, gpu_ready, capfd):

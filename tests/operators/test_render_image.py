@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from curved_reflections.operators import demo_scenes, methods, reference_render
+from curved_reflections.operators.frame_pipeline import clip_start_message
 
 
 @pytest.fixture
@@ -144,7 +145,7 @@ def test_second_orders_of_searched_mirrors_get_a_camera_without_their_first_orde
                                                                                   monkeypatch):
     """Two facing balls, both searched, at Max Order 2: the frame's camera is made for
     their images of each other alone, and the frame is the one a whole camera gives."""
-    from curved_reflections.operators import render_image
+    from curved_reflections.operators import frame_pipeline, render_image
 
     scene = demo_scenes.build("two_spheres", bpy.context.scene, 96, 64)
     assert scene.curved_reflections.max_order == 2
@@ -153,8 +154,8 @@ def test_second_orders_of_searched_mirrors_get_a_camera_without_their_first_orde
     assert set(higher.stats["methods"].values()) == {"ITERATIVE"}
     assert higher.camera.first_order_left_out == {0, 1}
     assert sorted(map(tuple, higher.camera.groups)) == [(0, 1), (1, 0)]
-    build = render_image.build_sample_based_camera
-    monkeypatch.setattr(render_image, "build_sample_based_camera",
+    build = frame_pipeline.build_sample_based_camera
+    monkeypatch.setattr(frame_pipeline, "build_sample_based_camera",
                         lambda *args, first_order_left_out, **kwargs: build(*args, **kwargs))
     whole = render_image.render_scene(scene, depsgraph)
     assert {len(h) for h in whole.camera.groups} == {1, 2}
@@ -243,12 +244,12 @@ def test_a_view_whose_near_plane_cuts_the_mirror_is_filled_not_traced(fig3, tmp_
     fig3.render.resolution_x, fig3.render.resolution_y = 48, 36
     sealed = render_scene(fig3, bpy.context.evaluated_depsgraph_get())
     assert sealed.stats["n_rays"] == 0 and not sealed.stats.get("traced_pixels")
-    assert sealed.stats["clip_start_inside"] == ["MirrorSphere"] and ordinary.stats["clip_start_inside"] == []
+    assert sealed.stats["warnings"] == [clip_start_message("MirrorSphere")] and ordinary.stats["warnings"] == []
     assert bpy.ops.curved_reflections.render_image(filepath=str(tmp_path / "sealed.png")) == {'FINISHED'}
     assert "'MirrorSphere': the camera's clip start cuts into this mirror" in capfd.readouterr().out
     bpy.ops.mesh.primitive_cube_add(size=0.2 * radius, location=centre)  # holds the ball open
     near = render_scene(fig3, bpy.context.evaluated_depsgraph_get())
-    assert near.stats["n_rays"] > 0 and near.stats["clip_start_inside"] == []  # not sealed: traced
+    assert near.stats["n_rays"] > 0 and near.stats["warnings"] == []  # not sealed: traced
     assert near.stats["traced_pixels"] == 0 and near.stats["untraced_pixels"] > 0.25 * 48 * 36
     assert bpy.ops.curved_reflections.render_image(filepath=str(tmp_path / "near.png")) == {'FINISHED'}
     assert "mirror pixels without a reflection were filled, not ray traced" in capfd.readouterr().out

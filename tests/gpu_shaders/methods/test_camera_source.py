@@ -6,6 +6,7 @@ landing camera's and the main thread only uploads them."""
 import numpy as np
 
 from curved_reflections.addon import DiffuseMesh, look_at_view, scene_bounds
+from curved_reflections.addon.frame_settings import FrameSettings
 from curved_reflections.addon.geometry.sphere import icosphere
 from curved_reflections.addon.methods.sbc import build_sample_based_camera
 
@@ -36,7 +37,7 @@ def test_the_cpu_projection_gives_the_gpu_passes_reflected_triangles(gpu_ready):
     sbc = build_sample_based_camera(mirrors, view, scene_bounds(mirrors, meshes, margin=1.0), max_order=2,
                                     downsample=2)
     assert any(len(history) == 2 for history in sbc.groups)  # second-order sheets too
-    projections = ReflectionRenderer(mirrors, meshes, polish=False).sbc
+    projections = ReflectionRenderer(mirrors, meshes, settings=FrameSettings(polish_camera=False)).sbc
     gpu = projections.triangles(SBCTextures(sbc), view, sbc, vertex_batch=projections._vertex_points())
     cpu = projections.triangles(CameraSource(sbc), view, sbc)
     assert projections.counts["projections"] == 0 and projections.last is None  # nothing kept, nothing drawn

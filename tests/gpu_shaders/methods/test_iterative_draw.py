@@ -10,6 +10,7 @@ from curved_reflections.addon.methods.iterative import search as search_module
 from curved_reflections.addon.scene import DiffuseMesh
 from curved_reflections.addon.geometry.sphere import bumpy_icosphere, ellipsoid, icosphere
 from curved_reflections.addon.view import View, look_at_view
+from curved_reflections.gpu_shaders.methods.iterative_draw import IterativePass
 
 FACE_SIZE = 32
 
@@ -91,13 +92,13 @@ def test_degenerate_input_draws_no_nan(gpu_ready):
     points = np.concatenate([grazing, at_centre, flat])
     mesh = DiffuseMesh("odd", points, np.arange(9).reshape(3, 3), np.ones((9, 4)))
     method = IterativeReflector(0, reflector.name, rmap, 1.0)
-    renderer = ReflectionRenderer([reflector], [mesh], edge_fraction=None, iterative=[method])
+    renderer = ReflectionRenderer([reflector], [mesh], edge_fraction=None, passes=[IterativePass.factory([method])])
     outside = look_at_view((0.0, 3.0, 0.2), (0, 0, 0), width=96, height=64)
     inside = look_at_view((0.1, 0.2, 0.0), (0, 3, 0), width=96, height=64)
     for view in (outside, inside):
         image = renderer.render(view, None, (0.1, 0.2, 0.3, 1.0))
         assert np.isfinite(image).all()
-        found = renderer.iterative.read(0)
+        found = renderer.pass_named("iterative").read(0)
         assert np.isfinite(found.reflector_points[found.found]).all()
         assert (found.status == search_module.INSIDE).sum() >= (3 if view is outside else 9), found.status
     assert renderer.stats["iterative"]["Sphere"]["found"] == 0  # eye inside: nothing answered
@@ -119,7 +120,7 @@ def test_iterative_render_matches_a_sample_based_render(gpu_ready):
     view = look_at_view((4.0, -3.0, 2.5), (0.0, 0.0, 0.8), fov_y_deg=35.0, width=160, height=120)
     shape, bake = prepare_iterative(reflector, 64)
     method = IterativeReflector(0, reflector.name, bake.reflector_map, 1.0)
-    searched = ReflectionRenderer([reflector], meshes, iterative=[method]).render(view, None)
+    searched = ReflectionRenderer([reflector], meshes, passes=[IterativePass.factory([method])]).render(view, None)
     lo, hi = scene_bounds([reflector], meshes)
     margin = 0.05 * float(np.linalg.norm(hi - lo))
     sbc = build_sample_based_camera([reflector], view, (lo - margin, hi + margin))
@@ -212,9 +213,9 @@ def test_a_triangle_across_a_fold_is_not_drawn(gpu_ready):
         for corner, drawn in ((a, across), (near[2], control)):
             mesh = DiffuseMesh("triangle", np.array([cloud[near[0]], cloud[near[1]], cloud[corner]]),
                                np.array([[0, 1, 2]]), np.ones((3, 4)))
-            renderer = ReflectionRenderer([reflector], [mesh], edge_fraction=None, iterative=[method])
+            renderer = ReflectionRenderer([reflector], [mesh], edge_fraction=None, passes=[IterativePass.factory([method])])
             pixels = _drawn_pixels(renderer, view)
-            gpu = renderer.iterative.read(0)  # the GPU's own verdicts (float32 may pick another root)
+            gpu = renderer.pass_named("iterative").read(0)  # the GPU's own verdicts (float32 may pick another root)
             corners = [np.flatnonzero((renderer.geometry.vertices == cloud[k]).all(axis=1))[0]
                        for k in (near[0], near[1], corner)]  # the renderer sorts its vertices
             if gpu.found.all() and list(gpu.flipped[corners]) == [False, False, corner == a]:
@@ -246,7 +247,7 @@ def test_a_render_traces_the_searched_mirror_where_nothing_was_drawn_next_to_its
     colors = np.where((np.add(*np.divmod(np.arange(41 * 41), 41)) % 2 == 0)[:, None], (1, 0.3, 0.3, 1), (1, 1, 0.3, 1))
     mesh = DiffuseMesh("floor", floor, triangles, colors.astype(np.float64))
     method = IterativeReflector(0, reflector.name, bake.reflector_map, 1.0)
-    renderer = ReflectionRenderer([reflector], [mesh], iterative=[method])
+    renderer = ReflectionRenderer([reflector], [mesh], passes=[IterativePass.factory([method])])
     view = look_at_view((3.5, -2.0, 1.5), (0, 0, 0), width=160, height=120)
     plain = renderer.render(view, None, (0.2, 0.3, 0.9, 1.0), trace=False)
     targets = renderer.draw_passes(view, None)

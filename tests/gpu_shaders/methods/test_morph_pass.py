@@ -16,6 +16,7 @@ from curved_reflections.addon import DiffuseMesh, look_at_view, scene_bounds
 from curved_reflections.addon.methods.sbc import build_sample_based_camera
 from curved_reflections.addon.methods.morphing import morphing as M
 from curved_reflections.addon.geometry.sphere import icosphere
+from curved_reflections.gpu_shaders.methods.morph_pass import MorphPass
 
 from test_morph_source import BLUE, GREEN, RED, SETTINGS, _square
 
@@ -173,12 +174,12 @@ def test_renderer_draws_the_grid_where_the_runtime_camera_draws(mirror):
     sphere, grid = mirror
     meshes = [_square("Near", 2.5, 1.0, RED), _square("Far", 4.0, 4.0, GREEN)]
     view = _view((0.4, -2.3, 0.3), (96, 96))
-    morphed_renderer = ReflectionRenderer([sphere], meshes, morph=[(grid, np.eye(4))])
+    morphed_renderer = ReflectionRenderer([sphere], meshes, passes=[MorphPass.factory([(grid, np.eye(4))])])
     morphed = morphed_renderer.render(view, None, world_color=(*BLUE, 1.0), trace=False)
     bounds = scene_bounds([sphere], meshes, margin=1.0)
     sbc = build_sample_based_camera([sphere], view, bounds, downsample=2)
     runtime = ReflectionRenderer([sphere], meshes).render(view, sbc, world_color=(*BLUE, 1.0), trace=False)
-    assert morphed_renderer.morph.counts["blends"] == 1
+    assert morphed_renderer.pass_named("morphing").counts["blends"] == 1
     for colour, recall in ((RED, 0.85), (GREEN, 0.7)):
         ours = np.abs(morphed[..., :3] - colour).max(axis=2) < 1e-3
         theirs = np.abs(runtime[..., :3] - colour).max(axis=2) < 1e-3
