@@ -29,10 +29,8 @@ from ...view import View
 
 #: Triangles a start walks through (its seed's, then across the edge its root lies
 #: beyond). Next to the silhouette a pixel spans several foreshortened triangles, and a
-#: seed a pixel from a missed image was 5 or more triangles from it. Tuning mirrors, two
-#: views each (docs/overview.md): 4: 99.63 / 99.74 / 99.80 / 99.60 %, 6: 99.77 / 99.95 /
-#: 99.85 / 99.75 % for about 0.5 s a view more, 8: 99.86 / 99.95 / 99.85 / 99.80 % for
-#: 1.2 s.
+#: seed a pixel from a missed image can be 5 or more triangles from it; more triangles
+#: find few more images for much more time.
 WALK_TRIANGLES = 6
 #: Newton iterations per triangle (the exact solver's from a centroid take 24; a root
 #: beyond the triangle is left after 4, ``reference.exact.ABANDON_AFTER``).
