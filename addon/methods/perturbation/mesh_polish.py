@@ -5,9 +5,8 @@ On a mirror that bends both ways, a point's images crowd toward the folds of its
 reflection, and the Taylor step from a candidate seed (Chen & Arvo 2000, section III)
 does not converge there: its step is not local (the candidate is dropped, ``projector``
 step 4) or its estimate stays above the accuracy after the adaptive seeds (refused).
-On two mirrors made to tune this (a bumpy sphere, a rippled ellipsoid) most images
-perturbation missed had such a candidate, often more than 10 px from any answer of
-the point (docs/overview.md, "Newton on the mesh where the series stops").
+Most images perturbation misses on such a mirror (a bumpy sphere, a rippled ellipsoid)
+have such a candidate, often far from any answer of the point.
 
 Each such candidate starts the exact solver's Newton iteration on the law of reflection
 (``reference.exact.newton_in_triangles``: flat triangles, interpolated normals, the
