@@ -71,8 +71,8 @@ def smooth_pieces(triangles: np.ndarray, n_vertices: int) -> np.ndarray:
     while True:
         # Hook every corner's root to the lowest root of its triangle, then jump each
         # vertex to its new root: whole trees merge in a pass (log-many passes), where
-        # moving each vertex's own label took a pass per ring (30 s of a 1.3M-triangle
-        # mirror's 40 s ReflectorSet).
+        # moving each vertex's own label takes a pass per ring (tens of seconds on a
+        # million-triangle mirror).
         roots = label[triangles]
         merged = label.copy()
         np.minimum.at(merged, roots.reshape(-1), np.repeat(roots.min(axis=1), 3))

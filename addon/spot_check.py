@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""A method's accuracy in the current view, measured on a few of its answers (issue 20).
+"""A method's accuracy in the current view, measured on a few of its answers.
 
 Every method answers with first reflector points; whichever drew a reflector, a handful
 of its answers (a seeded sample of vertices that have one) are checked against exactly

@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """The desired view: Blender's view and window matrices plus the image size.
 
-Conventions (DESIGN.md): ``view_matrix`` maps world to camera space, the camera looking
+Conventions (docs/overview.md): ``view_matrix`` maps world to camera space, the camera looking
 down -Z (``RegionView3D.view_matrix``); ``projection_matrix`` maps camera space to
 OpenGL clip space (``RegionView3D.window_matrix``). Pixel coordinates have x right,
 y up, the origin at the bottom-left corner of the image and pixel centres at k + 0.5,

@@ -27,9 +27,9 @@ def normal_equations_glsl(unknowns: int, ridge=None) -> str:
     The normal equations (``ridge`` added to them: one value per unknown for their
     diagonal, by default 1e-10 each, as the numpy twin's, or a symmetric matrix, a
     penalty on combinations of unknowns) are solved by Cholesky factorisation, written
-    out term by term: llvmpipe kept the same code written with arrays and loops in
-    memory, and the morphing blend, which fits one surface per vertex and frame, ran
-    2.3x slower (``glsl/morph_blend.glsl``).
+    out term by term: llvmpipe keeps the same code written with arrays and loops in
+    memory, which makes the morphing blend, one fit per vertex and frame, about twice as
+    slow (``glsl/morph_blend.glsl``).
     """
     lower = [(i, j) for i in range(unknowns) for j in range(i + 1)]
     terms = range(unknowns)

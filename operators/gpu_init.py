@@ -4,8 +4,7 @@
 In background mode every ``gpu`` drawing call raises ``SystemError: GPU functions for
 drawing are not available in background mode`` until something has rendered. One tiny
 Workbench render initialises the GPU backend (through EGL, e.g. on Mesa llvmpipe), after
-which offscreen buffers, custom shaders and float textures all work
-(``shared/BLENDER_HEADLESS.md`` of the development checkout). With a window the GPU is
+which offscreen buffers, custom shaders and float textures all work. With a window the GPU is
 always ready and nothing is rendered.
 
 This module imports only ``bpy`` and ``gpu``, so the test harness can also load it by

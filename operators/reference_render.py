@@ -14,7 +14,7 @@ These are what our viewport reflections are measured against (``scripts/demo.py`
 
 Images come back as float32 numpy arrays (H, W, 4) of *display* sRGB in [0, 1] (the
 "Standard" view transform), rows bottom to top as Blender stores pixels (y up, as
-DESIGN.md's pixel convention). Every render is also written as a PNG.
+the pixel convention of docs/overview.md). Every render is also written as a PNG.
 """
 
 from __future__ import annotations

@@ -80,7 +80,7 @@ def _bake_node(node: int):
     """Worker: build one node and write its cache file; only its status and sizes cross the pipe.
 
     Writing in the worker keeps the parent idle: compressing every node's arrays in the
-    parent (and pickling them to it) took a core's worth of time away from the workers.
+    parent (and pickling them to it) would take a core's worth of time away from the workers.
     """
     work = _WORK
     kind = bake_cache.GRID_KINDS[work["settings"].kind]

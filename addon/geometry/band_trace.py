@@ -28,7 +28,7 @@ import numpy as np
 from .raytrace import RayHits, ReflectorSet, reflect, reflection_valid
 from ..scene import Reflector, vertex_normals
 
-#: Ambient share of the headlight Lambert shading (SBC V-C; glsl/reflection_shading.glsl).
+#: Ambient share of the headlight Lambert shading (SBC V-C; gpu_shaders/glsl/reflection_shading.glsl).
 SHADE_AMBIENT = 0.3
 #: An eye ray started from the mirrors' cell grid (``ReflectorSet.triangle_grid``) saves
 #: about 14 us of BVH descent; building the grid costs about 1.2 us a triangle (measured
@@ -118,7 +118,7 @@ class BandTracer:
         ``surface_points`` (K, 3), NaN where unknown: where the pre-pass's depth puts the
         mirror on each pixel; the eye ray is then met with the triangles around it first
         (``ReflectorSet.triangle_grid``, ``intersect_near``), the BVH descended only by
-        the rays that miss them (a quarter of a Render Image frame was these descents).
+        the rays that miss them (descents that would otherwise cost a large share of a render).
 
         Paths stop at the first diffuse hit, when they leave the scene (world colour), at
         an invalid reflection (a grazing ray turned into the mirror: world colour), or

@@ -7,7 +7,7 @@ reflectors comes for free. Rays are processed in chunks, each chunk as whole arr
 (breadth-first BVH descent, batched Moller-Trumbore), so full-resolution ray maps are
 practical in numpy.
 
-Surface model (DESIGN.md): flat triangles carrying interpolated vertex normals. Mirrors
+Surface model (docs/overview.md, Conventions): flat triangles carrying interpolated vertex normals. Mirrors
 are two-sided, as in Cycles: at a hit, the geometric and the interpolated normal are
 turned toward the side the ray comes from. A reflection is *valid* where the incoming
 ray is in front of the interpolated normal and the reflected ray leaves the front of

@@ -1,7 +1,7 @@
 /* SPDX-License-Identifier: GPL-3.0-or-later */
 /* Polish Node Images on the GPU: each node image moved onto the mirror's exact
  * reflection point of its scene point near it, the float32 twin of
- * addon/methods/morphing/image_polish.py's Newton (reference/exact.py,
+ * addon/methods/morphing/image_polish.py's Newton (addon/reference/exact.py,
  * newton_in_triangles: the law of reflection in a triangle's barycentric (u, v), the
  * half vector minus the interpolated normal in two axes of its plane).
  *

@@ -332,8 +332,8 @@ void main()
    * around the sphere guess. A found answer faces the eye and the vertex, and on a
    * non-convex mirror no part of the surface lies between them (check()): neither lies
    * inside the mirror, which is tested only before the first restart. One loop calls
-   * newton() once: the compiled shader holds one copy of it, not one per start (on
-   * llvmpipe the search ran at half the speed with six). */
+   * newton() once: the compiled shader holds one copy of it, not one per start (a copy
+   * per start makes the search far slower on llvmpipe). */
   int attempts = convex != 0 ? 1 : 5;  /* one reflection at most on a convex mirror */
   for (int attempt = resume ? -1 : 0; attempt < attempts; attempt++) {
     vec2 start = vec2(0.0);

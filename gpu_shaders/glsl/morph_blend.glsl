@@ -34,7 +34,7 @@
  * most SLOTS each): every loop over images runs to them, a constant. llvmpipe runs the
  * code of a branch or a loop iteration whether or not any invocation takes it, so loops
  * over slots that no node fills cost as much as filled ones (a convex mirror's nodes
- * fill one of three: the blend took 1.5x as long).
+ * fill one of three).
  * Push constants: n_vertices, positions_width and slot_rows (rows of one slot in a node
  * texture). The view's parameters, in the uniform block `frame` (struct MorphFrame,
  * gpu_shaders/methods/morph_pass.py): frame_from_shifted and shifted_from_frame (the grid's rigid
@@ -245,7 +245,7 @@ void main()
         }
         spread = max(sqrt(spread), 1e-12);
         /* The normal equations in scalars (shader_sources.normal_equations_glsl): as
-         * arrays with loops, llvmpipe kept them in memory and the blend cost 2.3x. */
+         * arrays with loops, llvmpipe keeps them in memory, which is much slower. */
         fit_clear();
         for (int n = 0; n < NODES; n++) {
           if (!use[n]) {

@@ -15,7 +15,7 @@
  * between four rays of its group (addon/methods/sbc/sbc.py), so no reflection can land in the last
  * ray-map cell (up to the down-sampling factor d, in pixels) before the reflector's
  * silhouette or an object in front of it. Where the caller traced those pixels
- * (gpu_shaders/band_trace.py), `traced_colors` holds them (alpha 1). Without tracing
+ * (addon/geometry/band_trace.py), `traced_colors` holds them (alpha 1). Without tracing
  * (`fill_radius` > 0, e.g. d), a reflector pixel within `fill_radius` of its
  * footprint's edge that has no reflection takes the reflection of the nearest pixel
  * within `fill_radius` that has one on the same reflector, a cheap guess. Elsewhere, or

@@ -86,7 +86,7 @@ class MapAtlas:
 class IterativePass(FramePass):
     """The iterative method's GPU side for one renderer's reflected geometry (a
     ``draw_geometry.DrawGeometry``, on the GPU as ``meshes``, a
-    :class:`.reflected_meshes.ReflectedMeshes`, made here when not given) and its
+    :class:`..reflected_meshes.ReflectedMeshes`, made here when not given) and its
     star-shaped reflectors (``addon.methods.iterative.IterativeReflector`` each), among
     ``n_reflectors`` of the scene."""
 

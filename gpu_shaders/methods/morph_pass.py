@@ -186,7 +186,7 @@ class NodeTextures:
 class MorphPass(FramePass):
     """The morphing grids' GPU side for one renderer's reflected geometry: ``grids`` are
     (``MorphingGrid``, the reflector's object matrix) pairs, ``meshes`` the renderer's
-    :class:`.reflected_meshes.ReflectedMeshes` (made here when not given)."""
+    :class:`..reflected_meshes.ReflectedMeshes` (made here when not given)."""
 
     #: No hidden-point test: a blended image lies on the surface fitted to the nodes'
     #: images, not on the mesh, often more than ``FramePass.hidden_fraction`` off it
@@ -380,11 +380,9 @@ class MorphPass(FramePass):
         points (``polish_gpu.polish_answers``: Newton on the mesh from each blended image,
         as Polish Node Images does for the nodes' images), dropping those it cannot place.
         A blend on a mirror that is not a quadric errs by tens of pixels where its
-        curvature changes within a cell (a rounded box, four views: p99 22 px), and
-        polished lands on the exact solver's reflections (``tests/gpu_shaders/methods/
-        test_morph_pass.py``: p99 under 0.01 px; docs/benchmarks/octree.md: 0.00 px on
-        every mirror measured). It adds 11-35 ms to the blend's 40-60 ms on llvmpipe at
-        88,000 vertices (docs/benchmarks/view_change.md)."""
+        curvature changes within a cell (a rounded box), and polished lands on the exact
+        solver's reflections (tests/gpu_shaders/methods/test_morph_pass.py; figures in
+        docs/benchmarks/octree.md, its cost in docs/benchmarks/view_change.md)."""
         from .polish_gpu import GPUImagePolish, polish_answers
 
         polish = grid.image_polish
@@ -463,8 +461,8 @@ class MorphPass(FramePass):
 
     def _polished(self, k: int, node: int, frame: np.ndarray, images: tuple) -> np.ndarray:
         """The node slots of a prefetched node's ``unpolished_images``, polished here, on
-        the main thread (the grid's GPU polish: milliseconds, where the worker's numpy
-        polish took 0.2-0.3 s a node)."""
+        the main thread (the grid's GPU polish takes milliseconds, the worker's numpy
+        polish a large part of a second a node)."""
         return self.grids[k][0].polished_slots(node, self._points_in_frame(frame), images, SLOTS)
 
     def _node_bytes(self) -> int:

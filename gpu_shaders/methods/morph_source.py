@@ -4,15 +4,15 @@
 In reflection-morphing mode (Popescu, Sacks, Mei 2006, section VI) a reflector's
 reflections come from the panoramic sample-based cameras baked at the nodes of a
 tetrahedral grid around it: the four nodes of the tetrahedron holding the eye project
-each vertex, and their first reflector points are blended (:mod:`..addon.morphing`).
+each vertex, and their first reflector points are blended (:mod:`...addon.methods.morphing`).
 :class:`GPUFaceImages` runs the nodes' projections, the expensive part, on the GPU with
 the GLSL twin of ``SampleBasedCamera.project``; the live view and Render Image project
 their nodes with it once per node and blend on the GPU every frame
 (:mod:`.morph_pass`).
 
-:class:`MorphSource` is the earlier path, kept as the numpy reference the benchmarks
+:class:`MorphSource` is the numpy path, kept as the reference the benchmarks
 compare with (``tests/benchmarks/bench_view_change.py``): it hands the blended points
-of one view to :class:`.reflection_draw.ReflectionRenderer` in the layout of its GPU
+of one view to :class:`..reflection_draw.ReflectionRenderer` in the layout of its GPU
 projection pass (``glsl/reflection_project_vert.glsl``), so the renderer draws them as
 it draws a runtime camera's (whole and mixed triangles); the matching of images across
 nodes and the blend run in numpy, and the renderer's own vertices are *static points*

@@ -4,7 +4,7 @@
 Per new view, ``addon.methods.perturbation`` traces the seed paths; every diffuse
 vertex's Taylor step then runs on the GPU (``perturbation_gpu.py``; in numpy for an
 orthographic view) into answer textures, one per image rank (a non-convex mirror shows
-a point several times), which :class:`.reflected_meshes.ReflectedMeshes` draws with the
+a point several times), which :class:`..reflected_meshes.ReflectedMeshes` draws with the
 iterative search's and morphing's vertex stage. An unchanged view reuses the textures:
 an orbit costs one projection per frame, a still viewport none.
 """

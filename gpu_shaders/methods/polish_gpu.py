@@ -2,11 +2,9 @@
 """Polish Node Images on the GPU: ``glsl/image_polish.glsl``, the float32 twin of
 ``addon/methods/morphing/image_polish.polish_images`` (``MorphingGrid.image_polish``).
 
-In numpy the polish cost more than the node's projection itself (a BVH descent per
-image to find its triangle, then Newton in float64: 0.2-0.3 s for a node's 10-15k
-grazing and widened-chart images of 20k points), and Render Image's Morphing animation
-went from 1.7x to 2.6-3x Workbench. Here one dispatch answers every image of a node
-(5-10 ms on llvmpipe): the shader walks from a grid cell's triangle across the mirror's
+In numpy the polish costs more than the node's projection itself (a BVH descent per
+image to find its triangle, then Newton in float64), too much for an animation's
+frames. Here one dispatch answers every image of a node (milliseconds): the shader walks from a grid cell's triangle across the mirror's
 edges instead of descending a BVH, so it needs two flat tables of the mirror
 (``ReflectorSet.triangle_grid``, ``ReflectorSet.edge_neighbours``), uploaded once per
 mirror (docs/benchmarks/morphing.md). Triangle indices travel as float32, exact below

@@ -6,7 +6,7 @@ projecting every vertex with the sample-based camera *in the vertex shader*. Thi
 module gives that projection to shaders:
 
 - :func:`library_source` is ``glsl/sbc_projection.glsl`` (the GLSL twin of
-  :meth:`addon.sbc.SampleBasedCamera.project`) behind ``#define`` lines generated from
+  :meth:`addon.methods.sbc.sbc.SampleBasedCamera.project`) behind ``#define`` lines generated from
   the engine's own constants, so iteration counts and tolerances cannot drift apart;
 - :func:`declare_samplers` adds its six samplers to a ``GPUShaderCreateInfo``;
 - :class:`SBCTextures` packs one camera (:mod:`.sbc_pack`) into RGBA32F textures and
@@ -190,7 +190,7 @@ POINT_SHADER_PUSH_CONSTANT_BYTES = 4 + 8
 
 @dataclass(frozen=True)
 class GPUProjection:
-    """Result of :func:`project_points` for P points and G groups (as ``addon.sbc.Projection``)."""
+    """Result of :func:`project_points` for P points and G groups (as ``addon.projection.Projection``)."""
 
     groups: list
     valid: np.ndarray  # (G, P) bool

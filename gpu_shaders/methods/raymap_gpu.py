@@ -17,8 +17,8 @@ does not depend on ``gl_PrimitiveID`` being available in every Blender backend.
 
 After read-back, numpy turns each sample into what the CPU tracer returns for the same
 view ray (depth along the ray, normals turned toward the ray's origin) and hands it to
-:func:`addon.raymap.reflect_primary_hits`, so reflection, higher orders, heads and
-grouping are shared with :func:`addon.raymap.trace_ray_map`. By default the hit is
+:func:`addon.methods.sbc.raymap.reflect_primary_hits`, so reflection, higher orders, heads and
+grouping are shared with :func:`addon.methods.sbc.raymap.trace_ray_map`. By default the hit is
 also refined in float64 on the triangle the rasteriser chose (the GPU decides
 visibility, numpy the exact point), removing the error of sub-pixel vertex snapping;
 see :func:`gpu_ray_map`.
@@ -217,12 +217,12 @@ def gpu_ray_map(reflector_set: ReflectorSet, view: View, bounds, downsample: int
     is recomputed in float64 on the triangle the rasteriser chose, and the few cells
     whose ray falls outside that triangle (snapped across an edge or a silhouette, a
     tiny fraction) are re-traced on the CPU. The result then matches
-    :func:`addon.raymap.trace_ray_map` to rounding, except where depth-buffer precision
+    :func:`addon.methods.sbc.raymap.trace_ray_map` to rounding, except where depth-buffer precision
     picks a different surface than the exact nearest hit.
 
     As in :meth:`ReflectorSet.intersect`, the interpolated and the face normal are both
     turned toward the ray's origin. Everything after the first hit is shared with the
-    CPU path (:func:`addon.raymap.reflect_primary_hits`).
+    CPU path (:func:`addon.methods.sbc.raymap.reflect_primary_hits`).
     """
     if max_order < 1:
         raise ValueError(f"max_order must be >= 1, got {max_order}")

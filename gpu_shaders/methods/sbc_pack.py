@@ -6,7 +6,7 @@ sample-based camera in the vertex shader, so the camera's data (BSP trees, leaf
 models, ray map) must live in GPU memory; section VII-B: "the BSP trees are packed and
 loaded into texture memory using the vertex texture technique". Storage buffers are
 not exposed to Python in Blender, so everything goes into RGBA32F textures read with
-``texelFetch`` (which works in vertex shaders, see BLENDER_HEADLESS.md).
+``texelFetch``, which works in vertex shaders.
 
 Every array is a list of *records* of a fixed number of texels (RGBA, float32). Record
 texel ``k`` sits at texel index ``i`` and texel index ``i`` at (i % W, i // W) of a 2D
@@ -157,7 +157,7 @@ def _pack_patches(patches, bilinear: bool, valid=None, band=None) -> np.ndarray:
 
 
 def pack_sample_based_camera(sbc) -> PackedSBC:
-    """Pack every reflection group of ``sbc`` (a :class:`addon.sbc.SampleBasedCamera`).
+    """Pack every reflection group of ``sbc`` (a :class:`addon.methods.sbc.sbc.SampleBasedCamera`).
 
     Only the ``"ray_patch"`` leaf model is supported (the paper's pinhole leaves are a
     CPU baseline).

@@ -3,12 +3,12 @@
 camera, drawn every frame (SBC paper, Popescu, Sacks, Mei 2006, sections V-A and V-B).
 
 a. *Vertex projection* (GPU): every vertex of the (pre-subdivided, SBC V-B,
-   :mod:`..addon.subdivision`) diffuse meshes is projected per sheet with ``sbc_project``
+   :mod:`...addon.geometry.subdivision`) diffuse meshes is projected per sheet with ``sbc_project``
    (``glsl/sbc_projection.glsl``, ``glsl/reflection_project_vert.glsl``): pixel, depth
    and validity, eye vector and reflected distance land in texel ``gl_VertexID`` of the
    sheet's layer of two float targets, read back. Only the vertex chunks (runs of
    :data:`CHUNK_VERTICES` Morton-sorted vertices) that meet the sheet's bounds are
-   projected (:mod:`..addon.sheet_bounds`); the others could not project there.
+   projected (:mod:`...addon.methods.sbc.sheet_bounds`); the others could not project there.
 b. *Triangles* (CPU, from the read-back), per sheet: those with a corner projected in
    the sheet and every corner projected, in it or, across the seam between two sheets
    of one history, in another sheet within a few ray-map cells of the triangle's own
@@ -99,7 +99,7 @@ def _subdivision_caps(source, sheets: list):
 
 def _culling(camera, diameter: float):
     """Per-sheet k-DOPs and bounding cones of a sample-based ``camera`` that cull vertex
-    chunks (:mod:`..addon.sheet_bounds`), or ``None`` (no camera: no culling)."""
+    chunks (:mod:`...addon.methods.sbc.sheet_bounds`), or ``None`` (no camera: no culling)."""
     if camera is None:
         return None
     return sheet_bounds.sheet_kdops(camera, diameter), getattr(camera, "cones", None)
@@ -169,7 +169,7 @@ class CameraProjections:
     ``per_frame_reflectors(view)``: the reflectors whose first-order sheets the
     per-frame passes draw instead (left out of a projection); ``counts``: the renderer's
     counters (``"projections"`` is counted here). ``cull``: project in each sheet only
-    the vertex chunks that meet the sheet's k-DOP (:mod:`..addon.sheet_bounds`; needs the
+    the vertex chunks that meet the sheet's k-DOP (:mod:`...addon.methods.sbc.sheet_bounds`; needs the
     camera itself, not only its textures). ``polish``: the GPU's ray-list and fold-cell
     answers are polished on the true rays on the CPU (needs the camera too; exact, but
     the numpy BVH makes it seconds per camera: the live viewport turns it off).
@@ -478,15 +478,14 @@ class CameraProjections:
         return pieces
 
     def _facing_away(self, triangles, corners, eyes, known) -> np.ndarray:
-        """:func:`.closed_surfaces.turned_away` of mesh ``triangles`` (their ``corners``)
+        """:func:`...addon.geometry.closed_surfaces.turned_away` of mesh ``triangles`` (their ``corners``)
         seen from their first-order reflector points (``eyes``; a mixed triangle
         ``known`` only at its projected corners). The mirror lies outside the solid
         (``closed_surfaces.cullable_winding``), so the reflected ray meets its near side
         first and such a triangle's image is hidden in its sheet (SBC V-A, case 2): left
         out rather than drawn and hidden, about half the closed meshes' triangles. Only
-        for convex mirrors: on the non-convex vase demo, where a sheet can hold the far
-        side of a solid without its near side, the floor then showed through (label
-        disagreement with Cycles 0.8 -> 1.1 %)."""
+        for convex mirrors: on a non-convex one (the vase demo) a sheet can hold the far
+        side of a solid without its near side, and the floor would show through."""
         return turned_away(self.geometry.vertices, corners, self._triangle_winding[triangles], eyes, known)
 
     def _mixed_instances(self, points, sheets: list, order: int, caps=None, eyes=None) -> list:
@@ -507,10 +506,9 @@ class CameraProjections:
         # projected triangles around it (local, so that a magnified part of a sheet, near a
         # silhouette, does not refine every mixed triangle of the sheet); a mixed triangle
         # without such a neighbour takes its sheet's 90th percentile. (The sheet's largest,
-        # thousands of pixels per unit next to a fold, subdivided a tenth of a subdivided
-        # monkey head's mixed triangles 32 times: 877k sub-vertices, each polished on the
-        # true rays, now 171k for the same image; the median, 51k, left 7 more of the
-        # teapot's 14,793 mirror pixels without their reflection.)
+        # thousands of pixels per unit next to a fold, would subdivide many mixed triangles
+        # of a crumpled mirror 32 times, each sub-vertex polished on the true rays; the
+        # median leaves some mirror pixels without their reflection.)
         scales = []
         for layer in range(len(sheets)):
             own = valid[layer][g.triangles]

@@ -8,7 +8,7 @@ coordinates and, in section 3.3.7, names the cube map as the better choice (no p
 no trigonometry: the face and its coordinates come from the direction's largest
 component); we use the cube map.
 
-Our surface model (DESIGN.md) has flat triangles with interpolated normals, so each texel
+Our surface model (docs/overview.md, Conventions) has flat triangles with interpolated normals, so each texel
 stores r and the *interpolated* normal where the ray from O along the texel's direction
 meets the mesh, rather than the gradient of r: the reflection law is then solved with
 the same normals as the exact reference solver (``addon/reference/exact.py``). Values between

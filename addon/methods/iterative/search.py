@@ -20,10 +20,9 @@ direction d from O, and the search runs in two dimensions:
    at most :data:`TRUST_RADIUS` and halved until |F| falls), and where a start fails on
    a non-convex mirror, start again from four points around the guess
    (:data:`RESTARTS`; a convex mirror has one reflection of a point at most, so there a
-   failed start means none). Measured on a
-   bumpy sphere (64-texel faces, 6,000 points): the secant triangle missed 32 % of the
-   exact solver's visible reflections (it cycles between the roots of neighbouring
-   bumps), Newton from one start 19 %, with the restarts 3.4 %.
+   failed start means none). On a bumpy sphere the secant triangle cycles between the
+   roots of neighbouring bumps and misses many of the exact solver's reflections; Newton
+   from one start misses fewer, and with the restarts few.
 3. **Stop** (3.2, the geometric bound): when a step moves P by less than
    :data:`STOP_FRACTION` of the accuracy in pixels, measured in the view at P; Newton
    steps shrink quadratically, so the answer is then far closer than the step. Or one
@@ -31,8 +30,7 @@ direction d from O, and the search runs in two dimensions:
    residual the line search already sampled (a chord step), would move P by less than
    that and the residual already passes the answer's test; it is then taken along the
    chart's tangents with no new sample. Warm, nearly every vertex stops after one step
-   instead of two (the GPU search a fifth to a third faster on llvmpipe; in
-   docs/benchmarks/iterative.md p99 unchanged, coverage within 0.2 %). No convergence
+   instead of two, at the same accuracy (docs/benchmarks/iterative.md). No convergence
    leaves the point unanswered and counted, never drawn at a wrong place.
 4. **Validity**: P must face both E and V (n . e > 0, n . v > 0, with the interpolated
    normal n and with the map surface's own normal, as the exact solver asks of the
@@ -46,7 +44,7 @@ direction d from O, and the search runs in two dimensions:
    segment from P to V the same way (their maps, sampled where it crosses their bounding
    spheres): there the point's reflection is of the other mirror, a higher order.
 
-``glsl/iterative_search.glsl`` is this module step by step in float32; the tests hold
+``gpu_shaders/glsl/iterative_search.glsl`` is this module step by step in float32; the tests hold
 them to each other.
 """
 
@@ -192,7 +190,7 @@ def flipped_images(camera, perspective: bool, points, position, normal, position
     mirror's caustic is virtual, so there none is flipped; where a fold of a non-convex
     mirror crowds two images of one region, one of them is flipped. A reflected triangle
     whose corners disagree joins two images across the fold: it is not drawn
-    (``glsl/iterative_mesh_vert.glsl``). ``position_u``, ``position_v`` (and their
+    (``gpu_shaders/glsl/iterative_mesh_vert.glsl``). ``position_u``, ``position_v`` (and their
     normals) are the surface a chart step along each chart axis from ``position``."""
     def reflected(at, n):
         e = _to_eye(camera, perspective, at)

@@ -12,9 +12,9 @@ meets. The first candidate that passes is O; the full-resolution bake
 head (ears, eye sockets) or a teapot (handle, spout) fail, and the message says why.
 So does an open mirror (a vase open at the top, a bowl): every ray from O must meet the
 surface, since the map holds one radius per direction and the inner side of an open
-mirror, seen through its opening, would have none (measured on the Chen-Arvo vase, open
-at both ends and seen whole from a point on its axis: drawn as star-shaped, 74 % of its
-pixels showed the wrong object).
+mirror, seen through its opening, would have none (the Chen-Arvo vase, open at both
+ends, is seen whole from a point on its axis, and drawn as star-shaped most of its
+pixels would show the wrong object).
 """
 
 from __future__ import annotations

@@ -4,25 +4,18 @@
 Remedy 2 of the morphing blend (SBC paper VI, ``morphing.py``) asks a node camera's
 leaf for an image its rays do not bracket: the leaf's chart widened by
 ``EXTENDED_CHART``, its ray patch extrapolated. Those images lie off the mirror's true
-reflection points by up to 0.07 of the ball's radius (sbc_fig3, p99 of how far the
-polish moves them), and they made most of the blend's error over a pixel: on
-bench_morphing.py's views, p99 2.8 px as extrapolated, 1.1 px with every extended image
-replaced by the sphere's closed-form one. Polished here, each is the exact reflection
-point on the surface model the reference solver uses (flat triangles, interpolated
-normals), once per node and point set, not per frame.
+reflection points by up to a few hundredths of the mirror's size, and they make most of
+the blend's error over a pixel. Polished here, each is the exact reflection point on the
+surface model the reference solver uses (flat triangles, interpolated normals), once per
+node and point set, not per frame.
 
 The node's regular images, interpolated between its rays (0.5 face pixels), are off
-too, most where the node sees the mirror at a grazing angle. Polishing the regular
-images seen more than 60 degrees off the normal (35 % of them) took the ball's p99 from
-1.05 to 0.72 px; every regular image, 0.48 px, for three times the work. Since the blend's
-surface is fitted to the images of a whole cube of nodes (``MorphingGrid.locate_view``),
-every image is polished: the fit's pull toward a sphere, which damped the cameras'
-interpolation error, can then be 100 times weaker (``morph_surface.POLISHED_RIDGE``):
-on bench_octree.py's views (diagnostic runs) the held-out ellipsoid's p99 fell from 0.86
-px (grazing images polished, the pull at 1e-2) to 0.11 px, an ellipsoid of radii 1.1,
-1.35, 0.65 from 0.94 to 0.23 px, the ball's from 0.65 to 0.39 px (the run of record,
-docs/benchmarks/octree.md: 0.20 and 0.40 px, the fit-only nodes matching regular images
-alone).
+too, most where the node sees the mirror at a grazing angle; every one of them is
+polished. The blend's surface is fitted to the images of a whole cube of nodes
+(``MorphingGrid.locate_view``), and with polished images the fit's pull toward a
+sphere, which damps the cameras' interpolation error, can be 100 times weaker
+(``morph_surface.POLISHED_RIDGE``). Figures: docs/benchmarks/morphing.md and
+docs/benchmarks/octree.md.
 
 The scene's *Polish Node Images* (``MorphingGrid.mirror``, on by default) turns this
 on. This is the numpy twin, which the engine's own projection (``MorphingGrid.project``)
@@ -46,9 +39,8 @@ from ...view import look_at_view
 #: then the ones through Newton's root while it lies outside the triangle it was found in.
 POLISH_ROUNDS = 3
 #: Triangles tried per blended image polished each frame (``MorphingGrid.polish_frames``):
-#: a blend on a mirror that is not a quadric lands tens of pixels off (bench_octree.py's
-#: rounded box: p99 22 px), and three rounds left 2 % of those images unplaced, eight
-#: one in 7,000 (four views of it, a diagnostic run).
+#: a blend on a mirror that is not a quadric (a rounded box) lands tens of pixels off,
+#: several triangles from its root, where POLISH_ROUNDS would leave some images unplaced.
 FRAME_POLISH_ROUNDS = 8
 #: Newton iterations per triangle: the images start within a triangle or two of their
 #: root, where the reference solver's 24 (from a triangle's centroid) are rarely needed.

@@ -7,7 +7,7 @@ quadric surface is fitted through the images of the cell's nodes (the tetrahedro
 cube: eight, or fewer where some lie inside the mirror; with their normals), and the
 reflection point of the desired eye is solved on it by Newton's method; the refined
 point replaces the blend where it stays within reach of the nodes' images
-(:mod:`.morphing`, ``MorphingGrid._blend``; the GLSL twin is ``glsl/morph_blend.glsl``).
+(:mod:`.morphing`, ``MorphingGrid._blend``; the GLSL twin is ``gpu_shaders/glsl/morph_blend.glsl``).
 """
 
 from __future__ import annotations
@@ -27,22 +27,14 @@ SURFACE_REACH = 2.0
 #: the quadratic's mean curvature (:func:`sphere_prior`), in the fit's normal equations:
 #: where the nodes' images do not pin them (three nodes, images close together, images
 #: off by the node cameras' accuracy, float32 on the GPU) the fit falls back toward that
-#: sphere. Measured on sbc_fig3 (9x9x5 grid; p99 px against the exact solver on
-#: bench_morphing.py's views, with the nodes' images polished, image_polish.py): 1e-2:
-#: 0.72 px, 1.5 % label disagreement with Cycles (bench_morph_animation.py); 1e-1:
-#: 0.99 px before the grazing images were polished (1e-2: 1.05 px). Pulled toward zero
-#: (the paraboloid) instead, as before, close views were biased by 1.5 px: p99 2.8 px.
+#: sphere. Pulled toward zero (the paraboloid) instead, close views were biased by
+#: more than a pixel; a stronger pull biases mirrors that are not spheres.
 QUADRIC_RIDGE = 1e-2
 #: The same weight where every node image is polished on the mirror (the scene's
 #: *Polish Node Images*, ``image_polish.py``) and the fit reads a whole cube of nodes
 #: (``MorphingGrid.locate_view``: 24 equations for 9 coefficients): the images then hold
-#: no camera error to damp, and the pull only biased mirrors that are not spheres.
-#: Measured on bench_octree.py's views, p99 px (the ball, the held-out ellipsoid, an
-#: ellipsoid of radii 1.1, 1.35, 0.65): a tetrahedron's four nodes, every image polished,
-#: 1e-2 0.52 / 2.18 / 2.89, 1e-4 0.91 / 0.83 / 2.81, 1e-5 1.01 / 0.62 / 2.38 (the partial
-#: blends' fits have no spare equation); the cube's eight, grazing images polished, 1e-2
-#: 0.65 / 0.86 / 0.94, 1e-4 0.73 / 0.64 / 0.64; the eight, every image polished, 1e-4
-#: 0.39 / 0.11 / 0.23. The float32 blend on the GPU solves it as well
+#: no camera error to damp, and the pull would only bias mirrors that are not spheres.
+#: The float32 blend on the GPU solves it as well
 #: (tests/gpu_shaders/methods/test_morph_pass.py).
 POLISHED_RIDGE = 1e-4
 #: A node's image joins the surface fit where its normal is within about 78 degrees of

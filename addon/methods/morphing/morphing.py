@@ -65,8 +65,7 @@ ENGINE_VERSION = "morphing-2"
 EXTENDED_CHART = 1.25
 #: ... and this far where its images are polished on the mirror (*Polish Node Images*):
 #: the extrapolated patch is only the polish's start there, and the polish drops a start
-#: with no reflection near it. Images compared on bench_octree.py's views, p99 unchanged:
-#: demo ball 26,652 -> 27,034, held-out ellipsoid 24,880 -> 25,607 (2.0 gave nearly as many).
+#: with no reflection near it, so a wider chart only gives more images a start.
 POLISHED_CHART = 4.0
 #: Images of one point at two nodes match when their reflector points are this close
 #: (fraction of the reflector's size), plus ``MATCH_SLOPE`` times the
@@ -208,11 +207,8 @@ class MorphingGrid:
         mirror, weighing 0 (:attr:`blend_nodes`): their images join the local surface's
         fit (``morph_surface.refine_on_local_surface``) and nothing else. Four nodes give
         the quadric's nine coefficients 12 equations, three (a node that does not see the
-        point) only 9, and the fit then leaned on its pull toward a sphere; the cell's
-        eight give 24 and 21. P99 against the exact solver on bench_octree.py's views
-        (diagnostic runs): the held-out ellipsoid 2.23 -> 0.86 px, an ellipsoid of radii
-        1.1, 1.35, 0.65 2.89 -> 0.94 px, the ball 0.71 -> 0.65 px, 5-13 % more images
-        compared (the run of record: docs/benchmarks/octree.md)."""
+        point) only 9, and the fit would lean on its pull toward a sphere; the cell's
+        eight give 24 and 21 (figures: docs/benchmarks/octree.md)."""
         frame = rigid_frame(matrix)
         eye = to_frame(frame, np.asarray(eye_world, dtype=np.float64)[None])
         tet, nodes, weights, inside = self.grid.locate(eye)
@@ -395,9 +391,8 @@ class MorphingGrid:
             rows = np.flatnonzero(missing.any(axis=1))
             how[n] = np.where(np.isfinite(found[..., 0]), ALL_NODES, NOT_PROJECTED)
             # A node that only joins the surface fit is asked for its regular images
-            # alone: its widened charts took the GPU blend from 17.9 to 20.6 ms a frame
-            # (bench_view_change.py --morph-only, alternated runs) for p99 0.20 -> 0.11 px
-            # and 1.8 % more images on the held-out ellipsoid (bench_octree.py's views).
+            # alone: its widened charts would cost the GPU blend about a sixth more per
+            # frame for a few per cent more images.
             if len(rows) and n < self.blend_nodes:
                 extended = self._extended_images(int(nodes[n]), points[rows], images[n][rows])
                 again = _match(reference[rows], extended, threshold[rows])

@@ -6,7 +6,7 @@ A regular grid of *sampling locations* around the reflector, a ray octree at eac
 where the trilinear blend of the eight locations' first reflector points lies (MORPH_VERTEX,
 section 6). The grid, its rigid frame, the matching of images across nodes, the
 renderer's GPU pass and the bake cache are those of the tetrahedral grid (SBC paper VI,
-:mod:`...morphing`), which succeeded this method: only the cell (a cube of eight nodes, not a
+:mod:`..morphing`), which succeeded this method: only the cell (a cube of eight nodes, not a
 tetrahedron of four), the weights (trilinear, not barycentric) and what a node holds differ.
 Like the tetrahedral grid, the blend is refined on the quadric surface fitted to the
 eight images (``morph_surface``): the paper's blend alone errs quadratically in the cell size.
@@ -45,7 +45,7 @@ def locate_cell(grid, point):
 
 class OctreeGrid(MorphingGrid):
     """A baked (or on-demand) grid of ray octrees for one reflector: the interface of
-    :class:`...morphing.MorphingGrid` (``project``, ``check_view``, ``node_slots``), which
+    :class:`..morphing.morphing.MorphingGrid` (``project``, ``check_view``, ``node_slots``), which
     the renderer's GPU pass and the operators use for both kinds of grid."""
 
     #: A cube's eight nodes are all blended, with the eye's trilinear weights.
@@ -54,9 +54,8 @@ class OctreeGrid(MorphingGrid):
     @property
     def quadric_ridge(self) -> float:
         """A ray octree's images are traced, never polished (:meth:`_polished_regular`),
-        each within ``ray_octree.CONVERGED`` of the law: the fit keeps
-        :data:`..morphing.morph_surface.QUADRIC_RIDGE` (measured on bench_octree.py's
-        views, 1e-4 took the held-out ellipsoid's p99 from 0.96 to 1.01 px)."""
+        each within ``ray_octree.CONVERGED`` of the law: the fit keeps the stronger pull
+        toward a sphere, :data:`..morphing.morph_surface.QUADRIC_RIDGE`, to damp that error."""
         return QUADRIC_RIDGE
 
     def locate_view(self, eye_world, matrix):

@@ -24,10 +24,9 @@ Projecting a point (what the paper does by "the ray closest to the point"):
    Gauss-Newton on the point's distance to the interpolated ray) until the ray passes
    through the point. The closest ray alone errs by up to half a ray spacing at the
    point's distance (many pixels of the desired view); the interpolated ray by the
-   interpolation's second-order error. (A quadratic patch fitted to the four rays'
-   points and normals, as the blend does across nodes, was tried and is worse here: the
-   rays leave from a mesh's flat facets with interpolated normals, which no smooth
-   patch fits to better than the facets' sagitta.)
+   interpolation's second-order error. (The rays leave from a mesh's flat facets with
+   interpolated normals, which no smooth patch fits to better than the facets' sagitta,
+   so no patch is fitted here.)
 
 The answer is the first reflector point of that ray: the point's image at this node,
 which :mod:`.grid` blends over the eight nodes of the grid cell holding the eye.

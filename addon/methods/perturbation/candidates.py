@@ -17,7 +17,7 @@ import numpy as np
 MAX_IMAGES = 8
 #: Candidates farther from their nearest ray than this many times the point's best are
 #: dropped. A small image (near a fold, where the mirror shrinks what it shows) has its
-#: rays spread wide at the point: at 4 those images were dropped on bumpy mirrors.
+#: rays spread wide at the point: a smaller spread drops those images on bumpy mirrors.
 CANDIDATE_SPREAD = 16.0
 #: Distances evaluated per block of points (points x scanned seeds).
 BLOCK_SIZE = 4_000_000

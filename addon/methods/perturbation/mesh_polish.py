@@ -5,9 +5,8 @@ On a mirror that bends both ways, a point's images crowd toward the folds of its
 reflection, and the Taylor step from a candidate seed (Chen & Arvo 2000, section III)
 does not converge there: its step is not local (the candidate is dropped, ``projector``
 step 4) or its estimate stays above the accuracy after the adaptive seeds (refused).
-On two mirrors made to tune this (a bumpy sphere, a rippled ellipsoid) most images
-perturbation missed had such a candidate, often more than 10 px from any answer of
-the point (docs/overview.md, "Newton on the mesh where the series stops").
+Most images perturbation misses on such a mirror (a bumpy sphere, a rippled ellipsoid)
+have such a candidate, often far from any answer of the point.
 
 Each such candidate starts the exact solver's Newton iteration on the law of reflection
 (``reference.exact.newton_in_triangles``: flat triangles, interpolated normals, the
@@ -29,10 +28,8 @@ from ...view import View
 
 #: Triangles a start walks through (its seed's, then across the edge its root lies
 #: beyond). Next to the silhouette a pixel spans several foreshortened triangles, and a
-#: seed a pixel from a missed image was 5 or more triangles from it. Tuning mirrors, two
-#: views each (docs/overview.md): 4: 99.63 / 99.74 / 99.80 / 99.60 %, 6: 99.77 / 99.95 /
-#: 99.85 / 99.75 % for about 0.5 s a view more, 8: 99.86 / 99.95 / 99.85 / 99.80 % for
-#: 1.2 s.
+#: seed a pixel from a missed image can be 5 or more triangles from it; more triangles
+#: find few more images for much more time.
 WALK_TRIANGLES = 6
 #: Newton iterations per triangle (the exact solver's from a centroid take 24; a root
 #: beyond the triangle is left after 4, ``reference.exact.ABANDON_AFTER``).

@@ -57,9 +57,7 @@ from .seeds import SeedPaths, seed_paths_to, seed_quadrics, trace_seed_paths
 MIN_GROUP_SEEDS = 600
 #: Seed spacing of the coarse search for candidate images, in grid seeds: every seed
 #: on a mirror that bends both ways, where a point's images crowd (two images a few
-#: pixels apart shared one basin of every other seed). With candidates.CANDIDATE_SPREAD
-#: 16 it took the held-out bumpy sphere's coverage from 93.3 / 91.3 % to 96.6 / 95.6 %
-#: (docs/benchmarks/perturbation.md).
+#: pixels apart share one basin of every other seed; docs/benchmarks/perturbation.md).
 COARSE = 1
 #: ... on a mirror whose seeds all bend one way (convex): a point has one image there,
 #: one minimum of the distance, which a coarser scan finds as well (the hops refine it).
@@ -78,19 +76,15 @@ REFINE_ROUNDS = 12
 #: A candidate whose adaptive seeds leave the history this often gives up (an image
 #: beyond the silhouette, or none). Each miss halves the way back toward the last seed:
 #: 8 reach a twentieth of a pixel, where a grazing image lies (R c^2 / 2 pixels inside
-#: the silhouette of a mirror R pixels across, at cosine c; 4 stopped at 0.75 px).
+#: the silhouette of a mirror R pixels across, at cosine c).
 MAX_MISSES = 8
 #: On a mirror that bends both ways, with adaptive seeds (the numpy path; the GPU twin
 #: scans the grid alone), a candidate is also stepped from the grid seeds in these cells
 #: around its own (``_answer_group``).
 NEIGHBOUR_CELLS = ((-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (1, 1), (1, -1), (-1, 1))
 #: The grid seeds two cells from any candidate's (the ring around those) start Newton's
-#: method on the mesh (``_polished``): of the images still missed on a tuning mirror's
-#: view, 20 of 24 were found walking from a seed within 2.5 cells. Tuning mirrors, two
-#: views each: 99.2 / 99.6 / 99.7 / 98.8 -> 99.3 / 99.7 / 99.8 / 99.5 %, 5 -> 6 s a view
-#: (crowded points' candidates only). Every candidate's: three bumpier mirrors 98.4 /
-#: 99.5 / 98.5 -> 99.1 / 99.5 / 99.2 % (a missed image a few cells from a point's only
-#: candidate), tuning mirrors +0.05 points, about 0.7 s a view.
+#: method on the mesh (``_polished``): most images the steps miss lie within 2.5 cells of
+#: a seed, a few cells from a point's only candidate.
 POLISH_RING_CELLS = tuple((a, b) for a in range(-2, 3) for b in range(-2, 3) if max(abs(a), abs(b)) == 2)
 #: On such a mirror an answer is given when the step from a seed traced through its own
 #: pixel moves it by at most this (px) (``PerturbationMethod._confirm``; adaptive seeds only).
@@ -233,7 +227,7 @@ class PerturbationMethod:
         ``_step``) for a step of half a spacing is over ``accuracy_px`` at no more than
         FINER_SHARE of the seeds. On a bumpy mesh the quadric fitted at a seed misses the
         surface a spacing away (the model error falls slowly with the spacing, the step
-        in proportion), and the grid's answers were refused over half the mirror; adaptive
+        in proportion), and the grid's answers would be refused over half the mirror; adaptive
         seeds (the numpy path) trace rays per answer instead. The candidate scan keeps its
         spacing in pixels (its cost), hops and steps use the finer seeds."""
         coarse_px = group.coarse * group.stride
@@ -306,9 +300,8 @@ class PerturbationMethod:
         crowded = self.settings.adaptive_seeds and group.coarse != COARSE_CONVEX  # the numpy path, bending both ways
         # Near a fold the first-order hop can carry a candidate cells away from its image,
         # onto another image's seeds: the seed it was found at starts Newton on the mesh
-        # too. Of the images still missed on the tuning mirrors away from the rim, most had
-        # a candidate within a cell before its hops (coverage 99.30 / 99.74 / 99.80 /
-        # 99.45 -> 99.63 / 99.74 / 99.80 / 99.60 %, 0.3 s a view).
+        # too: most images missed away from the rim have a candidate within a cell before
+        # its hops.
         walk_from = _left_by_hops(point_of, found_at, seed_of)
         if crowded:
             if group.inner is None:  # the grid's seeds (the rim band's lie RIM_STEP px apart)
@@ -316,7 +309,7 @@ class PerturbationMethod:
                 walk_from = tuple(np.concatenate(pair) for pair in zip(walk_from, around))
             # Two images a few pixels apart can share one candidate (its hops and steps reach
             # one of them); the step from a seed beside it reaches the other. Stepping around
-            # a point's only candidate too cost about 3 s a view more (docs/overview.md).
+            # a point's only candidate too would cost seconds a view more.
             several = np.bincount(point_of)[point_of] > 1
             beside = _around(group, point_of[several], seed_of[several], NEIGHBOUR_CELLS)
             point_of, seed_of = np.concatenate([point_of, beside[0]]), np.concatenate([seed_of, beside[1]])
@@ -394,8 +387,8 @@ class PerturbationMethod:
         the image by at most CONFIRM_PX. An estimate is the series' own guess: among a
         bumpy mirror's crowded images a step from a seed two images away can look
         converged on the wrong one, and a step from the answer's own pixel is short
-        (on the held-out bumpy sphere, with NEIGHBOUR_CELLS: answers farther than a
-        pixel from every exact image 2.2-3.1 -> 1.0-1.1 %, p99 0.5-0.6 -> 0.1 px)."""
+        (about halves the answers farther than a pixel from every exact image on a
+        bumpy mirror)."""
         first, last, estimate, pixel = answer
         asked = np.flatnonzero(estimate <= max(self.settings.accuracy_px, 1e-9))
         traced = self._traced_in(view, group.history, pixel[asked])

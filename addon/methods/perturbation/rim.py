@@ -25,12 +25,9 @@ import numpy as np
 
 #: Grid cells from the footprint's edge the band reaches, inward and outward.
 RIM_CELLS = 1
-#: Pixels between the band's seeds, across and up. Every pixel (1) found images a step
-#: could not reach from a grid seed; with those polished on the mesh from their candidate
-#: seeds (``mesh_polish``), every second pixel finds as many at a quarter of the rays
-#: (tuning mirrors, two views each: coverage 98.4 / 98.9 / 99.2 / 97.1 % before, 99.4 / 99.7 /
-#: 99.7 / 98.6 % polished with every pixel, 99.2 / 99.6 / 99.7 / 98.8 % with every second,
-#: 5 s a view instead of 7-8).
+#: Pixels between the band's seeds, across and up. Every pixel finds images a step cannot
+#: reach from a grid seed; with those polished on the mesh from their candidate seeds
+#: (``mesh_polish``), every second pixel finds nearly as many at a quarter of the rays.
 RIM_STEP = 2
 
 

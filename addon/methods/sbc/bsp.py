@@ -411,8 +411,8 @@ def _within_accuracy(ray_map, model, params, member_ray, member_node, accuracy_p
     nodes' largest errors with the accuracy, for less work: a node fails on its first bad
     sample, so errors are measured on strided probes of the members first and only the
     nodes still passing are measured on more. In the upper levels nearly every node
-    fails the first probe, which is most of the saving (the error samples' Newton
-    inversions were half of a morphing node's build); nodes that are not ``candidates``
+    fails the first probe, which is most of the saving (measuring every sample's Newton
+    inversion would be half of a morphing node's build); nodes that are not ``candidates``
     (ill-posed) are never measured. Each sample is measured as before, so the tree is
     the same.
     """
@@ -453,7 +453,7 @@ def _depth_bands(ray_map, grid, model, params, member_ray, member_node, accuracy
     Where a leaf's rays focus (the neck of a vase, any concave stretch of mirror), they
     cross near their focal distance: a point there lies on several of the leaf's rays
     and its cell is ill-conditioned, so no patch keeps within the accuracy over that
-    depth however small the leaf, and the node used to end as a ray list. Before and
+    depth however small the leaf, and the node would end as a ray list. Before and
     after the crossing the patch holds. Such a node becomes a camera leaf with a *band*:
     the distances along its rays between the nearest passing error samples on either
     side of all its failing ones. Answers in the band, and points whose Newton fails,

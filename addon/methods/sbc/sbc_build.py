@@ -122,8 +122,8 @@ def build_sample_based_camera(reflectors, view: View, bounds, max_order: int = 1
     indices of reflectors whose first-order reflections another method draws in this
     view (the iterative search, a morphing grid): the camera is then made for the higher
     orders they start, and their first-order groups, most of the ray map, get no BSP
-    tree and no traced cells: two facing balls drawn by the search at Max Order 2, 480x320,
-    camera 2.3 -> 1.1 s a frame, the same pixels (docs/benchmarks/view_change.md).
+    tree and no traced cells, which about halves the camera's build for two facing balls
+    drawn by the search at Max Order 2 (docs/benchmarks/view_change.md).
     """
     if int(downsample) < 1:
         raise ValueError(f"downsample must be >= 1, got {downsample}")

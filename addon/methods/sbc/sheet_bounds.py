@@ -19,7 +19,7 @@ per sheet, the diffuse vertices that lie outside it (``gpu_shaders/methods/sbc_t
   so that fixed-size runs of them are spatially compact, and each run's AABB.
 - :func:`chunks_meeting`: the runs whose AABB meets a k-DOP (slab test on the k-DOP's
   directions: conservative, it never drops a run that meets it); :func:`chunks_in_cone`:
-  those that may meet a sheet's bounding cone (``sbc.cones``, :func:`..bsp.ray_cones`:
+  those that may meet a sheet's bounding cone (``sbc.cones``, :func:`.bsp.ray_cones`:
   the engine's own bound, per sheet, of the rays' reach, unbounded beyond the heads).
   The k-DOP is per ray-map group (``sbc.grids`` is shared by the sheets of a group) and
   bounds the far end; the cone separates the sheets of a group.
