@@ -23,13 +23,13 @@ Three passes, all into float targets of the view's size:
    nearer point within an order). Two kinds of source, any mix of them per reflector:
 
    a. a *sample-based camera* (SBC IV): its reflected triangles are made **once per
-      camera** (:mod:`.sbc_triangles`, cached) and drawn every frame with
+      camera** (:mod:`.methods.sbc_triangles`, cached) and drawn every frame with
       ``glsl/reflection_mesh_vert.glsl``; in the camera's own view exactly at its
       projected pixels. From a moved view (a new camera still building) the reflection
       stays on the mirror in world space, nearly right, instead of lagging as pixels of
       the old view;
-   b. the *per-frame passes*: the iterative search (:mod:`.iterative_draw`) and the
-      morphing grids (:mod:`.morph_pass`) answer every vertex on the GPU each frame,
+   b. the *per-frame passes*: the iterative search (:mod:`.methods.iterative_draw`) and the
+      morphing grids (:mod:`.methods.morph_pass`) answer every vertex on the GPU each frame,
       and :mod:`.reflected_meshes` draws the meshes at their answers.
 
    The fragment stage keeps only pixels whose pre-pass id is the vertex's first
@@ -52,7 +52,7 @@ The sample-based camera cannot place a reflection in the last ray-map cell befor
 footprint's edge (the silhouette, or an object in front of the mirror), nor between
 ray-map cells of different reflection histories inside a footprint (where another
 mirror's reflection begins): a projection needs four neighbouring rays of one group.
-:meth:`ReflectionRenderer.render` ray traces those pixels on the CPU (:mod:`.band_trace`,
+:meth:`ReflectionRenderer.render` ray traces those pixels on the CPU (:mod:`..addon.geometry.band_trace`,
 shaded alike), and every pixel where the camera knows it is unreliable (a traced colour
 wins); :meth:`ReflectionRenderer.draw` (for a viewport) fills the band from the nearest
 reflected pixel instead. ``trace_edges`` traces every pixel next to a drawn reflection too.
@@ -469,7 +469,7 @@ class ReflectionRenderer:
     def projection(self, textures, camera_view, camera=None) -> CachedProjection:
         """The reflected triangles of ``textures``'s camera, built in ``camera_view``:
         the cached ones when they were made from these textures (the last
-        :data:`.sbc_triangles.CACHED_PROJECTIONS` cameras drawn are kept: one per viewport region),
+        :data:`.methods.sbc_triangles.CACHED_PROJECTIONS` cameras drawn are kept: one per viewport region),
         else made now."""
         cached = self.sbc.projection(textures, camera_view, camera)
         self.stats.update(cached.stats)
@@ -521,7 +521,7 @@ class ReflectionRenderer:
     def trace_band(self, view, targets: FrameTargets, max_order: int, world_color, radius: int,
                    edges_of_drawn: bool = False, ray_map=None, camera=None, holes_of=()) -> int:
         """Trace the reflector pixels along each footprint's edge that got no reflection
-        (:mod:`.band_trace`): reads the pre-pass ids and the reflection coverage back,
+        (:mod:`..addon.geometry.band_trace`): reads the pre-pass ids and the reflection coverage back,
         traces those pixels on the CPU and uploads their colours for the composite. With
         the camera's ``ray_map``, also those between ray-map cells of different histories
         (:func:`band_trace.history_boundary`: the edge of a second-order reflection inside
@@ -590,7 +590,7 @@ class ReflectionRenderer:
 
         ``sbc_or_textures``: a ``SampleBasedCamera`` built for this view, its
         ``projection.SBCTextures``, another projection source of this view
-        (:class:`.morph_source.MorphSource`), or ``None`` when
+        (:class:`.methods.morph_source.MorphSource`), or ``None`` when
         the per-frame passes (iterative search, morphing grids) draw every reflector.
         With ``trace`` the band along each footprint's edge that the camera cannot reach
         (d pixels wide) is ray traced (:meth:`trace_band`; on a searched mirror, the pixels

@@ -33,28 +33,6 @@ import pytest
 REPO_ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("addon", "gpu_shaders", "operators")
 
-#: Stale references in modules another change is rewriting (operators/render_image.py,
-#: operators/live*.py, operators/methods.py, operators/accuracy.py, operators/panel.py,
-#: gpu_shaders/reflection_draw.py, gpu_shaders/frame_pass.py: the frame pipeline and the
-#: method registry), left for that change to fix: (file, reference as written). Whoever
-#: fixes one removes its entry; ``test_every_exemption_is_still_needed`` fails on an
-#: entry that no longer occurs, so this set only shrinks. Empty it; do not add to it.
-EXEMPT = {
-    ("operators/render_image.py", "addon/band_trace.shade"),
-    ("gpu_shaders/reflection_draw.py", ":mod:`..addon.sheet_bounds`"),
-    ("gpu_shaders/reflection_draw.py", ":mod:`.band_trace`"),
-    ("gpu_shaders/reflection_draw.py", ":mod:`.sbc_triangles`"),
-    ("gpu_shaders/reflection_draw.py", ":mod:`.iterative_draw`"),
-    ("gpu_shaders/reflection_draw.py", ":mod:`.morph_pass`"),
-    ("gpu_shaders/reflection_draw.py", ":data:`.sbc_triangles.CACHED_PROJECTIONS`"),
-    ("gpu_shaders/reflection_draw.py", ":class:`.morph_source.MorphSource`"),
-}
-
-#: Modules the docs describe that a change in progress introduces (the frame pipeline
-#: and the method registry, docs/overview.md): the docs may name them before they exist.
-#: ``test_pending_modules_do_not_exist_yet`` fails once one exists: then remove it here.
-PENDING = {"operators/frame_pipeline.py", "operators/method_registry.py"}
-
 #: Extensions of the files a path may name; a path without one must start with one of
 #: ROOTS (a folder, or ``path/module.attribute``).
 EXTENSIONS = ("py", "glsl", "md", "json", "toml", "png", "txt")
@@ -196,29 +174,19 @@ def _unresolved_references(path: Path, text: str | None = None) -> list:
 
 def test_every_path_in_the_docs_exists():
     names = _all_file_names()
-    missing = [m for path in _doc_files() for m in _missing_paths(path, names) if m[1] not in PENDING]
+    missing = [m for path in _doc_files() for m in _missing_paths(path, names)]
     assert missing == [], "paths in the docs that name nothing:\n" + "\n".join(map(str, missing))
 
 
 def test_every_path_in_the_extensions_docstrings_and_comments_exists():
     names = _all_file_names()
-    missing = [m for path in _source_files() for m in _missing_paths(path, names) if m not in EXEMPT]
+    missing = [m for path in _source_files() for m in _missing_paths(path, names)]
     assert missing == [], "paths in the source that name nothing:\n" + "\n".join(map(str, missing))
 
 
 def test_every_module_reference_in_the_docstrings_resolves():
-    unresolved = [m for path in _source_files() if path.suffix == ".py" for m in _unresolved_references(path)
-                  if m not in EXEMPT]
+    unresolved = [m for path in _source_files() if path.suffix == ".py" for m in _unresolved_references(path)]
     assert unresolved == [], "references that do not resolve:\n" + "\n".join(map(str, unresolved))
-
-
-def test_every_exemption_is_still_needed():
-    names = _all_file_names()
-    found = set()
-    for name, _ in EXEMPT:
-        path = REPO_ROOT / name
-        found |= set(_missing_paths(path, names)) | set(_unresolved_references(path))
-    assert EXEMPT <= found, f"fixed; remove from EXEMPT: {sorted(EXEMPT - found)}"
 
 
 def test_the_docs_describe_the_code_not_its_history():
@@ -232,10 +200,6 @@ def test_the_docs_describe_the_code_not_its_history():
     pages = sorted((REPO_ROOT / "docs" / "benchmarks").glob("*.md"))
     assert {p.name: history.findall(p.read_text(encoding="utf-8")) for p in pages if
             history.search(p.read_text(encoding="utf-8"))} == {}
-
-
-def test_pending_modules_do_not_exist_yet():
-    assert [name for name in sorted(PENDING) if (REPO_ROOT / name).exists()] == [], "it exists: remove it from PENDING"
 
 
 def test_the_checks_find_what_they_should():
