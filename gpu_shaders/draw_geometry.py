@@ -14,6 +14,7 @@ import numpy as np
 
 from ..addon.methods.sbc import sheet_bounds
 from ..addon.geometry import closed_surfaces, subdivision
+from ..addon.scene import vertex_normals
 
 #: Float targets hold vertex indices exactly below 2^24.
 MAX_VERTICES = 1 << 24
@@ -71,8 +72,6 @@ def _sorted_by_image(triangles: np.ndarray, image: np.ndarray) -> tuple[np.ndarr
 
 def _mesh_attributes(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Normals (N, 3) (the mesh's, else smooth ones from its faces), UVs (N, 2) and lit (N,)."""
-    from ..addon.scene import vertex_normals
-
     normals = mesh.normals if getattr(mesh, "normals", None) is not None else vertex_normals(
         mesh.vertices, mesh.triangles)
     uvs = mesh.uvs if mesh.uvs is not None else np.zeros((len(mesh.vertices), 2))

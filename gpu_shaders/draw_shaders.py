@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import functools
 
+import gpu
+
 from ..addon.geometry import band_trace
 from .methods import projection
 from .shader_sources import glsl_source
@@ -51,8 +53,6 @@ def shading_source() -> str:
 
 @functools.cache
 def _build_prepass():
-    import gpu
-
     interface = gpu.types.GPUStageInterfaceInfo("curved_reflections_prepass_interface")
     interface.smooth('VEC4', "color_interp")
     interface.flat('VEC4', "label_interp")
@@ -81,8 +81,6 @@ def _build_prepass():
 
 @functools.cache
 def _build_project():
-    import gpu
-
     interface = gpu.types.GPUStageInterfaceInfo("curved_reflections_project_interface")
     interface.flat('VEC4', "projected")
     interface.flat('VEC4', "projected_eye")
@@ -108,8 +106,6 @@ def _build_project():
 def reflected_interface(name: str, searched: bool = False):
     """The varyings of a reflected-mesh vertex stage, read by ``glsl/reflection_mesh_frag.glsl``;
     ``searched`` adds the per-frame passes' interpolated validity."""
-    import gpu
-
     interface = gpu.types.GPUStageInterfaceInfo(name)
     interface.smooth('VEC4', "color_interp")
     interface.smooth('VEC3', "normal_interp")
@@ -132,8 +128,6 @@ def reflected_fragment_source(defines: str = "") -> str:
 
 @functools.cache
 def _build_reflected():
-    import gpu
-
     interface = reflected_interface("curved_reflections_reflected_interface")
     info = gpu.types.GPUShaderCreateInfo()
     info.push_constant('MAT4', "view_projection")
@@ -162,8 +156,6 @@ def _build_reflected():
 
 @functools.cache
 def _build_composite():
-    import gpu
-
     info = gpu.types.GPUShaderCreateInfo()
     info.push_constant('VEC4', "world_color")
     info.push_constant('VEC4', "rect")

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 
+import gpu
 import numpy as np
 
 from .methods import sbc_pack
@@ -18,8 +19,6 @@ from .methods import sbc_pack
 
 def vertex_buffer(attributes: dict):
     """A GPUVertBuf from {name: (array, comp_type, fetch_mode)}."""
-    import gpu
-
     vertex_format = gpu.types.GPUVertFormat()
     count = None
     for name, (array, comp_type, fetch_mode) in attributes.items():
@@ -35,8 +34,6 @@ def vertex_buffer(attributes: dict):
 def data_texture(values: np.ndarray, width: int | None = None):
     """An RGBA32F texture of ``values`` (N, <= 4) one texel each, rows of ``width``
     texels (default: up to the packer's texture width), or of an (H, W, 4) image."""
-    import gpu
-
     values = np.asarray(values, dtype=np.float32)
     if values.ndim == 3:
         height, width = values.shape[:2]
@@ -72,8 +69,6 @@ def read_depth(framebuffer, width: int, height: int) -> np.ndarray:
 @contextlib.contextmanager
 def saved_state():
     """Restore viewport, depth test, depth writes and blending (a draw handler's state)."""
-    import gpu
-
     saved = (gpu.state.viewport_get(), gpu.state.depth_test_get(), gpu.state.depth_mask_get(),
              gpu.state.blend_get())
     try:
@@ -87,6 +82,4 @@ def saved_state():
 
 def points_batch(positions: np.ndarray):
     """A POINTS batch of (N, 3) float32 positions (the projection pass's input)."""
-    import gpu
-
     return gpu.types.GPUBatch(type='POINTS', buf=vertex_buffer({"position": (positions, 'F32', 'FLOAT')}))

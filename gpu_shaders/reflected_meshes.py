@@ -17,10 +17,13 @@ from __future__ import annotations
 import functools
 import math
 
+import gpu
 import numpy as np
 
 from ..addon.methods.iterative import search as search_module
+from .draw_shaders import reflected_fragment_source, reflected_interface, shading_source
 from .frame_pass import REFLECTION_COSINE
+from .gpu_data import data_texture, read_texture, vertex_buffer
 from .shader_sources import glsl_source
 
 #: Texels per row of the vertex and answer textures.
@@ -56,10 +59,6 @@ def reflected_shader(law_test: bool = True, hidden_test: bool = True):
     """The reflected meshes' shader, built on first use (fragment stage shared with the
     sample-based camera's reflected meshes), with or without the fragment stage's
     law-of-reflection and hidden-point tests (:func:`fragment_tests`)."""
-    import gpu
-
-    from .draw_shaders import reflected_fragment_source, reflected_interface, shading_source
-
     interface = reflected_interface("curved_reflections_iterative_interface", searched=True)
     info = gpu.types.GPUShaderCreateInfo()
     # In this order 120 bytes, within the 128 Vulkan guarantees (Blender counts 128).
@@ -144,10 +143,6 @@ class ReflectedMeshes:
         return self._positions
 
     def _ensure(self) -> None:
-        import gpu
-
-        from .gpu_data import data_texture, vertex_buffer
-
         if self._positions is not None:
             return
         g = self.geometry
@@ -162,8 +157,6 @@ class ReflectedMeshes:
 
     def answer_texture(self):
         """A new answer texture, one RGBA32F texel per vertex."""
-        import gpu
-
         return gpu.types.GPUTexture((self.width, self.height), format='RGBA32F')
 
     def work_groups(self, local_size: int) -> tuple:
@@ -191,8 +184,6 @@ class ReflectedMeshes:
         point, is dropped before it is rasterised (:data:`SNAP_SHARE`). A vertex without
         an answer goes to the centre of its cell of a coarser grid, always
         (:data:`UNANSWERED_CELLS`)."""
-        import gpu
-
         answers = list(answers)
         self._ensure()
         if self._batch is None or not answers:
@@ -230,8 +221,6 @@ class ReflectedMeshes:
     def read(self, texture) -> tuple[np.ndarray, np.ndarray]:
         """An answer texture read back: (N, 3) world points (NaN where no answer) and the
         (N,) int64 codes."""
-        from .gpu_data import read_texture
-
         texels = read_texture(texture, self.width, self.height).reshape(-1, 4)[:self.n_vertices]
         texels = texels.astype(np.float64)
         code = texels[:, 3].astype(np.int64)

@@ -83,6 +83,7 @@ from __future__ import annotations
 import functools
 import time
 
+import gpu
 import numpy as np
 
 from ..addon.geometry import band_trace, subdivision
@@ -128,8 +129,6 @@ class FrameTargets:
     """Float textures and framebuffers of one frame size (reusable from frame to frame)."""
 
     def __init__(self, width: int, height: int):
-        import gpu
-
         self.width, self.height = int(width), int(height)
         size = (self.width, self.height)
         self.prepass_colors = gpu.types.GPUTexture(size, format='RGBA32F')
@@ -157,8 +156,6 @@ class FrameTargets:
     def output(self):
         """(texture, framebuffer) that :meth:`ReflectionRenderer.render` composites into."""
         if self._output is None:
-            import gpu
-
             texture = gpu.types.GPUTexture((self.width, self.height), format='RGBA32F')
             self._output = (texture, gpu.types.GPUFrameBuffer(color_slots=(texture,)))
         return self._output
@@ -173,8 +170,6 @@ def _showing(labels: np.ndarray, reflectors) -> np.ndarray:
 def _scissor_set(box: tuple | None) -> None:
     """The bound framebuffer's scissor (Blender keeps it per framebuffer): ``box`` (x, y,
     width, height), or none."""
-    import gpu
-
     gpu.state.scissor_test_set(box is not None)
     if box is not None:
         gpu.state.scissor_set(*box)
@@ -237,8 +232,6 @@ class ReflectionRenderer:
 
     def _make_batches(self) -> dict:
         """Vertex buffers of the pre-pass and of the full-screen triangle, and the images."""
-        import gpu
-
         g = self.geometry
         batches = {}
         if len(g.prepass_triangles):
@@ -316,8 +309,6 @@ class ReflectionRenderer:
         which holds the scene as Blender drew it: what stands in front of a mirror hides
         its reflection there, and the scene is not drawn a second time.
         """
-        import gpu
-
         if fill_radius is None:
             fill_radius = 0 if textures is None else textures.downsample
         targets = self.targets(view.width, view.height)
@@ -369,8 +360,6 @@ class ReflectionRenderer:
         ``scissor``: (x, y, width, height), the only pixels cleared and drawn (an
         overlay's, around its mirrors; the rest of the targets keeps old values).
         """
-        import gpu
-
         if self._batches is None:
             self._batches = self._make_batches()
         batches, g = self._batches, self.geometry
@@ -491,8 +480,6 @@ class ReflectionRenderer:
         mirrors' own triangles instead of one rectangle cost twice as much on llvmpipe
         with the band's fill: small triangles shade their pixels in partly covered
         blocks.)"""
-        import gpu
-
         if self._batches is None:
             self._batches = self._make_batches()
         with saved_state():

@@ -6,6 +6,7 @@ the screen a bounding box can cover (``reflection_draw.py``)."""
 from __future__ import annotations
 
 import numpy as np
+from mathutils import Matrix
 
 #: A viewport overlay's mirror pixels are depth-tested against the scene's depth as if
 #: this share of their distance nearer (:func:`depth_bias`): 1 cm at 10 m.
@@ -28,8 +29,6 @@ def box_corners(points: np.ndarray) -> np.ndarray:
 def view_projection(view, shift):
     """The view's projection times view matrix, applied to positions relative to ``shift``
     (folded in float64, so that large world coordinates keep their precision in float32)."""
-    from mathutils import Matrix
-
     translate = np.eye(4)
     translate[:3, 3] = shift
     return Matrix((np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix) @ translate).tolist())

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import gpu
 import numpy as np
 
 from ..addon.geometry import band_trace
@@ -41,8 +42,6 @@ def traced_rgba(tracer, view: View, pixels: np.ndarray, max_order: int, world_co
 def traced_texture(width: int, height: int, pixels: np.ndarray, rgba: np.ndarray):
     """A (width x height) RGBA32F texture holding ``rgba`` at ``pixels``, zero (untraced)
     elsewhere."""
-    import gpu
-
     image = np.zeros((height, width, 4), np.float32)
     image[pixels[:, 1], pixels[:, 0]] = rgba
     return gpu.types.GPUTexture((width, height), format='RGBA32F',

@@ -21,6 +21,7 @@ import numpy as np
 from mathutils import Matrix
 
 from ..addon.errors import SceneInputError
+from ..addon.metrics import srgb_to_linear
 from ..addon.scene import DiffuseMesh, Reflector, vertex_normals
 from ..addon.view import View
 from .material_color import MaterialColor, material_color
@@ -294,8 +295,6 @@ def _image_pixels(image) -> np.ndarray:
     """(H, W, 4) float32 linear RGBA of a ``bpy.types.Image``, rows bottom to top.
 
     Byte images store display values in their colour space; an sRGB one is linearised."""
-    from ..addon.metrics import srgb_to_linear
-
     width, height = image.size
     if width == 0 or height == 0:
         raise SceneInputError(image.name, "is an image texture without pixels (missing file?)")

@@ -15,14 +15,13 @@ Blender aborts the whole process instead of raising).
 from __future__ import annotations
 
 import bpy
+import gpu
 
 _NAME = "curved_reflections_gpu_init"
 
 
 def gpu_ready() -> bool:
     """Whether ``gpu`` drawing calls work now (no side effects beyond a 4x4 offscreen)."""
-    import gpu
-
     try:
         gpu.types.GPUOffScreen(4, 4).free()
     except SystemError:

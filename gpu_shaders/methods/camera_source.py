@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .projection import reflected_depth
+from .reflected_depth import reflected_depth
 
 
 class CameraSource:

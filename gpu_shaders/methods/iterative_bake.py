@@ -36,11 +36,13 @@ from __future__ import annotations
 
 import functools
 
+import gpu
 import numpy as np
 
 from ...addon.geometry.closed_surfaces import is_convex
 from ...addon.methods.iterative.reflector_map import MapBake, ReflectorMap
 from ...addon.geometry.vectors import cross
+from ..gpu_data import read_texture, vertex_buffer
 
 #: A texel crosses the surface again where its last crossing lies farther than its first
 #: by more than this share of the reflector's size (bounding-box diagonal).
@@ -93,8 +95,6 @@ void main()
 
 @functools.cache
 def _bake_shader():
-    import gpu
-
     interface = gpu.types.GPUStageInterfaceInfo("curved_reflections_map_bake_interface")
     interface.smooth('VEC3', "position_interp")
     interface.smooth('VEC3', "normal_interp")
@@ -137,10 +137,6 @@ def _face_normals(vertices, triangles) -> np.ndarray:
 def _triangle_batch(vertices, triangles, normals, centre, face_normals):
     """An un-indexed TRIS batch: positions relative to O, vertex normals, and each
     triangle's plane (geometric normal, offset from O) on its three corners."""
-    import gpu
-
-    from ..gpu_data import vertex_buffer
-
     corners = triangles.reshape(-1)
     relative = vertices[corners] - centre
     offsets = np.einsum("tk,tk->t", face_normals, vertices[triangles[:, 0]] - centre)
@@ -156,8 +152,6 @@ def _triangle_batch(vertices, triangles, normals, centre, face_normals):
 def _draw_faces(framebuffer, shader, batch, uniforms, depth_test: str, clear_depth: float) -> None:
     """Clear the atlas target and draw the six face cameras into their rows; the
     viewport, depth and blend state are restored afterwards."""
-    import gpu
-
     size, near, inverse_far = uniforms
     side = size + 2
     saved = (gpu.state.viewport_get(), gpu.state.depth_test_get(), gpu.state.depth_mask_get(),
@@ -195,10 +189,6 @@ def _draw_faces(framebuffer, shader, batch, uniforms, depth_test: str, clear_dep
 def bake_reflector_map_gpu(reflector, centre, face_size: int) -> MapBake:
     """The ``MapBake`` of ``bake_reflector_map(ReflectorSet([reflector]), centre, face_size)``,
     rasterised on the GPU (which must be ready: ``operators.gpu_init.ensure_gpu``)."""
-    import gpu
-
-    from ..gpu_data import read_texture
-
     size = int(face_size)
     side = size + 2
     centre = np.asarray(centre, dtype=np.float64)

@@ -18,10 +18,12 @@ from __future__ import annotations
 
 import functools
 
+import gpu
 import numpy as np
 
 from ...addon.methods.iterative import search as search_module
 from ..frame_pass import FramePass, PassInputs
+from ..gpu_data import data_texture
 from ..reflected_meshes import FLIPPED_CODE, ReflectedMeshes
 from ..shader_sources import glsl_source
 
@@ -42,8 +44,6 @@ def search_defines() -> dict:
 @functools.cache
 def search_shader():
     """The compute shader of the search, built on first use."""
-    import gpu
-
     info = gpu.types.GPUShaderCreateInfo()
     info.push_constant('VEC4', "camera")
     info.push_constant('VEC4', "w_row")
@@ -68,8 +68,6 @@ class MapAtlas:
     search reads its own map and the others', which may block its reflected segments."""
 
     def __init__(self, methods, shift):
-        from ..gpu_data import data_texture
-
         maps = [m.reflector_map for m in methods]
         width = max(rmap.texels.shape[1] for rmap in maps)
         rows = np.cumsum([0] + [rmap.texels.shape[0] for rmap in maps])
@@ -148,8 +146,6 @@ class IterativePass(FramePass):
         """This frame's search: one dispatch per reflector, into its result texture.
         ``warm``: each vertex starts from its last answer (a viewport whose view moves
         a little each frame); cold, the answer depends on this view alone."""
-        import gpu
-
         if self.n_vertices == 0 or not self.methods:
             return
         self._ensure()

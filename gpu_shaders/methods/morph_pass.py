@@ -30,6 +30,7 @@ import functools
 import math
 from collections import OrderedDict
 
+import gpu
 import numpy as np
 
 from ...addon.methods.morphing import morph_grid, morph_surface, morphing
@@ -37,8 +38,10 @@ from ...addon.baking.bake_cache import CacheError
 from ...addon.geometry.closed_surfaces import ConvexMirrors
 from ...addon.frame_settings import DEFAULT_MORPH_BUDGET_MB
 from ..frame_pass import FramePass, PassInputs
+from ..gpu_data import data_texture
 from ..reflected_meshes import FOUND_CODE, ReflectedMeshes
 from ..shader_sources import glsl_source, normal_equations_glsl
+from .polish_gpu import GPUImagePolish, polish_answers
 
 #: Image slots per vertex and grid: a convex mirror shows a point once, a concave one
 #: two or three times.
@@ -100,8 +103,6 @@ def blend_shader(n_nodes: int = 4, regular: int = SLOTS, widened: int = SLOTS, b
     built on first use: llvmpipe pays for every loop iteration over slots, filled or not
     (``glsl/morph_blend.glsl``), so each pair gets its own (a convex mirror's cells use
     one or two of them)."""
-    import gpu
-
     info = gpu.types.GPUShaderCreateInfo()
     info.push_constant('INT', "n_vertices")
     info.push_constant('INT', "positions_width")
@@ -162,8 +163,6 @@ class NodeTextures:
     def put(self, key, slots: np.ndarray, width: int, rows: int, keep=()) -> None:
         """Upload a node's (P, 2 SLOTS, 3) images under ``key`` (:func:`node_texels`);
         drop the least recently used (but ``keep``) while over the budget."""
-        from ..gpu_data import data_texture
-
         texels = node_texels(slots, width, rows)
         used = np.isfinite(slots[..., 0]).any(axis=0)
         counts = tuple(int(np.max(np.flatnonzero(part), initial=-1)) + 1 for part in (used[:SLOTS], used[SLOTS:]))
@@ -328,8 +327,6 @@ class MorphPass(FramePass):
         """This frame's blend for every grid covering ``view`` (one dispatch each) but
         those of the reflectors in ``skip``; returns the reflector indices drawn from a
         grid in this view."""
-        import gpu
-
         self._drawn = []
         if self.meshes.n_vertices == 0 or not self.grids:
             return []
@@ -383,8 +380,6 @@ class MorphPass(FramePass):
         curvature changes within a cell (a rounded box), and polished lands on the exact
         solver's reflections (tests/gpu_shaders/methods/test_morph_pass.py; figures in
         docs/benchmarks/octree.md, its cost in docs/benchmarks/view_change.md)."""
-        from .polish_gpu import GPUImagePolish, polish_answers
-
         polish = grid.image_polish
         if not isinstance(polish, GPUImagePolish):
             polish = self._own_polish = self._own_polish or GPUImagePolish()
@@ -392,8 +387,6 @@ class MorphPass(FramePass):
 
     def _frame_buffer(self, n_nodes: int):
         """The uniform buffer of the blend's parameters for cells of ``n_nodes`` nodes."""
-        import gpu
-
         if n_nodes not in self._uniforms:
             size = frame_floats(n_nodes)
             self._uniforms[n_nodes] = gpu.types.GPUUniformBuf(gpu.types.Buffer('FLOAT', size))

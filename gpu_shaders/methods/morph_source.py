@@ -27,7 +27,7 @@ import numpy as np
 
 from . import projection
 from .morph_pass import SLOTS
-from .projection import reflected_depth
+from .reflected_depth import reflected_depth
 
 #: Images of one point in one reflector drawn at most (sheets per grid), as on the GPU.
 MAX_IMAGES = SLOTS

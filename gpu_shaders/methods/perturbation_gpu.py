@@ -19,9 +19,11 @@ from __future__ import annotations
 
 import functools
 
+import gpu
 import numpy as np
 
 from ...addon.methods.perturbation import answers, candidates, projector
+from ..gpu_data import data_texture
 from ..reflected_meshes import FOUND_CODE
 from ..shader_sources import glsl_source
 
@@ -53,8 +55,6 @@ def step_defines() -> dict:
 @functools.cache
 def step_shader():
     """The compute shader of the step, built on first use."""
-    import gpu
-
     info = gpu.types.GPUShaderCreateInfo()
     info.push_constant('INT', "n_vertices")
     info.push_constant('INT', "positions_width")
@@ -128,10 +128,6 @@ class PerturbationStep:
         """The answer textures of ``group`` (a first-order ``SeedGroup``) in ``view``, one
         per image rank (kept per history and written again by the next view's call);
         ``surface``: the reflector's exact surface (adaptive seeds in the shader)."""
-        import gpu
-
-        from ..gpu_data import data_texture
-
         shift = self.meshes.geometry.shift
         seeds = data_texture(seed_texels(group, shift))
         grid = data_texture(group.grid.reshape(-1, 1).astype(np.float32))

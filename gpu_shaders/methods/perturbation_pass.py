@@ -13,11 +13,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...addon.methods.perturbation import PerturbationMethod, PerturbationSettings
+from ...addon.methods.perturbation import PerturbationMethod, PerturbationSettings, PerturbationStats
 from ...addon.methods.perturbation.projector import grazing
 from ...addon.geometry.raytrace import ReflectorSet
 from ..frame_pass import FramePass, PassInputs
+from ..gpu_data import data_texture
 from ..reflected_meshes import FOUND_CODE, ReflectedMeshes
+from .perturbation_gpu import RANKS, PerturbationStep
 
 
 class PerturbationPass(FramePass):
@@ -81,9 +83,6 @@ class PerturbationPass(FramePass):
         adaptive seeds meet a sphere or ellipsoid (a quadric) in closed form and assume no
         other mirror blocks their rays; on a superquadric it traces none, as on a mesh, and
         the seeds are traced finer where their model errs (``PerturbationMethod.fine_enough``)."""
-        from ...addon.methods.perturbation import PerturbationStats
-        from .perturbation_gpu import RANKS, PerturbationStep
-
         if self._step is None:
             self._step = PerturbationStep(self.meshes)
         self.engine.stats = PerturbationStats()
@@ -105,8 +104,6 @@ class PerturbationPass(FramePass):
     def _in_numpy(self, view) -> list:
         """Every vertex's step in numpy, uploaded (orthographic views; the reference);
         images grazing the mirror are not drawn (``projector.grazing``), as on the GPU."""
-        from ..gpu_data import data_texture
-
         projection = self.engine.project(view, self.geometry.vertices, [(m.index,) for m in self.methods])
         answers = []
         for g, history in enumerate(projection.groups):

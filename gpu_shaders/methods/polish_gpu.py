@@ -16,10 +16,12 @@ from __future__ import annotations
 import functools
 from collections import OrderedDict
 
+import gpu
 import numpy as np
 
 from ...addon.methods.morphing.image_polish import FRAME_POLISH_ROUNDS
 from ...addon.reference import exact
+from ..gpu_data import data_texture, read_texture
 from ..shader_sources import glsl_source
 
 #: Invocations per work group (along x).
@@ -65,8 +67,6 @@ def polish_shader(frame_answers: bool = False):
     rows into a result texture, or with ``frame_answers`` of a frame's answer texture in
     place (``FRAME_ANSWERS``: each vertex's blended answer, up to FRAME_POLISH_ROUNDS
     triangles from it)."""
-    import gpu
-
     width, rows, result, access = (("positions_width", "vertex_positions", "answers", {'READ', 'WRITE'})
                                    if frame_answers else ("work_width", "work", "result", {'WRITE'}))
     info = gpu.types.GPUShaderCreateInfo()
@@ -89,8 +89,6 @@ def polish_answers(tables: tuple, eye, to_mirror: np.ndarray, meshes, answers) -
     ``tables`` (:meth:`GPUImagePolish.tables`), seen from ``eye``; ``to_mirror`` (4, 4)
     maps the renderer's coordinates to the mirror's (``eye`` is in them). An answer not
     placed is dropped."""
-    from ..gpu_data import data_texture
-
     centre, grid_rows = tables[2:]
     to_table = np.eye(4)
     to_table[:3, 3] = -centre
@@ -106,8 +104,6 @@ def _dispatch_polish(tables: tuple, params, n_rows: int, width: int, rows, resul
                      frame_answers: bool = False) -> None:
     """One dispatch of :func:`polish_shader` over ``n_rows`` rows ``width`` to a texel
     row of ``rows`` (the work rows, or the vertices' positions), into ``result``."""
-    import gpu
-
     mirror_texture, cells_texture = tables[:2]
     shader = polish_shader(frame_answers)
     shader.bind()
@@ -170,8 +166,6 @@ class GPUImagePolish:
     def tables(self, mirror) -> tuple:
         """(mirror texture, cells texture, centre, the grid's two rows of ``params``) of
         a mirror, made and uploaded on first use; the last ``capacity`` mirrors kept."""
-        from ..gpu_data import data_texture
-
         entry = self._tables_of.pop(id(mirror), None)
         if entry is None or entry[0] is not mirror:
             centre = mirror_centre(mirror)
@@ -187,10 +181,6 @@ class GPUImagePolish:
     def _dispatch(self, tables: tuple, eye, points, images) -> np.ndarray:
         """(R, 4) float32: (reflection point, 1) of each row, else zeros; positions
         relative to the centre in ``tables`` (:meth:`tables`)."""
-        import gpu
-
-        from ..gpu_data import data_texture, read_texture
-
         params = data_texture(np.array([[*eye, 0.0], *tables[3]]))
         n_rows = len(points)
         width = min(WORK_WIDTH, n_rows)

@@ -14,9 +14,8 @@ module gives that projection to shaders:
 - :func:`project_points` projects points by drawing one point primitive per input
   point into a float target, one texel per point, and reads the texels back: the same
   answer as ``SampleBasedCamera.project``, used by the tests and benchmarks;
-- :func:`reflected_depth` is the depth the renderer's projection pass writes, and
-  :func:`polish_readback` polishes that pass's risky answers on the true rays, as the
-  engine's numpy projection does.
+- :func:`polish_readback` polishes the renderer's projection pass's risky answers on
+  the true rays, as the engine's numpy projection does.
 
 Shaders are built on first use and cached, never at import or register time.
 
@@ -47,12 +46,15 @@ from __future__ import annotations
 import functools
 from dataclasses import dataclass
 
+import gpu
 import numpy as np
 
 from ...addon.methods.sbc import ray_patch, sbc as sbc_module, sbc_cells
 from ...addon.methods.sbc.bsp import CAMERA_LEAF, RAY_LIST_LEAF
+from ..gpu_data import data_texture
 from ..shader_sources import glsl_source
 from . import sbc_pack
+from .reflected_depth import reflected_depth
 
 #: Newton's step tolerance on the GPU (chart coordinates span [-1, 1]; float32 resolves ~1e-7).
 STEP_TOLERANCE = 1e-6
@@ -121,7 +123,7 @@ class SBCTextures:
 
     def __init__(self, sbc):
         self.packed = sbc_pack.pack_sample_based_camera(sbc)
-        self.textures = sbc_pack.build_textures(self.packed)
+        self.textures = {name: data_texture(image) for name, image in self.packed.texture_arrays().items()}
         self.groups = list(sbc.groups)
 
     @property
@@ -166,8 +168,6 @@ void main()
 @functools.cache
 def _point_shader():
     """Projects each vertex and writes its result to the texel of its index (built on first use)."""
-    import gpu
-
     interface = gpu.types.GPUStageInterfaceInfo("curved_reflections_sbc_points_interface")
     interface.flat('VEC4', "projected")
     interface.flat('FLOAT', "distance_out")
@@ -209,8 +209,6 @@ def _read(texture, n: int) -> np.ndarray:
 
 def project_points(textures: SBCTextures, points) -> GPUProjection:
     """Project world points (P, 3) in every group on the GPU (float32 input)."""
-    import gpu
-
     points = np.ascontiguousarray(points, dtype=np.float32)
     if points.ndim != 2 or points.shape[1] != 3:
         raise ValueError(f"points must be a (P, 3) array, got shape {points.shape}")
@@ -267,12 +265,6 @@ def project_points(textures: SBCTextures, points) -> GPUProjection:
     finally:
         del framebuffer, projected, distance, batch, buffer
     return result
-
-
-def reflected_depth(order: int, distance: np.ndarray, setup: dict) -> np.ndarray:
-    """The depth that orders reflections, as ``glsl/reflection_project_vert.glsl`` writes it:
-    (k - 1 + z / D) g (SBC paper V-A), z the distance along the reflected ray."""
-    return (order - 1 + np.clip(distance * setup["inverse_diameter"], 0.0, 1.0)) * setup["order_range"]
 
 
 def polish_readback(camera, positions, draws: list, points: np.ndarray, eyes: np.ndarray, setup: dict) -> None:

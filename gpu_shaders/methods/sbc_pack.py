@@ -62,7 +62,7 @@ the coefficients, which are already functions of the chart coordinates.
 
 :func:`pack_sample_based_camera` is plain numpy (testable without a GPU);
 :func:`unpack_sample_based_camera` reads the arrays back for tests;
-:func:`build_textures` makes the ``gpu`` textures.
+``projection.SBCTextures`` uploads them as ``gpu`` textures.
 """
 
 from __future__ import annotations
@@ -319,15 +319,3 @@ def unpack_sample_based_camera(packed: PackedSBC) -> tuple[list, dict]:
         })
     return out, {"tail": rays[:, 0, :3], "head_distance": np.abs(rays[:, 0, 3]), "blocked": rays[:, 0, 3] > 0,
                  "direction": rays[:, 1, :3], "first_depth": rays[:, 1, 3]}
-
-
-def build_textures(packed: PackedSBC) -> dict:
-    """``gpu`` RGBA32F textures of the packed arrays, by name (needs an initialised GPU)."""
-    import gpu
-
-    textures = {}
-    for name, image in packed.texture_arrays().items():
-        height, width, _ = image.shape
-        data = gpu.types.Buffer('FLOAT', image.size, image.reshape(-1))
-        textures[name] = gpu.types.GPUTexture((width, height), format='RGBA32F', data=data)
-    return textures

@@ -37,7 +37,9 @@ import functools
 import time
 from dataclasses import dataclass, field
 
+import gpu
 import numpy as np
+from mathutils import Matrix
 
 from ...addon.geometry.closed_surfaces import ConvexMirrors, turned_away
 from ...addon.methods.sbc import sheet_bounds
@@ -127,7 +129,7 @@ class CachedProjection:
     #: Reflectors whose first-order sheets it leaves to the passes run every frame (the
     #: iterative search; the morphing grids covering ``camera_view``).
     per_frame: frozenset = frozenset()
-    #: The depth range per order of its vertices (``projection.reflected_depth``): 1 / (max order + 1).
+    #: The depth range per order of its vertices (``reflected_depth.reflected_depth``): 1 / (max order + 1).
     order_range: float = 1.0
     #: The vertex arrays by attribute, until they are put on the GPU as ``batch``.
     arrays: dict | None = None
@@ -239,8 +241,6 @@ class CameraProjections:
 
     def _uploaded(self, cached: CachedProjection) -> CachedProjection:
         """``cached`` with its vertex arrays in one GPU vertex buffer (main thread)."""
-        import gpu
-
         self.counts["projections"] += 1
         if cached.arrays is not None:
             buffer = vertex_buffer({name: (values, 'F32', 'FLOAT') for name, values in cached.arrays.items()})
@@ -298,8 +298,6 @@ class CameraProjections:
         no GPU call and changes nothing here: a worker thread may run it. ``vertex_batch``:
         the vertices as a GPU batch, for the GPU pass of ``projection.SBCTextures``.
         """
-        from mathutils import Matrix
-
         start = time.perf_counter()
         g = self.geometry
         histories = list(textures.groups)
@@ -367,8 +365,6 @@ class CameraProjections:
         texels offset + index. Returns the two targets read back, (n_texels, 4) each:
         (pixel, depth, valid) and (eye vector, reflected distance)
         (``glsl/reflection_project_vert.glsl``); texels of points not drawn are 0 (invalid)."""
-        import gpu
-
         columns = max(1, min(n_texels, projection.sbc_pack.TEXTURE_WIDTH))
         rows = max(1, -(-n_texels // columns))
         points = gpu.types.GPUTexture((columns, rows), format='RGBA32F')

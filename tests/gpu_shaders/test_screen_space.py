@@ -7,8 +7,6 @@ from curved_reflections.addon.view import look_at_view
 
 
 def test_a_box_is_drawn_over_its_projection_and_over_the_whole_view_from_inside_it():
-    import bpy  # noqa: F401  (mathutils)
-
     from curved_reflections.gpu_shaders.screen_space import FULL_SCREEN, box_corners, box_on_screen
 
     shift = np.array([10.0, 0.0, 0.0])  # positions are relative to the geometry's shift
