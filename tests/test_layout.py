@@ -1,16 +1,36 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""The layout rules of the extension's code (issue 20; ``../shared/DESIGN.md``): no
-import circle between its modules (imports inside functions count: they hide a circle,
-they do not remove it), no module much over 600 lines, and the engine (``addon/``) free
-of Blender. Read from the source with ``ast``; nothing is imported."""
+"""The layout rules of the extension's code (issues 20 and 45; ``../shared/DESIGN.md``):
+no import circle between its modules (imports inside functions count: they hide a
+circle, they do not remove it), imports at the top of their modules, no module over 600
+lines but those listed with their reason, the engine (``addon/``) free of Blender and
+what the live view's worker threads import free of ``gpu``. Read from the source with
+``ast``; nothing is imported."""
 
 import ast
+import io
+import tokenize
 from pathlib import Path
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("addon", "gpu_shaders", "operators")
-#: "No module over about 600 lines" (issue 20): this much over is still "about".
-MAX_LINES = 650
+#: No module over this many lines (issue 20) but those in :data:`OVER_THE_CEILING`.
+MAX_LINES = 600
+#: {module: why it is longer than :data:`MAX_LINES`}. An entry goes once its module is
+#: split (a test fails while a module listed here is no longer over the ceiling).
+OVER_THE_CEILING = {
+    "operators.live": "being split by the frame-pipeline refactor",
+    "gpu_shaders.reflection_draw": "being split by the frame-pipeline refactor",
+    "gpu_shaders.methods.sbc_triangles": "being split by the frame-pipeline refactor",
+}
+#: Imports inside functions other than a module's ``register()`` / ``unregister()``
+#: allowed in all (issue 45), each with its reason in a comment on its line or the line
+#: above: an import circle no better split removes, an optional dependency.
+MAX_LOCAL_IMPORTS = 10
+#: Modules the live view's worker threads import (``operators/live_workers.py``): numpy
+#: work that must import without Blender's ``gpu``, nor reach a module that imports it.
+WORKER_IMPORTS = ("gpu_shaders.methods.camera_source",)
+#: Modules of Blender's own that exist only inside Blender (or the ``bpy`` module).
+BLENDER_MODULES = {"bpy", "gpu", "mathutils", "bmesh"}
 
 
 def _modules() -> dict:
@@ -102,18 +122,102 @@ def test_a_circle_is_found():
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 
 
-def test_no_module_over_about_600_lines():
-    lengths = {name or "__init__": len(path.read_text(encoding="utf-8").splitlines())
-               for name, path in _modules().items()}
-    assert {name: n for name, n in lengths.items() if n > MAX_LINES} == {}
+def _lengths() -> dict:
+    return {name or "__init__": len(path.read_text(encoding="utf-8").splitlines())
+            for name, path in _modules().items()}
+
+
+def test_no_module_over_600_lines_but_those_listed_with_their_reason():
+    over = {name: n for name, n in _lengths().items() if n > MAX_LINES and name not in OVER_THE_CEILING}
+    assert over == {}, f"over {MAX_LINES} lines (split by concept, or list with the reason): {over}"
+    assert all(reason.strip() for reason in OVER_THE_CEILING.values())
+
+
+def test_every_module_listed_over_the_ceiling_still_is():
+    lengths = _lengths()
+    stale = {name: lengths.get(name, "no such module") for name in OVER_THE_CEILING
+             if not (name in lengths and lengths[name] > MAX_LINES)}
+    assert stale == {}, f"listed in OVER_THE_CEILING but not over {MAX_LINES} lines: {stale}"
+
+
+def _local_imports(source: str) -> list:
+    """(line, whether a comment gives its reason) of each import inside a function
+    other than a module-level ``register()`` / ``unregister()``: the comment on one of
+    the import's lines, or alone on the line above."""
+    alone = {}  # {line: whether its comment stands alone on it}
+    for token in tokenize.generate_tokens(io.StringIO(source).readline):
+        if token.type == tokenize.COMMENT:
+            alone[token.start[0]] = not token.line[:token.start[1]].strip()
+    tree = ast.parse(source)
+    found = []
+
+    def visit(node, in_function: bool):
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                if not (node is tree and child.name in ("register", "unregister")):
+                    visit(child, True)
+            elif isinstance(child, (ast.Import, ast.ImportFrom)) and in_function:
+                reason = (any(line in alone for line in range(child.lineno, child.end_lineno + 1))
+                          or alone.get(child.lineno - 1, False))
+                found.append((child.lineno, reason))
+            else:
+                visit(child, in_function)
+
+    visit(tree, False)
+    return found
+
+
+def test_a_local_import_is_found_with_its_reason():
+    source = (
+        "import os\n"
+        "def register():\n    from . import operators\n"
+        "def f():\n    import gpu\n"
+        "    x = 1  # unrelated\n    import bpy\n"
+        "    # the package imports this module\n    from . import b\n"
+        "class C:\n    def g(self):\n        from .a import (x,  # optional\n            y)\n"
+        "        def inner():\n            import numpy\n"
+        "    def register(self):\n        import bmesh\n"
+    )
+    assert _local_imports(source) == [(5, False), (7, False), (9, True), (12, True), (15, False), (17, False)]
+
+
+def test_imports_sit_at_the_top_of_their_modules():
+    found = [(f"{path.relative_to(REPO_ROOT).as_posix()}:{line}", reason) for path in _modules().values()
+             for line, reason in _local_imports(path.read_text(encoding="utf-8"))]
+    unexplained = [where for where, reason in found if not reason]
+    problems = ([f"{len(found)} imports inside functions, at most {MAX_LOCAL_IMPORTS}"]
+                if len(found) > MAX_LOCAL_IMPORTS else []) + (
+        [f"{len(unexplained)} without a comment giving the reason"] if unexplained else [])
+    assert not problems, "; ".join(problems) + ":\n" + "\n".join(
+        where + ("" if reason else "  (no reason given)") for where, reason in found)
+
+
+def _blender_imports(path: Path) -> set:
+    """The modules of :data:`BLENDER_MODULES` that a module imports, anywhere in its source."""
+    roots = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            roots |= {alias.name.split(".")[0] for alias in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            roots.add(node.module.split(".")[0])
+    return roots & BLENDER_MODULES
+
+
+def test_what_the_worker_threads_import_never_touches_the_gpu():
+    modules, graph = _modules(), _graph()
+    for start in WORKER_IMPORTS:
+        reached, waiting = set(), [start]
+        while waiting:
+            name = waiting.pop()
+            if name not in reached:
+                reached.add(name)
+                waiting += graph[name]
+        touching = {name: found for name in sorted(reached) if (found := _blender_imports(modules[name]))}
+        assert touching == {}, (start, touching)
 
 
 def test_the_engine_never_imports_blender():
     for name, path in _modules().items():
         if not name.startswith("addon"):
             continue
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-            if isinstance(node, (ast.Import, ast.ImportFrom)):
-                roots = [a.name.split(".")[0] for a in node.names] if isinstance(node, ast.Import) else (
-                    [node.module.split(".")[0]] if node.level == 0 and node.module else [])
-                assert not set(roots) & {"bpy", "gpu", "mathutils", "bmesh"}, (name, roots)
+        assert _blender_imports(path) == set(), name

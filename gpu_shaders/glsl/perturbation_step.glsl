@@ -1,7 +1,8 @@
 /* SPDX-License-Identifier: GPL-3.0-or-later */
 /* Perturbation (Chen & Arvo 2000), compute stage: every vertex's first-order images
  * from one reflector's seed paths, the float32 twin of
- * addon/methods/perturbation/projector.py for one history of one bounce.
+ * addon/methods/perturbation/projector.py (its steps: taylor_step.py) for one history
+ * of one bounce.
  *
  * One invocation per diffuse vertex (texel of `vertex_positions`):
  *   1. candidates: the local minima, over every coarse-th grid seed, of the distance
@@ -158,7 +159,7 @@ Step take_step(Seed seed, vec3 target, bool second)
   bool reflects = dot(normal, target - step.point) * dot(normal, eye - step.point) > 0.0;
   /* That holds on a convex mirror's far side too (eye and point both behind the tangent
    * plane): the normal there, oriented along the seed's (a step is local), must face the
-   * eye as the seed's does (projector._faces_eye). */
+   * eye as the seed's does (taylor_step._faces_eye). */
   bool faces_eye = dot(normal, grad) * dot(normal, eye - step.point) * dot(grad, eye - y) > 0.0;
   step.estimate = (local && short_step && reachable && reflects && faces_eye && !isnan(estimate)) ? estimate
                                                                                                     : INF;

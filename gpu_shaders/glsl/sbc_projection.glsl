@@ -7,7 +7,7 @@
  *   1. descend the group's BSP tree to a leaf;
  *   2. camera leaf: Newton on the leaf's ray patch t(a, b) + s r(a, b) = p (ray_patch._newton),
  *      accepted on a small residual and a cell within the leaf's cells +- 0.5; a banded
- *      leaf hands answers in its band of s, and failures, to its ray list (sbc.to_fallback);
+ *      leaf hands answers in its band of s, and failures, to its ray list (bsp.to_fallback);
  *      ray-list leaf: the CANDIDATE_CELLS cells whose centre ray passes closest
  *      (sbc._closest_cells), Newton on each in order of distance, the first inside wins;
  *   3. the four rays around the cell must exist in the group and the point must lie
@@ -254,7 +254,7 @@ bool sbc_project(vec3 p, int group, out vec2 pixel, out float first_depth, out f
   vec4 owned = SBC_FETCH(sbc_groups, group * SBC_GROUP_TEXELS + 3);
   int node_offset = int(h0.x);
 
-  /* 1. BSP descent (sbc.descend_tree): plane_normal . p >= plane_offset goes left. */
+  /* 1. BSP descent (bsp.descend_tree): plane_normal . p >= plane_offset goes left. */
   int node = 0;
   int leaf = -1;
   int depth = int(h1.z);
@@ -286,7 +286,7 @@ bool sbc_project(vec3 p, int group, out vec2 pixel, out float first_depth, out f
     bool converged;
     accepted = sbc_project_camera(int(h0.z) + row, p, cell, s, converged);
     /* A banded leaf's answers in its band, where Newton fails and where its fold cell
-     * refuses them come from its ray list (bsp._depth_bands, sbc.to_fallback). */
+     * refuses them come from its ray list (bsp._depth_bands, bsp.to_fallback). */
     bool handed = false;
     if (fallback >= 0) {
       vec4 band = SBC_FETCH(sbc_patches, (int(h0.z) + row) * SBC_PATCH_TEXELS + 14);

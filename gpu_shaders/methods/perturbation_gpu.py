@@ -22,7 +22,7 @@ import functools
 import gpu
 import numpy as np
 
-from ...addon.methods.perturbation import answers, candidates, projector
+from ...addon.methods.perturbation import answers, candidates, projector, taylor_step
 from ..gpu_data import data_texture
 from ..reflected_meshes import FOUND_CODE
 from ..shader_sources import glsl_source
@@ -41,13 +41,13 @@ MAX_CANDIDATES = 6
 
 def step_defines() -> dict:
     """The engine's constants, as the shader's ``#define`` s."""
-    p = projector
+    p, step = projector, taylor_step
     return {"SEED_TEXELS": SEED_TEXELS, "MAX_COLUMNS": MAX_COLUMNS,
             "MAX_CANDIDATES": MAX_CANDIDATES, "CANDIDATE_SPREAD": f"{candidates.CANDIDATE_SPREAD:.9e}", "HOPS": p.HOPS,
             "HOP_SAMPLES": p.HOP_SAMPLES,
-            "REACH": f"{p.REACH:.9e}", "MAX_RELATIVE_STEP": f"{p.MAX_RELATIVE_STEP:.9e}",
-            "BEHIND_START": f"{p.BEHIND_START:.9e}", "GRAZING_COSINE": f"{p.GRAZING_COSINE:.9e}",
-            "MODEL_SAFETY": f"{p.MODEL_SAFETY:.9e}",
+            "REACH": f"{p.REACH:.9e}", "MAX_RELATIVE_STEP": f"{step.MAX_RELATIVE_STEP:.9e}",
+            "BEHIND_START": f"{step.BEHIND_START:.9e}", "GRAZING_COSINE": f"{p.GRAZING_COSINE:.9e}",
+            "MODEL_SAFETY": f"{step.MODEL_SAFETY:.9e}",
             "REFINE_ROUNDS": p.REFINE_ROUNDS, "MAX_MISSES": p.MAX_MISSES,
             "SAME_IMAGE_PX": f"{answers.SAME_IMAGE_PX:.9e}", "FOUND_CODE": f"{float(FOUND_CODE):.1f}"}
 

@@ -77,7 +77,7 @@ def measure(name: str, n_points: int, repeats: int) -> dict:
 
 
 def _share_in_cones(sbc, points) -> float:
-    """Share of the (sheet, point) pairs inside the sheet's bounding cone (``bsp.ray_cones``):
+    """Share of the (sheet, point) pairs inside the sheet's bounding cone (``ray_cones.ray_cones``):
     those that descend its tree (``SampleBasedCamera._sheet_points``)."""
     every = np.arange(len(points))
     inside = sum(len(sbc._sheet_points(g, points, every)) for g in range(len(sbc.trees)))
@@ -115,7 +115,7 @@ def report(results: list, command: str, machine: str) -> str:
                      f"{r['gpu'] / 1e6:.2f} | {r['gpu'] / r['numpy']:.1f}x | {100 * r['agree']:.3f}% | "
                      f"{100 * r['in_cones']:.1f}% | {100 * r['projected']:.1f}% | {r['oracle'] / 1e6:.2f} |")
     lines += ["", "Pairs in cones: share of the (sheet, point) pairs inside the sheet's bounding cone "
-              "(`bsp.ray_cones`), which descend its tree; pairs projected: share with an image there. "
+              "(`ray_cones.ray_cones`), which descend its tree; pairs projected: share with an image there. "
               "Numpy, perfect cull: the same numpy projection with each sheet handed only the points it "
               "projects (an oracle from a first run), a rate no culling of sheets can beat.", "",
               "A point is projected in every group (sheet) of the camera, so scenes with many sheets "

@@ -49,13 +49,13 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..sbc.bsp import CAMERA_LEAF
+from ..sbc.bsp import CAMERA_LEAF, descend_tree, in_band
 from .morph_grid import (NODE_OK, MorphSettings, NodesOnDemand, TetrahedralGrid, _StatusOnDemand, bake_reflector,
                          extended_mirror, from_frame, rigid_frame, to_frame)
 from .image_polish import FRAME_POLISH_ROUNDS, polish_images, polish_regular
 from .morph_surface import POLISHED_RIDGE, QUADRIC_RIDGE, refine_on_local_surface, sphere_prior
 from ..sbc.ray_patch import RayPatches, solve_charts
-from ..sbc.sbc import SampleBasedCamera, descend_tree, in_band
+from ..sbc.sbc import SampleBasedCamera
 from ...scene import Reflector
 from ...view import View
 

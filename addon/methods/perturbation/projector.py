@@ -15,14 +15,14 @@ Per view (section III):
    (else the last one on the way) is taken, until the seed stays. Along a non-convex
    mirror's silhouette, where its images crowd, seeds at every second pixel of a band
    are searched as well (``rim.py``).
-3. *Perturbation*: from the point p on the seed's outgoing ray closest to the vertex
+3. *Perturbation* (``taylor_step.py``): from the point p on the seed's outgoing ray closest to the vertex
    p', the path Jacobian and Hessian give the reflector points of the path to p'
    (eq. 4, ``path_derivatives.py``; orders 2 and more in one system).
 4. *Error estimate*: the series' next term from the last two (e2^2 / e1, in pixels),
    and on a mesh twice the seed's model error (:func:`_model_errors`) times e1. A step
    is trusted only when local (REACH spacings in the image, MAX_RELATIVE_STEP of the
    path in the scene), in front of the next reflector on the ray, and not landing on
-   the surface's far side (:func:`_reflects`).
+   the surface's far side.
 5. *Adaptive seeds*: where the estimate exceeds ``accuracy_px`` a new seed is traced
    toward the predicted pixel (damped to REACH spacings) and the step is taken again
    from it (up to REFINE_ROUNDS times). An answer still above the bound, or whose
@@ -49,9 +49,9 @@ from ...view import View
 from .answers import ranked, repeats
 from .candidates import candidate_images
 from .mesh_polish import walk_to_roots
-from .path_derivatives import perturb
 from .rim import RimBand
-from .seeds import SeedPaths, seed_paths_to, seed_quadrics, trace_seed_paths
+from .seeds import SeedPaths, seed_quadrics, trace_seed_paths
+from .taylor_step import MODEL_SAFETY, first_order_pixels, taylor_step
 
 #: A history with fewer grid seeds is traced again at half the spacing over its footprint.
 MIN_GROUP_SEEDS = 600
@@ -92,15 +92,9 @@ CONFIRM_PX = 1.0
 #: A root found on the mesh (``_polished``) is seen where the eye's ray through its pixel
 #: meets the mirror within this share of the mirrors' size of it.
 SAME_POINT = 1e-6
-#: The longest step trusted, against the distance from the seed's last bounce (radians).
-MAX_RELATIVE_STEP = 0.3
 #: Reflections more grazing than this (cosine to the normal) are not drawn
 #: (:func:`grazing`): the silhouette's last pixel (R / 200 of a mirror R pixels across).
 GRAZING_COSINE = 0.1
-#: A target behind its seed's reflected ray steps from this share of its distance along it.
-BEHIND_START = 0.1
-#: Factor on the mesh model's error term of a step's estimate (``_model_errors``).
-MODEL_SAFETY = 2.0
 #: Answered from the grid alone (no adaptive seeds: the GPU twin on a mesh), a history's
 #: seeds are traced again at half the spacing while this share of them would give a step
 #: of half a spacing an estimate over the accuracy by their model error alone...
@@ -224,7 +218,7 @@ class PerturbationMethod:
     def fine_enough(self, view: View, group: SeedGroup) -> SeedGroup:
         """``group`` traced again at half its spacing until a step from the grid alone can
         meet the accuracy: the estimate's model term (MODEL_SAFETY x model error x step,
-        ``_step``) for a step of half a spacing is over ``accuracy_px`` at no more than
+        ``taylor_step``) for a step of half a spacing is over ``accuracy_px`` at no more than
         FINER_SHARE of the seeds. On a bumpy mesh the quadric fitted at a seed misses the
         surface a spacing away (the model error falls slowly with the spacing, the step
         in proportion), and the grid's answers would be refused over half the mirror; adaptive
@@ -287,10 +281,10 @@ class PerturbationMethod:
         return traced.select(np.flatnonzero((traced.histories == np.array(history)).all(axis=1)))
 
     def _step_from(self, view, traced: SeedPaths, targets, model_error, reach_px):
-        """:meth:`_step` from each of the ``traced`` seeds to its target (its row of
-        ``targets`` and ``model_error``), with the seeds' own quadrics."""
+        """:func:`.taylor_step.taylor_step` from each of the ``traced`` seeds to its target
+        (its row of ``targets`` and ``model_error``), with the seeds' own quadrics."""
         quadrics = seed_quadrics(self.reflector_set, traced, self.analytic)
-        return self._step(view, traced, quadrics, targets, np.arange(len(targets)), model_error, reach_px)
+        return taylor_step(view, traced, quadrics, targets, np.arange(len(targets)), model_error, reach_px)
 
     def _answer_group(self, view, group: SeedGroup, points):
         """The images found from ``group``'s seeds: (K,) point index, (K, 3) first and
@@ -317,7 +311,7 @@ class PerturbationMethod:
         _, first_of = np.unique(point_of * len(group.seeds.pixels) + seed_of, return_index=True)
         point_of, seed_of = point_of[first_of], seed_of[first_of]
         model_error = group.model_error[seed_of]
-        first, last, estimate, pixel = self._step(view, group.seeds, group.quadrics, points[point_of], seed_of,
+        first, last, estimate, pixel = taylor_step(view, group.seeds, group.quadrics, points[point_of], seed_of,
                                                   model_error, REACH * group.stride)
         # Along a convex mirror's edge the distance falls toward the silhouette, and
         # each edge seed is a candidate whose step leaves the mirror: where the point
@@ -436,7 +430,7 @@ class PerturbationMethod:
         origin = np.array(group.origin)
         current = _cells(group, group.seeds.pixels)
         for _ in range(HOPS):
-            pixel = self._first_order_pixels(view, group.seeds, group.quadrics, points[point_of], seed_of)
+            pixel = first_order_pixels(view, group.seeds, group.quadrics, points[point_of], seed_of)
             aim = np.nan_to_num(pixel / group.stride, nan=-1e9) - origin
             start = current[seed_of]
             moved = np.full(len(seed_of), -1, dtype=np.int64)
@@ -449,91 +443,6 @@ class PerturbationMethod:
                 break
             seed_of = moved
         return seed_of
-
-    def _first_order_pixels(self, view, seeds: SeedPaths, quadrics: list, targets, seed_of) -> np.ndarray:
-        """(K, 2) where a first-order step from seeds ``seed_of`` puts ``targets`` (hops)."""
-        paths, _, _ = _paths_toward(view, seeds, quadrics, targets, seed_of)
-        return view.to_pixels(paths.reflector_points[:, -1] + perturb(paths, targets, order=1).first[:, -1])[0]
-
-    def _step(self, view, seeds: SeedPaths, quadrics: list, targets, seed_of, model_error, reach_px):
-        """The Taylor step from seeds ``seed_of`` to ``targets``: first and last reflector
-        points (K, 3), the error estimate (px) and the pixel (K, 2), NaN where the target
-        lies beyond the next reflector on the seed's reflected ray (blocked: the seed
-        cannot lead to an image). ``model_error`` (K,):
-        how far each seed's quadrics miss the surface (:func:`_model_errors`); ``reach_px``:
-        the longest step trusted (REACH seed spacings)."""
-        paths, foot, along = _paths_toward(view, seeds, quadrics, targets, seed_of)
-        step = perturb(paths, targets)
-        seen = paths.reflector_points[:, -1]
-        moves = (0.0, step.first[:, -1], step.first[:, -1] + step.second[:, -1])
-        at = [view.to_pixels(seen + move)[0] for move in moves]
-        e1 = np.linalg.norm(at[1] - at[0], axis=1)
-        e2 = np.linalg.norm(at[2] - at[1], axis=1)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            estimate = np.where(e2 > 0, e2 * e2 / np.maximum(e1, e2), np.where(e2 == 0, 0.0, np.inf))
-        # On a mesh the quadric is only osculating: its series says nothing of where the
-        # mesh bends differently. The image moves by e1; the normals it moves over turn
-        # by a share ``model_error`` other than the quadric's, and so does the image.
-        estimate = np.maximum(estimate, MODEL_SAFETY * model_error * e1)
-        # A step is local: it may not carry the image farther than REACH seed spacings from
-        # its seed's pixel (farther, the series is taken past a fold or off the mirror).
-        local = np.linalg.norm(at[2] - seeds.pixels[seed_of], axis=1) <= reach_px
-        # Nor may it be long against the path: at a grazing edge a long step moves the
-        # image by little, and its series looks converged in pixels while the point has
-        # no image there at all.
-        short = np.linalg.norm(targets - foot, axis=1) <= MAX_RELATIVE_STEP * np.maximum(along, 0.0)
-        reachable = along < seeds.head[seed_of]
-        moved = step.points(paths)
-        estimate = np.where(reachable & local & short & _reflects(paths, moved, targets) & _faces_eye(paths, moved),
-                            estimate, np.inf)
-        return moved[:, -1], moved[:, 0], estimate, np.where(reachable[:, None], at[2], np.nan)
-
-
-def _paths_toward(view, seeds: SeedPaths, quadrics: list, targets, seed_of):
-    """The seeds ``seed_of`` as paths to the points on their reflected rays nearest the
-    ``targets`` (the feet the steps start from), the feet and the targets' distances
-    along the rays."""
-    tail, direction = seeds.points[seed_of, -1], seeds.outgoing[seed_of]
-    along = np.einsum("ki,ki->k", targets - tail, direction)
-    # A target behind the ray's start (a fast-spreading fan: a small second-order
-    # image) steps from a point a little way along the ray: a long step, not trusted,
-    # but it points the adaptive seeds the right way.
-    reach = np.maximum(along, BEHIND_START * np.linalg.norm(targets - tail, axis=1))
-    foot = tail + reach[:, None] * direction
-    paths = seed_paths_to(seeds.select(seed_of), [q.take(seed_of) for q in quadrics], view, foot)
-    return paths, foot, along
-
-
-def _reflects(paths, moved, targets) -> np.ndarray:
-    """(K,) bool: at every moved bounce the path arrives and leaves on the same side of
-    the surface (its quadric's tangent plane), as a reflection does. A step carried
-    past the silhouette lands on the far side, where the eye cannot see it."""
-    k = len(targets)
-    before = np.concatenate([np.asarray(targets)[:, None], moved[:, :-1]], axis=1)
-    if paths.orthographic:
-        after_direction = np.concatenate([moved[:, 1:] - moved[:, :-1], np.broadcast_to(paths.eye, (k, 1, 3))], axis=1)
-    else:
-        after_direction = np.concatenate([moved[:, 1:], np.broadcast_to(paths.eye, (k, 1, 3))], axis=1) - moved
-    normal = paths.gradients(moved)
-    arrive = np.einsum("kni,kni->kn", normal, before - moved)
-    leave = np.einsum("kni,kni->kn", normal, after_direction)
-    return (arrive * leave > 0).all(axis=1)
-
-
-def _faces_eye(paths, moved) -> np.ndarray:
-    """(K,) bool: the moved point the eye sees lies on the side of the surface its seed's
-    point shows the eye. :func:`_reflects` holds on a convex mirror's far side too (eye
-    and point both behind the tangent plane), where a step carried past the silhouette
-    lands and the eye cannot see: the quadric's normal there, oriented along the seed's
-    (a step is local), must face the eye as the seed's does."""
-    def to_eye(points):
-        return np.broadcast_to(paths.eye, points.shape) if paths.orthographic else paths.eye - points
-
-    seen, moved_seen = paths.reflector_points[:, -1], moved[:, -1]
-    seed_normal = paths.gradients(paths.reflector_points)[:, -1]
-    normal = paths.gradients(moved)[:, -1]
-    normal = normal * np.where(dot(normal, seed_normal) < 0.0, -1.0, 1.0)[:, None]
-    return dot(normal, to_eye(moved_seen)) * dot(seed_normal, to_eye(seen)) > 0.0
 
 
 def grazing(view: View, points: np.ndarray, reflector_points: np.ndarray) -> np.ndarray:

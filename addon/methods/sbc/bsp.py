@@ -22,6 +22,10 @@ unit square of the ray map) project by bilinear ray patches.
 Where a node's rays focus in front of the mirror, no patch holds near the focus however
 small the node, yet it holds before and after: such a node becomes a camera leaf with a
 *band* of depth along its rays whose points its own cells answer (``_depth_bands``).
+
+A point is answered in the leaf it descends to (:func:`descend_tree`), by the leaf's ray
+list where it lies in the leaf's band (:func:`to_fallback`); the leaves' bounding cones
+(``ray_cones.py``) let projection skip the points a leaf cannot answer.
 """
 
 from __future__ import annotations
@@ -31,9 +35,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .ray_cones import ray_cones, reachable_rays
 from .ray_patch import ERROR_SAMPLE_FRACTIONS, RayPatches, fit_patches
-from .raymap import RayMap
-from ...geometry.segments import expand_ranges, range_offsets, segment_max, segment_mean, segment_min, segment_sum
+from .raymap import RayMap, grid_neighbour
+from ...geometry.segments import range_offsets, segment_mean, segment_sum
 from ...geometry.vectors import cross
 
 MAX_DEPTH = 40
@@ -82,7 +87,7 @@ class BSPTree:
     cell_start: np.ndarray  # (n_raylist + 1,) CSR offsets into ``cells``
     cells: RayPatches | None  # bilinear patches of the ray-list leaves' cells
     depth: int
-    leaf_cones: np.ndarray | None = None  # (n_leaves, CONE_SIZE) bounding cones (see ray_cones)
+    leaf_cones: np.ndarray | None = None  # (n_leaves, CONE_SIZE) bounding cones (``ray_cones.py``)
     cone: np.ndarray | None = None  # (CONE_SIZE,) bounding cone of the whole tree
     #: (n_cameras, 2) per camera leaf, the band of distance along its rays, lo < s < hi,
     #: where its answers are not trusted (_depth_bands); NO_BAND where there is none.
@@ -105,13 +110,50 @@ class BSPTree:
         return int(sum(a.nbytes for a in arrays)) + int(sum(models))
 
 
-def grid_neighbour(grid: np.ndarray, i: np.ndarray, j: np.ndarray, di: int, dj: int) -> np.ndarray:
-    """Ray index at cell (i + di, j + dj) of ``grid`` (RayMap.group_grid), -1 where there
-    is none or the cell lies outside."""
-    rows, columns = grid.shape
-    ii, jj = i + di, j + dj
-    inside = (ii >= 0) & (ii < columns) & (jj >= 0) & (jj < rows)
-    return np.where(inside, grid[np.clip(jj, 0, rows - 1), np.clip(ii, 0, columns - 1)], -1)
+def descend_tree(tree: BSPTree, points: np.ndarray) -> np.ndarray:
+    """Node index of the leaf each point falls in (whole arrays, one step per tree level).
+
+    Only the points still in inner nodes go on to the next level, and each step is a
+    few 1-D operations on the point coordinates (no gathers of (n, 3) rows).
+    """
+    node = np.zeros(len(points), dtype=np.int64)
+    if tree.leaf[0] >= 0:
+        return node
+    x, y, z = (np.ascontiguousarray(points[:, d]) for d in range(3))
+    normal = tree.plane_normal
+    nx, ny, nz = (np.ascontiguousarray(normal[:, d]) for d in range(3))
+    active = np.arange(len(points))
+    current = node
+    for _ in range(tree.depth + 1):
+        side = (x * nx[current] + y * ny[current] + z * nz[current]) >= tree.plane_offset[current]
+        current = np.where(side, tree.left[current], tree.right[current])
+        done = tree.leaf[current] >= 0
+        if done.all():
+            node[active] = current
+            break
+        finished = np.flatnonzero(done)
+        node[active[finished]] = current[finished]
+        going = np.flatnonzero(~done)
+        active, current, x, y, z = active[going], current[going], x[going], y[going], z[going]
+    return node
+
+
+def to_fallback(tree: BSPTree, leaf, camera_row, distance) -> np.ndarray:
+    """Which points of camera leaves go to the leaf's ray list (:func:`_depth_bands`): those
+    of a banded leaf whose distance along the ray lies in its band, or is NaN (Newton did
+    not converge: near the band the patch is ill-conditioned). So do answers its fold
+    cell refuses (``SampleBasedCamera._project_group``). An answer outside the leaf's
+    cells is not handed on: outside its band the patch is accurate, so the point is not
+    on the leaf's rays."""
+    return (tree.leaf_fallback[leaf] >= 0) & (in_band(tree, camera_row, distance) | np.isnan(distance))
+
+
+def in_band(tree: BSPTree, camera_row, distance) -> np.ndarray:
+    """Whether distances along the rays of camera leaves lie in the leaves' bands
+    (:func:`_depth_bands`), where their patches are not trusted; False where NaN."""
+    band = tree.camera_band[camera_row]
+    with np.errstate(invalid="ignore"):
+        return (distance > band[:, 0]) & (distance < band[:, 1])
 
 
 def diagonal_neighbours(ray_map: RayMap, grid: np.ndarray, rays: np.ndarray) -> np.ndarray:
@@ -125,20 +167,6 @@ def diagonal_neighbours(ray_map: RayMap, grid: np.ndarray, rays: np.ndarray) -> 
         neighbour = grid_neighbour(grid, i, j, di, dj)
         corners.append(np.where(neighbour >= 0, neighbour, rays))
     return np.stack(corners, axis=1)
-
-
-def neighbour_spacing(ray_map: RayMap, grid: np.ndarray, rays: np.ndarray):
-    """How far each ray's tail and unit direction (R,) lie from those of its four
-    neighbours in ``grid`` (the largest; 0 where it has none): a point at distance s
-    along the ray lies between it and its neighbours within tail + s * direction."""
-    i, j = ray_map.cell[rays, 0], ray_map.cell[rays, 1]
-    tail, direction = np.zeros(len(rays)), np.zeros(len(rays))
-    for di, dj in ((1, 0), (0, 1), (-1, 0), (0, -1)):
-        neighbour = grid_neighbour(grid, i, j, di, dj)
-        other = np.where(neighbour >= 0, neighbour, rays)
-        tail = np.maximum(tail, np.linalg.norm(ray_map.tail[other] - ray_map.tail[rays], axis=1))
-        direction = np.maximum(direction, np.linalg.norm(ray_map.direction[other] - ray_map.direction[rays], axis=1))
-    return tail, direction
 
 
 def unit_frustum_points(ray_map: RayMap, grid: np.ndarray, rays: np.ndarray) -> np.ndarray:
@@ -253,126 +281,6 @@ def build_bsp(ray_map: RayMap, rays: np.ndarray, grid: np.ndarray, model, accura
     whole = ray_cones(ray_map, grid, np.unique(reach_ray), np.zeros(len(np.unique(reach_ray)), np.int64), 1)[0]
     return dataclasses.replace(tree, leaf_cones=cones, cone=whole, list_ray_start=list_ray_start,
                                list_rays=raylist_rays[order])
-
-
-def reachable_rays(ray_map: RayMap, grid: np.ndarray, member_ray: np.ndarray, member_leaf: np.ndarray, n: int):
-    """(rays, leaf) pairs: every ray of the group that can be a corner of a cell a leaf answers.
-
-    A leaf answers cells within half a cell of its member cells' bounding box (camera
-    leaves, ray_patch.project_patches) or cells whose four corners are its members
-    (ray lists); the corners of those cells lie in the box grown by one cell.
-    """
-    cells = ray_map.cell[member_ray]
-    lo = np.maximum(segment_min(cells, member_leaf, n) - 1, 0)
-    hi = np.minimum(segment_max(cells, member_leaf, n) + 1, [ray_map.columns - 1, ray_map.rows - 1])
-    width, height = hi[:, 0] - lo[:, 0] + 1, hi[:, 1] - lo[:, 1] + 1
-    count = width * height
-    leaf, local = expand_ranges(np.zeros(n, dtype=np.int64), count)
-    i = lo[leaf, 0] + local % width[leaf]
-    j = lo[leaf, 1] + local // width[leaf]
-    ray = grid[j, i]
-    return ray[ray >= 0], leaf[ray >= 0]
-
-
-#: Row layout of a bounding cone: apex (3), unit axis (3), radius at the apex, growth of
-#: the radius per unit along the axis, least distance along the axis.
-CONE_SIZE = 9
-#: Cones are widened by this many times the largest spacing of neighbouring rays.
-CONE_MARGIN_CELLS = 3.0
-#: Rays more than this far (cosine) from the cone axis make the cone unbounded.
-CONE_MIN_COS = 0.05
-
-
-def ray_cones(ray_map: RayMap, grid: np.ndarray, member_ray: np.ndarray, member_node: np.ndarray,
-              n: int) -> np.ndarray:
-    """(n, CONE_SIZE) cones around the region where each node's rays can project a point.
-
-    A node (leaf or sheet) projects a point only within MISS_CELLS cell spacings of the
-    interpolated ray of a cell it answers; ``member_ray`` holds every ray that can be a
-    corner of such a cell (:func:`reachable_rays`). The cone holds every point
-    t_i + s d_i (s >= 0, also beyond the head) of those rays: with axis d and apex c,
-    a radius growing by k >= |d_i x d| / (d_i . d) per unit along d holds a ray whose
-    tail it holds. It is widened by CONE_MARGIN_CELLS times the largest distance between
-    neighbouring rays (at tail and head, growing with the directions' difference): the
-    MISS_CELLS tolerance plus the bend of the normalised interpolated direction. A point
-    outside its cone cannot project there, so projection skips it before any Newton
-    iteration; the test is conservative, not an approximation.
-    """
-    cones = np.zeros((n, CONE_SIZE))
-    cones[:, 6], cones[:, 8] = np.inf, -np.inf  # nodes without rays (none expected) accept everything
-    if len(member_ray) == 0:
-        return cones
-    head = ray_map.head
-    rays, nodes = member_ray, member_node
-    spacing_tail, spacing_direction = neighbour_spacing(ray_map, grid, member_ray)
-    present = np.bincount(nodes, minlength=n) > 0
-    reduce = _SortedSegments(nodes, n)
-    tails, directions = ray_map.tail[rays], ray_map.direction[rays]
-    apex = reduce.sum(tails) / np.maximum(reduce.counts, 1)[:, None]
-    axis = reduce.sum(directions)
-    axis /= np.maximum(np.linalg.norm(axis, axis=1), 1e-300)[:, None]
-    cos = np.einsum("md,md->m", directions, axis[nodes])
-    sin = np.linalg.norm(cross(directions, axis[nodes]), axis=1)
-    growth = reduce.max(np.where(cos > CONE_MIN_COS, sin / np.maximum(cos, CONE_MIN_COS), np.inf))
-    bounded = present & np.isfinite(growth)
-    safe_growth = np.where(bounded, growth, 0.0)
-    radius, least = np.full(n, -np.inf), np.full(n, np.inf)
-    for ends in (tails, head[rays]):
-        offset = ends - apex[nodes]
-        along = np.einsum("md,md->m", offset, axis[nodes])
-        perp = np.linalg.norm(offset - along[:, None] * axis[nodes], axis=1)
-        radius = np.maximum(radius, reduce.max(perp - safe_growth[nodes] * along))
-        least = np.minimum(least, reduce.min(along))
-    # Neighbouring rays at distance s along them are at most |dt| + s |dd| apart, and
-    # s <= (along - least) / cos along the axis.
-    # A point that far off a ray in the cone is also that far along the axis, where the
-    # radius is k times that smaller: hence the factor 1 + k.
-    margin = CONE_MARGIN_CELLS * reduce.max(spacing_tail) * (1.0 + safe_growth)
-    margin_growth = (CONE_MARGIN_CELLS * reduce.max(spacing_direction) / reduce.min(np.maximum(cos, CONE_MIN_COS))
-                     * (1.0 + safe_growth))
-    least = np.where(present, least, 0.0)
-    scale = 1e-6 * (1.0 + np.abs(apex).max(axis=1) + np.abs(least))
-    cones[:, 0:3], cones[:, 3:6] = apex, axis
-    cones[:, 6] = np.where(bounded, radius + margin + margin_growth * np.maximum(-least, 0.0) + scale, np.inf)
-    cones[:, 7] = np.where(bounded, safe_growth + margin_growth, 0.0)
-    # Along the axis, a ray only moves forward where every ray is within the cone's angle.
-    cones[:, 8] = np.where(bounded, least - margin - scale, -np.inf)
-    return cones
-
-
-class _SortedSegments:
-    """Per-node reductions over rows sorted once by node (nodes without rows get the identity)."""
-
-    def __init__(self, node: np.ndarray, n: int):
-        self.order = np.argsort(node, kind="stable")
-        self.counts = np.bincount(node, minlength=n)
-        self.present = self.counts > 0
-        self.starts = (np.cumsum(self.counts) - self.counts)[self.present]
-        self.n = n
-
-    def _reduce(self, ufunc, values, empty):
-        out = np.full((self.n,) + values.shape[1:], empty, dtype=np.float64)
-        if len(values):
-            out[self.present] = ufunc.reduceat(values[self.order], self.starts, axis=0)
-        return out
-
-    def sum(self, values):
-        return self._reduce(np.add, values, 0.0)
-
-    def max(self, values):
-        return self._reduce(np.maximum, values, -np.inf)
-
-    def min(self, values):
-        return self._reduce(np.minimum, values, np.inf)
-
-
-def in_cones(cones: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Which points (P, 3) lie in their cone (rows of (P, CONE_SIZE), see ray_cones)."""
-    offset = points - cones[:, 0:3]
-    along = np.einsum("pd,pd->p", offset, cones[:, 3:6])
-    squared = np.einsum("pd,pd->p", offset, offset) - along * along
-    reach = cones[:, 6] + cones[:, 7] * np.maximum(along, 0.0)
-    return (along >= cones[:, 8]) & (squared <= reach * reach)
 
 
 def _assemble_tree(levels, n_nodes, model, camera_parts, camera_bands, cell_start, cells, depth) -> BSPTree:

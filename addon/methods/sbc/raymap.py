@@ -218,3 +218,26 @@ def first_pieces(ray_map: RayMap, grid: np.ndarray) -> np.ndarray:
     """The smooth pieces (ReflectorSet.piece) that the rays of ``grid`` first reflect off."""
     surfaces = np.unique(ray_map.surface[grid[grid >= 0]])
     return np.unique([ray_map.surfaces[k][0] for k in surfaces]).astype(np.int64)
+
+
+def grid_neighbour(grid: np.ndarray, i: np.ndarray, j: np.ndarray, di: int, dj: int) -> np.ndarray:
+    """Ray index at cell (i + di, j + dj) of ``grid`` (RayMap.group_grid), -1 where there
+    is none or the cell lies outside."""
+    rows, columns = grid.shape
+    ii, jj = i + di, j + dj
+    inside = (ii >= 0) & (ii < columns) & (jj >= 0) & (jj < rows)
+    return np.where(inside, grid[np.clip(jj, 0, rows - 1), np.clip(ii, 0, columns - 1)], -1)
+
+
+def neighbour_spacing(ray_map: RayMap, grid: np.ndarray, rays: np.ndarray):
+    """How far each ray's tail and unit direction (R,) lie from those of its four
+    neighbours in ``grid`` (the largest; 0 where it has none): a point at distance s
+    along the ray lies between it and its neighbours within tail + s * direction."""
+    i, j = ray_map.cell[rays, 0], ray_map.cell[rays, 1]
+    tail, direction = np.zeros(len(rays)), np.zeros(len(rays))
+    for di, dj in ((1, 0), (0, 1), (-1, 0), (0, -1)):
+        neighbour = grid_neighbour(grid, i, j, di, dj)
+        other = np.where(neighbour >= 0, neighbour, rays)
+        tail = np.maximum(tail, np.linalg.norm(ray_map.tail[other] - ray_map.tail[rays], axis=1))
+        direction = np.maximum(direction, np.linalg.norm(ray_map.direction[other] - ray_map.direction[rays], axis=1))
+    return tail, direction

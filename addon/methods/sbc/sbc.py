@@ -28,11 +28,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .bsp import CAMERA_LEAF, CONE_SIZE, RAY_LIST_LEAF, BSPTree, in_cones, neighbour_spacing
+from .bsp import CAMERA_LEAF, RAY_LIST_LEAF, BSPTree, descend_tree, to_fallback
 from .pinhole import PinholeLeaves
 from ...projection import Projection
+from .ray_cones import CONE_SIZE, in_cones
 from .ray_patch import RayPatchLeaves, invert_patches
-from .raymap import RayMap, first_pieces
+from .raymap import RayMap, first_pieces, neighbour_spacing
 from ...geometry.raytrace import ReflectorSet
 from .sbc_cells import FOLD_SAMPLES, FoldCells, check_on_rays, rays_fold_at
 from .sbc_edges import (EDGE_REACH_CELLS, SeedRays, complete, complete_quads, edge_seeds, nearest_ray_seeds,
@@ -70,7 +71,7 @@ class SampleBasedCamera:
     model_name: str
     histories: list  # one reflection history per tree (a history repeats once per sheet)
     stats: dict = field(default_factory=dict)
-    #: (trees, CONE_SIZE) per tree, a cone around where its rays can project (bsp.ray_cones), or None.
+    #: (trees, CONE_SIZE) per tree, a cone around where its rays can project (``ray_cones.ray_cones``), or None.
     cones: np.ndarray | None = None
     #: Per tree, its group's MixedCells (shared by the sheets of a group), or None where not traced.
     mixed: list | None = None
@@ -177,7 +178,7 @@ class SampleBasedCamera:
 
     def _sheet_points(self, g: int, points, index) -> np.ndarray:
         """Which of ``points`` (rows ``index`` of the points ``project`` was given) descend
-        tree ``g``: those in the sheet's bounding cone (bsp.ray_cones)."""
+        tree ``g``: those in the sheet's bounding cone (``ray_cones.py``)."""
         if self.cones is None:
             return np.arange(len(points))
         return np.flatnonzero(in_cones(np.broadcast_to(self.cones[g], (len(points), CONE_SIZE)), points))
@@ -185,7 +186,7 @@ class SampleBasedCamera:
     def _project_group(self, g, tree: BSPTree, grid, points, point_index, result: Projection, pending):
         leaf = tree.leaf[descend_tree(tree, points)]
         if tree.leaf_cones is not None:
-            # Points outside their leaf's bounding cone cannot project there (bsp.ray_cones).
+            # Points outside their leaf's bounding cone cannot project there (``ray_cones.py``).
             near = np.flatnonzero(in_cones(tree.leaf_cones[leaf], points))
             leaf, points, point_index = leaf[near], points[near], point_index[near]
         kind = tree.leaf_kind[leaf]
@@ -383,7 +384,7 @@ class SampleBasedCamera:
     @functools.cached_property
     def _ray_spacing(self) -> list:
         """Per tree, (tail, direction) (R,) each: how far its rays lie from their
-        neighbours in its grid (``bsp.neighbour_spacing``), 0 for rays not in it; None for
+        neighbours in its grid (``raymap.neighbour_spacing``), 0 for rays not in it; None for
         a tree without edges. Sheets of one set share theirs."""
         spacing = {}
         for g, grid in enumerate(self.grids):
@@ -456,51 +457,6 @@ class SampleBasedCamera:
         """(R, 8) rows tail, direction, head distance, first-hit depth: one gather per corner."""
         m = self.ray_map
         return np.concatenate([m.tail, m.direction, m.head_distance[:, None], m.first_depth[:, None]], axis=1)
-
-
-def descend_tree(tree: BSPTree, points: np.ndarray) -> np.ndarray:
-    """Node index of the leaf each point falls in (whole arrays, one step per tree level).
-
-    Only the points still in inner nodes go on to the next level, and each step is a
-    few 1-D operations on the point coordinates (no gathers of (n, 3) rows).
-    """
-    node = np.zeros(len(points), dtype=np.int64)
-    if tree.leaf[0] >= 0:
-        return node
-    x, y, z = (np.ascontiguousarray(points[:, d]) for d in range(3))
-    normal = tree.plane_normal
-    nx, ny, nz = (np.ascontiguousarray(normal[:, d]) for d in range(3))
-    active = np.arange(len(points))
-    current = node
-    for _ in range(tree.depth + 1):
-        side = (x * nx[current] + y * ny[current] + z * nz[current]) >= tree.plane_offset[current]
-        current = np.where(side, tree.left[current], tree.right[current])
-        done = tree.leaf[current] >= 0
-        if done.all():
-            node[active] = current
-            break
-        finished = np.flatnonzero(done)
-        node[active[finished]] = current[finished]
-        going = np.flatnonzero(~done)
-        active, current, x, y, z = active[going], current[going], x[going], y[going], z[going]
-    return node
-
-
-def to_fallback(tree: BSPTree, leaf, camera_row, distance) -> np.ndarray:
-    """Which points of camera leaves go to the leaf's ray list (bsp._depth_bands): those
-    of a banded leaf whose distance along the ray lies in its band, or is NaN (Newton did
-    not converge: near the band the patch is ill-conditioned). So do answers its fold
-    cell refuses (``_project_group``). An answer outside the leaf's cells is not handed
-    on: outside its band the patch is accurate, so the point is not on the leaf's rays."""
-    return (tree.leaf_fallback[leaf] >= 0) & (in_band(tree, camera_row, distance) | np.isnan(distance))
-
-
-def in_band(tree: BSPTree, camera_row, distance) -> np.ndarray:
-    """Whether distances along the rays of camera leaves lie in the leaves' bands
-    (bsp._depth_bands), where their patches are not trusted; False where NaN."""
-    band = tree.camera_band[camera_row]
-    with np.errstate(invalid="ignore"):
-        return (distance > band[:, 0]) & (distance < band[:, 1])
 
 
 def _project_ray_lists(tree: BSPTree, row, points, keep=CANDIDATE_CELLS, reach: float = 0.0):

@@ -12,8 +12,9 @@ import time
 
 import numpy as np
 
-from .bsp import CAMERA_LEAF, CONE_SIZE, MAX_DUPLICATION, RAY_LIST_LEAF, RaysCrossError, build_bsp
+from .bsp import CAMERA_LEAF, MAX_DUPLICATION, RAY_LIST_LEAF, RaysCrossError, build_bsp
 from ...errors import SceneInputError
+from .ray_cones import CONE_SIZE
 from .raymap import RayMap, trace_ray_map
 from ...geometry.raytrace import ReflectorSet
 from .sbc import LEAF_MODELS, SampleBasedCamera

@@ -51,7 +51,7 @@ class SeedRays:
     @classmethod
     def of_rays(cls, ray_map: RayMap, rays: np.ndarray, spacing) -> "SeedRays":
         """The ray map's ``rays`` with their neighbour ``spacing`` (per ray of the map, (tail,
-        direction) of ``bsp.neighbour_spacing``)."""
+        direction) of ``raymap.neighbour_spacing``)."""
         return cls(ray_map.cell[rays].astype(np.float64), ray_map.tail[rays], ray_map.direction[rays],
                    spacing[0][rays], spacing[1][rays])
 

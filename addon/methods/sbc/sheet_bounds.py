@@ -19,7 +19,7 @@ per sheet, the diffuse vertices that lie outside it (``gpu_shaders/methods/sbc_t
   so that fixed-size runs of them are spatially compact, and each run's AABB.
 - :func:`chunks_meeting`: the runs whose AABB meets a k-DOP (slab test on the k-DOP's
   directions: conservative, it never drops a run that meets it); :func:`chunks_in_cone`:
-  those that may meet a sheet's bounding cone (``sbc.cones``, :func:`.bsp.ray_cones`:
+  those that may meet a sheet's bounding cone (``sbc.cones``, :func:`.ray_cones.ray_cones`:
   the engine's own bound, per sheet, of the rays' reach, unbounded beyond the heads).
   The k-DOP is per ray-map group (``sbc.grids`` is shared by the sheets of a group) and
   bounds the far end; the cone separates the sheets of a group.
@@ -105,7 +105,7 @@ def chunk_boxes(points: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
 
 def chunks_in_cone(lo: np.ndarray, hi: np.ndarray, cone: np.ndarray) -> np.ndarray:
     """(C,) bool: the AABBs (lo, hi) that may meet ``cone`` (a sheet's bounding cone of
-    ``bsp.ray_cones``: apex, unit axis, radius at the apex, radius growth per unit along
+    ``ray_cones.ray_cones``: apex, unit axis, radius at the apex, radius growth per unit along
     the axis, least distance along the axis). Tested with each box's bounding sphere:
     a box is dropped only when no point within its sphere's radius r of its centre can
     be in the cone (along + r below the least distance, or the distance from the axis

@@ -22,7 +22,7 @@ from curved_reflections.addon import Reflector, look_at_view, scene_bounds
 from curved_reflections.addon.methods.sbc import build_sample_based_camera
 from curved_reflections.addon.geometry.shapes import vase
 from curved_reflections.addon.methods.sbc import sbc_cells
-from curved_reflections.addon.methods.sbc.sbc import descend_tree
+from curved_reflections.addon.methods.sbc.bsp import descend_tree
 from curved_reflections.addon.geometry.sphere import icosphere
 from curved_reflections.gpu_shaders.methods import sbc_pack
 

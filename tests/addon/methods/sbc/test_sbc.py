@@ -211,7 +211,7 @@ def test_leaves_whose_rays_focus_hand_their_focal_band_to_their_ray_list(vase_ca
     answers come from camera leaves than when such nodes end as ray lists, and no
     image is lost."""
     from curved_reflections.addon.methods.sbc import bsp
-    from curved_reflections.addon.methods.sbc.sbc import descend_tree
+    from curved_reflections.addon.methods.sbc.bsp import descend_tree
 
     _, reflectors, view, bounds, sbc = vase_case
     points = np.random.default_rng(4).uniform(bounds[0], bounds[1], (2500, 3))
@@ -383,10 +383,10 @@ def test_sheets_own_disjoint_cells_so_a_seam_answers_each_image_once(vase_case):
 
 
 def test_bounding_cones_skip_work_but_change_no_answer(vase_case):
-    """Sheets and leaves skip points outside their rays' bounding cones (bsp.ray_cones): on
+    """Sheets and leaves skip points outside their rays' bounding cones (ray_cones.py): on
     a many-sheet vase most (point, sheet) pairs are skipped, and every answer, also for
     points outside the scene box, is the one projection without cones gives."""
-    from curved_reflections.addon.methods.sbc.bsp import in_cones
+    from curved_reflections.addon.methods.sbc.ray_cones import in_cones
 
     vase, _, _, bounds, sbc = vase_case
     rng = np.random.default_rng(12)

@@ -7,7 +7,7 @@ import numpy as np
 from curved_reflections.addon import look_at_view
 from curved_reflections.addon.methods.sbc import build_sample_based_camera
 from curved_reflections.addon.methods.sbc import sheet_bounds
-from curved_reflections.addon.methods.sbc.bsp import in_cones
+from curved_reflections.addon.methods.sbc.ray_cones import in_cones
 from curved_reflections.addon.geometry.sphere import icosphere
 
 
