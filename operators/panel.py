@@ -1,10 +1,18 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""The "Reflections" tab of the 3D viewport's sidebar (N panel).
+"""The "Reflections" tab of the 3D viewport's sidebar (N panel), laid out as Blender's own.
 
-Top to bottom: the active object's reflector settings, the scene's reflectors, the
-method settings, the live reflections (**Bake**, **Refresh**, **Clear**, their stats and
-a status line, :mod:`.live`), then the scene checks and the offscreen render. Settings
-that do not apply are greyed, not hidden, so the layout does not jump.
+The main panel holds the live view (:mod:`.live`): **Bake**, **Refresh**, **Clear**,
+*Auto Refresh* and the status line, then Render Reflections Image and the demo scenes.
+Its sub-panels, as in Blender's property editors (a mixin for the shared ``bl_*``, one
+``VIEW3D_PT_`` class each, registered after the parent):
+
+- *Mirror*: the active object's settings, its *Reflector* checkbox in the header;
+- *Reflectors*: each reflector with the method drawing it, why, and its measured accuracy;
+- *Quality*: the scene's method settings;
+- *Morphing Grids* (closed by default): the grids' settings, baking and their status;
+- *Statistics* (closed by default): the live view's rays, leaves, timings and memory.
+
+Settings that do not apply are greyed, not hidden, so the layout does not jump.
 """
 
 import textwrap
@@ -16,155 +24,262 @@ from .capture import SURFACE_TYPES
 
 _STATUS_ICONS = {'INFO': 'INFO', 'WARNING': 'ERROR', 'ERROR': 'CANCEL'}
 
-
-def _reflector_settings(layout, obj) -> None:
-    settings = obj.curved_reflections
-    column = layout.column(heading=obj.name)
-    column.prop(settings, "is_reflector")
-    details = column.column()
-    details.active = settings.is_reflector
-    details.prop(settings, "reflectivity")
-    details.prop(settings, "use_fresnel")
-    facing = details.row()
-    facing.active = settings.is_reflector and settings.use_fresnel
-    facing.prop(settings, "fresnel_f0")
-    details.prop(settings, "attenuation_distance")
-    details.prop(settings, "mode")
-    if settings.mode == 'PERTURBATION':
-        details.prop(settings, "analytic_shape")
-        radii = details.row()
-        radii.active = settings.analytic_shape != 'NONE'
-        radii.prop(settings, "analytic_radii")
-        if settings.analytic_shape == 'SUPERQUADRIC':
-            details.prop(settings, "analytic_exponent")
-
-
-#: Characters per line of a reflector's reason in the panel.
+#: Characters per line of a reflector's reason in the panel (labels do not wrap by themselves).
 REASON_WIDTH = 52
 _METHOD_ICONS = {methods.ITERATIVE: 'SHADERFX', methods.MORPHING: 'LIGHTPROBE_VOLUME', methods.RUNTIME: 'CAMERA_DATA',
                  methods.PERTURBATION: 'FORCE_HARMONIC', methods.OCTREE: 'LIGHTPROBE_VOLUME'}
 
 
-def _reflector_methods(box, scene, reflectors) -> None:
-    """Each reflector with the method drawing it and why (the last plan: Bake or Render),
+def _reflectors(scene) -> list:
+    """The scene's objects marked as reflectors."""
+    return [o for o in scene.objects if o.curved_reflections.is_reflector]
+
+
+def _morphing(scene) -> bool:
+    """Whether a reflector wants a morphing grid: the grid settings apply only then."""
+    return any(methods.grid_wanted_by_last_plan(scene, o) for o in _reflectors(scene))
+
+
+def _surface_object(context):
+    """The active object when it can be a mirror (a mesh, curve, surface, text or metaball)."""
+    obj = context.active_object
+    return obj if obj is not None and obj.type in SURFACE_TYPES else None
+
+
+def _split_property(layout):
+    """Names in a left column, fields in a right one, as Blender's property panels."""
+    layout.use_property_split = True
+    layout.use_property_decorate = False  # no animation
+
+
+def _wrapped(layout, text: str, icon: str) -> None:
+    """``text`` over as many labels as it needs, the icon on the first."""
+    for k, line in enumerate(textwrap.wrap(text, REASON_WIDTH)):
+        layout.label(text=line, icon=icon if k == 0 else 'BLANK1')
+
+
+def _reflector_method(layout, reflector, choice, found) -> None:
+    """One reflector with the method drawing it and why (the last plan: Bake or Render),
     and its accuracy measured in the live view once the view settled."""
-    choices = {c.reflector: c for c in methods.last_choices(scene)}
-    measured = methods.measured(scene)
-    for reflector in reflectors:
-        choice = choices.get(reflector.name)
-        if choice is None:
-            box.label(text=f"{reflector.name}: {reflector.curved_reflections.mode.title()} (not baked yet)",
-                      icon='MOD_MIRROR')
-            continue
-        box.label(text=f"{reflector.name}: {choice.method.title()}", icon=_METHOD_ICONS[choice.method])
-        for line in textwrap.wrap(choice.reason, REASON_WIDTH):  # labels do not wrap by themselves
-            box.label(text=line)
-        found = measured.get(reflector.name)
-        if found is not None:
-            for k, line in enumerate(textwrap.wrap(accuracy.panel_line(found), REASON_WIDTH)):
-                box.label(text=line, icon='DRIVER_DISTANCE' if k == 0 else 'BLANK1')
-
-
-def _live_section(layout, scene) -> None:
-    row = layout.row(align=True)
-    row.operator("curved_reflections.bake", icon='RENDER_STILL')
-    row.operator("curved_reflections.refresh", icon='FILE_REFRESH')
-    row.operator("curved_reflections.clear", icon='X')
-    state = live.state_of(scene)
-    if state is None:
-        layout.label(text="Not baked: no live reflections", icon='INFO')
+    if choice is None:
+        layout.label(text=f"{reflector.name}: {reflector.curved_reflections.mode.title()} (not baked yet)",
+                     icon='MOD_MIRROR')
         return
-    stats = state.stats
-    if "rays" in stats:
-        grid = layout.grid_flow(row_major=True, columns=2, even_columns=True, align=True)
-        for label, text in (
-            ("Rays", f"{stats['rays']:,}"),
-            ("Leaves", f"{stats['leaves']:,}"),
-            ("Build", f"{stats['build_ms']:.0f} ms"),
-            ("Draw", f"{stats['draw_ms']:.1f} ms" if "draw_ms" in stats else "-"),
-            ("Memory", f"{stats['memory_mb']:.1f} MB"),
-            ("Views", f"{stats['views']}"),
-        ):
-            grid.label(text=label)
-            grid.label(text=text)
-    if "unanswered" in stats:
-        layout.label(text=f"Searched on the GPU: {stats['searched'] - stats['unanswered']:,} of "
-                          f"{stats['searched']:,} vertex reflections found", icon='SHADERFX')
-    if state.jobs or state.requests:
-        layout.label(text="Updating...", icon='SORTTIME')
-    if state.status:
-        layout.label(text=state.status, icon=_STATUS_ICONS.get(state.level, 'INFO'))
+    layout.label(text=f"{reflector.name}: {choice.method.title()}", icon=_METHOD_ICONS[choice.method])
+    _wrapped(layout, choice.reason, 'BLANK1')
+    if found is not None:
+        _wrapped(layout, accuracy.panel_line(found), 'DRIVER_DISTANCE')
 
 
-def _morphing_section(layout, scene) -> None:
-    row = layout.row(align=True)
-    row.operator("curved_reflections.bake_morphing", icon='LIGHTPROBE_VOLUME')
-    row.operator("curved_reflections.clear_morphing", icon='TRASH')
-    bake_line = morph_bake.morph_status(scene, per_reflector=False)
-    if bake_line:
-        layout.label(text=bake_line, icon='INFO')
-    state = live.state_of(scene)
-    if state is not None and state.renderer is not None and state.renderer.morph.grids:
-        nodes = state.renderer.morph.nodes
-        layout.label(text=f"Nodes on the GPU: {len(nodes)} ({nodes.nbytes / 2 ** 20:.0f} of "
-                          f"{nodes.budget_bytes / 2 ** 20:.0f} MB)", icon='MEMORY')
-    for name, mode in morph_bake.reflector_modes(scene):
-        layout.label(text=f"{name}: {mode}", icon='LIGHTPROBE_VOLUME' if mode.startswith("morphing") else 'INFO')
+def _statistic(layout, name: str, value: str) -> None:
+    """A name and its value, aligned like a property with ``use_property_split``."""
+    split = layout.split(factor=0.4)
+    row = split.row()
+    row.alignment = 'RIGHT'
+    row.label(text=name)
+    split.label(text=value)
 
 
-class VIEW3D_PT_curved_reflections(bpy.types.Panel):
-    """Curved mirror reflections: which objects are mirrors, the method settings and live drawing"""
+class _SidebarPanel:
+    """Where every panel of the tab lives (as bl_ui's ``RenderButtonsPanel`` mixins)."""
 
-    bl_label = "Curved Reflections"
     bl_space_type = 'VIEW_3D'
     bl_region_type = 'UI'
     bl_category = "Reflections"
 
+
+class _SubPanel(_SidebarPanel):
+    """A sub-panel of the main panel: drawn below its content, opened and closed on its own."""
+
+    bl_parent_id = "VIEW3D_PT_curved_reflections"
+
+
+class VIEW3D_PT_curved_reflections(_SidebarPanel, bpy.types.Panel):
+    """Curved mirror reflections: build, refresh and clear the live reflections, render an image"""
+
+    bl_label = "Curved Reflections"
+
     def draw(self, context):
         layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        _split_property(layout)
         scene = context.scene
-
-        obj = context.active_object
-        if obj is not None and obj.type in SURFACE_TYPES:
-            _reflector_settings(layout, obj)
-
-        reflectors = [o for o in scene.objects if o.curved_reflections.is_reflector]
-        box = layout.box()
-        if reflectors:
-            _reflector_methods(box, scene, reflectors)
+        row = layout.row(align=True)
+        row.operator("curved_reflections.bake", icon='RENDER_STILL')
+        row.operator("curved_reflections.refresh", icon='FILE_REFRESH')
+        row.operator("curved_reflections.clear", icon='X')
+        layout.prop(scene.curved_reflections, "auto_refresh")
+        state = live.state_of(scene)
+        if state is None:
+            layout.label(text="Not baked: no live reflections", icon='INFO')
         else:
-            box.label(text="No reflector marked", icon='INFO')
-        layout.operator("curved_reflections.mark_reflector", icon='MOD_MIRROR')
-
-        scene_settings = scene.curved_reflections
-        column = layout.column()
-        column.prop(scene_settings, "downsample")
-        column.prop(scene_settings, "accuracy_px")
-        column.prop(scene_settings, "max_order")
-        column.prop(scene_settings, "auto_refresh")
-        morphing = any(methods.grid_wanted_by_last_plan(scene, o) for o in reflectors)
-        morph = column.column()
-        morph.active = morphing
-        morph.prop(scene_settings, "morph_grid")
-        morph.prop(scene_settings, "morph_margin")
-        morph.prop(scene_settings, "morph_polish_nodes")
-        polish_frames = morph.row()
-        polish_frames.active = scene_settings.morph_polish_nodes
-        polish_frames.prop(scene_settings, "morph_polish_frames")
-        morph.prop(scene_settings, "morph_gpu_budget_mb")
-        if morphing:
-            _morphing_section(layout.box(), scene)
-
-        _live_section(layout.box(), scene)
-
-        layout.operator("curved_reflections.check_scene", icon='VIEWZOOM')
-        layout.operator("curved_reflections.render_image", icon='RENDER_STILL')
-        layout.operator_menu_enum("curved_reflections.add_demo_scene", "demo", text="Add Demo Scene",
+            if state.jobs or state.requests:
+                layout.label(text="Updating...", icon='SORTTIME')
+            if state.status:
+                _wrapped(layout, state.status, _STATUS_ICONS.get(state.level, 'INFO'))
+        layout.separator()
+        column = layout.column(align=True)
+        column.operator("curved_reflections.render_image", icon='RENDER_STILL')
+        column.operator_menu_enum("curved_reflections.add_demo_scene", "demo", text="Add Demo Scene",
                                   icon='SCENE_DATA')
+
+
+class VIEW3D_PT_curved_reflections_mirror(_SubPanel, bpy.types.Panel):
+    """The active object as a mirror: reflectivity, Fresnel, fading and the method that draws it"""
+
+    bl_label = "Mirror"
+
+    def draw_header(self, context):
+        obj = _surface_object(context)
+        if obj is not None:
+            self.layout.prop(obj.curved_reflections, "is_reflector", text="")
+
+    def draw(self, context):
+        layout = self.layout
+        _split_property(layout)
+        obj = context.active_object
+        if obj is None:
+            layout.label(text="No active object", icon='INFO')
+            return
+        if obj.type not in SURFACE_TYPES:
+            layout.label(text=f"{obj.name}: a {obj.type.lower()} object cannot be a mirror", icon='INFO')
+            return
+        settings = obj.curved_reflections
+        layout.label(text=obj.name, icon='OBJECT_DATA')
+        column = layout.column()
+        column.active = settings.is_reflector
+        column.prop(settings, "reflectivity")
+        column.prop(settings, "use_fresnel")
+        facing = column.column()
+        facing.active = settings.use_fresnel
+        facing.prop(settings, "fresnel_f0")
+        column.prop(settings, "attenuation_distance")
+        column.separator()
+        column.prop(settings, "mode")
+        exact = column.column()
+        exact.active = settings.mode == 'PERTURBATION'
+        exact.prop(settings, "analytic_shape")
+        radii = exact.column()
+        radii.active = settings.analytic_shape != 'NONE'
+        radii.prop(settings, "analytic_radii")
+        exponent = exact.column()
+        exponent.active = settings.analytic_shape == 'SUPERQUADRIC'
+        exponent.prop(settings, "analytic_exponent")
+
+
+class VIEW3D_PT_curved_reflections_reflectors(_SubPanel, bpy.types.Panel):
+    """The scene's reflectors: the method drawing each, why, and its accuracy measured in the view"""
+
+    bl_label = "Reflectors"
+
+    def draw(self, context):
+        layout = self.layout
+        scene = context.scene
+        reflectors = _reflectors(scene)
+        if not reflectors:
+            layout.label(text="No reflector marked", icon='INFO')
+        choices = {c.reflector: c for c in methods.last_choices(scene)}
+        measured = methods.measured(scene)
+        for reflector in reflectors:
+            _reflector_method(layout.box().column(align=True), reflector, choices.get(reflector.name),
+                              measured.get(reflector.name))
+        row = layout.row(align=True)
+        row.operator("curved_reflections.mark_reflector", icon='MOD_MIRROR')
+        row.operator("curved_reflections.check_scene", icon='VIEWZOOM')
+
+
+class VIEW3D_PT_curved_reflections_quality(_SubPanel, bpy.types.Panel):
+    """How accurate and how fast: mirror bounces, traced rays, the error allowed, the morphing polish"""
+
+    bl_label = "Quality"
+
+    def draw(self, context):
+        layout = self.layout
+        _split_property(layout)
+        settings = context.scene.curved_reflections
+        column = layout.column()
+        column.prop(settings, "max_order")
+        column.prop(settings, "downsample")
+        column.prop(settings, "accuracy_px")
+        layout.separator()
+        morph = layout.column(heading="Polish")
+        morph.active = _morphing(context.scene)
+        morph.prop(settings, "morph_polish_nodes", text="Node Images")
+        frames = morph.column()
+        frames.active = settings.morph_polish_nodes
+        frames.prop(settings, "morph_polish_frames", text="Every Frame")
+        morph.prop(settings, "morph_gpu_budget_mb")
+
+
+class VIEW3D_PT_curved_reflections_grids(_SubPanel, bpy.types.Panel):
+    """Morphing grids: their nodes, margin and cache folder, baking them (also in ranges on a farm)"""
+
+    bl_label = "Morphing Grids"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw(self, context):
+        layout = self.layout
+        _split_property(layout)
+        scene = context.scene
+        settings = scene.curved_reflections
+        morphing = _morphing(scene)
+        column = layout.column()
+        column.active = morphing
+        column.prop(settings, "morph_grid")
+        column.prop(settings, "morph_margin")
+        column.prop(settings, "morph_cache_dir")
+        nodes = settings.morph_grid[0] * settings.morph_grid[1] * settings.morph_grid[2]
+        _statistic(column, "Nodes", f"{nodes} a grid, numbered 0-{nodes - 1}")  # a farm bakes ranges of them
+        row = layout.row(align=True)
+        bake = row.row(align=True)
+        bake.active = morphing
+        bake.operator("curved_reflections.bake_morphing", icon='LIGHTPROBE_VOLUME')
+        row.operator("curved_reflections.clear_morphing", icon='TRASH')
+        bake_line = morph_bake.morph_status(scene, per_reflector=False)
+        if bake_line:
+            _wrapped(layout, bake_line, 'INFO')
+        for name, mode in morph_bake.reflector_modes(scene):
+            _wrapped(layout, f"{name}: {mode}", 'LIGHTPROBE_VOLUME' if mode.startswith("morphing") else 'INFO')
+
+
+class VIEW3D_PT_curved_reflections_statistics(_SubPanel, bpy.types.Panel):
+    """The live reflections' cost: traced rays, camera leaves, build and draw times, memory"""
+
+    bl_label = "Statistics"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw(self, context):
+        layout = self.layout
+        scene = context.scene
+        state = live.state_of(scene)
+        if state is None:
+            layout.label(text="Not baked: no statistics", icon='INFO')
+            return
+        stats = state.stats
+        if "rays" in stats:
+            column = layout.column(align=True)
+            for name, value in (
+                ("Rays", f"{stats['rays']:,}"),
+                ("Leaves", f"{stats['leaves']:,}"),
+                ("Build", f"{stats['build_ms']:.0f} ms"),
+                ("Draw", f"{stats['draw_ms']:.1f} ms" if "draw_ms" in stats else "-"),
+                ("Memory", f"{stats['memory_mb']:.1f} MB"),
+                ("Views", f"{stats['views']}"),
+            ):
+                _statistic(column, name, value)
+        if "unanswered" in stats:
+            _wrapped(layout, f"Searched on the GPU: {stats['searched'] - stats['unanswered']:,} of "
+                             f"{stats['searched']:,} vertex reflections found", 'SHADERFX')
+        if state.renderer is not None and state.renderer.morph.grids:
+            nodes = state.renderer.morph.nodes
+            layout.label(text=f"Morphing nodes on the GPU: {len(nodes)} ({nodes.nbytes / 2 ** 20:.0f} of "
+                              f"{nodes.budget_bytes / 2 ** 20:.0f} MB)", icon='MEMORY')
 
 
 classes = (
     VIEW3D_PT_curved_reflections,
+    VIEW3D_PT_curved_reflections_mirror,
+    VIEW3D_PT_curved_reflections_reflectors,
+    VIEW3D_PT_curved_reflections_quality,
+    VIEW3D_PT_curved_reflections_grids,
+    VIEW3D_PT_curved_reflections_statistics,
 )

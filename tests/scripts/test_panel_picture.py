@@ -1,8 +1,9 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""scripts/panel_picture.py draws the Reflections tab from the panel's own draw code.
+"""scripts/panel_picture.py draws the Reflections tab from the panels' own draw code.
 
-Run as from the command line (its own Blender state, in a child process); the rows it
-records are checked through the picture's size (one line per row) and its log.
+Run as from the command line (its own Blender state, in a child process); its log names
+each panel drawn, open or closed as by default, with its rows, and the picture's size
+follows from them.
 """
 
 import os
@@ -18,9 +19,14 @@ def test_panel_picture_is_written(tmp_path, gpu_ready):
     out = tmp_path / "panel.png"
     environment = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "blender_user"))
     run = subprocess.run([sys.executable, str(SCRIPT), "--out", str(out)], capture_output=True, text=True,
-                         timeout=300, env=environment)
+                         timeout=600, env=environment)
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
     size = re.search(r"wrote .*panel\.png \((\d+)x(\d+)\)", run.stdout)
     assert size and out.stat().st_size > 5000
-    # The active object's settings, the lists, both boxes with their buttons and the stats: 25+ rows.
-    assert int(size.group(1)) == 540 and int(size.group(2)) >= 2 * 10 + 22 * 25
+    panels = dict(re.findall(r"^panel (.+): ((?:open|closed), \d+ rows)$", run.stdout, re.MULTILINE))
+    assert list(panels) == ["Curved Reflections", "Mirror", "Reflectors", "Quality", "Morphing Grids", "Statistics"]
+    assert panels["Morphing Grids"] == panels["Statistics"] == "closed, 0 rows"  # closed: the header alone
+    rows = {name: int(state.split(", ")[1].split()[0]) for name, state in panels.items()}
+    # The live buttons and status; the mirror's settings; both mirrors with their reasons; the quality settings.
+    assert rows["Curved Reflections"] >= 5 and rows["Mirror"] >= 9 and rows["Reflectors"] >= 8 and rows["Quality"] >= 6
+    assert int(size.group(1)) == 540 and int(size.group(2)) >= 2 * 10 + 22 * (sum(rows.values()) + len(rows))
