@@ -137,6 +137,10 @@ class FramePass:
         """Whether a render traces the band of this pass's reflectors at all."""
         return bool(self.searched_reflectors)
 
+    def statistics(self) -> list:
+        """Lines for the panel's Statistics (what the pass holds, e.g. on the GPU)."""
+        return []
+
     def frame_stats(self) -> dict:
         """What a render reports about this pass's last frame (read back from the GPU)."""
         return {}

@@ -167,7 +167,7 @@ class ReflectedMeshes:
         """The reflected meshes of each (reflector index, answer texture) of ``answers``
         into the bound framebuffer (depth test on), placed by ``view_projection`` (a
         ``mathutils.Matrix`` relative to the shift), against the pre-pass of ``targets``
-        (``reflection_draw.FrameTargets``); ``image_of(k)`` is the texture of
+        (``frame_targets.FrameTargets``); ``image_of(k)`` is the texture of
         image ``k`` (-1: none); ``setup`` as ``ReflectionRenderer.reflected_setup``, with
         ``hidden_fraction``: a fragment whose reflector point lies farther from the eye
         than the mirror surface the pre-pass saw there, by more than this fraction of the

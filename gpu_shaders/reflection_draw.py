@@ -93,6 +93,7 @@ from . import draw_shaders
 from .methods import projection
 from .draw_geometry import prepare_geometry
 from .frame_pass import REFLECTION_COSINE, PassInputs
+from .frame_targets import FrameTargets
 from .gpu_data import data_texture, read_depth, read_texture, saved_state, vertex_buffer
 from .reflected_meshes import SNAP_SHARE, ReflectedMeshes, snap_grid
 from .traced_pixels import traced_rgba, traced_texture
@@ -123,42 +124,6 @@ SEARCHED_BAND_PX = 2
 #: lower rim at 480x320, up to 6 pixels wide: 1 % of the mirror's pixels on frame 12 of
 #: docs/benchmarks/morph_animation.md).
 RIM_GAP_PX = 6
-
-
-class FrameTargets:
-    """Float textures and framebuffers of one frame size (reusable from frame to frame)."""
-
-    def __init__(self, width: int, height: int):
-        self.width, self.height = int(width), int(height)
-        size = (self.width, self.height)
-        self.prepass_colors = gpu.types.GPUTexture(size, format='RGBA32F')
-        self.prepass_labels = gpu.types.GPUTexture(size, format='RGBA32F')
-        #: The smooth normal of the surface each pixel shows (the mirrors' for the
-        #: reflected meshes' law-of-reflection test).
-        self.prepass_normals = gpu.types.GPUTexture(size, format='RGBA16F')
-        self.prepass_depth = gpu.types.GPUTexture(size, format='DEPTH_COMPONENT32F')
-        self.prepass = gpu.types.GPUFrameBuffer(depth_slot=self.prepass_depth,
-                                                color_slots=(self.prepass_colors, self.prepass_labels,
-                                                             self.prepass_normals))
-        self.reflection_colors = gpu.types.GPUTexture(size, format='RGBA32F')
-        self.reflection_depth = gpu.types.GPUTexture(size, format='DEPTH_COMPONENT32F')
-        self.reflection = gpu.types.GPUFrameBuffer(depth_slot=self.reflection_depth,
-                                                   color_slots=(self.reflection_colors,))
-        zero = np.zeros(4, np.float32)
-        self.no_trace = gpu.types.GPUTexture((1, 1), format='RGBA32F', data=gpu.types.Buffer('FLOAT', 4, zero))
-        self.traced = None  # RGBA32F of the traced band of the last frame, or None
-        self._output = None
-
-    def fits(self, width: int, height: int) -> bool:
-        return (self.width, self.height) == (int(width), int(height))
-
-    @property
-    def output(self):
-        """(texture, framebuffer) that :meth:`ReflectionRenderer.render` composites into."""
-        if self._output is None:
-            texture = gpu.types.GPUTexture((self.width, self.height), format='RGBA32F')
-            self._output = (texture, gpu.types.GPUFrameBuffer(color_slots=(texture,)))
-        return self._output
 
 
 def _showing(labels: np.ndarray, reflectors) -> np.ndarray:

@@ -19,15 +19,13 @@ import textwrap
 
 import bpy
 
-from . import accuracy, live, methods, morph_bake
+from . import accuracy, live, method_registry, methods, morph_bake
 from .capture import SURFACE_TYPES
 
 _STATUS_ICONS = {'INFO': 'INFO', 'WARNING': 'ERROR', 'ERROR': 'CANCEL'}
 
 #: Characters per line of a reflector's reason in the panel (labels do not wrap by themselves).
 REASON_WIDTH = 52
-_METHOD_ICONS = {methods.ITERATIVE: 'SHADERFX', methods.MORPHING: 'LIGHTPROBE_VOLUME', methods.RUNTIME: 'CAMERA_DATA',
-                 methods.PERTURBATION: 'FORCE_HARMONIC', methods.OCTREE: 'LIGHTPROBE_VOLUME'}
 
 
 def _reflectors(scene) -> list:
@@ -65,7 +63,8 @@ def _reflector_method(layout, reflector, choice, found) -> None:
         layout.label(text=f"{reflector.name}: {reflector.curved_reflections.mode.title()} (not baked yet)",
                      icon='MOD_MIRROR')
         return
-    layout.label(text=f"{reflector.name}: {choice.method.title()}", icon=_METHOD_ICONS[choice.method])
+    method = method_registry.get(choice.method)
+    layout.label(text=f"{reflector.name}: {method.label}", icon=method.icon)
     _wrapped(layout, choice.reason, 'BLANK1')
     if found is not None:
         _wrapped(layout, accuracy.panel_line(found), 'DRIVER_DISTANCE')
@@ -269,10 +268,9 @@ class VIEW3D_PT_curved_reflections_statistics(_SubPanel, bpy.types.Panel):
         if "unanswered" in stats:
             _wrapped(layout, f"Searched on the GPU: {stats['searched'] - stats['unanswered']:,} of "
                              f"{stats['searched']:,} vertex reflections found", 'SHADERFX')
-        if state.renderer is not None and state.renderer.morph.grids:
-            nodes = state.renderer.morph.nodes
-            layout.label(text=f"Morphing nodes on the GPU: {len(nodes)} ({nodes.nbytes / 2 ** 20:.0f} of "
-                              f"{nodes.budget_bytes / 2 ** 20:.0f} MB)", icon='MEMORY')
+        for frame_pass in () if state.renderer is None else state.renderer.passes:
+            for line in frame_pass.statistics():
+                layout.label(text=line, icon='MEMORY')
 
 
 classes = (

@@ -461,6 +461,13 @@ class MorphPass(FramePass):
     def _node_bytes(self) -> int:
         return 2 * SLOTS * self.meshes.width * self.meshes.height * 16
 
+    def statistics(self) -> list:
+        """The node images held on the GPU, against their budget."""
+        if not self.grids:
+            return []
+        return [f"Morphing nodes on the GPU: {len(self.nodes)} ({self.nodes.nbytes / 2 ** 20:.0f} of "
+                f"{self.nodes.budget_bytes / 2 ** 20:.0f} MB)"]
+
     def answers(self) -> list:
         """(reflector index, answer texture) per image slot of the last blend."""
         return [(self.grids[k][0].reflector_index, texture) for k in self._drawn

@@ -14,7 +14,7 @@ import bpy
 import pytest
 
 from curved_reflections import operators
-from curved_reflections.operators import demo_scenes, live, methods, morph_bake, panel
+from curved_reflections.operators import demo_scenes, live, method_registry, methods, morph_bake, panel
 
 MAIN = panel.VIEW3D_PT_curved_reflections
 MIRROR = panel.VIEW3D_PT_curved_reflections_mirror
@@ -193,7 +193,8 @@ def test_panels_on_a_baked_scene_show_methods_stats_and_status(empty_scene, regi
     state = live.state_of(scene)
     choice = methods.last_choices(scene)[0]
     reflectors = _draw(REFLECTORS, scene)
-    assert reflectors["labels"][0] == (f"MirrorSphere: {choice.method.title()}", panel._METHOD_ICONS[choice.method])
+    method = method_registry.get(choice.method)
+    assert reflectors["labels"][0] == (f"MirrorSphere: {method.label}", method.icon)
     assert " ".join(_texts(reflectors)[1:]).startswith(choice.reason[:40])
 
     main = _texts(_draw(MAIN, scene))

@@ -11,7 +11,7 @@ e1. A step is trusted (a finite estimate) only when it is local (``reach_px`` fr
 seed's pixel), short against the path (MAX_RELATIVE_STEP), reaches the target before
 the next reflector on the ray, and lands on the side of the surface its seed shows the
 eye, as a reflection does. ``projector.py`` takes the steps;
-``glsl/perturbation_step.glsl`` (``take_step``) is their float32 twin.
+``gpu_shaders/glsl/perturbation_step.glsl`` (``take_step``) is their float32 twin.
 """
 
 from __future__ import annotations
