@@ -328,7 +328,7 @@ class ReflectionRenderer:
         if self._batches is None:
             self._batches = self._make_batches()
         batches, g = self._batches, self.geometry
-        camera_view = camera.ray_map.view if camera is not None else getattr(textures, "view", view)
+        camera_view = camera.ray_map.view if camera is not None else view if textures is None else textures.view
         cached = None if textures is None else self.projection(textures, camera_view, camera)
         targets = self.targets(view.width, view.height)
         width, height = targets.width, targets.height
@@ -416,9 +416,10 @@ class ReflectionRenderer:
     def _answers(self) -> list:
         return [answer for frame_pass in self.passes for answer in frame_pass.answers()]
 
-    def _reflectors_of(self, kind: str) -> list:
-        """The union over the passes of one of their :class:`.frame_pass.FramePass` lists."""
-        return [index for frame_pass in self.passes for index in getattr(frame_pass, kind)]
+    def _reflectors_of(self, kind) -> list:
+        """The union over the passes of one of their :class:`.frame_pass.FramePass` lists
+        (``kind``: the pass -> its list)."""
+        return [index for frame_pass in self.passes for index in kind(frame_pass)]
 
     def projection(self, textures, camera_view, camera=None) -> CachedProjection:
         """The reflected triangles of ``textures``'s camera, built in ``camera_view``:
@@ -489,7 +490,7 @@ class ReflectionRenderer:
         Returns how many pixels were traced."""
         size = (targets.width, targets.height)
         labels = read_texture(targets.prepass_labels, *size)[..., 0]
-        searched = _showing(labels, self._reflectors_of("searched_reflectors"))
+        searched = _showing(labels, self._reflectors_of(lambda p: p.searched_reflectors))
         drawn = read_texture(targets.reflection_colors, *size)[..., 3] > 0.5
         # The searched reflectors' pixels are traced by their own rule, below.
         searched_labels, labels = np.where(searched, labels, 0.0), np.where(searched, 0.0, labels)
@@ -515,8 +516,8 @@ class ReflectionRenderer:
             # every node of the eye's cell sees the mirror: the strip between the two is
             # traced, wider (the pixels farther from a drawn reflection show the world).
             reach = max(radius, SEARCHED_BAND_PX)
-            folded = _showing(searched_labels, self._reflectors_of("folded_reflectors"))
-            blended = _showing(searched_labels, self._reflectors_of("gap_reflectors"))
+            folded = _showing(searched_labels, self._reflectors_of(lambda p: p.folded_reflectors))
+            blended = _showing(searched_labels, self._reflectors_of(lambda p: p.gap_reflectors))
             pixels = np.unique(np.concatenate([
                 pixels, band_trace.band_pixels(searched_labels, drawn, reach),
                 band_trace.band_pixels(np.where(folded, searched_labels, 0.0), drawn, reach, edges_of_drawn=True),
@@ -536,31 +537,30 @@ class ReflectionRenderer:
         targets.traced = traced_texture(*size, pixels, rgba)
         return int(len(pixels))
 
-    def render(self, view, sbc_or_textures, world_color=(0.0, 0.0, 0.0, 1.0), trace: bool = True,
-               fill_radius: int | None = None, trace_edges: bool = False, trace_gaps: bool = False) -> np.ndarray:
+    def render(self, view, camera=None, world_color=(0.0, 0.0, 0.0, 1.0), trace: bool = True,
+               fill_radius: int | None = None, trace_edges: bool = False, trace_gaps: bool = False,
+               source=None) -> np.ndarray:
         """Draw ``view`` offscreen and read it back: (H, W, 4) float32 linear RGBA, rows bottom to top.
 
-        ``sbc_or_textures``: a ``SampleBasedCamera`` built for this view, its
-        ``projection.SBCTextures``, another projection source of this view
-        (:class:`.methods.morph_source.MorphSource`), or ``None`` when
-        the per-frame passes (iterative search, morphing grids) draw every reflector.
-        With ``trace`` the band along each footprint's edge that the camera cannot reach
-        (d pixels wide) is ray traced (:meth:`trace_band`; on a searched mirror, the pixels
-        without a reflection within :data:`SEARCHED_BAND_PX` of its silhouette or, if it is
-        not convex or not alone, of a drawn reflection), and with ``trace_gaps`` every
-        pixel of a mirror drawn from its grid that the blend left without a reflection
-        (exact there, but tens of thousands of rays a frame: the sky's pixels too);
-        without, it gets the composite's fill (``fill_radius``, ``None``: d). With
-        ``trace_edges`` also the reflector pixels within d of a drawn reflection that got
-        none: seams and creases; exact there, but no longer a purely feed-forward image
-        (15-18 % of the mirror pixels of the demo scenes are traced). When
-        ``sbc_or_textures`` is the camera itself, the pixels between ray-map cells of
+        ``camera``: a ``SampleBasedCamera`` built for this view, or ``None`` when the
+        per-frame passes draw every reflector; or, instead of a camera, ``source``:
+        another projection source of this view (its GPU textures without the camera, the
+        benchmarks' numpy morphing blend). With ``trace`` the band along each footprint's
+        edge that the camera cannot reach (d pixels wide) is ray traced
+        (:meth:`trace_band`; on a searched mirror, the pixels without a reflection within
+        :data:`SEARCHED_BAND_PX` of its silhouette or, if it is not convex or not alone, of
+        a drawn reflection), and with ``trace_gaps`` every pixel of a mirror drawn from its
+        grid that the blend left without a reflection (exact there, but tens of thousands
+        of rays a frame: the sky's pixels too); without, it gets the composite's fill
+        (``fill_radius``, ``None``: d). With ``trace_edges`` also the reflector pixels
+        within d of a drawn reflection that got none: seams and creases; exact there, but
+        no longer a purely feed-forward image (15-18 % of the mirror pixels of the demo
+        scenes are traced). With the ``camera``, the pixels between ray-map cells of
         different histories are traced too (:func:`band_trace.history_boundary`).
         """
         start = time.perf_counter()
-        textures, camera = sbc_or_textures, None
-        if hasattr(sbc_or_textures, "ray_map"):  # the camera itself, not its textures or another source
-            camera = sbc_or_textures
+        textures = source
+        if camera is not None:
             cached = self.sbc.last
             # The same camera again (a second render of it) keeps its projection.
             textures = cached.source if cached is not None and cached.camera is camera else (
@@ -572,12 +572,12 @@ class ReflectionRenderer:
             self.sbc.last.camera = camera
         drawn = time.perf_counter()
         traced = 0
-        morphed = self._reflectors_of("gap_reflectors") if trace_gaps else []
+        morphed = self._reflectors_of(lambda p: p.gap_reflectors) if trace_gaps else []
         if trace and ((textures is not None and textures.groups) or morphed
                       or any(frame_pass.traces_band for frame_pass in self.passes)):
             max_order = max((len(h) for h in textures.groups), default=1) if textures is not None else 1
             traced = self.trace_band(view, targets, max_order, world_color, downsample, trace_edges,
-                                     getattr(sbc_or_textures, "ray_map", None), camera, holes_of=morphed)
+                                     None if camera is None else camera.ray_map, camera, holes_of=morphed)
             fill_radius = 0 if targets.traced is not None else downsample
         elif fill_radius is None:
             fill_radius = downsample

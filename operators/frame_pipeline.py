@@ -21,6 +21,7 @@ meshes alone as edits arrive. Every stage reads one :class:`FrameSettings`
 from __future__ import annotations
 
 import hashlib
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -105,8 +106,9 @@ class FramePipeline:
     renderer: object = None
     bounds: tuple | None = None  # the capture's scene box
     world: tuple = (0.0, 0.0, 0.0, 1.0)
-    #: The last :meth:`update`'s capture key, and how many frames reused the renderer.
+    #: The last :meth:`update`'s capture key and capture time, and how many frames reused the renderer.
     key: tuple = ()
+    capture_seconds: float = 0.0
     reused: int = 0
 
     def plan_reflectors(self, scene, captured, bake_missing: bool = False) -> None:
@@ -134,7 +136,9 @@ class FramePipeline:
         the last frame: the reflectors' BVH when they moved, the plan (and grids, baking a
         grid mode's missing one) when they, their modes or the settings changed, the
         renderer when anything captured, the settings or the mirrors' looks changed."""
+        start = time.perf_counter()
         captured = capture_scene(depsgraph)
+        self.capture_seconds = time.perf_counter() - start
         properties = reflector_properties(captured.reflectors, scene)
         # Modes, settings and the mirrors' looks may be animated too: they are part of the key.
         looks = hashlib.sha1(b"".join(np.ascontiguousarray(v).tobytes() for v in properties.values())).hexdigest()

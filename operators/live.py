@@ -451,7 +451,7 @@ def _projection_source(state: LiveScene, camera: ViewCamera | None):
     dropped) the camera's GPU textures, which project on this draw."""
     if camera is None or camera.sbc is None:
         return None
-    if isinstance(camera.source, SBCTextures) or state.renderer.sbc.holds(camera.source):
+    if (camera.source is not None and camera.source.on_gpu) or state.renderer.sbc.holds(camera.source):
         return camera.source
     projected, camera.projected = camera.projected, None
     if projected is not None and projected[0] is state.renderer.sbc and state.renderer.sbc.adopt(projected[1]):

@@ -51,8 +51,8 @@ PREDICTED_FRAMES = 6
 class ReflectionRender:
     """One rendered frame: (H, W, 4) float32 linear RGBA, rows bottom to top, and timings.
 
-    ``seconds`` holds ``plan`` (the view, the capture and what changed of the pipeline:
-    :meth:`.frame_pipeline.FramePipeline.update`), ``sbc`` (ray map and BSP trees),
+    ``seconds`` holds ``capture`` (the scene), ``plan`` (the view and what changed of
+    the pipeline: :meth:`.frame_pipeline.FramePipeline.update`), ``sbc`` (ray map and BSP trees),
     ``draw`` (the passes, the band trace, the composite and the read-back) and
     ``total``; ``stats`` the camera's and the renderer's figures, ``methods``
     ({reflector: method}) and ``warnings`` (messages for the user).
@@ -120,7 +120,8 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
     image = state.renderer.render(view, sbc, state.world, trace_edges=trace_edges, trace_gaps=trace_gaps)
     end = time.perf_counter()
     state.frames += 1
-    seconds = {"plan": planned_at - start, "sbc": built_at - planned_at,
+    seconds = {"capture": state.capture_seconds, "plan": planned_at - start - state.capture_seconds,
+               "sbc": built_at - planned_at,
                "draw": end - built_at, "total": end - start,
                "trace": sbc.stats.get("trace_seconds", float("nan")) if sbc is not None else 0.0}
     stats = {**(sbc.stats if sbc is not None else {}), **state.renderer.stats,

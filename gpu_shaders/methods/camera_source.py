@@ -22,19 +22,25 @@ class CameraSource:
     """``sbc`` (a ``SampleBasedCamera``) projecting with numpy, as the GPU pass writes
     its targets (``glsl/reflection_project_vert.glsl``)."""
 
+    #: Projects in numpy: no point batch, ``positions`` themselves.
+    on_gpu = False
+    #: Mixed triangles use the renderer's sub-grids.
+    sheet_subdivisions = None
+
     def __init__(self, sbc):
         self.sbc = sbc
         self.groups = sbc.groups
         self.downsample = sbc.ray_map.downsample
         self.view = sbc.ray_map.view
 
-    def project(self, projections, positions, batch, draws: list, n_texels: int, setup: dict, static: bool = False):
+    def project(self, projections, positions, batch, draws: list, n_texels: int, setup: dict, static: bool = False,
+                camera=None):
         """Per (group, order, texel offset, first, count) of ``draws``, points first ..
         first + count - 1 of ``positions`` into texels offset + index: (pixel, depth,
         leaf kind) and (eye vector, reflected distance), 0 where a point does not
         project; ``batch`` is not used. Each point is projected once, in every group
         (the camera culls groups by their cones), and polished on the true rays where
-        ``projections.polish`` asks, as the GPU pass's read-back is."""
+        ``projections.polish`` asks, as the GPU pass's read-back is (``camera`` is its own)."""
         points = np.zeros((n_texels, 4), np.float32)
         eyes = np.zeros((n_texels, 4), np.float32)
         if not draws:

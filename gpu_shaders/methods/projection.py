@@ -51,7 +51,7 @@ import numpy as np
 
 from ...addon.methods.sbc import ray_patch, sbc as sbc_module, sbc_cells
 from ...addon.methods.sbc.bsp import CAMERA_LEAF, RAY_LIST_LEAF
-from ..gpu_data import data_texture
+from ..gpu_data import data_texture, points_batch
 from ..shader_sources import glsl_source
 from . import sbc_pack
 from .reflected_depth import reflected_depth
@@ -119,12 +119,19 @@ def declare_samplers(info, first_slot: int = 0) -> int:
 
 
 class SBCTextures:
-    """One sample-based camera in GPU textures (needs an initialised GPU)."""
+    """One sample-based camera in GPU textures (needs an initialised GPU): a projection
+    source (``sbc_triangles``' protocol) that projects on the GPU."""
+
+    #: Projects on the GPU, a batch of the points at a time (``CameraProjections.project_pass``).
+    on_gpu = True
+    #: Mixed triangles use the renderer's sub-grids.
+    sheet_subdivisions = None
 
     def __init__(self, sbc):
         self.packed = sbc_pack.pack_sample_based_camera(sbc)
         self.textures = {name: data_texture(image) for name, image in self.packed.texture_arrays().items()}
         self.groups = list(sbc.groups)
+        self.view = sbc.ray_map.view
 
     @property
     def n_groups(self) -> int:
@@ -133,6 +140,19 @@ class SBCTextures:
     @property
     def downsample(self) -> int:
         return self.packed.downsample
+
+    def project(self, projections, positions, batch, draws: list, n_texels: int, setup: dict,
+                static: bool = False, camera=None):
+        """The GPU projection pass of ``draws`` (``CameraProjections.project_pass``) over
+        ``positions`` (``batch``: their point batch, made here when None); with the
+        ``camera`` these textures were packed from, risky answers are polished on the
+        true rays where the renderer polishes (:func:`polish_readback`)."""
+        if batch is None:
+            batch = points_batch(np.asarray(positions, np.float32))
+        points, eyes = projections.project_pass(self, batch, draws, n_texels, setup)
+        if projections.polish and camera is not None and camera.true_rays is not None:
+            polish_readback(camera, positions, draws, points, eyes, setup)
+        return points, eyes
 
     def bind(self, shader) -> None:
         """Bind the textures to the library's samplers of a bound ``shader``."""

@@ -26,9 +26,17 @@ c. *Mixed triangles* (SBC V-B: one or two corners project, none stitched): each 
 
 The result, a :class:`CachedProjection`, is one vertex buffer whose vertices hold their
 first reflector point in world space, depth, eye vector, distance and mesh data; the
-renderer draws it every frame with ``glsl/reflection_mesh_vert.glsl``. Other sources
-of sheets (morphing grids on the CPU, ``morph_source.MorphSource``) project through the same
-:meth:`CameraProjections.project_points`.
+renderer draws it every frame with ``glsl/reflection_mesh_vert.glsl``.
+
+What is projected comes from a *projection source*, one protocol for every kind: its
+``groups`` (a reflection history per sheet), ``downsample`` (ray-map pixels per cell),
+``view`` (the view it was made for), ``on_gpu`` (it projects a batch of points on the
+GPU, else their positions in numpy), ``sheet_subdivisions`` (a cap per sheet on the
+mixed-triangle sub-grid, or None) and ``project(projections, positions, batch, draws,
+n_texels, setup, static, camera)`` -> the (pixel, depth, kind) and (eye vector,
+distance) texels of :meth:`CameraProjections.project_pass`. A camera's GPU textures
+(``projection.SBCTextures``) and the camera in numpy (``camera_source.CameraSource``)
+are sources; so is the numpy morphing blend the benchmarks compare with.
 """
 
 from __future__ import annotations
@@ -95,7 +103,7 @@ def _subdivision_caps(source, sheets: list):
     """The largest mixed-triangle sub-grid each of ``sheets`` allows (``None``: the
     renderer's): a source whose points cost much more to project than the GPU pass
     (``MorphSource``) caps it."""
-    caps = getattr(source, "sheet_subdivisions", None)
+    caps = source.sheet_subdivisions
     return None if caps is None else [caps[sheet] for sheet in sheets]
 
 
@@ -104,7 +112,7 @@ def _culling(camera, diameter: float):
     chunks (:mod:`...addon.methods.sbc.sheet_bounds`), or ``None`` (no camera: no culling)."""
     if camera is None:
         return None
-    return sheet_bounds.sheet_kdops(camera, diameter), getattr(camera, "cones", None)
+    return sheet_bounds.sheet_kdops(camera, diameter), camera.cones
 
 
 @dataclass
@@ -212,7 +220,7 @@ class CameraProjections:
         region), else made now."""
         cached = self._cache.get(id(textures))
         if cached is None or cached.source is not textures:
-            batch = self._vertex_points() if isinstance(textures, projection.SBCTextures) else None
+            batch = self._vertex_points() if textures.on_gpu else None
             cached = self._uploaded(self.triangles(textures, camera_view, camera, vertex_batch=batch))
         self._keep(cached)
         return cached
@@ -396,22 +404,16 @@ class CameraProjections:
                 read_texture(eyes, columns, rows).reshape(-1, 4)[:n_texels])
 
     def project_points(self, source, positions, batch, draws: list, n_texels: int, setup: dict,
-                        static: bool = False, camera=None):
-        """The projection pass of ``draws`` (as :meth:`project_pass`) with any source: a
-        camera's textures on the GPU, else the source's own ``project`` (morphing grids
-        on the CPU). ``positions`` are the points of ``batch`` (made from them
-        when ``None``); ``static``: they are this renderer's own vertices, which a source
-        may keep work for between views (morphing's node images, SBC paper VI). With the
-        ``camera`` of the textures, risky answers are polished on the true rays as its
-        numpy projection polishes them (:func:`.projection.polish_readback`)."""
-        if isinstance(source, projection.SBCTextures):
-            if batch is None:
-                batch = points_batch(np.asarray(positions, np.float32))
-            points, eyes = self.project_pass(source, batch, draws, n_texels, setup)
-            if self.polish and getattr(camera, "true_rays", None) is not None:
-                projection.polish_readback(camera, positions, draws, points, eyes, setup)
-            return points, eyes
-        return source.project(self, positions, batch, draws, n_texels, setup, static)
+                       static: bool = False, camera=None):
+        """The projection pass of ``draws`` (as :meth:`project_pass`) with any projection
+        source: its own ``project`` (a camera's textures on the GPU, a camera or a grid in
+        numpy). ``positions`` are the points of ``batch`` (made from them by a source that
+        projects on the GPU when ``None``); ``static``: they are this renderer's own
+        vertices, which a source may keep work for between views (morphing's node
+        images, SBC paper VI). With the ``camera`` of the textures, risky answers are
+        polished on the true rays as its numpy projection polishes them
+        (:func:`.projection.polish_readback`)."""
+        return source.project(self, positions, batch, draws, n_texels, setup, static, camera)
 
     def _vertex_arrays(self, positions, points, eyes, reflector: float, color, normal_lit, uv) -> dict:
         """Per-vertex arrays of drawn reflected triangles (``glsl/reflection_mesh_vert.glsl``)."""

@@ -14,7 +14,7 @@ import bpy
 import pytest
 
 from curved_reflections import operators
-from curved_reflections.operators import demo_scenes, live, method_registry, methods, morph_bake, panel
+from curved_reflections.operators import demo_scenes, live, method_registry, methods, morph_bake, panel, scene_status
 
 MAIN = panel.VIEW3D_PT_curved_reflections
 MIRROR = panel.VIEW3D_PT_curved_reflections_mirror
@@ -217,7 +217,7 @@ def test_panels_on_a_baked_scene_show_methods_stats_and_status(empty_scene, regi
 @pytest.mark.parametrize("mode", ['MORPHING', 'OCTREE'])
 def test_a_reflector_wanting_a_grid_makes_the_grid_settings_apply(empty_scene, registered, mode):
     scene = demo_scenes.build("sbc_fig3", bpy.context.scene, 64, 48)
-    morph_bake._REFLECTOR_STATUS.clear()
+    scene_status.forget_all()
     bpy.data.objects["MirrorSphere"].curved_reflections.mode = mode
     grids = _draw(GRIDS, scene)
     assert grids["greyed"] == []
