@@ -294,7 +294,7 @@ def _image_pixels(image) -> np.ndarray:
     """(H, W, 4) float32 linear RGBA of a ``bpy.types.Image``, rows bottom to top.
 
     Byte images store display values in their colour space; an sRGB one is linearised."""
-    from ..addon.metrics import srgb_to_linear
+    from ..addon.srgb import srgb_to_linear
 
     width, height = image.size
     if width == 0 or height == 0:

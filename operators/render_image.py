@@ -33,7 +33,7 @@ import numpy as np
 from bpy.props import BoolProperty, StringProperty
 
 from ..addon.errors import SceneInputError
-from ..addon.metrics import linear_to_srgb
+from ..addon.srgb import linear_to_srgb
 from ..addon.geometry.raytrace import ReflectorSet
 from ..addon.methods.sbc.sbc_build import build_sample_based_camera, check_view_outside_reflectors, clip_start_inside
 from ..addon.scene import scene_bounds
@@ -42,7 +42,7 @@ from . import methods
 from .capture import capture_scene, view_from_camera
 from .gpu_init import ensure_gpu
 from .properties import BLEND_RELATIVE
-from .reference_render import write_png
+from .png import write_png
 from .render_inputs import BOUNDS_MARGIN, reflector_properties, world_color
 
 #: Node projections an animation keeps queued on the prefetching thread (one runs).

@@ -198,7 +198,7 @@ def main(argv=None) -> int:
 
     from curved_reflections.operators import demo_scenes
     from curved_reflections.operators.gpu_init import ensure_gpu
-    from curved_reflections.operators.reference_render import write_png
+    from curved_reflections.operators.png import write_png
 
     ensure_gpu()
     package.register()

@@ -27,8 +27,8 @@ c. *Mixed triangles* (SBC V-B: one or two corners project, none stitched): each 
 The result, a :class:`CachedProjection`, is one vertex buffer whose vertices hold their
 first reflector point in world space, depth, eye vector, distance and mesh data; the
 renderer draws it every frame with ``glsl/reflection_mesh_vert.glsl``. Other sources
-of sheets (morphing grids on the CPU, ``morph_source.MorphSource``) project through the same
-:meth:`CameraProjections.project_points`.
+of sheets (morphing grids on the CPU, ``tools.numpy_morph_source.MorphSource``, the
+benchmarks' reference) project through the same :meth:`CameraProjections.project_points`.
 """
 
 from __future__ import annotations

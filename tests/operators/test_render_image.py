@@ -9,7 +9,8 @@ import bpy
 import numpy as np
 import pytest
 
-from curved_reflections.operators import demo_scenes, methods, reference_render
+from curved_reflections.operators import demo_scenes, methods
+from curved_reflections.tools import reference_render
 
 
 @pytest.fixture
