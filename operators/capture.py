@@ -21,7 +21,7 @@ import numpy as np
 from mathutils import Matrix
 
 from ..addon.errors import SceneInputError
-from ..addon.metrics import srgb_to_linear
+from ..addon.srgb import srgb_to_linear
 from ..addon.scene import DiffuseMesh, Reflector, vertex_normals
 from ..addon.view import View
 from .material_color import MaterialColor, material_color

@@ -3,9 +3,9 @@
 
 Each scene is made to be *measured*: every diffuse object is a flat, distinct,
 saturated emission colour and the world a further flat colour, so every rendered pixel
-says which object it shows (see ``addon/metrics.py``). Mirrors are perfect (metallic 1,
-roughness 0, white) and carry the exact normals of the surface they sample as custom
-split normals. No lights are needed: nothing is lit, everything emits.
+says which object it shows (the label metrics of ``tools/metrics.py``). Mirrors are
+perfect (metallic 1, roughness 0, white) and carry the exact normals of the surface they
+sample as custom split normals. No lights are needed: nothing is lit, everything emits.
 
 Scenes:
 - ``sbc_fig3``: Popescu, Sacks & Mei 2006, Fig. 3: a mirror sphere on a tiled floor among
@@ -27,7 +27,7 @@ from bpy.props import EnumProperty, IntProperty
 from mathutils import Vector
 
 from ..addon.geometry import shapes
-from ..addon.metrics import srgb_to_linear
+from ..addon.srgb import srgb_to_linear
 from ..addon.geometry.sphere import bumpy_icosphere
 
 #: Display-sRGB label colours, channels in {0, 0.5, 1} with at least one 1 and not white:

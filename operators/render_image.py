@@ -30,7 +30,7 @@ import numpy as np
 from bpy.props import BoolProperty, StringProperty
 
 from ..addon.errors import SceneInputError
-from ..addon.metrics import linear_to_srgb
+from ..addon.srgb import linear_to_srgb
 from ..addon.methods.sbc.sbc_build import check_view_outside_reflectors
 from ..addon.view import View
 from .capture import view_from_camera
@@ -38,7 +38,7 @@ from .frame_pipeline import FramePipeline, settings_of
 from .gpu_init import ensure_gpu
 from .live_workers import prefetcher
 from .properties import BLEND_RELATIVE
-from .reference_render import write_png
+from .png import write_png
 
 #: Node projections an animation keeps queued on the prefetching thread (one runs).
 PREFETCHED_NODES = 2

@@ -7,7 +7,7 @@
 
 For each scene this saves DIR/<scene>.blend (set up for the Cycles reference), renders
 the reflector mask, Cycles (the reference) and each other renderer, and compares labels
-(which object each pixel shows, ``addon/metrics.py``) against Cycles on all reflector
+(which object each pixel shows, ``tools/metrics.py``) against Cycles on all reflector
 pixels and on the near-contact region. It writes the images, one side-by-side PNG per
 scene and DIR/results.md, and prints the table.
 
@@ -53,7 +53,7 @@ class Renderer:
 
 def renderers(args) -> list[Renderer]:
     """The reference (Cycles) first, then every renderer compared with it."""
-    from curved_reflections.operators import reference_render as rr
+    from curved_reflections.tools import reference_render as rr
 
     def eevee(variant):
         return lambda scene, reflectors, path: rr.render_eevee(
@@ -81,7 +81,9 @@ def render_ours(scene, path, args, mode: str | None = None):
     """
     import bpy
     import numpy as np
-    from curved_reflections.operators import reference_render as rr, render_image
+    from curved_reflections.operators import render_image
+    from curved_reflections.operators.png import write_png
+    from curved_reflections.tools import reference_render as rr
 
     depsgraph = bpy.context.evaluated_depsgraph_get()  # run_scene builds into the context's scene
     mirrors = [o for o in scene.objects if o.curved_reflections.is_reflector]
@@ -91,7 +93,7 @@ def render_ours(scene, path, args, mode: str | None = None):
         start = time.perf_counter()
         result = render_image.render_scene(scene, depsgraph, max_order=args.max_order,
                                            trace_edges=args.trace_edges)
-        rr.write_png(path, result.display)
+        write_png(path, result.display)
         return time.perf_counter() - start, result
 
     try:
@@ -130,7 +132,7 @@ class Row:
 
 def measure(kind: str, results, mask, palette) -> tuple[list[Row], dict]:
     """Label disagreement of every result with the reference, on the mask and near contact."""
-    from curved_reflections.addon import metrics
+    from curved_reflections.tools import metrics
     from curved_reflections.operators.demo_scenes import WORLD_KEY
 
     names = metrics.palette_names(palette)
@@ -225,7 +227,9 @@ def causes_image(reference_image, cause):
 def run_scene(kind: str, args, out: Path) -> list[Row]:
     """Build, save, render and measure one demo scene."""
     import bpy
-    from curved_reflections.operators import demo_scenes, reference_render as rr
+    from curved_reflections.operators import demo_scenes
+    from curved_reflections.operators.png import write_png
+    from curved_reflections.tools import reference_render as rr
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     bpy.context.scene.name = kind  # before building: camera and world are named after it
@@ -240,18 +244,18 @@ def run_scene(kind: str, args, out: Path) -> list[Row]:
         print(f"[demo] {kind}: {entry.name} ...", flush=True)
         results.append(entry.render(scene, reflectors, out / f"{kind}_{entry.name}.png"))
     rows, maps = measure(kind, results, mask, palette)
-    rr.write_png(out / f"{kind}_side_by_side.png",
+    write_png(out / f"{kind}_side_by_side.png",
                  side_by_side(results, mask, maps["contact"], maps["differences"]))
     for row in rows:
         row.notes += f"; {int(mask.sum())} reflector px, {int(maps['contact'].sum())} near contact"
     ours = next((r for r in results if r.name == OURS), None)
     if ours is not None:
-        from curved_reflections.addon import metrics
+        from curved_reflections.tools import metrics
         from curved_reflections.operators.demo_scenes import WORLD_KEY
 
         cause = causes(metrics.label_image(ours.image, palette), metrics.label_image(results[0].image, palette),
                        mask, metrics.palette_names(palette).index(WORLD_KEY), scene.curved_reflections.downsample)
-        rr.write_png(out / f"{kind}_causes.png", causes_image(results[0].image, cause))
+        write_png(out / f"{kind}_causes.png", causes_image(results[0].image, cause))
         counts = ", ".join(f"{name} {100.0 * (cause == k).sum() / max(1, mask.sum()):.2f} %"
                            for k, name in enumerate(CAUSES))
         next(r for r in rows if r.renderer == OURS).notes += f"; disagreement by cause: {counts}"
@@ -282,7 +286,7 @@ def details(rows: list[Row]) -> str:
 
 
 def report(rows: list[Row], args) -> str:
-    from curved_reflections.addon.metrics import CONTACT_RADIUS_FRACTION
+    from curved_reflections.tools.metrics import CONTACT_RADIUS_FRACTION
 
     radius = CONTACT_RADIUS_FRACTION * args.width
     return "\n\n".join([

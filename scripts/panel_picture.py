@@ -48,7 +48,7 @@ from mathutils import Matrix  # noqa: E402
 from curved_reflections.operators import demo_scenes, live, panel  # noqa: E402
 from curved_reflections.operators.capture import view_from_camera  # noqa: E402
 from curved_reflections.operators.gpu_init import ensure_gpu  # noqa: E402
-from curved_reflections.operators.reference_render import write_png  # noqa: E402
+from curved_reflections.operators.png import write_png  # noqa: E402
 
 WIDTH, LINE, HEADER, GAP, INDENT, MARGIN, ICON = 540, 22, 26, 8, 14, 10, 18
 #: Share of a split property's row taken by its name (Blender's ``use_property_split``).

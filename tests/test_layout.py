@@ -1,18 +1,24 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""The layout rules of the extension's code (issues 20 and 45; ``../shared/DESIGN.md``):
-no import circle between its modules (imports inside functions count: they hide a
-circle, they do not remove it), imports at the top of their modules, no module over 600
-lines but those listed with their reason, the engine (``addon/``) free of Blender and
-what the live view's worker threads import free of ``gpu``. Read from the source with
-``ast``; nothing is imported."""
+"""The layout rules of the extension's code (``../shared/DESIGN.md``): no import circle
+between its modules (imports inside functions count: they hide a circle, they do not
+remove it), imports at the top of their modules, no module over 600 lines but those
+listed with their reason, the engine (``addon/``) free of Blender, what the live view's
+worker threads import free of ``gpu``, and the shipped packages free of the development
+helpers (``tools/``, not in the zip). Read from the source with ``ast``
+(``tools/import_graph.py``); nothing of the extension is imported."""
 
 import ast
 import io
 import tokenize
 from pathlib import Path
 
+from curved_reflections.tools.import_graph import module_names, relative_imports
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("addon", "gpu_shaders", "operators")
+#: What the zip ships, and the development helpers beside it (same rules, never imported
+#: by the shipped ones).
+SHIPPED_PACKAGES = ("addon", "gpu_shaders", "operators")
+PACKAGES = SHIPPED_PACKAGES + ("tools",)
 #: No module over this many lines but those in :data:`OVER_THE_CEILING`.
 MAX_LINES = 600
 #: {module: why it is longer than :data:`MAX_LINES`}. An entry goes once its module is
@@ -35,35 +41,14 @@ BLENDER_MODULES = {"bpy", "gpu", "mathutils", "bmesh"}
 
 def _modules() -> dict:
     """{dotted name relative to the repository root: path} of the extension's modules."""
-    modules = {"": REPO_ROOT / "__init__.py"}
-    for package in PACKAGES:
-        for path in (REPO_ROOT / package).rglob("*.py"):
-            parts = path.relative_to(REPO_ROOT).with_suffix("").parts
-            name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
-            modules[name] = path
-    return modules
+    paths = ["__init__.py"] + [path.relative_to(REPO_ROOT).as_posix()
+                               for package in PACKAGES for path in (REPO_ROOT / package).rglob("*.py")]
+    return {name: REPO_ROOT / path for name, path in module_names(paths).items()}
 
 
 def _imports(name: str, path: Path, modules: dict) -> set:
     """The extension's modules that ``name`` imports, anywhere in its source."""
-    is_package = path.name == "__init__.py"
-    package = name.split(".") if is_package else name.split(".")[:-1]
-    if name == "":
-        package = []
-    found = set()
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-        if not isinstance(node, ast.ImportFrom) or node.level == 0:
-            continue
-        base = package[:len(package) - (node.level - 1)] if node.level > 1 else package
-        target = ".".join(base + ([node.module] if node.module else []))
-        for alias in node.names:
-            submodule = f"{target}.{alias.name}" if target else alias.name
-            if submodule in modules:
-                found.add(submodule)
-            elif target in modules:
-                found.add(target)
-    found.discard(name)
-    return found
+    return relative_imports(name, path.read_text(encoding="utf-8"), path.name == "__init__.py", modules)[0]
 
 
 def _cycles(graph: dict) -> list:
@@ -221,3 +206,19 @@ def test_the_engine_never_imports_blender():
         if not name.startswith("addon"):
             continue
         assert _blender_imports(path) == set(), name
+
+
+def test_shipped_modules_never_import_the_development_helpers():
+    """``tools/`` is not in the zip: a shipped module importing it would fail installed."""
+    leaks = {name: sorted(t for t in targets if t.split(".")[0] == "tools")
+             for name, targets in _graph().items() if name == "" or name.split(".")[0] in SHIPPED_PACKAGES}
+    assert {name: found for name, found in leaks.items() if found} == {}
+
+
+def test_every_relative_import_names_a_module():
+    """One that names none fails only when it runs, perhaps inside a function on a rare path."""
+    modules = _modules()
+    unresolved = {name: found for name, path in modules.items()
+                  if (found := relative_imports(name, path.read_text(encoding="utf-8"), path.name == "__init__.py",
+                                                modules)[1])}
+    assert unresolved == {}

@@ -53,12 +53,6 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
-def rotation_z(angle: float) -> np.ndarray:
-    """3x3 rotation by ``angle`` radians about +Z."""
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
 def merge(shapes) -> Shape:
     """One shape holding all of ``shapes`` as separate parts (vertices are not welded)."""
     offsets = np.cumsum([0] + [len(s.vertices) for s in shapes])

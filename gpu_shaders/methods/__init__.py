@@ -1,10 +1,9 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Each method's GPU side, used by the method-agnostic renderer (``reflection_draw.py``):
 
-- sample-based cameras: ray maps by rasterisation (:mod:`.raymap_gpu`), cameras packed into
-  textures (:mod:`.sbc_pack`) and projected in a vertex shader (:mod:`.projection`) or in
-  numpy (:mod:`.camera_source`), at the depth that orders reflections
-  (:mod:`.reflected_depth`), their reflected triangles (:mod:`.sbc_triangles`);
+- sample-based cameras: cameras packed into textures (:mod:`.sbc_pack`) and projected in a
+  vertex shader (:mod:`.projection`) or in numpy (:mod:`.camera_source`), at the depth that
+  orders reflections (:mod:`.reflected_depth`), their reflected triangles (:mod:`.sbc_triangles`);
 - morphing grids (tetrahedral and octree): node images on the GPU and their per-frame blend
   (:mod:`.morph_source`, :mod:`.morph_pass`);
 - the iterative search: the reflector's cube map baked (:mod:`.iterative_bake`) and the

@@ -36,7 +36,8 @@ mixed-triangle sub-grid, or None) and ``project(projections, positions, batch, d
 n_texels, setup, static, camera)`` -> the (pixel, depth, kind) and (eye vector,
 distance) texels of :meth:`CameraProjections.project_pass`. A camera's GPU textures
 (``projection.SBCTextures``) and the camera in numpy (``camera_source.CameraSource``)
-are sources; so is the numpy morphing blend the benchmarks compare with.
+are sources; so is the numpy morphing blend the benchmarks compare with
+(``tools/numpy_morph_source.py``).
 """
 
 from __future__ import annotations

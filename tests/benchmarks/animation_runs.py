@@ -60,8 +60,9 @@ def sampled_frames(scene, folder: Path, frames: int, sampled: int, samples: int,
     scene for the variant (modes, settings) before its single-frame render."""
     import bpy
 
-    from curved_reflections.addon import metrics
-    from curved_reflections.operators import demo_scenes, reference_render as rr
+    from curved_reflections.operators import demo_scenes
+    from curved_reflections.operators.png import write_png
+    from curved_reflections.tools import metrics, reference_render as rr
     from curved_reflections.operators.render_image import render_scene
 
     palette = demo_scenes.palette(scene)
@@ -78,7 +79,7 @@ def sampled_frames(scene, folder: Path, frames: int, sampled: int, samples: int,
             start = time.perf_counter()
             ours = render_scene(scene, depsgraph, **options)
             row[f"{name}_seconds"] = time.perf_counter() - start
-            path = rr.write_png(folder / f"{name}_{frame}.png", ours.display)
+            path = write_png(folder / f"{name}_{frame}.png", ours.display)
             row[name] = metrics.label_disagreement(rr.read_png(path), cycles.image, mask, palette)
             row[f"{name}_methods"] = ours.stats["methods"]
         rows.append(row)

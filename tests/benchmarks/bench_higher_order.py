@@ -8,7 +8,7 @@ order-2 groups against the exact second-order solver, and rendered labels agains
 Scene: the two_spheres demo (two mirror spheres 0.18 apart), built with bpy and
 captured from the evaluated depsgraph exactly as ``bench_sbc.py`` does (480x320 camera
 view, scene box = bounds + 0.1, the same shuffled points: in the box, on the diffuse
-meshes, within 0.5 of the mirrors). The exact solver (``addon/reference/exact_paths.py``) finds
+meshes, within 0.5 of the mirrors). The exact solver (``tools/exact_paths.py``) finds
 every visible path eye -> x1 -> x2 -> p once.
 
 Per down-sampling d (accuracy 1 px, ``max_order=2``), for the histories (A, B) and
@@ -23,7 +23,7 @@ Per down-sampling d (accuracy 1 px, ``max_order=2``), for the histories (A, B) a
 ``--render`` adds the picture-level check at the demo's 320x240: our render
 (``operators/render_image.render_scene``) with ``max_order`` 1 and 2 and Cycles with 1
 and 8 glossy bounces, against Cycles with 8 bounces, label disagreement
-(``addon/metrics.py``) on all reflector pixels and on the second-order footprint (pixels
+(``tools/metrics.py``) on all reflector pixels and on the second-order footprint (pixels
 whose reflected view ray hits the other mirror, from a full-resolution ray map).
 Writes OUT/higher_order.md and OUT/higher_order.json.
 """
@@ -49,7 +49,7 @@ RENDER_WIDTH, RENDER_HEIGHT = 320, 240
 
 
 def prepare(n_points: int) -> dict:
-    from curved_reflections.addon.reference.exact_paths import solve_second_order
+    from curved_reflections.tools.exact_paths import solve_second_order
     from curved_reflections.addon.geometry.raytrace import ReflectorSet
 
     _, _, reflectors, view, bounds, points, counts = bench_sbc.demo_scene("two_spheres", n_points)
@@ -133,11 +133,13 @@ def render_check(images: Path, cycles_samples: int, bounces: int) -> dict:
     """Label disagreement with Cycles (``bounces`` glossy bounces) on the two_spheres demo."""
     import bpy
 
-    from curved_reflections.addon import metrics
+    from curved_reflections.tools import metrics
     from curved_reflections.addon.methods.sbc.raymap import trace_ray_map
     from curved_reflections.addon.geometry.raytrace import ReflectorSet
     from curved_reflections.addon.scene import scene_bounds
-    from curved_reflections.operators import capture, demo_scenes, reference_render as rr, render_image
+    from curved_reflections.operators import capture, demo_scenes, render_image
+    from curved_reflections.operators.png import write_png
+    from curved_reflections.tools import reference_render as rr
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     bpy.context.scene.name = "two_spheres"
@@ -165,7 +167,7 @@ def render_check(images: Path, cycles_samples: int, bounces: int) -> dict:
     for order in (1, 2):
         start = time.perf_counter()
         result = render_image.render_scene(scene, depsgraph, max_order=order)
-        path = rr.write_png(images / f"ours_order{order}.png", result.display)
+        path = write_png(images / f"ours_order{order}.png", result.display)
         seconds[order] = time.perf_counter() - start
         rows[f"ours, max_order {order}"] = rr.read_png(path)
     table = []
@@ -219,7 +221,7 @@ def report(results: dict) -> str:
             f"- Started {results['started']}, total {results['total_seconds'] / 60:.1f} min."]),
         "## Scene and reference",
         f"two_spheres demo, 480x320 camera view, {scene['n_points']} points ({scene['point_counts']}). "
-        f"The exact second-order solver (`addon/reference/exact_paths.py`) found {scene['exact_visible']} visible paths "
+        f"The exact second-order solver (`tools/exact_paths.py`) found {scene['exact_visible']} visible paths "
         f"({scene['exact_by_history']}) in {scene['exact_seconds']:.1f} s.",
         "## Sample-based camera, order-2 groups (accuracy 1 px, max_order 2)",
     ]

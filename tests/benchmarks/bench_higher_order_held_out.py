@@ -14,7 +14,7 @@ turned 25 degrees, two equal spheres side by side and a ball under a flat ceilin
 mirror were first run after that work. A 320x240 view sees both
 reflectors; points are drawn uniformly (fixed seed) in the box of
 the reflectors grown by 2, outside the spheres. The exact solver
-(``addon/reference/exact_paths.py``) gives every visible path eye -> x1 -> x2 -> p (a path
+(``tools/exact_paths.py``) gives every visible path eye -> x1 -> x2 -> p (a path
 it finds twice, through an edge two of a flat mirror's triangles share, counts once).
 
 Per scene and down-sampling d (``max_order`` 2, accuracy 1 px), per history:
@@ -59,7 +59,7 @@ def _wall(x: float, y_range, z_range, quads: int = 24):
 
 def _turned(reflector, degrees: float, axis: str = "z"):
     """``reflector`` turned about the Z (or Y) axis through the origin."""
-    from curved_reflections.addon.geometry.shapes import rotation_z
+    from curved_reflections.tools.surfaces import rotation_z
     from curved_reflections.addon.scene import Reflector
 
     c, s = np.cos(np.radians(degrees)), np.sin(np.radians(degrees))
@@ -112,7 +112,7 @@ def scenes() -> dict:
 
 
 def measure(name: str, reflectors, view, spheres, n_points: int, downsamples) -> dict:
-    from curved_reflections.addon.reference.exact_paths import solve_second_order
+    from curved_reflections.tools.exact_paths import solve_second_order
     from curved_reflections.addon.geometry.raytrace import ReflectorSet
     from curved_reflections.addon.methods.sbc import build_sample_based_camera
 

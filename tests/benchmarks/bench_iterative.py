@@ -43,7 +43,8 @@ EYES = ((3.5, -2.0, 1.5), (-1.2, 3.3, -1.4))
 
 
 def reflectors(subdivisions: int) -> list:
-    from curved_reflections.addon.geometry.sphere import bumpy_icosphere, ellipsoid, icosphere, superellipsoid
+    from curved_reflections.addon.geometry.sphere import bumpy_icosphere, icosphere
+    from curved_reflections.tools.surfaces import ellipsoid, superellipsoid
 
     return [icosphere((0.0, 0.0, 0.0), 1.0, subdivisions, name="sphere"),
             ellipsoid((0.0, 0.0, 0.0), (1.2, 0.7, 0.5), subdivisions, name="ellipsoid"),

@@ -127,7 +127,9 @@ def _accuracy(scene, frame: int, points: int) -> dict:
 def measure_scene(name: str, args, images: Path | None) -> dict:
     import bpy
 
-    from curved_reflections.operators import demo_scenes, reference_render as rr
+    from curved_reflections.operators import demo_scenes
+    from curved_reflections.operators.png import write_png
+    from curved_reflections.tools import reference_render as rr
     from curved_reflections.operators.gpu_init import ensure_gpu
 
     ensure_gpu()
@@ -165,7 +167,7 @@ def measure_scene(name: str, args, images: Path | None) -> dict:
             frame = labels[len(labels) // 2]["frame"]
             strip = np.concatenate([rr.read_png(folder / f"{n}_{frame}.png")[..., :3] for n in ["cycles", *args.modes]],
                                    axis=1)
-            rr.write_png(images / f"methods_{name}.png", strip)
+            write_png(images / f"methods_{name}.png", strip)
     return out
 
 

@@ -51,7 +51,9 @@ def measure(width: int, height: int, grid: tuple, frames: int, degrees: float, s
             images: Path | None = None, mode: str = "MORPHING", polish: str | None = None) -> dict:
     import bpy
 
-    from curved_reflections.operators import demo_scenes, reference_render as rr
+    from curved_reflections.operators import demo_scenes
+    from curved_reflections.operators.png import write_png
+    from curved_reflections.tools import reference_render as rr
     from curved_reflections.operators.gpu_init import ensure_gpu
     from curved_reflections.operators.render_image import render_scene
 
@@ -92,7 +94,7 @@ def measure(width: int, height: int, grid: tuple, frames: int, degrees: float, s
             if images is not None:
                 strip = np.concatenate([rr.read_png(folder / f"{name}_{row['frame']}.png")[..., :3]
                                         for name in ("cycles", "GRID", "GAPS", "RUNTIME")], axis=1)
-                rr.write_png(Path(images) / f"{mode.lower()}_animation_frame_{row['frame']}.png", strip)
+                write_png(Path(images) / f"{mode.lower()}_animation_frame_{row['frame']}.png", strip)
         result["rows"] = rows
     return result
 

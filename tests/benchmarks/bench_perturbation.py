@@ -11,7 +11,7 @@ sample-based camera (``RUNTIME``: its build and projection, down-sampling 2) and
 iterative search (``ITERATIVE``: its numpy twin, first order on star-shaped mirrors,
 cube maps baked beforehand and not timed), against the exact reference: on meshes the
 mesh solvers (``addon/reference/exact.py``, ``exact_paths.py``), on declared exact surfaces their
-solutions polished onto the surface (``addon/reference/exact_analytic.py``), so that a method is
+solutions polished onto the surface (``tools/exact_analytic.py``), so that a method is
 charged with its own error and not the tessellation's. *Coverage*: the share of the
 exact visible reflections answered within 1 px; errors: each answer's distance to the
 nearest exact visible reflection of its point (answers farther than 1 px count as
@@ -70,7 +70,8 @@ def _placed(centre):
 def scenes(subdivisions: int) -> list:
     """(name, reflectors, {index: AnalyticSurface}, eyes, max_order) of every scene."""
     from curved_reflections.addon.methods.perturbation import AnalyticSurface
-    from curved_reflections.addon.geometry.sphere import bumpy_icosphere, ellipsoid, icosphere, superellipsoid
+    from curved_reflections.addon.geometry.sphere import bumpy_icosphere, icosphere
+    from curved_reflections.tools.surfaces import ellipsoid, superellipsoid
 
     centre, radii = np.array([0.1, -0.2, 0.05]), (1.1, 0.75, 0.6)
     eyes = ((3.4, -2.3, 1.3), (-1.5, 3.1, -1.2))
@@ -124,8 +125,8 @@ def points_outside(reflector_set, count: int, rng) -> np.ndarray:
 def exact_reference(reflector_set, view, points, analytic: dict, order: int):
     """(point, pixel, history) of every exact visible reflection of the order."""
     from curved_reflections.addon.reference.exact import solve_reflections
-    from curved_reflections.addon.reference.exact_analytic import polish_on_surfaces
-    from curved_reflections.addon.reference.exact_paths import solve_second_order
+    from curved_reflections.tools.exact_analytic import polish_on_surfaces
+    from curved_reflections.tools.exact_paths import solve_second_order
 
     if order == 1:
         exact = solve_reflections(reflector_set, view, points)
@@ -273,12 +274,13 @@ def measure_animation(width: int, height: int, frames: int, degrees: float, samp
             ("RUNTIME", use('RUNTIME', 'NONE'), {})])
         settings.mode, settings.analytic_shape = 'PERTURBATION', 'SPHERE'
         if images is not None:
-            from curved_reflections.operators import reference_render as rr
+            from curved_reflections.operators.png import write_png
+            from curved_reflections.tools import reference_render as rr
 
             for row in result["rows"]:
                 strip = np.concatenate([rr.read_png(folder / f"{name}_{row['frame']}.png")[..., :3]
                                         for name in ("cycles", "EXACT", "MESH", "RUNTIME")], axis=1)
-                rr.write_png(Path(images) / f"perturbation_frame_{row['frame']}.png", strip)
+                write_png(Path(images) / f"perturbation_frame_{row['frame']}.png", strip)
     return result
 
 

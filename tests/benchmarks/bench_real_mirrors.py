@@ -99,8 +99,9 @@ def build(kind: str, width: int, height: int):
 def measure(kind: str, width: int, height: int, samples: int, folder: Path, mode: str = "AUTO") -> dict:
     import bpy
 
-    from curved_reflections.addon import metrics
-    from curved_reflections.operators import demo_scenes, reference_render as rr
+    from curved_reflections.operators import demo_scenes
+    from curved_reflections.operators.png import write_png
+    from curved_reflections.tools import metrics, reference_render as rr
     from curved_reflections.operators.render_image import render_scene
 
     scene, mirror = build(kind, width, height)
@@ -114,14 +115,14 @@ def measure(kind: str, width: int, height: int, samples: int, folder: Path, mode
     start = time.perf_counter()
     ours = render_scene(scene, depsgraph)
     seconds = time.perf_counter() - start
-    path = rr.write_png(folder / f"{kind}_ours.png", ours.display)
+    path = write_png(folder / f"{kind}_ours.png", ours.display)
     # Max Order 1: without the mirror's reflections of itself (its inner rim, ears, folds),
     # which Cycles shows and the default order 2 draws.
     scene.curved_reflections.max_order = 1
     start = time.perf_counter()
     second = render_scene(scene, bpy.context.evaluated_depsgraph_get())
     seconds_second = time.perf_counter() - start
-    second_path = rr.write_png(folder / f"{kind}_ours_order1.png", second.display)
+    second_path = write_png(folder / f"{kind}_ours_order1.png", second.display)
     scene.curved_reflections.max_order = 2
     live_view = viewport(scene, cycles.image, mask, palette)
     return {**live_view, "kind": kind, "mirror_px": int(mask.sum()), "seconds": seconds,
@@ -138,7 +139,7 @@ def _overlay(scene, view):
     import gpu
     import numpy as np
 
-    from curved_reflections.addon.metrics import linear_to_srgb
+    from curved_reflections.addon.srgb import linear_to_srgb
     from curved_reflections.operators import live
 
     offscreen = gpu.types.GPUOffScreen(view.width, view.height, format='RGBA32F')
@@ -162,7 +163,7 @@ def viewport(scene, cycles_image, mask, palette) -> dict:
     camera's unreliable cells (``traced_pixels.trace_doubtful``), and that trace's time."""
     import bpy
 
-    from curved_reflections.addon import metrics
+    from curved_reflections.tools import metrics
     from curved_reflections.operators import live
     from curved_reflections.operators.capture import view_from_camera
 
@@ -186,11 +187,12 @@ def _strip(folder: Path, kinds, path: Path) -> Path:
     """``path``: per mirror, top to bottom, Cycles beside ours (the renders in ``folder``)."""
     import numpy as np
 
-    from curved_reflections.operators import reference_render as rr
+    from curved_reflections.operators.png import write_png
+    from curved_reflections.tools import reference_render as rr
 
     rows = [np.concatenate([rr.read_png(folder / f"{kind}_{name}.png")[..., :3] for name in ("cycles", "ours")],
                            axis=1) for kind in kinds]
-    return rr.write_png(path, np.concatenate(rows[::-1], axis=0))  # rows bottom to top
+    return write_png(path, np.concatenate(rows[::-1], axis=0))  # rows bottom to top
 
 
 def report(rows: list, width: int, height: int, samples: int, command: str, mode: str = "AUTO") -> str:

@@ -210,7 +210,7 @@ def second_ellipsoid():
     radii 1.7, 0.8, 0.6, coarser than :func:`ellipsoid_reflector` (a level-4 geodesic
     sphere), turned about z and x, exact normals."""
     from curved_reflections.addon import Reflector
-    from curved_reflections.addon.geometry.sphere import ellipsoid
+    from curved_reflections.tools.surfaces import ellipsoid
 
     centre = np.array([0.0, 0.0, 1.0])
     base = ellipsoid(centre, (1.7, 0.8, 0.6), 4, "HeldOutEllipsoidB")
@@ -223,7 +223,7 @@ def rounded_box():
     """Held-out, not a quadric (made 2026-11-28): the superellipsoid |x/1.2|^4 + |y/0.9|^4
     + |z/0.8|^4 = 1, a box with rounded edges, smooth, its curvature from near 0 on the
     faces to about 3.5 on the edges; exact normals."""
-    from curved_reflections.addon.geometry.sphere import superellipsoid
+    from curved_reflections.tools.surfaces import superellipsoid
 
     return superellipsoid((0.0, 0.0, 1.0), (1.2, 0.9, 0.8), 4.0, 5, "HeldOutRoundedBox")
 
@@ -233,7 +233,7 @@ def rippled_ellipsoid(centre, radii, subdivisions: int, amplitude: float, lobes=
     normals from the faces: a held-out mirror that is not a quadric (bench_perturbation.py:
     made after its candidate scan was tuned on the bumpy sphere; bench_octree.py: no
     constant of the morphing blend was chosen on it)."""
-    from curved_reflections.addon.geometry.sphere import ellipsoid
+    from curved_reflections.tools.surfaces import ellipsoid
     from curved_reflections.addon.scene import Reflector, vertex_normals
 
     base = ellipsoid(centre, radii, subdivisions, name)
@@ -346,7 +346,7 @@ def sphere_check(reflectors, view, points, exact, distance) -> dict | None:
     tessellated and the smooth silhouettes may disagree), but for which the exact solver
     (on the tessellated sphere) finds no visible reflection, split by distance to the mirror.
     """
-    from curved_reflections.addon.geometry.sphere import sphere_reflection
+    from curved_reflections.tools.surfaces import sphere_reflection
 
     if len(reflectors) != 1:
         return None

@@ -15,9 +15,10 @@ does after the view changed (``operators/live.py``):
 - **runtime** (SBC paper IV-V): build the view's sample-based camera (ray map and trees),
   then the renderer's projection with it (textures uploaded, every vertex projected on
   the GPU and read back, reflected triangles decided);
-- **morphing** (SBC paper VI, ``gpu_shaders/methods/morph_source.py``): the renderer's projection
+- **morphing** (SBC paper VI, ``tools/numpy_morph_source.py``): the renderer's projection
   from the grid: in a tetrahedron the eye has just entered, the four nodes project the
-  vertices (on the GPU, ``GPUFaceImages``; also timed with numpy) and the images are
+  vertices (on the GPU, ``gpu_shaders/methods/morph_source.GPUFaceImages``; also timed
+  with numpy) and the images are
   matched and blended; in the same tetrahedron as before, only the blend.
 
 Medians over the path's views. On this project's machines the GPU is Mesa llvmpipe
@@ -80,7 +81,8 @@ def measure(width: int, height: int, steps: int, jumps: int) -> dict:
     from curved_reflections.addon.methods.morphing import morph_grid, morphing
     from curved_reflections.addon.methods.sbc import build_sample_based_camera
     from curved_reflections.addon.scene import scene_bounds
-    from curved_reflections.gpu_shaders.methods.morph_source import GPUFaceImages, MorphSource
+    from curved_reflections.gpu_shaders.methods.morph_source import GPUFaceImages
+    from curved_reflections.tools.numpy_morph_source import MorphSource
     from curved_reflections.gpu_shaders.methods.projection import SBCTextures
     from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
     from curved_reflections.addon.frame_settings import FrameSettings

@@ -3,7 +3,7 @@
 
 ``gpu_shaders/reflection_draw.py`` (SBC paper, Popescu, Sacks, Mei 2006, section V)
 renders a demo scene at a small size; its labels (which object each pixel shows, the
-demo scenes' flat colours, ``addon/metrics.py``) are compared with a Cycles render on
+demo scenes' flat colours, ``tools/metrics.py``) are compared with a Cycles render on
 the reflector pixels (Workbench mask). A synthetic scene checks the depth order of
 reflections (SBC V-A, case 2: within a reflection group the point nearer the mirror
 hides the farther one). The numpy helpers (pre-subdivision, SBC V-B; the band of
@@ -140,7 +140,9 @@ def fig3(gpu_ready, tmp_path_factory):
     import bpy
 
     import curved_reflections
-    from curved_reflections.operators import demo_scenes, reference_render, render_image
+    from curved_reflections.operators import demo_scenes, render_image
+    from curved_reflections.operators.png import write_png
+    from curved_reflections.tools import reference_render
 
     out = tmp_path_factory.mktemp("reflection_draw")
     curved_reflections.register()
@@ -151,7 +153,7 @@ def fig3(gpu_ready, tmp_path_factory):
         start = time.perf_counter()
         ours = render_image.render_scene(scene, bpy.context.evaluated_depsgraph_get(), max_order=1)
         seconds = time.perf_counter() - start
-        reference_render.write_png(out / "ours.png", ours.display)
+        write_png(out / "ours.png", ours.display)
         image = reference_render.read_png(out / "ours.png")  # 8-bit, as the references
         reflectors = demo_scenes.reflectors(scene)
         mask, _ = reference_render.render_mask(scene, out / "mask.png", reflectors)
@@ -164,13 +166,13 @@ def fig3(gpu_ready, tmp_path_factory):
 
 
 def _labels(image, palette):
-    from curved_reflections.addon import metrics
+    from curved_reflections.tools import metrics
 
     return metrics.label_image(image, palette)
 
 
 def test_reflections_agree_with_cycles_on_the_mirror(fig3):
-    from curved_reflections.addon import metrics
+    from curved_reflections.tools import metrics
 
     ours, cycles = _labels(fig3["ours"], fig3["palette"]), _labels(fig3["cycles"], fig3["palette"])
     mask = fig3["mask"]
@@ -192,7 +194,7 @@ def test_mirror_shows_the_columns_and_the_cube(fig3):
 def test_pixels_off_the_mirror_show_the_objects_themselves(fig3):
     """Outside the reflectors' footprint the image is the diffuse scene (and the world),
     as Cycles shows it; the cube in front of the sphere stays in front of it."""
-    from curved_reflections.addon import metrics
+    from curved_reflections.tools import metrics
 
     ours, cycles = _labels(fig3["ours"], fig3["palette"]), _labels(fig3["cycles"], fig3["palette"])
     off = ~fig3["mask"]

@@ -296,7 +296,7 @@ def test_image_texture_in_base_colour_is_captured_with_uvs(empty_scene):
     layer.uv.foreach_set("vector", uvs.ravel())
     mesh = capture()[1]["Crate"]
     assert mesh.image.shape == (2, 4, 4)
-    from curved_reflections.addon.metrics import srgb_to_linear
+    from curved_reflections.addon.srgb import srgb_to_linear
     np.testing.assert_allclose(mesh.image[0, 0, :3], srgb_to_linear([0.5, 0.25, 1.0]), atol=5e-3)  # 8-bit
     assert mesh.uvs.shape == (len(mesh.vertices), 2)
     assert {tuple(np.round(uv, 3)) for uv in mesh.uvs} == {tuple(uv) for uv in np.round(uvs, 3)}

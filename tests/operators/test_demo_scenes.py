@@ -6,9 +6,10 @@ import pytest
 
 import bpy
 
-from curved_reflections.addon import metrics
 from curved_reflections.addon.geometry import shapes
-from curved_reflections.operators import demo_scenes, reference_render
+from curved_reflections.addon.srgb import linear_to_srgb
+from curved_reflections.operators import demo_scenes
+from curved_reflections.tools import metrics, reference_render
 
 
 @pytest.fixture
@@ -65,7 +66,7 @@ def test_every_diffuse_object_has_a_distinct_flat_emission_colour(build, kind):
     palette = demo_scenes.palette(scene)
     diffuse = [o for o in scene.objects if o.type == "MESH" and not o.curved_reflections.is_reflector]
     assert sorted(palette) == sorted([demo_scenes.WORLD_KEY] + [o.name for o in diffuse])
-    display = metrics.linear_to_srgb(np.array(list(palette.values())))
+    display = linear_to_srgb(np.array(list(palette.values())))
     gaps = np.linalg.norm(display[:, None] - display[None, :], axis=2) + 10 * np.eye(len(display))
     assert gaps.min() >= 0.49  # far apart in display space: labels survive noise and blending
     for obj in diffuse:

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""The extension zip, built and checked by Blender's own CLI, installs, works and uninstalls.
+"""The extension zip, built and checked by Blender's own CLI, holds the product alone (no
+development helper, no module the extension never imports), installs, works and uninstalls.
 
 Installing runs in a separate Python (install_probe.py) with its own Blender user
 folder, so the installed add-on (``bl_ext.user_default.curved_reflections``) never
@@ -16,12 +17,16 @@ from pathlib import Path
 import bpy
 import pytest
 
+from curved_reflections.tools.import_graph import module_names, reachable, relative_imports
+
 SCRIPTS = Path(bpy.utils.system_resource('SCRIPTS'))
 BLENDER_EXT = SCRIPTS / "addons_core" / "bl_pkg" / "cli" / "blender_ext.py"
 VALID_TAGS = SCRIPTS / "modules" / "_bpy_internal" / "extensions" / "tags.py"
 
 #: What the zip may hold at its top level: the extension and nothing of its development.
 SHIPPED = {"blender_manifest.toml", "__init__.py", "LICENSE", "addon", "operators", "gpu_shaders"}
+#: The repository's development folders, none of which may ship.
+DEVELOPMENT = {"tools", "tests", "scripts", "docs"}
 
 
 def blender_ext(*args):
@@ -55,9 +60,32 @@ def test_zip_holds_only_the_extension(extension_zip):
     names = zipfile.ZipFile(extension_zip).namelist()
     assert {"blender_manifest.toml", "__init__.py", "addon/__init__.py", "addon/scene.py",
             "operators/__init__.py", "operators/capture.py"} <= set(names)
+    helpers = [n for n in names if n.split("/")[0] in DEVELOPMENT
+               or Path(n).name == "conftest.py" or Path(n).name.startswith("test_")]
+    assert helpers == [], "development or test helpers in the zip"
     top_level = {name.split("/")[0] for name in names}
     assert top_level <= SHIPPED, top_level - SHIPPED
     assert not [n for n in names if "__pycache__" in n or n.endswith((".pyc", ".blend1"))]
+
+
+def test_zip_ships_only_modules_the_extension_imports(extension_zip):
+    """Every Python module in the zip is one the extension can run: reached from the root
+    ``__init__.py`` (whose ``register()`` imports the operators) through relative imports,
+    wherever in a module they stand, read with ``ast`` from the zip itself. A module nothing
+    reaches is a development helper that belongs in ``tools/`` (or dead code); an import
+    naming a module the zip lacks would fail installed."""
+    with zipfile.ZipFile(extension_zip) as archive:
+        sources = {n: archive.read(n).decode("utf-8") for n in archive.namelist() if n.endswith(".py")}
+    modules = module_names(sources)
+    assert "" in modules and "operators" in modules
+    graph, unresolved = {}, {}
+    for name, path in modules.items():
+        graph[name], missing = relative_imports(name, sources[path], path.endswith("__init__.py"), modules)
+        if missing:
+            unresolved[path] = missing
+    assert unresolved == {}, "imports of modules the zip lacks"
+    never_imported = sorted(modules[name] for name in set(modules) - reachable(graph, ""))
+    assert never_imported == [], "shipped modules the extension never imports"
 
 
 def test_installs_enables_works_and_disables(extension_zip, tmp_path):

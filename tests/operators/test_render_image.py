@@ -9,8 +9,9 @@ import bpy
 import numpy as np
 import pytest
 
-from curved_reflections.operators import demo_scenes, methods, reference_render
+from curved_reflections.operators import demo_scenes, methods
 from curved_reflections.operators.frame_pipeline import clip_start_message
+from curved_reflections.tools import reference_render
 
 
 @pytest.fixture

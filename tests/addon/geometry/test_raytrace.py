@@ -213,7 +213,7 @@ def test_the_seal_finds_points_inside_through_the_bvh_as_every_triangle_tested_d
     around a ball and a torus (a non-convex solid: points in its hole are outside) set
     side by side, each point asked of each mirror."""
     from curved_reflections.addon.geometry import closed_surfaces
-    from curved_reflections.addon.geometry.sphere import torus
+    from curved_reflections.tools.surfaces import torus
 
     mirrors = [icosphere((0.0, 0.0, 0.0), 1.0, 3, "Ball"), torus((4.0, 0.0, 0.0), 1.2, 0.4, 48, 24)]
     reflectors = ReflectorSet(mirrors)

@@ -8,7 +8,8 @@ from curved_reflections.addon import Reflector, View, look_at_view
 from curved_reflections.addon.geometry import shapes
 from curved_reflections.addon.reference.exact import _ReflectionLaw, solve_reflections
 from curved_reflections.addon.geometry.raytrace import ReflectorSet, reflect
-from curved_reflections.addon.geometry.sphere import bumpy_icosphere, icosphere, sphere_reflection
+from curved_reflections.addon.geometry.sphere import bumpy_icosphere, icosphere
+from curved_reflections.tools.surfaces import sphere_reflection
 
 CENTER = np.array([0.0, 0.0, 1.0])
 EYE = np.array([6.0, -5.0, 3.0])

@@ -89,8 +89,8 @@ def test_images_within_a_step_of_the_mirror_edge_converge():
 
 def _facing_spheres(n_points: int, seed: int):
     """Two facing mirror spheres and points around them (not used while tuning), with
-    every visible second-order path of the exact solver (addon/reference/exact_paths.py)."""
-    from curved_reflections.addon.reference.exact_paths import solve_second_order
+    every visible second-order path of the exact solver (tools/exact_paths.py)."""
+    from curved_reflections.tools.exact_paths import solve_second_order
 
     reflectors = [icosphere((0.0, 0.0, 1.0), 1.0, 4, "A"), icosphere((3.0, 0.3, 1.1), 0.8, 4, "B")]
     reflector_set = ReflectorSet(reflectors)

@@ -8,7 +8,8 @@ import pytest
 from curved_reflections.addon.methods.iterative import IterativeReflector, prepare_iterative, search_reflections
 from curved_reflections.addon.methods.iterative import search as search_module
 from curved_reflections.addon.scene import DiffuseMesh
-from curved_reflections.addon.geometry.sphere import bumpy_icosphere, ellipsoid, icosphere
+from curved_reflections.addon.geometry.sphere import bumpy_icosphere, icosphere
+from curved_reflections.tools.surfaces import ellipsoid
 from curved_reflections.addon.view import View, look_at_view
 from curved_reflections.gpu_shaders.methods.iterative_draw import IterativePass
 

@@ -193,7 +193,7 @@ def test_polished_frames_are_the_numpy_engines_and_the_exact_reflections(gpu_rea
     ``glsl/image_polish.glsl``'s FRAME_ANSWERS) on a rounded box, a mirror that is not a
     quadric: the same vertices answered as the numpy engine's polished blend, within
     0.01 px of it and of the exact solver, where the blend alone misses by pixels."""
-    from curved_reflections.addon.geometry.sphere import superellipsoid
+    from curved_reflections.tools.surfaces import superellipsoid
     from curved_reflections.addon.reference.exact import solve_reflections
     from curved_reflections.addon.geometry.raytrace import ReflectorSet
     from curved_reflections.gpu_shaders.draw_geometry import prepare_geometry

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Morphing grids drawn by the reflection renderer (gpu_shaders/methods/morph_source.py, SBC paper VI).
+"""Morphing grids drawn by the reflection renderer (gpu_shaders/methods/morph_source.py and
+the numpy reference tools/numpy_morph_source.py, SBC paper VI).
 
 A mirror sphere with a red square beside it and a large green one behind that (out of
 the camera's sight), seen from inside the sphere's grid: the morphed reflection lands
@@ -45,7 +46,7 @@ def _render(scene, source):
 
     mirror, meshes, view, _, _ = scene
     renderer = ReflectionRenderer([mirror], meshes)
-    return renderer.render(view, source, world_color=(*BLUE, 1.0), trace=False), renderer
+    return renderer.render(view, source=source, world_color=(*BLUE, 1.0), trace=False), renderer
 
 
 def _mask(image, colour):
@@ -79,7 +80,7 @@ def test_morphed_reflection_lands_where_the_exact_reflection_is(scene):
     """The red square's corners, drawn from the grid, sit within a pixel or two of their
     exact reflections (a coarse test grid: 48 px faces), and the squares' reflections
     cover what the runtime camera's do."""
-    from curved_reflections.gpu_shaders.methods.morph_source import MorphSource
+    from curved_reflections.tools.numpy_morph_source import MorphSource
 
     mirror, meshes, view, grid, sbc = scene
     morphed, renderer = _render(scene, MorphSource([(grid, np.eye(4))], view))

@@ -11,7 +11,8 @@ from curved_reflections.addon.methods.perturbation import AnalyticSurface, Pertu
 from curved_reflections.addon.methods.perturbation.projector import grazing
 from curved_reflections.addon.geometry.raytrace import ReflectorSet
 from curved_reflections.addon.scene import DiffuseMesh
-from curved_reflections.addon.geometry.sphere import bumpy_icosphere, ellipsoid
+from curved_reflections.addon.geometry.sphere import bumpy_icosphere
+from curved_reflections.tools.surfaces import ellipsoid
 from curved_reflections.addon.view import look_at_view
 
 CENTRE = np.array([0.2, -0.3, 0.1])

@@ -1,9 +1,10 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """The iterative search (Roger & Holzschuch 2006, addon/methods/iterative) on the test
-reflectors of addon/geometry/sphere.py: which reflectors are star-shaped, what the cube map
-returns, how close the search comes to the exact reference solver (addon/reference/exact.py) in
-perspective and orthographic views, and what it says of points and eyes it cannot
-answer for. Complements test_iterative_search.py (other reflectors, views and points).
+reflectors of addon/geometry/sphere.py and tools/surfaces.py: which reflectors are
+star-shaped, what the cube map returns, how close the search comes to the exact reference
+solver (addon/reference/exact.py) in perspective and orthographic views, and what it says
+of points and eyes it cannot answer for. Complements test_iterative_search.py (other
+reflectors, views and points).
 
 Meshes stay at 5,120 triangles and maps at faces of 32-48 texels: the whole file runs
 in seconds on two cores.
@@ -20,7 +21,8 @@ from curved_reflections.addon.methods.iterative.search import FOUND, INSIDE, NO_
 from curved_reflections.addon.projection import NOT_PROJECTED, SEARCH_ANSWER
 from curved_reflections.addon.geometry.raytrace import ReflectorSet
 from curved_reflections.addon.scene import Reflector, vertex_normals
-from curved_reflections.addon.geometry.sphere import bumpy_icosphere, ellipsoid, icosphere, torus
+from curved_reflections.addon.geometry.sphere import bumpy_icosphere, icosphere
+from curved_reflections.tools.surfaces import ellipsoid, torus
 from curved_reflections.addon.view import View, look_at_view
 
 O = np.array([-0.4, 0.25, 0.6])

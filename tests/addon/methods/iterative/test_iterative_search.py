@@ -13,7 +13,8 @@ from curved_reflections.addon.geometry.closed_surfaces import is_convex
 from curved_reflections.addon.methods.iterative.reflector_map import face_coordinates, texel_directions
 from curved_reflections.addon.geometry.raytrace import ReflectorSet
 from curved_reflections.addon.scene import Reflector
-from curved_reflections.addon.geometry.sphere import bumpy_icosphere, ellipsoid, icosphere
+from curved_reflections.addon.geometry.sphere import bumpy_icosphere, icosphere
+from curved_reflections.tools.surfaces import ellipsoid
 from curved_reflections.addon.view import View, look_at_view
 
 CENTRE = np.array([0.3, -0.2, 0.1])

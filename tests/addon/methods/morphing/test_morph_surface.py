@@ -6,7 +6,7 @@ it extends erred, and its slopes are the derivatives of its height."""
 import numpy as np
 import pytest
 
-from curved_reflections.addon.geometry.sphere import sphere_reflection
+from curved_reflections.tools.surfaces import sphere_reflection
 from curved_reflections.addon.methods.morphing import morph_surface
 
 

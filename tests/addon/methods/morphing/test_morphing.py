@@ -313,7 +313,7 @@ def test_polished_blends_land_on_the_exact_reflections_of_a_mirror_that_is_not_a
     blend's local quadric misses by pixels; each blended image polished on the mirror
     (``polish_frames``) lands on the exact solver's reflection, and is not lost. Measured:
     the blend p50 2.6 px, p99 9.2 px; polished, under 1e-4 px, every image kept."""
-    from curved_reflections.addon.geometry.sphere import superellipsoid
+    from curved_reflections.tools.surfaces import superellipsoid
 
     box = superellipsoid(CENTRE, (1.2, 0.9, 0.8), 4.0, 4, "Box")
     grid = M.grid_on_demand(box, G.MorphSettings(grid=(4, 4, 4), margin=0.8, face_resolution=48), polish=True)

@@ -12,7 +12,8 @@ from curved_reflections.addon.methods.morphing import morph_grid as G
 from curved_reflections.addon.reference.exact import solve_reflections
 from curved_reflections.addon.methods.octree import OctreeGrid, locate_cell, octree_grid_on_demand
 from curved_reflections.addon.geometry.raytrace import ReflectorSet
-from curved_reflections.addon.geometry.sphere import ellipsoid, icosphere
+from curved_reflections.addon.geometry.sphere import icosphere
+from curved_reflections.tools.surfaces import ellipsoid
 
 CENTRE = np.array([0.0, 0.0, 1.0])
 SETTINGS = G.MorphSettings(kind=G.OCTREE)  # the default grid; nodes are built as views need them

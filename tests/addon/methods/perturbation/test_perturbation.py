@@ -9,14 +9,15 @@ import pytest
 
 from curved_reflections.addon.errors import SceneInputError
 from curved_reflections.addon.reference.exact import solve_reflections
-from curved_reflections.addon.reference.exact_analytic import polish_on_surfaces
-from curved_reflections.addon.reference.exact_paths import solve_second_order
+from curved_reflections.tools.exact_analytic import polish_on_surfaces
+from curved_reflections.tools.exact_paths import solve_second_order
 from curved_reflections.addon.methods.perturbation import (AnalyticSurface, PerturbationMethod, PerturbationSettings,
                                                            newton, osculating_quadrics, perturb, trace_seed_paths)
 from curved_reflections.addon.methods.perturbation.seeds import seed_paths_to, seed_quadrics
 from curved_reflections.addon.projection import PERTURBATION_ANSWER
 from curved_reflections.addon.geometry.raytrace import ReflectorSet
-from curved_reflections.addon.geometry.sphere import bumpy_icosphere, ellipsoid, icosphere, sphere_reflection
+from curved_reflections.addon.geometry.sphere import bumpy_icosphere, icosphere
+from curved_reflections.tools.surfaces import ellipsoid, sphere_reflection
 from curved_reflections.addon.view import look_at_view
 
 CENTRE = np.array([-0.4, 0.3, 0.2])
@@ -442,7 +443,7 @@ def test_superquadric_derivatives_match_finite_differences():
 def test_perturbation_on_an_exact_superquadric_against_the_polished_reference():
     """A rounded box declared exactly (exponent 4): seeds move onto it, its osculating
     quadric bends each path, and the reference is the mesh's answer polished onto it."""
-    from curved_reflections.addon.geometry.sphere import superellipsoid
+    from curved_reflections.tools.surfaces import superellipsoid
 
     surface = _box_surface()
     mesh = superellipsoid(CENTRE, (1.0, 0.8, 0.65), 4.0, 4, name="Box")

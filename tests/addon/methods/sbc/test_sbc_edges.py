@@ -5,7 +5,7 @@ import numpy as np
 
 from curved_reflections.addon import Reflector, look_at_view
 from curved_reflections.addon.geometry.raytrace import ReflectorSet
-from curved_reflections.addon.geometry.shapes import rotation_z
+from curved_reflections.tools.surfaces import rotation_z
 from curved_reflections.addon.geometry.sphere import icosphere
 from curved_reflections.addon.methods.sbc.raymap import trace_ray_map
 from curved_reflections.addon.methods.sbc.sbc_edges import SeedRays, nearest_ray_seeds, sub_ray_seeds

@@ -8,7 +8,7 @@ import pytest
 from curved_reflections.addon import Reflector, look_at_view
 from curved_reflections.addon.methods.sbc import build_sample_based_camera
 from curved_reflections.addon.geometry import shapes
-from curved_reflections.addon.reference.exact_paths import solve_second_order
+from curved_reflections.tools.exact_paths import solve_second_order
 from curved_reflections.addon.geometry.raytrace import ReflectorSet
 
 #: The two-spheres demo's mirrors (operators/demo_scenes.py), built without bpy.

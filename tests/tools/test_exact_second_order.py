@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from curved_reflections.addon import Reflector, look_at_view
-from curved_reflections.addon.reference.exact_paths import solve_second_order
+from curved_reflections.tools.exact_paths import solve_second_order
 from curved_reflections.addon.methods.sbc.raymap import trace_ray_map
 from curved_reflections.addon.geometry.raytrace import ReflectorSet, reflect
 from curved_reflections.addon.geometry.sphere import icosphere

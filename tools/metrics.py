@@ -10,8 +10,11 @@ Fig. 17) show.
 
 Colours: palettes hold *linear* RGB (what the materials store); rendered images are
 *display* sRGB in [0, 1] (Blender's "Standard" view transform on an sRGB display, i.e.
-what a PNG holds divided by 255). Labels are assigned in display space, where the
-palette's colours are spread evenly.
+what a PNG holds divided by 255; ``addon/srgb.py``). Labels are assigned in display
+space, where the palette's colours are spread evenly.
+
+The scripts, tests and benchmarks measure with these; the extension does not, so they are
+not shipped.
 """
 
 from __future__ import annotations
@@ -20,20 +23,10 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from ..addon.srgb import linear_to_srgb
+
 #: Radius of the near-contact region as a share of the image width (see contact_region).
 CONTACT_RADIUS_FRACTION = 1.0 / 32.0
-
-
-def linear_to_srgb(linear) -> np.ndarray:
-    """sRGB transfer function (IEC 61966-2-1): linear [0, 1] -> display [0, 1]."""
-    c = np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
-    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.power(c, 1.0 / 2.4) - 0.055)
-
-
-def srgb_to_linear(srgb) -> np.ndarray:
-    """Inverse of :func:`linear_to_srgb`: display [0, 1] -> linear [0, 1]."""
-    c = np.clip(np.asarray(srgb, dtype=np.float64), 0.0, 1.0)
-    return np.where(c <= 0.04045, c / 12.92, np.power((c + 0.055) / 1.055, 2.4))
 
 
 def palette_names(palette: Mapping[str, tuple]) -> list[str]:

@@ -1,25 +1,26 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """The exact reference on declared exact surfaces (spheres, ellipsoids).
 
-``exact.py`` and ``exact_paths.py`` solve the reflection law on the mesh (flat
-triangles, interpolated normals): the yard stick of every method on meshes. A reflector
-declared an exact surface (``methods.perturbation.quadrics.AnalyticSurface``) reflects
-off the surface itself, which the mesh only approximates; measured against the mesh,
-a method that uses the true surface would be charged with the tessellation's error.
-Here each of the mesh's solutions (found, with its visibility, by the mesh solvers) is
-polished onto the true surface by Newton's method on the Lagrange system of Chen & Arvo
-(2000, eq. 5; ``path_derivatives.newton``, each bounce's quadric osculating the surface
-at the current point: exact for spheres and ellipsoids, refreshed every step on a
-superquadric), which converges quadratically from the mesh's nearby answer.
-Visibility stays the mesh's.
+``addon/reference/exact.py`` and ``exact_paths.py`` solve the reflection law on the mesh
+(flat triangles, interpolated normals): the yard stick of every method on meshes. A
+reflector declared an exact surface
+(``addon.methods.perturbation.quadrics.AnalyticSurface``) reflects off the surface itself,
+which the mesh only approximates; measured against the mesh, a method that uses the true
+surface would be charged with the tessellation's error. Here each of the mesh's solutions
+(found, with its visibility, by the mesh solvers) is polished onto the true surface by
+Newton's method on the Lagrange system of Chen & Arvo (2000, eq. 5;
+``path_derivatives.newton``, each bounce's quadric osculating the surface at the current
+point: exact for spheres and ellipsoids, refreshed every step on a superquadric), which
+converges quadratically from the mesh's nearby answer. Visibility stays the mesh's. A test
+and benchmark reference, not shipped.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..methods.perturbation.path_derivatives import Paths, newton, optimal_multipliers
-from ..view import View
+from ..addon.methods.perturbation.path_derivatives import Paths, newton, optimal_multipliers
+from ..addon.view import View
 
 #: Newton steps of the polish (quadratic convergence from the mesh's answer; a
 #: superquadric's osculating quadric is refreshed at each).

@@ -35,7 +35,11 @@ back of every closed mirror, whose pairs with its own front outnumber all others
 A solution is *visible* when x1 is in the view frustum and is the view ray's first hit,
 nothing lies between x1 and x2 or between x2 and p, and each reflection is valid (the
 ray arrives in front of the interpolated normal and leaves the front of the facet), the
-same rules the ray map (``raymap.py``) applies when it traces second-order rays.
+same rules the ray map (``addon/methods/sbc/raymap.py``) applies when it traces
+second-order rays.
+
+The extension never solves for exact paths at runtime: this is the yard stick of the tests
+and benchmarks of second-order reflections, not shipped.
 """
 
 from __future__ import annotations
@@ -44,12 +48,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry.bvh import descend
-from .exact import (CONE_SLACK, INSIDE_TOLERANCE, _first_hit_of_view_ray, _foot, first_of_duplicates,
-                    half_vector_may_meet_cone, turn_toward)
-from ..geometry.raytrace import ReflectorSet, reflect
-from ..geometry.vectors import cross, dot, lengths, normalized, unit
-from ..view import View
+from ..addon.geometry.bvh import descend
+from ..addon.reference.exact import (CONE_SLACK, INSIDE_TOLERANCE, _first_hit_of_view_ray, _foot,
+                                     first_of_duplicates, half_vector_may_meet_cone, turn_toward)
+from ..addon.geometry.raytrace import ReflectorSet, reflect
+from ..addon.geometry.vectors import cross, dot, lengths, normalized, unit
+from ..addon.view import View
 
 NEWTON_ITERATIONS = 30
 NEWTON_TOLERANCE = 1e-13

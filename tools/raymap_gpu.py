@@ -25,6 +25,10 @@ see :func:`gpu_ray_map`.
 
 Unlike the CPU tracer, the rasteriser clips at the view's far plane: reflector points
 beyond it are not in the ray map (nor visible in the view).
+
+The extension traces its ray maps on the CPU (``addon/methods/sbc/raymap.py``) and never
+runs this producer; it is kept, with its tests (``tests/tools/test_raymap_gpu.py``), as
+the paper's GPU route measured against the CPU tracer, not shipped.
 """
 
 from __future__ import annotations
@@ -35,9 +39,9 @@ import gpu
 import numpy as np
 from mathutils import Matrix
 
-from ...addon.methods.sbc.raymap import RayMap, reflect_primary_hits
-from ...addon.geometry.raytrace import ReflectorSet
-from ...addon.view import View
+from ..addon.methods.sbc.raymap import RayMap, reflect_primary_hits
+from ..addon.geometry.raytrace import ReflectorSet
+from ..addon.view import View
 
 
 #: Clear value of the position target; w = -1 marks pixels that no reflector covers.

@@ -104,7 +104,7 @@ def _assert_agree(figures, refine, head_share=1.0):
 @pytest.mark.parametrize("refine", [False, True])
 @pytest.mark.parametrize("downsample", [2, 3])
 def test_sphere_gpu_ray_map_matches_cpu(gpu_ready, downsample, refine):
-    from curved_reflections.gpu_shaders.methods.raymap_gpu import gpu_ray_map
+    from curved_reflections.tools.raymap_gpu import gpu_ray_map
 
     reflectors, view, bounds = _sphere_scene()
     cpu = trace_ray_map(reflectors, view, bounds, downsample)
@@ -118,7 +118,7 @@ def test_sphere_gpu_ray_map_matches_cpu(gpu_ready, downsample, refine):
 
 @pytest.mark.parametrize("refine", [False, True])
 def test_two_reflectors_second_order_matches_cpu(gpu_ready, refine):
-    from curved_reflections.gpu_shaders.methods.raymap_gpu import gpu_ray_map
+    from curved_reflections.tools.raymap_gpu import gpu_ray_map
 
     reflectors, view, bounds = _vase_and_sphere_scene()
     cpu = trace_ray_map(reflectors, view, bounds, 2, max_order=2)
@@ -136,7 +136,7 @@ def test_two_reflectors_second_order_matches_cpu(gpu_ready, refine):
 
 def test_target_projection_samples_desired_pixel_centres(gpu_ready):
     """Target pixel k + 0.5 of the cropped projection is desired pixel d (k + 0.5)."""
-    from curved_reflections.gpu_shaders.methods.raymap_gpu import target_projection
+    from curved_reflections.tools.raymap_gpu import target_projection
 
     _, view, _ = _vase_and_sphere_scene()
     for d in (1, 2, 3, 4):

@@ -1,7 +1,8 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Reference renders of a scene's camera view: Cycles, EEVEE, and the reflector footprint.
 
-These are what our viewport reflections are measured against (``scripts/demo.py``):
+These are what our viewport reflections are measured against (``scripts/demo.py``, the
+tests and the benchmarks; the extension itself never renders them, so this is not shipped):
 - Cycles (CPU) is ground truth: it path-traces the mirrors exactly, with enough glossy
   bounces for second-order reflections. With a tiny pixel filter, and only mirrors and
   emitters in the scene, every sample of a pixel follows the same path, so a few
@@ -54,7 +55,7 @@ class RenderResult:
     notes: str = ""
 
 
-# --- PNG in and out -----------------------------------------------------------------
+# --- PNG read-back ------------------------------------------------------------------
 
 
 def read_png(path) -> np.ndarray:
@@ -67,23 +68,6 @@ def read_png(path) -> np.ndarray:
         return pixels.reshape(height, width, 4)
     finally:
         bpy.data.images.remove(image)
-
-
-def write_png(path, array) -> Path:
-    """Write (H, W, 3 or 4) display values in [0, 1], rows bottom to top, as an 8-bit PNG."""
-    array = np.asarray(array, dtype=np.float32)
-    if array.shape[2] == 3:
-        array = np.concatenate([array, np.ones(array.shape[:2] + (1,), np.float32)], axis=2)
-    height, width = array.shape[:2]
-    image = bpy.data.images.new(Path(path).stem, width, height, alpha=True)
-    try:
-        image.pixels.foreach_set(np.clip(array, 0.0, 1.0).ravel())
-        image.filepath_raw = str(Path(path).resolve())
-        image.file_format = "PNG"
-        image.save()
-    finally:
-        bpy.data.images.remove(image)
-    return Path(path)
 
 
 # --- rendering ----------------------------------------------------------------------
