@@ -114,7 +114,7 @@ class Recorder:
         if rna.type == 'BOOLEAN':
             widget, shown = "check", bool(value)
         elif rna.type == 'ENUM':
-            widget, shown = "menu", rna.enum_items[value].name
+            widget, shown = "menu", bpy.types.UILayout.enum_item_name(data, name, value)  # dynamic enums too
         elif rna.type == 'STRING':
             widget, shown = "text", value
         elif getattr(rna, "array_length", 0):

@@ -80,7 +80,7 @@ def test_bake_load_stale_and_clear(empty_scene, morph_ops):
 
     with pytest.raises(ViewOutsideGrid) as outside:
         grid.project(np.zeros((1, 3)), look_at_view([0.0, -20.0, 1.0], [0.5, 0.0, 1.0]), matrix=matrix)
-    morph_ops.note_runtime_fallback(outside.value)
+    morph_ops.note_runtime_fallback(status_of(empty_scene), outside.value)
     assert "Ball: runtime mode: the view is outside the morphing grid" in morph_ops.morph_status(empty_scene)
 
     # Moving the mirror keeps its grid (baked in its own frame); scaling it does not.

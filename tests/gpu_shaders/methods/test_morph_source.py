@@ -41,12 +41,12 @@ def scene(gpu_ready):
     return mirror, meshes, view, grid, sbc
 
 
-def _render(scene, source):
+def _render(scene, source=None, camera=None):
     from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
 
     mirror, meshes, view, _, _ = scene
     renderer = ReflectionRenderer([mirror], meshes)
-    return renderer.render(view, source=source, world_color=(*BLUE, 1.0), trace=False), renderer
+    return renderer.render(view, camera, world_color=(*BLUE, 1.0), trace=False, source=source), renderer
 
 
 def _mask(image, colour):
@@ -84,7 +84,7 @@ def test_morphed_reflection_lands_where_the_exact_reflection_is(scene):
 
     mirror, meshes, view, grid, sbc = scene
     morphed, renderer = _render(scene, MorphSource([(grid, np.eye(4))], view))
-    runtime, _ = _render(scene, sbc)
+    runtime, _ = _render(scene, camera=sbc)
     # Morphing's coverage thins at grazing angles (docs/benchmarks/morphing.md): the large
     # square, reflected out to the mirror's rim, keeps about 80 % of its pixels there.
     for colour, recall in ((RED, 0.9), (GREEN, 0.75)):

@@ -6,7 +6,7 @@ not trust. Its accuracy over whole views is measured in test_perturbation.py."""
 import numpy as np
 
 from curved_reflections.addon.geometry.raytrace import ReflectorSet
-from curved_reflections.addon.geometry.sphere import ellipsoid
+from curved_reflections.tools.surfaces import ellipsoid
 from curved_reflections.addon.methods.perturbation import AnalyticSurface, trace_seed_paths
 from curved_reflections.addon.methods.perturbation.seeds import seed_quadrics
 from curved_reflections.addon.methods.perturbation.taylor_step import first_order_pixels, taylor_step
