@@ -2,18 +2,18 @@
 """Curved Reflections: accurate curved-mirror reflections drawn in Blender's viewport.
 
 The repository root is the extension. This module only registers and unregisters;
-the Blender layer (``operators``) is imported inside those calls so that
-``import curved_reflections.addon`` (the numpy engine) never needs ``bpy``.
+the Blender layer (``blender``) is imported inside those calls so that
+``import curved_reflections.engine`` (the numpy engine) never needs ``bpy``.
 """
 
 
 def register():
-    from . import operators
+    from . import blender
 
-    operators.register()
+    blender.register()
 
 
 def unregister():
-    from . import operators
+    from . import blender
 
-    operators.unregister()
+    blender.unregister()

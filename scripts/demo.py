@@ -70,7 +70,7 @@ def renderers(args) -> list[Renderer]:
 
 
 def render_ours(scene, path, args, mode: str | None = None):
-    """Our reflections (``operators/render_image.py``): capture, the method of each
+    """Our reflections (``blender/render_image.py``): capture, the method of each
     reflector (``mode`` for all of them if given, else their own: Auto) and GPU drawing,
     timed together per frame with the PNG writing, as the other renderers.
 
@@ -81,8 +81,8 @@ def render_ours(scene, path, args, mode: str | None = None):
     """
     import bpy
     import numpy as np
-    from curved_reflections.operators import render_image
-    from curved_reflections.operators.png import write_png
+    from curved_reflections.blender import render_image
+    from curved_reflections.blender.png import write_png
     from curved_reflections.tools import reference_render as rr
 
     depsgraph = bpy.context.evaluated_depsgraph_get()  # run_scene builds into the context's scene
@@ -133,7 +133,7 @@ class Row:
 def measure(kind: str, results, mask, palette) -> tuple[list[Row], dict]:
     """Label disagreement of every result with the reference, on the mask and near contact."""
     from curved_reflections.tools import metrics
-    from curved_reflections.operators.demo_scenes import WORLD_KEY
+    from curved_reflections.blender.demo_scenes import WORLD_KEY
 
     names = metrics.palette_names(palette)
     reference = metrics.label_image(results[0].image, palette)
@@ -227,8 +227,8 @@ def causes_image(reference_image, cause):
 def run_scene(kind: str, args, out: Path) -> list[Row]:
     """Build, save, render and measure one demo scene."""
     import bpy
-    from curved_reflections.operators import demo_scenes
-    from curved_reflections.operators.png import write_png
+    from curved_reflections.blender import demo_scenes
+    from curved_reflections.blender.png import write_png
     from curved_reflections.tools import reference_render as rr
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -251,7 +251,7 @@ def run_scene(kind: str, args, out: Path) -> list[Row]:
     ours = next((r for r in results if r.name == OURS), None)
     if ours is not None:
         from curved_reflections.tools import metrics
-        from curved_reflections.operators.demo_scenes import WORLD_KEY
+        from curved_reflections.blender.demo_scenes import WORLD_KEY
 
         cause = causes(metrics.label_image(ours.image, palette), metrics.label_image(results[0].image, palette),
                        mask, metrics.palette_names(palette).index(WORLD_KEY), scene.curved_reflections.downsample)
@@ -303,7 +303,7 @@ def report(rows: list[Row], args) -> str:
         f"(median of {args.frames} frame(s)); EEVEE renders a warm-up frame first (shader "
         "compilation, faster when Mesa's shader cache is warm), shown below as the first frame. "
         "EEVEE's probe variants capture their sphere probes in every frame. Ours "
-        f"(`{OURS}`, `operators/render_image.py`) is timed from capture to PNG: the scene "
+        f"(`{OURS}`, `blender/render_image.py`) is timed from capture to PNG: the scene "
         "capture, each reflector's method (the iterative search on the GPU, or the "
         "sample-based camera's ray map and trees) and the GPU drawing, on Mesa llvmpipe (CPU) "
         "here; a warm-up frame first (shader compilation, star-shaped checks and cube maps). "

@@ -4,7 +4,7 @@
     .venv/bin/python scripts/panel_picture.py --out docs/images/panel.png
 
 Background mode draws no UI, so each panel's own ``draw`` and ``draw_header``
-(``operators/panel.py``) run with a layout that records what they show (labels,
+(``blender/panel.py``) run with a layout that records what they show (labels,
 properties with their current values, operator buttons, boxes, greyed rows), and the
 record is drawn with Blender's font module (``blf``) into an offscreen image: the main
 panel, then each sub-panel's header, open or closed as it is by default (a closed one
@@ -45,10 +45,10 @@ import gpu  # noqa: E402
 from gpu_extras.batch import batch_for_shader  # noqa: E402
 from mathutils import Matrix  # noqa: E402
 
-from curved_reflections.operators import demo_scenes, live, panel  # noqa: E402
-from curved_reflections.operators.capture import view_from_camera  # noqa: E402
-from curved_reflections.operators.gpu_init import ensure_gpu  # noqa: E402
-from curved_reflections.operators.png import write_png  # noqa: E402
+from curved_reflections.blender import demo_scenes, live, panel  # noqa: E402
+from curved_reflections.blender.capture import view_from_camera  # noqa: E402
+from curved_reflections.blender.gpu_init import ensure_gpu  # noqa: E402
+from curved_reflections.blender.png import write_png  # noqa: E402
 
 WIDTH, LINE, HEADER, GAP, INDENT, MARGIN, ICON = 540, 22, 26, 8, 14, 10, 18
 #: Share of a split property's row taken by its name (Blender's ``use_property_split``).
@@ -312,7 +312,7 @@ def main(argv=None) -> int:
             mirror.curved_reflections.mode = 'PERTURBATION'
             mirror.curved_reflections.analytic_shape = 'SPHERE'
         bpy.context.view_layer.objects.active = mirror
-        bpy.ops.curved_reflections.bake()
+        bpy.ops.curved_reflections.start_live()
         draw_and_check(scene)
         panels = record_panels(scene, mirror)
         image = draw_rows(layout_rows(panels))

@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Test harness: an isolated Blender user folder, the package import, the GPU fixture.
 
-Engine tests (tests/addon) never import ``bpy``; this file imports it only inside
+Engine tests (tests/engine) never import ``bpy``; this file imports it only inside
 fixtures. ``BLENDER_USER_RESOURCES`` is set before any test can import ``bpy`` so that
 no test reads or writes the user's real Blender configuration.
 """
@@ -35,12 +35,12 @@ def repo_root() -> Path:
     return REPO_ROOT
 
 
-#: Initialises the GPU the way gpu_ready does (operators/gpu_init.py, loaded by file path:
+#: Initialises the GPU the way gpu_ready does (blender/gpu_init.py, loaded by file path:
 #: it imports only bpy and gpu); run first in a child process, because without OpenGL
 #: Blender aborts the whole process instead of raising.
 _GPU_INIT = f"""
 import importlib.util
-spec = importlib.util.spec_from_file_location("gpu_init", {str(REPO_ROOT / "operators" / "gpu_init.py")!r})
+spec = importlib.util.spec_from_file_location("gpu_init", {str(REPO_ROOT / "blender" / "gpu_init.py")!r})
 gpu_init = importlib.util.module_from_spec(spec)
 spec.loader.exec_module(gpu_init)
 gpu_init.ensure_gpu()
@@ -66,7 +66,7 @@ def gpu_ready():
             + output,
             pytrace=False,
         )
-    from curved_reflections.operators.gpu_init import ensure_gpu
+    from curved_reflections.blender.gpu_init import ensure_gpu
 
     ensure_gpu()
     import gpu
@@ -84,10 +84,10 @@ def sphere_reflections():
 
     import numpy as np
 
-    from curved_reflections.addon import look_at_view
-    from curved_reflections.addon.geometry.raytrace import ReflectorSet
-    from curved_reflections.addon.geometry.sphere import icosphere
-    from curved_reflections.addon.reference.exact import solve_reflections
+    from curved_reflections.engine import look_at_view
+    from curved_reflections.engine.geometry.raytrace import ReflectorSet
+    from curved_reflections.engine.geometry.sphere import icosphere
+    from curved_reflections.engine.reference.exact import solve_reflections
 
     centre, eye = np.array([0.0, 0.0, 1.0]), np.array([0.3, -3.0, 1.6])
     mirror = ReflectorSet([icosphere(centre, 1.0, 4, "Sphere")])

@@ -2,22 +2,22 @@
 """The documentation describes the code as it is.
 
 - Every file or folder path written in the docs (``docs/*.md``, ``docs/benchmarks/*.md``,
-  ``README.md``) and in the extension's source (docstrings and comments of ``addon/``,
-  ``gpu_shaders/``, ``operators/``, its GLSL) exists: ``addon/methods/sbc/sbc.py``,
-  ``gpu_shaders/glsl/morph_blend.glsl``, ``tests/.../test_x.py``, ``scripts/demo.py``, a
+  ``README.md``) and in the extension's source (docstrings and comments of ``engine/``,
+  ``drawing/``, ``blender/``, its GLSL) exists: ``engine/methods/sbc/sbc.py``,
+  ``drawing/glsl/morph_blend.glsl``, ``tests/.../test_x.py``, ``scripts/demo.py``, a
   ``path/module.attribute``, a markdown link. Paths in the source may be relative to the
-  file's own folder or one above it (``glsl/x.glsl`` in ``gpu_shaders/methods/``); the
+  file's own folder or one above it (``glsl/x.glsl`` in ``drawing/methods/``); the
   docs write them from the repository root, or relative to the doc for links. A bare
   file name (``sbc_pack.py``) must name a file somewhere in the repository.
 - Every Sphinx-style reference in the source to one of the extension's modules
-  (``:mod:`.capture```, ``:func:`..bsp.ray_cones```, ``:class:`addon.view.View```)
+  (``:mod:`.capture```, ``:func:`..bsp.ray_cones```, ``:class:`engine.view.View```)
   resolves: relative ones against the module's package, as a relative import does, and
   the first name after the module is defined in it.
 - Every ```python example of the docs runs as written, in a fresh Python in which the
   repository is the package ``curved_reflections`` (``scripts/package_link.py``, as
   ``tests/conftest.py`` does). The user guide's examples for the installed extension
   (``bl_ext.user_default.curved_reflections``, .blend files) run against the built zip in
-  ``tests/operators/test_packaging.py``.
+  ``tests/blender/test_packaging.py``.
 
 Nothing here imports ``bpy``.
 """
@@ -31,12 +31,12 @@ from pathlib import Path
 import pytest
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("addon", "gpu_shaders", "operators")
+PACKAGES = ("engine", "drawing", "blender")
 
 #: Extensions of the files a path may name; a path without one must start with one of
 #: ROOTS (a folder, or ``path/module.attribute``).
 EXTENSIONS = ("py", "glsl", "md", "json", "toml", "png", "txt")
-ROOTS = ("addon", "gpu_shaders", "operators", "tests", "scripts", "docs")
+ROOTS = ("engine", "drawing", "blender", "tests", "scripts", "docs")
 _PATH = re.compile(
     r"(?<![\w./\-~:])"  # not inside a longer path, a URL or an absolute path
     r"((?:\.\./|\./)*(?:[\w\-*]+/)+[\w\-*.]*\w\.(?:" + "|".join(EXTENSIONS) + r")"
@@ -204,18 +204,18 @@ def test_the_docs_describe_the_code_not_its_history():
 
 def test_the_checks_find_what_they_should():
     """The checks themselves: a stale path, a stale relative reference, a bad link."""
-    assert _exists("addon/methods/sbc/sbc.py", [REPO_ROOT]) and not _exists("addon/sbc.py", [REPO_ROOT])
-    assert _exists("operators/morph_bake.cache_directory", [REPO_ROOT])
-    assert _exists("glsl/morph_blend.glsl", [REPO_ROOT / "gpu_shaders" / "methods", REPO_ROOT / "gpu_shaders"])
+    assert _exists("engine/methods/sbc/sbc.py", [REPO_ROOT]) and not _exists("engine/sbc.py", [REPO_ROOT])
+    assert _exists("blender/morph_bake.cache_directory", [REPO_ROOT])
+    assert _exists("glsl/morph_blend.glsl", [REPO_ROOT / "drawing" / "methods", REPO_ROOT / "drawing"])
     assert _exists("docs/benchmarks/*.md", [REPO_ROOT]) and not _exists("docs/benchmarks/*.txt", [REPO_ROOT])
-    assert [m.group(1) for m in _PATH.finditer("see `addon/band_trace.py`, //frames/a_####.png, "
-                                               "/tmp/x.png and https://x.org/a/b.py")] == ["addon/band_trace.py"]
-    assert _module_file(["addon", "methods", "sbc"]) is not None and _module_file(["addon", "sbc"]) is None
-    sbc = REPO_ROOT / "addon" / "methods" / "sbc" / "sbc.py"
+    assert [m.group(1) for m in _PATH.finditer("see `engine/band_trace.py`, //frames/a_####.png, "
+                                               "/tmp/x.png and https://x.org/a/b.py")] == ["engine/band_trace.py"]
+    assert _module_file(["engine", "methods", "sbc"]) is not None and _module_file(["engine", "sbc"]) is None
+    sbc = REPO_ROOT / "engine" / "methods" / "sbc" / "sbc.py"
     good = (":mod:`.bsp` :func:`.bsp.ray_cones` :mod:`...projection` :class:`..octree.OctreeGrid` "
-            "``addon.methods.sbc.sbc.SampleBasedCamera.project`` ``addon.methods.perturbation``")
+            "``engine.methods.sbc.sbc.SampleBasedCamera.project`` ``engine.methods.perturbation``")
     assert _unresolved_references(sbc, good) == []
-    bad = ":mod:`..bsp` :func:`.bsp.no_such_name` :mod:`....x` ``addon.sbc.SampleBasedCamera`` :mod:`.sbc.nothing`"
+    bad = ":mod:`..bsp` :func:`.bsp.no_such_name` :mod:`....x` ``engine.sbc.SampleBasedCamera`` :mod:`.sbc.nothing`"
     assert sorted(r for _, r in _unresolved_references(sbc, bad)) == sorted(bad.split(" "))
 
 
@@ -232,11 +232,11 @@ def _for_the_installed_extension(code: str) -> bool:
 
 
 def test_examples_for_the_installed_extension_are_the_user_guides():
-    """Those run against the built zip (tests/operators/test_packaging.py), not here."""
+    """Those run against the built zip (tests/blender/test_packaging.py), not here."""
     others = [p.id for p in _examples() if _for_the_installed_extension(p.values[0])
               and not p.id.startswith("docs/user_guide.md-")]
     assert others == []
-    packaging = (REPO_ROOT / "tests" / "operators" / "test_packaging.py").read_text(encoding="utf-8")
+    packaging = (REPO_ROOT / "tests" / "blender" / "test_packaging.py").read_text(encoding="utf-8")
     assert '"docs" / "user_guide.md"' in packaging
 
 

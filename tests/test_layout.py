@@ -2,7 +2,7 @@
 """The layout rules of the extension's code (``../shared/DESIGN.md``): no import circle
 between its modules (imports inside functions count: they hide a circle, they do not
 remove it), imports at the top of their modules, no module over 600 lines but those
-listed with their reason, the engine (``addon/``) free of Blender, what the live view's
+listed with their reason, the engine (``engine/``) free of Blender, what the live view's
 worker threads import free of ``gpu``, and the shipped packages free of the development
 helpers (``tools/``, not in the zip). Read from the source with ``ast``
 (``tools/import_graph.py``); nothing of the extension is imported."""
@@ -17,14 +17,14 @@ from curved_reflections.tools.import_graph import module_names, relative_imports
 REPO_ROOT = Path(__file__).resolve().parents[1]
 #: What the zip ships, and the development helpers beside it (same rules, never imported
 #: by the shipped ones).
-SHIPPED_PACKAGES = ("addon", "gpu_shaders", "operators")
+SHIPPED_PACKAGES = ("engine", "drawing", "blender")
 PACKAGES = SHIPPED_PACKAGES + ("tools",)
 #: No module over this many lines but those in :data:`OVER_THE_CEILING`.
 MAX_LINES = 600
 #: {module: why it is longer than :data:`MAX_LINES`}. An entry goes once its module is
 #: split (a test fails while a module listed here is no longer over the ceiling).
 OVER_THE_CEILING = {
-    "gpu_shaders.methods.sbc_triangles": "one class, CameraProjections: a camera's whole, stitched and mixed "
+    "drawing.methods.sbc_triangles": "one class, CameraProjections: a camera's whole, stitched and mixed "
                                          "reflected triangles (SBC V-A, V-B) share its per-sheet culling, vertex "
                                          "batches and projection cache",
 }
@@ -32,9 +32,9 @@ OVER_THE_CEILING = {
 #: allowed in all (issue 45), each with its reason in a comment on its line or the line
 #: above: an import circle no better split removes, an optional dependency.
 MAX_LOCAL_IMPORTS = 10
-#: Modules the live view's worker threads import (``operators/live_workers.py``): numpy
+#: Modules the live view's worker threads import (``blender/live_workers.py``): numpy
 #: work that must import without Blender's ``gpu``, nor reach a module that imports it.
-WORKER_IMPORTS = ("gpu_shaders.methods.camera_source",)
+WORKER_IMPORTS = ("drawing.methods.camera_source",)
 #: Modules of Blender's own that exist only inside Blender (or the ``bpy`` module).
 BLENDER_MODULES = {"bpy", "gpu", "mathutils", "bmesh"}
 
@@ -92,11 +92,11 @@ def _graph() -> dict:
 
 def test_the_graph_sees_the_known_imports():
     graph = _graph()
-    assert "gpu_shaders.methods.sbc_triangles" in graph["gpu_shaders.reflection_draw"]
-    assert "addon.methods.sbc.sbc" in graph["addon.methods.sbc.sbc_build"]
-    assert "operators.live" in graph["operators.live_handlers"]
-    assert "addon.methods.morphing.morph_grid" in graph["addon.methods.morphing.morphing"]
-    assert "addon.geometry.raytrace" in graph["addon.reference.exact"]
+    assert "drawing.methods.sbc_triangles" in graph["drawing.reflection_draw"]
+    assert "engine.methods.sbc.sbc" in graph["engine.methods.sbc.sbc_build"]
+    assert "blender.live" in graph["blender.live_handlers"]
+    assert "engine.methods.morphing.morph_grid" in graph["engine.methods.morphing.morphing"]
+    assert "engine.geometry.raytrace" in graph["engine.reference.exact"]
 
 
 def test_no_import_circle():
@@ -155,7 +155,7 @@ def _local_imports(source: str) -> list:
 def test_a_local_import_is_found_with_its_reason():
     source = (
         "import os\n"
-        "def register():\n    from . import operators\n"
+        "def register():\n    from . import blender\n"
         "def f():\n    import gpu\n"
         "    x = 1  # unrelated\n    import bpy\n"
         "    # the package imports this module\n    from . import b\n"
@@ -203,7 +203,7 @@ def test_what_the_worker_threads_import_never_touches_the_gpu():
 
 def test_the_engine_never_imports_blender():
     for name, path in _modules().items():
-        if not name.startswith("addon"):
+        if not name.startswith("engine"):
             continue
         assert _blender_imports(path) == set(), name
 

@@ -1,10 +1,10 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """The exact reference on declared exact surfaces (spheres, ellipsoids).
 
-``addon/reference/exact.py`` and ``exact_paths.py`` solve the reflection law on the mesh
+``engine/reference/exact.py`` and ``exact_paths.py`` solve the reflection law on the mesh
 (flat triangles, interpolated normals): the yard stick of every method on meshes. A
 reflector declared an exact surface
-(``addon.methods.perturbation.quadrics.AnalyticSurface``) reflects off the surface itself,
+(``engine.methods.perturbation.quadrics.AnalyticSurface``) reflects off the surface itself,
 which the mesh only approximates; measured against the mesh, a method that uses the true
 surface would be charged with the tessellation's error. Here each of the mesh's solutions
 (found, with its visibility, by the mesh solvers) is polished onto the true surface by
@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..addon.methods.perturbation.path_derivatives import Paths, newton, optimal_multipliers
-from ..addon.view import View
+from ..engine.methods.perturbation.path_derivatives import Paths, newton, optimal_multipliers
+from ..engine.view import View
 
 #: Newton steps of the polish (quadratic convergence from the mesh's answer; a
 #: superquadric's osculating quadric is refreshed at each).

@@ -5,7 +5,7 @@ SBC paper (Popescu, Sacks, Mei 2006) section III-B traces view rays on through t
 reflectors; a point p seen after two reflections appears where the view ray meets the
 first reflector point x1 of a light path eye -> x1 (on reflector A) -> x2 (on reflector
 B) -> p that obeys the law of reflection at both points, on our surface model (flat
-triangles with interpolated normals, two-sided, as ``addon/reference/exact.py``):
+triangles with interpolated normals, two-sided, as ``engine/reference/exact.py``):
 
     normalize(d(x1 -> E) + d(x1 -> x2)) = n(x1),   normalize(d(x2 -> x1) + d(x2 -> p)) = n(x2).
 
@@ -35,7 +35,7 @@ back of every closed mirror, whose pairs with its own front outnumber all others
 A solution is *visible* when x1 is in the view frustum and is the view ray's first hit,
 nothing lies between x1 and x2 or between x2 and p, and each reflection is valid (the
 ray arrives in front of the interpolated normal and leaves the front of the facet), the
-same rules the ray map (``addon/methods/sbc/raymap.py``) applies when it traces
+same rules the ray map (``engine/methods/sbc/raymap.py``) applies when it traces
 second-order rays.
 
 The extension never solves for exact paths at runtime: this is the yard stick of the tests
@@ -48,12 +48,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..addon.geometry.bvh import descend
-from ..addon.reference.exact import (CONE_SLACK, INSIDE_TOLERANCE, _first_hit_of_view_ray, _foot,
+from ..engine.geometry.bvh import descend
+from ..engine.reference.exact import (CONE_SLACK, INSIDE_TOLERANCE, _first_hit_of_view_ray, _foot,
                                      first_of_duplicates, half_vector_may_meet_cone, turn_toward)
-from ..addon.geometry.raytrace import ReflectorSet, reflect
-from ..addon.geometry.vectors import cross, dot, lengths, normalized, unit
-from ..addon.view import View
+from ..engine.geometry.raytrace import ReflectorSet, reflect
+from ..engine.geometry.vectors import cross, dot, lengths, normalized, unit
+from ..engine.view import View
 
 NEWTON_ITERATIONS = 30
 NEWTON_TOLERANCE = 1e-13

@@ -2,12 +2,12 @@
 """The extension's import graph, read from source with ``ast`` (nothing is imported).
 
 Modules are named by their dotted path inside the extension, the root ``__init__.py``
-being ``""`` and a package its ``__init__.py`` (``"addon.geometry"``). Only relative
+being ``""`` and a package its ``__init__.py`` (``"engine.geometry"``). Only relative
 imports count, the only kind the extension uses for its own modules (Blender installs it
 as ``bl_ext.<repo>.curved_reflections``), and they count wherever they stand: an import
 inside a function runs as surely as one at the top, only later.
 
-``tests/test_layout.py`` looks for circles in this graph; ``tests/operators/test_packaging.py``
+``tests/test_layout.py`` looks for circles in this graph; ``tests/blender/test_packaging.py``
 walks it from the root ``__init__.py`` through the built zip to find shipped modules the
 extension never imports.
 """

@@ -10,7 +10,7 @@ Fig. 17) show.
 
 Colours: palettes hold *linear* RGB (what the materials store); rendered images are
 *display* sRGB in [0, 1] (Blender's "Standard" view transform on an sRGB display, i.e.
-what a PNG holds divided by 255; ``addon/srgb.py``). Labels are assigned in display
+what a PNG holds divided by 255; ``engine/srgb.py``). Labels are assigned in display
 space, where the palette's colours are spread evenly.
 
 The scripts, tests and benchmarks measure with these; the extension does not, so they are
@@ -23,7 +23,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..addon.srgb import linear_to_srgb
+from ..engine.srgb import linear_to_srgb
 
 #: Radius of the near-contact region as a share of the image width (see contact_region).
 CONTACT_RADIUS_FRACTION = 1.0 / 32.0

@@ -3,11 +3,11 @@
 
 In reflection-morphing mode (Popescu, Sacks, Mei 2006, section VI) the extension projects
 each grid node's images on the GPU and blends them there every frame
-(``gpu_shaders/methods/morph_pass.py``). :class:`MorphSource` is the earlier path, kept as
+(``drawing/methods/morph_pass.py``). :class:`MorphSource` is the earlier path, kept as
 the numpy reference the benchmarks compare with (``tests/benchmarks/bench_view_change.py``)
 and not shipped: it hands the blended points of one view to
-``gpu_shaders.reflection_draw.ReflectionRenderer`` in the layout of its GPU projection pass
-(``gpu_shaders/glsl/reflection_project_vert.glsl``), so the renderer draws them as it draws
+``drawing.reflection_draw.ReflectionRenderer`` in the layout of its GPU projection pass
+(``drawing/glsl/reflection_project_vert.glsl``), so the renderer draws them as it draws
 a runtime camera's (whole and mixed triangles); the matching of images across nodes and the
 blend run in numpy, and the renderer's own vertices are *static points* whose four node
 images are kept while the eye stays in one tetrahedron.
@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..gpu_shaders.methods.morph_pass import SLOTS
-from ..gpu_shaders.methods.projection import reflected_depth
+from ..drawing.methods.morph_pass import SLOTS
+from ..drawing.methods.projection import reflected_depth
 
 #: Images of one point in one reflector drawn at most (sheets per grid), as on the GPU.
 MAX_IMAGES = SLOTS

@@ -17,8 +17,8 @@ does not depend on ``gl_PrimitiveID`` being available in every Blender backend.
 
 After read-back, numpy turns each sample into what the CPU tracer returns for the same
 view ray (depth along the ray, normals turned toward the ray's origin) and hands it to
-:func:`addon.methods.sbc.raymap.reflect_primary_hits`, so reflection, higher orders, heads and
-grouping are shared with :func:`addon.methods.sbc.raymap.trace_ray_map`. By default the hit is
+:func:`engine.methods.sbc.raymap.reflect_primary_hits`, so reflection, higher orders, heads and
+grouping are shared with :func:`engine.methods.sbc.raymap.trace_ray_map`. By default the hit is
 also refined in float64 on the triangle the rasteriser chose (the GPU decides
 visibility, numpy the exact point), removing the error of sub-pixel vertex snapping;
 see :func:`gpu_ray_map`.
@@ -26,7 +26,7 @@ see :func:`gpu_ray_map`.
 Unlike the CPU tracer, the rasteriser clips at the view's far plane: reflector points
 beyond it are not in the ray map (nor visible in the view).
 
-The extension traces its ray maps on the CPU (``addon/methods/sbc/raymap.py``) and never
+The extension traces its ray maps on the CPU (``engine/methods/sbc/raymap.py``) and never
 runs this producer; it is kept, with its tests (``tests/tools/test_raymap_gpu.py``), as
 the paper's GPU route measured against the CPU tracer, not shipped.
 """
@@ -39,9 +39,9 @@ import gpu
 import numpy as np
 from mathutils import Matrix
 
-from ..addon.methods.sbc.raymap import RayMap, reflect_primary_hits
-from ..addon.geometry.raytrace import ReflectorSet
-from ..addon.view import View
+from ..engine.methods.sbc.raymap import RayMap, reflect_primary_hits
+from ..engine.geometry.raytrace import ReflectorSet
+from ..engine.view import View
 
 
 #: Clear value of the position target; w = -1 marks pixels that no reflector covers.
@@ -221,12 +221,12 @@ def gpu_ray_map(reflector_set: ReflectorSet, view: View, bounds, downsample: int
     is recomputed in float64 on the triangle the rasteriser chose, and the few cells
     whose ray falls outside that triangle (snapped across an edge or a silhouette, a
     tiny fraction) are re-traced on the CPU. The result then matches
-    :func:`addon.methods.sbc.raymap.trace_ray_map` to rounding, except where depth-buffer precision
+    :func:`engine.methods.sbc.raymap.trace_ray_map` to rounding, except where depth-buffer precision
     picks a different surface than the exact nearest hit.
 
     As in :meth:`ReflectorSet.intersect`, the interpolated and the face normal are both
     turned toward the ray's origin. Everything after the first hit is shared with the
-    CPU path (:func:`addon.methods.sbc.raymap.reflect_primary_hits`).
+    CPU path (:func:`engine.methods.sbc.raymap.reflect_primary_hits`).
     """
     if max_order < 1:
         raise ValueError(f"max_order must be >= 1, got {max_order}")

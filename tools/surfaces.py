@@ -5,7 +5,7 @@ The ellipsoid, the superellipsoid and the torus carry their exact normals, so th
 are measured on more than spheres (the torus is not star-shaped: the iterative search must
 refuse it). The sphere is the one reflector whose reflections are known independently of
 any tessellation (:func:`sphere_reflection`), so it checks the exact solver. They start
-from the extension's own geodesic sphere (``addon/geometry/sphere.py``). Used by the tests
+from the extension's own geodesic sphere (``engine/geometry/sphere.py``). Used by the tests
 and benchmarks only, not shipped.
 """
 
@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..addon.geometry.sphere import icosphere
-from ..addon.scene import Reflector
+from ..engine.geometry.sphere import icosphere
+from ..engine.scene import Reflector
 
 
 def rotation_z(angle: float) -> np.ndarray:

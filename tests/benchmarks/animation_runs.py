@@ -60,10 +60,10 @@ def sampled_frames(scene, folder: Path, frames: int, sampled: int, samples: int,
     scene for the variant (modes, settings) before its single-frame render."""
     import bpy
 
-    from curved_reflections.operators import demo_scenes
-    from curved_reflections.operators.png import write_png
+    from curved_reflections.blender import demo_scenes
+    from curved_reflections.blender.png import write_png
     from curved_reflections.tools import metrics, reference_render as rr
-    from curved_reflections.operators.render_image import render_scene
+    from curved_reflections.blender.render_image import render_scene
 
     palette = demo_scenes.palette(scene)
     reflectors = demo_scenes.reflectors(scene)

@@ -69,8 +69,8 @@ def _stage(width: int, height: int):
     """sbc_fig3 with its ball in Runtime mode and max order 2: (scene, ball)."""
     import bpy
 
-    from curved_reflections.operators import demo_scenes
-    from curved_reflections.operators.gpu_init import ensure_gpu
+    from curved_reflections.blender import demo_scenes
+    from curved_reflections.blender.gpu_init import ensure_gpu
 
     ensure_gpu()
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
@@ -85,7 +85,7 @@ def _timed_row(scene, name: str, what: str, repeats: int) -> dict:
     """One row: Render Image's frame of ``scene``, the median of ``repeats`` after a first one."""
     import bpy
 
-    from curved_reflections.operators.render_image import render_scene
+    from curved_reflections.blender.render_image import render_scene
 
     depsgraph = bpy.context.evaluated_depsgraph_get()
     result = render_scene(scene, depsgraph)  # caches filled (shaders, capture, plan)

@@ -5,7 +5,7 @@ same diffuse meshes, measured in one run.
     .venv/bin/python tests/benchmarks/bench_draw.py                       # docs/benchmarks/draw.md
     .venv/bin/python tests/benchmarks/bench_draw.py --quick --out /tmp/draw.md
 
-A demo scene (``operators/demo_scenes.py``) is built with bpy and captured; its diffuse
+A demo scene (``blender/demo_scenes.py``) is built with bpy and captured; its diffuse
 meshes are split uniformly (every triangle into four, conforming) until the reflected
 geometry the renderer draws (after its own pre-subdivision, SBC paper V-B) is nearest
 ``--vertices`` vertices. The scene camera's sample-based camera is built once (SBC IV)
@@ -76,7 +76,7 @@ def split_uniformly(vertices: np.ndarray, triangles: np.ndarray, colors: np.ndar
 
 
 def scaled_meshes(meshes, levels: int):
-    from curved_reflections.addon.scene import DiffuseMesh
+    from curved_reflections.engine.scene import DiffuseMesh
 
     result = []
     for mesh in meshes:
@@ -92,9 +92,9 @@ def built_scene(kind: str, width: int, height: int):
     captured scene)."""
     import bpy
 
-    from curved_reflections.operators import demo_scenes
-    from curved_reflections.operators.capture import capture_scene
-    from curved_reflections.operators.gpu_init import ensure_gpu
+    from curved_reflections.blender import demo_scenes
+    from curved_reflections.blender.capture import capture_scene
+    from curved_reflections.blender.gpu_init import ensure_gpu
 
     ensure_gpu()
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
@@ -105,7 +105,7 @@ def built_scene(kind: str, width: int, height: int):
 
 def levels_for(captured, target_vertices: int) -> int:
     """Levels of uniform splitting whose drawn vertex count is nearest the target (log scale)."""
-    from curved_reflections.gpu_shaders.draw_geometry import prepare_geometry
+    from curved_reflections.drawing.draw_geometry import prepare_geometry
 
     counts = {}
     for levels in range(0, 6):
@@ -177,13 +177,13 @@ def measure(kind: str, width: int, height: int, target_vertices: int, repeats: i
             projection_repeats: int) -> dict:
     import gpu
 
-    from curved_reflections.addon.methods.sbc import build_sample_based_camera
-    from curved_reflections.addon.scene import scene_bounds
-    from curved_reflections.gpu_shaders.methods.projection import SBCTextures
-    from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
-    from curved_reflections.addon.frame_settings import FrameSettings
-    from curved_reflections.operators.capture import view_from_camera
-    from curved_reflections.operators.render_inputs import BOUNDS_MARGIN, reflector_appearance, world_color
+    from curved_reflections.engine.methods.sbc import build_sample_based_camera
+    from curved_reflections.engine.scene import scene_bounds
+    from curved_reflections.drawing.methods.projection import SBCTextures
+    from curved_reflections.drawing.reflection_draw import ReflectionRenderer
+    from curved_reflections.engine.frame_settings import FrameSettings
+    from curved_reflections.blender.capture import view_from_camera
+    from curved_reflections.blender.render_inputs import BOUNDS_MARGIN, reflector_appearance, world_color
 
     scene, depsgraph, captured = built_scene(kind, width, height)
     view = view_from_camera(scene.camera, scene, depsgraph)
@@ -310,7 +310,7 @@ def _position_format():
 
 def _turned(view, degrees: float):
     """The view turned by ``degrees`` about its own vertical axis (the eye stays)."""
-    from curved_reflections.addon.view import View
+    from curved_reflections.engine.view import View
 
     angle = np.radians(degrees)
     turn = np.eye(4)
@@ -320,7 +320,7 @@ def _turned(view, degrees: float):
 
 def _looking_away(view):
     """The same view turned half round about its vertical axis (sees no reflector in the demo scenes)."""
-    from curved_reflections.addon.view import View
+    from curved_reflections.engine.view import View
 
     turn = np.diag([-1.0, 1.0, -1.0, 1.0])
     return View(turn @ np.asarray(view.view_matrix), view.projection_matrix, view.width, view.height, name="away")

@@ -21,7 +21,7 @@ Per down-sampling d (accuracy 1 px, ``max_order=2``), for the histories (A, B) a
 - false rate: share of projected images with no exact visible path of that history.
 
 ``--render`` adds the picture-level check at the demo's 320x240: our render
-(``operators/render_image.render_scene``) with ``max_order`` 1 and 2 and Cycles with 1
+(``blender/render_image.render_scene``) with ``max_order`` 1 and 2 and Cycles with 1
 and 8 glossy bounces, against Cycles with 8 bounces, label disagreement
 (``tools/metrics.py``) on all reflector pixels and on the second-order footprint (pixels
 whose reflected view ray hits the other mirror, from a full-resolution ray map).
@@ -50,7 +50,7 @@ RENDER_WIDTH, RENDER_HEIGHT = 320, 240
 
 def prepare(n_points: int) -> dict:
     from curved_reflections.tools.exact_paths import solve_second_order
-    from curved_reflections.addon.geometry.raytrace import ReflectorSet
+    from curved_reflections.engine.geometry.raytrace import ReflectorSet
 
     _, _, reflectors, view, bounds, points, counts = bench_sbc.demo_scene("two_spheres", n_points)
     reflector_set = ReflectorSet(reflectors)
@@ -63,7 +63,7 @@ def prepare(n_points: int) -> dict:
 
 
 def measure_cell(scene: dict, downsample: int, accuracy_px: float = 1.0) -> dict:
-    from curved_reflections.addon.methods.sbc import build_sample_based_camera
+    from curved_reflections.engine.methods.sbc import build_sample_based_camera
 
     sbc = build_sample_based_camera(scene["reflector_set"], scene["view"], scene["bounds"], max_order=2,
                                     downsample=downsample, accuracy_px=accuracy_px)
@@ -134,11 +134,11 @@ def render_check(images: Path, cycles_samples: int, bounces: int) -> dict:
     import bpy
 
     from curved_reflections.tools import metrics
-    from curved_reflections.addon.methods.sbc.raymap import trace_ray_map
-    from curved_reflections.addon.geometry.raytrace import ReflectorSet
-    from curved_reflections.addon.scene import scene_bounds
-    from curved_reflections.operators import capture, demo_scenes, render_image
-    from curved_reflections.operators.png import write_png
+    from curved_reflections.engine.methods.sbc.raymap import trace_ray_map
+    from curved_reflections.engine.geometry.raytrace import ReflectorSet
+    from curved_reflections.engine.scene import scene_bounds
+    from curved_reflections.blender import capture, demo_scenes, render_image
+    from curved_reflections.blender.png import write_png
     from curved_reflections.tools import reference_render as rr
 
     bpy.ops.wm.read_factory_settings(use_empty=True)

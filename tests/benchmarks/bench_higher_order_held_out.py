@@ -47,7 +47,7 @@ SEED = 20261125
 
 def _wall(x: float, y_range, z_range, quads: int = 24):
     """A flat mirror in the plane x = ``x``, facing +X."""
-    from curved_reflections.addon.scene import Reflector
+    from curved_reflections.engine.scene import Reflector
 
     ys, zs = np.meshgrid(np.linspace(*y_range, quads + 1), np.linspace(*z_range, quads + 1), indexing="ij")
     vertices = np.c_[np.full(ys.size, x), ys.ravel(), zs.ravel()]
@@ -60,7 +60,7 @@ def _wall(x: float, y_range, z_range, quads: int = 24):
 def _turned(reflector, degrees: float, axis: str = "z"):
     """``reflector`` turned about the Z (or Y) axis through the origin."""
     from curved_reflections.tools.surfaces import rotation_z
-    from curved_reflections.addon.scene import Reflector
+    from curved_reflections.engine.scene import Reflector
 
     c, s = np.cos(np.radians(degrees)), np.sin(np.radians(degrees))
     turn = rotation_z(np.radians(degrees)) if axis == "z" else np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
@@ -75,8 +75,8 @@ TUNED_ON = {"facing spheres", "sphere and wall", "small and large sphere", "ball
 
 def scenes() -> dict:
     """{name: (reflectors, view, spheres as (centre, radius))}."""
-    from curved_reflections.addon.geometry.sphere import icosphere
-    from curved_reflections.addon.view import look_at_view
+    from curved_reflections.engine.geometry.sphere import icosphere
+    from curved_reflections.engine.view import look_at_view
 
     return {
         "facing spheres": ([icosphere((0.0, 0.0, 1.0), 1.0, 4, "A"), icosphere((3.0, 0.3, 1.1), 0.8, 4, "B")],
@@ -113,8 +113,8 @@ def scenes() -> dict:
 
 def measure(name: str, reflectors, view, spheres, n_points: int, downsamples) -> dict:
     from curved_reflections.tools.exact_paths import solve_second_order
-    from curved_reflections.addon.geometry.raytrace import ReflectorSet
-    from curved_reflections.addon.methods.sbc import build_sample_based_camera
+    from curved_reflections.engine.geometry.raytrace import ReflectorSet
+    from curved_reflections.engine.methods.sbc import build_sample_based_camera
 
     reflector_set = ReflectorSet(reflectors)
     lo, hi = reflector_set.vertices.min(axis=0) - 2.0, reflector_set.vertices.max(axis=0) + 2.0

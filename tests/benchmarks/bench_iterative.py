@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Accuracy of the iterative search (Roger & Holzschuch 2006; addon/methods/iterative)
+"""Accuracy of the iterative search (Roger & Holzschuch 2006; engine/methods/iterative)
 against the exact reference solver, on reflectors it was not tuned on.
 
     .venv/bin/python tests/benchmarks/bench_iterative.py --out docs/benchmarks      # docs/benchmarks/iterative.md
@@ -13,13 +13,13 @@ star-shaped, not convex), none of them used while the search was written (its te
 other views, points and amplitudes). Per reflector two views, 640x480, 40 degrees, from
 about 3.5 radii, and points drawn uniformly (fixed seed) in a box of 3 radii around it,
 outside it; every face size sees the same points. The cube map is baked on the CPU at
-each face size. The exact solver (``addon/reference/exact.py``) gives
+each face size. The exact solver (``engine/reference/exact.py``) gives
 every visible reflection of every point; a point counts as *covered* when the search
 answers within 1 px of one of them (the search gives one reflection per point: on the
 bumpy spheres some points have several). *False*: answers with no exact visible
 reflection within 1 px. Errors: pixel distance from each answer to the nearest exact
 visible reflection of its point. The numpy twin is measured; the GLSL search agrees with
-it to 0.05 px (tests/gpu_shaders/methods/test_iterative_draw.py).
+it to 0.05 px (tests/drawing/methods/test_iterative_draw.py).
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ EYES = ((3.5, -2.0, 1.5), (-1.2, 3.3, -1.4))
 
 
 def reflectors(subdivisions: int) -> list:
-    from curved_reflections.addon.geometry.sphere import bumpy_icosphere, icosphere
+    from curved_reflections.engine.geometry.sphere import bumpy_icosphere, icosphere
     from curved_reflections.tools.surfaces import ellipsoid, superellipsoid
 
     return [icosphere((0.0, 0.0, 0.0), 1.0, subdivisions, name="sphere"),
@@ -66,9 +66,9 @@ def points_outside(reflector_set, count: int, rng) -> np.ndarray:
 
 def exact_cases(reflector, n_points: int, rng) -> list:
     """Per view: the view, its points and their exact reflections (shared by the face sizes)."""
-    from curved_reflections.addon.reference.exact import solve_reflections
-    from curved_reflections.addon.geometry.raytrace import ReflectorSet
-    from curved_reflections.addon.view import look_at_view
+    from curved_reflections.engine.reference.exact import solve_reflections
+    from curved_reflections.engine.geometry.raytrace import ReflectorSet
+    from curved_reflections.engine.view import look_at_view
 
     reflector_set = ReflectorSet([reflector])
     cases = []
@@ -82,7 +82,7 @@ def exact_cases(reflector, n_points: int, rng) -> list:
 
 
 def measure(reflector, face_size: int, cases: list) -> dict:
-    from curved_reflections.addon.methods.iterative import IterativeReflector, prepare_iterative
+    from curved_reflections.engine.methods.iterative import IterativeReflector, prepare_iterative
 
     start = time.perf_counter()
     shape, bake = prepare_iterative(reflector, face_size)

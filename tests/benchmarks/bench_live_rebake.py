@@ -42,9 +42,9 @@ LEVELS = 4
 def measure(width: int, height: int, levels: int, repeats: int) -> dict:
     import bpy
 
-    from curved_reflections.operators import demo_scenes, live
-    from curved_reflections.operators.capture import view_from_camera
-    from curved_reflections.operators.gpu_init import ensure_gpu
+    from curved_reflections.blender import demo_scenes, live
+    from curved_reflections.blender.capture import view_from_camera
+    from curved_reflections.blender.gpu_init import ensure_gpu
 
     ensure_gpu()
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
@@ -57,7 +57,7 @@ def measure(width: int, height: int, levels: int, repeats: int) -> dict:
     triangles = bench_draw.evaluated_triangles(ball, depsgraph)
     view = view_from_camera(scene.camera, scene, depsgraph)
     start = time.perf_counter()
-    state = live.bake(scene, depsgraph, {live.CAMERA_KEY: view}, wait=True)
+    state = live.start(scene, depsgraph, {live.CAMERA_KEY: view}, wait=True)
     first_bake = time.perf_counter() - start
 
     def moved():

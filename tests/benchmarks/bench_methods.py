@@ -22,7 +22,7 @@ never asks which method it runs:
   change every frame: for Runtime a camera per frame);
 - *accuracy*: on ``--sampled`` frames, the answers the frame drew (every vertex's, read
   back from the GPU passes, or the sample-based camera's for 3000 vertices: the live
-  check's ``accuracy.drawn_answers``) against the exact solver (``addon/reference/exact.py``) on a
+  check's ``accuracy.drawn_answers``) against the exact solver (``engine/reference/exact.py``) on a
   sample of ``--points`` vertices: desired-view px from each exact visible reflection to
   the nearest drawn image of its vertex, within 12 px (p50 / p95 / p99); coverage, the
   share of exact reflections with a drawn image within 12 px; *false*, the share of
@@ -96,9 +96,9 @@ def _accuracy(scene, frame: int, points: int) -> dict:
     """The drawn answers of one frame against the exact solver, on sampled vertices."""
     import bpy
 
-    from curved_reflections.addon.reference.exact import solve_reflections
-    from curved_reflections.operators import accuracy
-    from curved_reflections.operators.render_image import FrameState, render_scene
+    from curved_reflections.engine.reference.exact import solve_reflections
+    from curved_reflections.blender import accuracy
+    from curved_reflections.blender.render_image import FrameState, render_scene
 
     scene.frame_set(frame)
     state = FrameState()
@@ -127,10 +127,10 @@ def _accuracy(scene, frame: int, points: int) -> dict:
 def measure_scene(name: str, args, images: Path | None) -> dict:
     import bpy
 
-    from curved_reflections.operators import demo_scenes
-    from curved_reflections.operators.png import write_png
+    from curved_reflections.blender import demo_scenes
+    from curved_reflections.blender.png import write_png
     from curved_reflections.tools import reference_render as rr
-    from curved_reflections.operators.gpu_init import ensure_gpu
+    from curved_reflections.blender.gpu_init import ensure_gpu
 
     ensure_gpu()
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
@@ -248,7 +248,7 @@ def report(results: dict, command: str, plot_path: str) -> str:
         "vertices to the nearest image drawn for the vertex (what the frame drew: the GPU passes' answers or the "
         f"sample-based camera's) within {MATCH_PX:g} px; *coverage*: exact reflections with a drawn image within "
         f"{MATCH_PX:g} px; *false*: drawn answers ({FALSE_SAMPLE} per reflector and frame) with no exact reflection "
-        f"within {MATCH_PX:g} px (the live check, `addon/spot_check.py`). "
+        f"within {MATCH_PX:g} px (the live check, `engine/spot_check.py`). "
         f"*Labels*: label disagreement with Cycles ({args['samples']} samples) on the mirrors' pixels, same "
         "frames. *Drew*: the methods the plan used on those frames (a mode falls back where it cannot draw).", "",
         "| scene | mode | drew | prepare s | baked MB | s/frame | x Workbench | error p50 / p95 / p99 px "

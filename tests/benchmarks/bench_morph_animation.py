@@ -51,11 +51,11 @@ def measure(width: int, height: int, grid: tuple, frames: int, degrees: float, s
             images: Path | None = None, mode: str = "MORPHING", polish: str | None = None) -> dict:
     import bpy
 
-    from curved_reflections.operators import demo_scenes
-    from curved_reflections.operators.png import write_png
+    from curved_reflections.blender import demo_scenes
+    from curved_reflections.blender.png import write_png
     from curved_reflections.tools import reference_render as rr
-    from curved_reflections.operators.gpu_init import ensure_gpu
-    from curved_reflections.operators.render_image import render_scene
+    from curved_reflections.blender.gpu_init import ensure_gpu
+    from curved_reflections.blender.render_image import render_scene
 
     ensure_gpu()
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)

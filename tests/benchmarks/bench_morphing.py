@@ -15,7 +15,7 @@ Error sweep: grids of several node counts over the same box (the mirror's box gr
 ``morph_margin`` = 1 mirror size, the default), so the spacing varies. Views: eyes drawn
 at random (fixed seed) inside the grid, above the floor and at least ``--min-eye-distance``
 from the sphere's centre, looking at the centre (jittered), 480x320, 45 degrees; the same
-views for every grid. Per view, fresh points; the exact solver (``addon/reference/exact.py``) gives
+views for every grid. Per view, fresh points; the exact solver (``engine/reference/exact.py``) gives
 the visible reflections. Only the nodes of the views' tetrahedra are built (lazily; the
 error does not depend on the others). Both blends: the paper's barycentric blend of the
 four first reflector points (``linear``) and ours (``surface``: the blend refined on a
@@ -87,7 +87,7 @@ def sphere_scene(n_points: int):
     name, _, reflectors, view, bounds, _, _ = B.demo_scene("sbc_fig3", 100)
     mirror = reflectors[0]
     matrix = np.array(bpy.data.objects[mirror.name].matrix_world, dtype=np.float64)
-    from curved_reflections.operators import capture
+    from curved_reflections.blender import capture
 
     meshes = capture.capture_scene(bpy.context.evaluated_depsgraph_get()).meshes
     return mirror, matrix, bounds, meshes
@@ -95,8 +95,8 @@ def sphere_scene(n_points: int):
 
 def draw_views(morphing, mirror, matrix, settings, count, min_distance, rng):
     """Eyes inside the default grid (in world space), above the floor, away from the mirror."""
-    from curved_reflections.addon import look_at_view
-    from curved_reflections.addon.methods.morphing import morph_grid
+    from curved_reflections.engine import look_at_view
+    from curved_reflections.engine.methods.morphing import morph_grid
 
     frame = morph_grid.rigid_frame(matrix)
     local = morph_grid.reflector_in_frame(mirror, frame)
@@ -116,8 +116,8 @@ def measure_grid(grid_on_demand, mirror, matrix, settings, views, view_points, e
     """Error, coverage and rates of one grid shape over all views, for both blends;
     ``grid_on_demand(local reflector, settings, blend=, nodes=)`` makes the grid
     (``morphing.grid_on_demand``, or the octree grid's of ``bench_octree.py``)."""
-    from curved_reflections.addon.methods.morphing import morph_grid, morphing
-    from curved_reflections.addon.geometry.raytrace import ReflectorSet
+    from curved_reflections.engine.methods.morphing import morph_grid, morphing
+    from curved_reflections.engine.geometry.raytrace import ReflectorSet
 
     frame = morph_grid.rigid_frame(matrix)
     local = morph_grid.reflector_in_frame(mirror, frame)
@@ -280,7 +280,7 @@ def report(results: dict) -> str:
         + ("; *polished*: the surface blend's images each polished on the mirror from where the blend put them "
            "(*Polish Every Frame*, the default; `MorphingGrid.polish_frames`)" if args.get("polish", True) else "")
         + ". Error: desired-view px from each projected image to the exact "
-        "visible reflection (`addon/reference/exact.py`). Coverage: exact visible reflections that are projected; "
+        "visible reflection (`engine/reference/exact.py`). Coverage: exact visible reflections that are projected; "
         "in parentheses, those seen less than 72.5 degrees off the mirror's normal (the rim of the sphere, a cell or "
         "two wide in every node's ray map, reflects much of the scene at grazing angles and is not projected). "
         "False: projected images inside the image with no exact visible reflection; in parentheses those whose "
@@ -380,10 +380,10 @@ def main(argv=None) -> int:
     started = time.perf_counter()
     args.out.mkdir(parents=True, exist_ok=True)
     B.import_package()
-    from curved_reflections.addon.baking import bake
-    from curved_reflections.addon.methods.morphing import morph_grid, morphing
-    from curved_reflections.addon.reference.exact import solve_reflections
-    from curved_reflections.addon.geometry.raytrace import ReflectorSet
+    from curved_reflections.engine.baking import bake
+    from curved_reflections.engine.methods.morphing import morph_grid, morphing
+    from curved_reflections.engine.reference.exact import solve_reflections
+    from curved_reflections.engine.geometry.raytrace import ReflectorSet
 
     face = args.face_resolution or morph_grid.MorphSettings.face_resolution
     accuracy = args.accuracy or morph_grid.MorphSettings.accuracy_px

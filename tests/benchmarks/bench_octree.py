@@ -58,8 +58,8 @@ def _log(text: str) -> None:
 def grid_maker(kind: str):
     """``grid_on_demand(local, settings, blend=, nodes=)`` of one kind, as a new scene
     draws it: *Polish Node Images* on, its default."""
-    from curved_reflections.addon.methods.morphing import morphing
-    from curved_reflections.addon.methods.octree import octree_grid_on_demand
+    from curved_reflections.engine.methods.morphing import morphing
+    from curved_reflections.engine.methods.octree import octree_grid_on_demand
 
     return functools.partial(octree_grid_on_demand if kind == "octree" else morphing.grid_on_demand, polish=True)
 
@@ -89,8 +89,8 @@ def _held_out(name: str, mirror, n_points: int):
 
 
 def measure_scene(name, mirror, matrix, sample, settings, args) -> dict:
-    from curved_reflections.addon.reference.exact import solve_reflections
-    from curved_reflections.addon.geometry.raytrace import ReflectorSet
+    from curved_reflections.engine.reference.exact import solve_reflections
+    from curved_reflections.engine.geometry.raytrace import ReflectorSet
 
     rng = np.random.default_rng(SEED)
     views = BM.draw_views(None, mirror, matrix, settings, args.views, args.min_eye_distance, rng)
@@ -120,8 +120,8 @@ def measure_scene(name, mirror, matrix, sample, settings, args) -> dict:
 
 
 def measure_bakes(mirror, matrix, settings, processes) -> dict:
-    from curved_reflections.addon.baking import bake
-    from curved_reflections.addon.methods.morphing import morphing
+    from curved_reflections.engine.baking import bake
+    from curved_reflections.engine.methods.morphing import morphing
 
     bakes = {}
     for kind in KINDS:
@@ -235,7 +235,7 @@ def main(argv=None) -> int:
     args = parse_args(argv)
     started = time.perf_counter()
     B.import_package()
-    from curved_reflections.addon.methods.morphing import morph_grid
+    from curved_reflections.engine.methods.morphing import morph_grid
 
     settings = morph_grid.MorphSettings(grid=(3, 3, 2), face_resolution=32) if args.quick \
         else morph_grid.MorphSettings()

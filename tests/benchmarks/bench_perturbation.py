@@ -10,7 +10,7 @@ scene and view, the same points projected by Perturbation (``PERTURBATION``), th
 sample-based camera (``RUNTIME``: its build and projection, down-sampling 2) and the
 iterative search (``ITERATIVE``: its numpy twin, first order on star-shaped mirrors,
 cube maps baked beforehand and not timed), against the exact reference: on meshes the
-mesh solvers (``addon/reference/exact.py``, ``exact_paths.py``), on declared exact surfaces their
+mesh solvers (``engine/reference/exact.py``, ``exact_paths.py``), on declared exact surfaces their
 solutions polished onto the surface (``tools/exact_analytic.py``), so that a method is
 charged with its own error and not the tessellation's. *Coverage*: the share of the
 exact visible reflections answered within 1 px; errors: each answer's distance to the
@@ -69,8 +69,8 @@ def _placed(centre):
 
 def scenes(subdivisions: int) -> list:
     """(name, reflectors, {index: AnalyticSurface}, eyes, max_order) of every scene."""
-    from curved_reflections.addon.methods.perturbation import AnalyticSurface
-    from curved_reflections.addon.geometry.sphere import bumpy_icosphere, icosphere
+    from curved_reflections.engine.methods.perturbation import AnalyticSurface
+    from curved_reflections.engine.geometry.sphere import bumpy_icosphere, icosphere
     from curved_reflections.tools.surfaces import ellipsoid, superellipsoid
 
     centre, radii = np.array([0.1, -0.2, 0.05]), (1.1, 0.75, 0.6)
@@ -107,7 +107,7 @@ def scenes(subdivisions: int) -> list:
 def points_outside(reflector_set, count: int, rng) -> np.ndarray:
     """``count`` points uniform in the box of 3 radii around the mirrors, outside each
     (farther from its centre, along the direction, than its mesh)."""
-    from curved_reflections.addon.geometry.raytrace import ReflectorSet
+    from curved_reflections.engine.geometry.raytrace import ReflectorSet
 
     lo, hi = reflector_set.vertices.min(axis=0), reflector_set.vertices.max(axis=0)
     size = float(np.max(hi - lo))
@@ -124,7 +124,7 @@ def points_outside(reflector_set, count: int, rng) -> np.ndarray:
 
 def exact_reference(reflector_set, view, points, analytic: dict, order: int):
     """(point, pixel, history) of every exact visible reflection of the order."""
-    from curved_reflections.addon.reference.exact import solve_reflections
+    from curved_reflections.engine.reference.exact import solve_reflections
     from curved_reflections.tools.exact_analytic import polish_on_surfaces
     from curved_reflections.tools.exact_paths import solve_second_order
 
@@ -171,12 +171,12 @@ def history_rows(history, h) -> np.ndarray:
 
 
 def measure_scene(name, reflectors, analytic, eyes, order, n_points, rng) -> list:
-    from curved_reflections.addon.methods.iterative import IterativeReflector, prepare_iterative
-    from curved_reflections.addon.methods.perturbation import PerturbationMethod, PerturbationSettings
-    from curved_reflections.addon.geometry.raytrace import ReflectorSet
-    from curved_reflections.addon.methods.sbc import build_sample_based_camera
-    from curved_reflections.addon.scene import scene_bounds
-    from curved_reflections.addon.view import look_at_view
+    from curved_reflections.engine.methods.iterative import IterativeReflector, prepare_iterative
+    from curved_reflections.engine.methods.perturbation import PerturbationMethod, PerturbationSettings
+    from curved_reflections.engine.geometry.raytrace import ReflectorSet
+    from curved_reflections.engine.methods.sbc import build_sample_based_camera
+    from curved_reflections.engine.scene import scene_bounds
+    from curved_reflections.engine.view import look_at_view
 
     reflector_set = ReflectorSet(reflectors)
     lo, hi = scene_bounds(reflectors, margin=2.0 * reflector_set.scale)
@@ -217,7 +217,7 @@ def measure_scene(name, reflectors, analytic, eyes, order, n_points, rng) -> lis
 
 
 def _subset(projection, groups):
-    from curved_reflections.addon.projection import Projection
+    from curved_reflections.engine.projection import Projection
 
     return Projection([projection.groups[g] for g in groups], projection.reflector_points[groups],
                       projection.valid[groups], projection.leaf_kind[groups], projection.pixels[groups],
@@ -231,9 +231,9 @@ def measure_animation(width: int, height: int, frames: int, degrees: float, samp
                       images: Path | None = None) -> dict:
     import bpy
 
-    from curved_reflections.operators import demo_scenes
-    from curved_reflections.operators.gpu_init import ensure_gpu
-    from curved_reflections.operators.render_image import render_scene
+    from curved_reflections.blender import demo_scenes
+    from curved_reflections.blender.gpu_init import ensure_gpu
+    from curved_reflections.blender.render_image import render_scene
 
     ensure_gpu()
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
@@ -274,7 +274,7 @@ def measure_animation(width: int, height: int, frames: int, degrees: float, samp
             ("RUNTIME", use('RUNTIME', 'NONE'), {})])
         settings.mode, settings.analytic_shape = 'PERTURBATION', 'SPHERE'
         if images is not None:
-            from curved_reflections.operators.png import write_png
+            from curved_reflections.blender.png import write_png
             from curved_reflections.tools import reference_render as rr
 
             for row in result["rows"]:

@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Projection throughput (issue #3): ``SampleBasedCamera.project`` in numpy against its GLSL
-twin on the GPU (``gpu_shaders/methods/projection.project_points``), measured in one run.
+twin on the GPU (``drawing/methods/projection.project_points``), measured in one run.
 
     .venv/bin/python tests/benchmarks/bench_projection_rate.py      # docs/benchmarks/projection_rate.md
     .venv/bin/python tests/benchmarks/bench_projection_rate.py --quick --out /tmp/rate.md
@@ -10,7 +10,7 @@ the camera is built at down-sampling 2 and accuracy 1 px, and ``--points`` point
 scene's points repeated, jittered: ``bench_sbc.throughput_points``) are projected in every
 reflection group, alternately by numpy (``project(points, polish=False)``: the
 interpolated answers, what the GLSL twin computes; polishing ray-list answers on the true
-rays, ``addon/reference/true_rays.py``, runs on the CPU after either) and by the GPU (upload, one
+rays, ``engine/reference/true_rays.py``, runs on the CPU after either) and by the GPU (upload, one
 point draw per group, read-back), ``--repeats`` times each after
 one warm-up; rates are points per second of the medians, and the answers of the two are
 compared (share of (group, point) pairs on which they agree about being projected). The
@@ -52,8 +52,8 @@ def _timed(function, repeats: int) -> tuple[float, object]:
 
 
 def measure(name: str, n_points: int, repeats: int) -> dict:
-    from curved_reflections.addon.methods.sbc import build_sample_based_camera
-    from curved_reflections.gpu_shaders.methods.projection import SBCTextures, project_points
+    from curved_reflections.engine.methods.sbc import build_sample_based_camera
+    from curved_reflections.drawing.methods.projection import SBCTextures, project_points
 
     parts = bench_sbc.demo_scene(name, 4000) if name in bench_sbc.DEMO_SCENES else \
         bench_sbc.held_out_scene(name, 4000)
@@ -104,7 +104,7 @@ def report(results: list, command: str, machine: str) -> str:
         "Points per second of one projection of all points in every reflection group (medians), "
         "down-sampling 2, accuracy 1 px. Target: 1 M points/s. Numpy: `project(points, polish=False)`, the "
         "interpolated answers the GLSL twin computes; polishing ray-list answers on the true rays "
-        "(`addon/reference/true_rays.py`) runs on the CPU after either (see sbc.md for the polished numpy rates).",
+        "(`engine/reference/true_rays.py`) runs on the CPU after either (see sbc.md for the polished numpy rates).",
         "",
         "| scene | groups | points | numpy (M/s) | GPU (M/s) | GPU / numpy | answers agree "
         "| pairs in cones | pairs projected | numpy, perfect cull (M/s) |",
@@ -145,7 +145,7 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     args = parse_args(argv)
     bench_sbc.import_package()
-    from curved_reflections.operators.gpu_init import ensure_gpu
+    from curved_reflections.blender.gpu_init import ensure_gpu
 
     ensure_gpu()
     results = []

@@ -46,7 +46,7 @@ LOCATION = (0.0, 0.0, 1.1)
 
 
 def _add_mirror(kind: str):
-    """The mirror object of ``kind`` at :data:`LOCATION`, made with bpy's own operators."""
+    """The mirror object of ``kind`` at :data:`LOCATION`, made with bpy's own blender."""
     import bpy
 
     if kind == "torus":
@@ -82,7 +82,7 @@ def build(kind: str, width: int, height: int):
     """The stage with a mirror of ``kind``: (scene, mirror object)."""
     import bpy
 
-    from curved_reflections.operators import demo_scenes
+    from curved_reflections.blender import demo_scenes
 
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     scene = demo_scenes.build("bumpy_ball", bpy.context.scene, width, height)
@@ -99,10 +99,10 @@ def build(kind: str, width: int, height: int):
 def measure(kind: str, width: int, height: int, samples: int, folder: Path, mode: str = "AUTO") -> dict:
     import bpy
 
-    from curved_reflections.operators import demo_scenes
-    from curved_reflections.operators.png import write_png
+    from curved_reflections.blender import demo_scenes
+    from curved_reflections.blender.png import write_png
     from curved_reflections.tools import metrics, reference_render as rr
-    from curved_reflections.operators.render_image import render_scene
+    from curved_reflections.blender.render_image import render_scene
 
     scene, mirror = build(kind, width, height)
     mirror.curved_reflections.mode = mode
@@ -139,8 +139,8 @@ def _overlay(scene, view):
     import gpu
     import numpy as np
 
-    from curved_reflections.addon.srgb import linear_to_srgb
-    from curved_reflections.operators import live
+    from curved_reflections.engine.srgb import linear_to_srgb
+    from curved_reflections.blender import live
 
     offscreen = gpu.types.GPUOffScreen(view.width, view.height, format='RGBA32F')
     try:
@@ -164,12 +164,12 @@ def viewport(scene, cycles_image, mask, palette) -> dict:
     import bpy
 
     from curved_reflections.tools import metrics
-    from curved_reflections.operators import live
-    from curved_reflections.operators.capture import view_from_camera
+    from curved_reflections.blender import live
+    from curved_reflections.blender.capture import view_from_camera
 
     depsgraph = bpy.context.evaluated_depsgraph_get()
     view = view_from_camera(scene.camera, scene, depsgraph)
-    state = live.bake(scene, depsgraph, {live.CAMERA_KEY: view}, wait=True)
+    state = live.start(scene, depsgraph, {live.CAMERA_KEY: view}, wait=True)
     camera = state.cameras[live.CAMERA_KEY]
     first = _overlay(scene, view)
     start = time.perf_counter()
@@ -187,7 +187,7 @@ def _strip(folder: Path, kinds, path: Path) -> Path:
     """``path``: per mirror, top to bottom, Cycles beside ours (the renders in ``folder``)."""
     import numpy as np
 
-    from curved_reflections.operators.png import write_png
+    from curved_reflections.blender.png import write_png
     from curved_reflections.tools import reference_render as rr
 
     rows = [np.concatenate([rr.read_png(folder / f"{kind}_{name}.png")[..., :3] for name in ("cycles", "ours")],
@@ -253,7 +253,7 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parse_args(argv)
     bench_sbc.import_package()
-    from curved_reflections.operators.gpu_init import ensure_gpu
+    from curved_reflections.blender.gpu_init import ensure_gpu
 
     ensure_gpu()
     command = " ".join([".venv/bin/python", "tests/benchmarks/bench_real_mirrors.py"] + [shlex.quote(a) for a in argv])

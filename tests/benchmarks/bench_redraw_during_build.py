@@ -6,7 +6,7 @@ never waits"), measured in one run.
     .venv/bin/python tests/benchmarks/bench_redraw_during_build.py --quick --out /tmp/redraw.md
 
 The sbc_fig3 demo with its mirror in Runtime mode, baked in the live view
-(``operators/live.py``) for the scene camera's view. The view then turns by
+(``blender/live.py``) for the scene camera's view. The view then turns by
 ``--degrees``: the live view asks for that view's camera, which builds off the main
 thread (``live_workers.build_camera``, with its reflected triangles) while the main
 thread goes on redrawing the moved view with the old camera's. Timed on the main thread, into one offscreen
@@ -45,7 +45,7 @@ TARGET_RATIO = 2.0
 
 
 def _turned(view, degrees: float):
-    from curved_reflections.addon.view import View
+    from curved_reflections.engine.view import View
 
     angle = np.radians(degrees)
     rotation = np.eye(4)
@@ -57,9 +57,9 @@ def measure(width: int, height: int, builds: int, degrees: float, idle_repeats: 
     import bpy
     import gpu
 
-    from curved_reflections.operators import demo_scenes, live
-    from curved_reflections.operators.capture import view_from_camera
-    from curved_reflections.operators.gpu_init import ensure_gpu
+    from curved_reflections.blender import demo_scenes, live
+    from curved_reflections.blender.capture import view_from_camera
+    from curved_reflections.blender.gpu_init import ensure_gpu
 
     ensure_gpu()
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
@@ -69,7 +69,7 @@ def measure(width: int, height: int, builds: int, degrees: float, idle_repeats: 
         depsgraph = bpy.context.evaluated_depsgraph_get()
         base = view_from_camera(scene.camera, scene, depsgraph)
         key = "bench"
-        state = live.bake(scene, depsgraph, views={key: base}, wait=True)
+        state = live.start(scene, depsgraph, views={key: base}, wait=True)
         plain = bench_draw.PlainDraw(state.renderer.geometry)
         times = {"idle": [], "during": [], "plain": [], "landing": [], "build": []}
         offscreen = gpu.types.GPUOffScreen(width, height, format='RGBA16F')

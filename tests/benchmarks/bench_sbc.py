@@ -179,8 +179,8 @@ def demo_scene(kind: str, n_points: int):
     """A demo scene built with bpy and captured from the evaluated depsgraph."""
     import bpy
 
-    from curved_reflections.addon import scene_bounds
-    from curved_reflections.operators import capture, demo_scenes
+    from curved_reflections.engine import scene_bounds
+    from curved_reflections.blender import capture, demo_scenes
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = demo_scenes.build(kind, bpy.context.scene, WIDTH, HEIGHT)
@@ -194,8 +194,8 @@ def demo_scene(kind: str, n_points: int):
 
 def ellipsoid_reflector(rng):
     """Held-out: an ellipsoid (radii 1.5, 0.75, 0.95) turned about z and x, exact normals."""
-    from curved_reflections.addon import Reflector
-    from curved_reflections.addon.geometry.sphere import icosphere
+    from curved_reflections.engine import Reflector
+    from curved_reflections.engine.geometry.sphere import icosphere
 
     unit = icosphere([0, 0, 0], 1.0, 5)
     radii = np.array([1.5, 0.75, 0.95])
@@ -209,7 +209,7 @@ def second_ellipsoid():
     """Held-out (made 2026-11-28, after the blend's constants were chosen): an ellipsoid of
     radii 1.7, 0.8, 0.6, coarser than :func:`ellipsoid_reflector` (a level-4 geodesic
     sphere), turned about z and x, exact normals."""
-    from curved_reflections.addon import Reflector
+    from curved_reflections.engine import Reflector
     from curved_reflections.tools.surfaces import ellipsoid
 
     centre = np.array([0.0, 0.0, 1.0])
@@ -234,7 +234,7 @@ def rippled_ellipsoid(centre, radii, subdivisions: int, amplitude: float, lobes=
     made after its candidate scan was tuned on the bumpy sphere; bench_octree.py: no
     constant of the morphing blend was chosen on it)."""
     from curved_reflections.tools.surfaces import ellipsoid
-    from curved_reflections.addon.scene import Reflector, vertex_normals
+    from curved_reflections.engine.scene import Reflector, vertex_normals
 
     base = ellipsoid(centre, radii, subdivisions, name)
     offset = base.vertices - np.asarray(centre, dtype=np.float64)
@@ -246,8 +246,8 @@ def rippled_ellipsoid(centre, radii, subdivisions: int, amplitude: float, lobes=
 
 def superellipsoid_reflector(rng, exponent: float = 3.0):
     """Held-out: |x/a|^p + |y/b|^p + |z/c|^p = 1 (p = 3, convex, flattish faces), exact normals."""
-    from curved_reflections.addon import Reflector
-    from curved_reflections.addon.geometry.sphere import icosphere
+    from curved_reflections.engine import Reflector
+    from curved_reflections.engine.geometry.sphere import icosphere
 
     unit = icosphere([0, 0, 0], 1.0, 5)
     radii = np.array([1.1, 0.9, 0.8])
@@ -266,7 +266,7 @@ def _rotation(about_z: float, about_x: float) -> np.ndarray:
 
 def held_out_scene(name: str, n_points: int):
     """A held-out reflector alone, seen from a random (seeded) view; box = its bounds + 3."""
-    from curved_reflections.addon import look_at_view
+    from curved_reflections.engine import look_at_view
 
     rng = _rng(name)
     reflector = ellipsoid_reflector(rng) if name == "ellipsoid" else superellipsoid_reflector(rng)
@@ -284,8 +284,8 @@ def held_out_scene(name: str, n_points: int):
 
 
 def prepare_scene(name: str, n_points: int) -> BenchScene:
-    from curved_reflections.addon.reference.exact import solve_reflections
-    from curved_reflections.addon.geometry.raytrace import ReflectorSet
+    from curved_reflections.engine.reference.exact import solve_reflections
+    from curved_reflections.engine.geometry.raytrace import ReflectorSet
 
     parts = demo_scene(name, n_points) if name in DEMO_SCENES else held_out_scene(name, n_points)
     name, source, reflectors, view, bounds, points, counts = parts
@@ -301,7 +301,7 @@ def prepare_scene(name: str, n_points: int) -> BenchScene:
 
 def mirror_distance(reflector_set, points: np.ndarray, radius: float) -> np.ndarray:
     """(P,) distance from each point to the nearest mirror triangle; inf where it exceeds ``radius``."""
-    from curved_reflections.addon.geometry.bvh import descend
+    from curved_reflections.engine.geometry.bvh import descend
 
     bvh = reflector_set.bvh
 
@@ -474,7 +474,7 @@ def _as_dict(projection) -> dict:
 def project_timed(sbc, points, repeats: int, repeat_limit: float, budget: float):
     """(projection dict, points measured, points/s, runs): see the module docstring.
 
-    Ours polishes ray-list and fold-cell answers on the true rays (``addon/reference/true_rays.py``);
+    Ours polishes ray-list and fold-cell answers on the true rays (``engine/reference/true_rays.py``);
     the paper's pinhole model is measured as the paper has it, interpolated only."""
     polish = sbc.model_name != "pinhole"
     probe = min(len(points), 2048)
@@ -517,7 +517,7 @@ def throughput_points(scene: BenchScene, count: int) -> np.ndarray:
 
 def run_cell(scene: BenchScene, downsample: int, accuracy: float, model: str, args, send) -> None:
     """Build, time, project and measure one configuration (in a child process)."""
-    from curved_reflections.addon.methods.sbc.sbc_build import build_from_ray_map, build_sample_based_camera
+    from curved_reflections.engine.methods.sbc.sbc_build import build_from_ray_map, build_sample_based_camera
 
     sbc = build_sample_based_camera(scene.reflector_set, scene.view, scene.bounds, max_order=1,
                                     downsample=downsample, accuracy_px=accuracy, leaf_model=model)
@@ -799,13 +799,13 @@ def report(results: dict) -> str:
         "Views are 480x320; the headline uses down-sampling d = "
         f"{s['downsample']} (a {WIDTH // s['downsample']}x{HEIGHT // s['downsample']} ray map) and accuracy 1 px. "
         "*Ours* is the ray-patch leaf model (`leaf_model=\"ray_patch\"`) with the answers of ray-list "
-        "leaves and fold cells polished on the true reflected rays (`addon/reference/true_rays.py`), *paper* the "
+        "leaves and fold cells polished on the true reflected rays (`engine/reference/true_rays.py`), *paper* the "
         "pinhole camera leaves of Popescu, Sacks & Mei 2006 (`\"pinhole\"`), answers interpolated as the "
         "paper has them (`project(polish=False)`). First-order reflections only (`max_order=1`). "
         "A group (one reflection history) may be split into several trees, *sheets*, where its rays "
         "cross; each projects one image of a point. Errors are desired-view pixel distances from each "
         "projected image to the nearest visible exact solution on the group's reflector "
-        "(`addon/reference/exact.py`). Coverage: share of points whose exact visible reflection lies at least "
+        "(`engine/reference/exact.py`). Coverage: share of points whose exact visible reflection lies at least "
         f"{FOOTPRINT_EROSION} ray-map cells inside the group's footprint that some sheet of the group "
         "projects. False: share of projected images with no exact visible reflection on "
         f"that reflector; the next column counts only points at least {SURFACE_LAYER:g} from every mirror "
@@ -870,7 +870,7 @@ def _code_version(root: Path) -> dict:
         except (OSError, subprocess.SubprocessError):
             return ""
 
-    changed = git("status", "--porcelain", "--", "addon", "operators", "gpu_shaders", "__init__.py")
+    changed = git("status", "--porcelain", "--", "engine", "blender", "drawing", "__init__.py")
     return {"commit": git("rev-parse", "HEAD") or "unknown",
             "uncommitted": [line[3:] for line in changed.splitlines()]}
 

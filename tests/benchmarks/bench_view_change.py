@@ -10,21 +10,21 @@ The sbc_fig3 demo (mirror ball) is built with bpy and captured, and a
 inside the ball's morphing grid (default settings, 9x9x5 nodes, 96 px faces; nodes built
 on demand before the clock runs, their build reported apart): small steps, so that
 several views share a tetrahedron, and jumps into others. Per view, what the live view
-does after the view changed (``operators/live.py``):
+does after the view changed (``blender/live.py``):
 
 - **runtime** (SBC paper IV-V): build the view's sample-based camera (ray map and trees),
   then the renderer's projection with it (textures uploaded, every vertex projected on
   the GPU and read back, reflected triangles decided);
 - **morphing** (SBC paper VI, ``tools/numpy_morph_source.py``): the renderer's projection
   from the grid: in a tetrahedron the eye has just entered, the four nodes project the
-  vertices (on the GPU, ``gpu_shaders/methods/morph_source.GPUFaceImages``; also timed
+  vertices (on the GPU, ``drawing/methods/morph_source.GPUFaceImages``; also timed
   with numpy) and the images are
   matched and blended; in the same tetrahedron as before, only the blend.
 
 Medians over the path's views. On this project's machines the GPU is Mesa llvmpipe
 (the CPU): compare the ratios measured in this one run, not absolute times.
 
-**Morphing rows on the GPU** (``gpu_shaders/methods/morph_pass.py``, what the live view draws
+**Morphing rows on the GPU** (``drawing/methods/morph_pass.py``, what the live view draws
 now): the sbc_fig3 meshes split to about ``--vertices`` drawn vertices, the eye moving
 ``--orbit-degrees`` a frame along an arc inside the ball's grid, every node the path
 uses projected once before the clock runs (as the prefetch does), each frame timed as
@@ -32,7 +32,7 @@ the viewport draws it and, apart, the morph pass alone (blend and reflected mesh
 the blend alone, against the plain draw; the frames that enter a new tetrahedron are
 counted.
 
-**Iterative rows** (Roger & Holzschuch 2006, ``gpu_shaders/methods/iterative_draw.py``): the
+**Iterative rows** (Roger & Holzschuch 2006, ``drawing/methods/iterative_draw.py``): the
 star-shaped demo scenes with their meshes split to about ``--vertices`` drawn vertices,
 the view orbiting by ``--orbit-degrees`` every frame, each frame timed as the viewport
 draws it (``ReflectionRenderer.draw``: pre-pass, this frame's search from the last
@@ -77,21 +77,21 @@ def eye_path(centre: np.ndarray, radius: float, steps: int, jumps: int) -> list:
 def measure(width: int, height: int, steps: int, jumps: int) -> dict:
     import bpy
 
-    from curved_reflections.addon import look_at_view
-    from curved_reflections.addon.methods.morphing import morph_grid, morphing
-    from curved_reflections.addon.methods.sbc import build_sample_based_camera
-    from curved_reflections.addon.scene import scene_bounds
-    from curved_reflections.gpu_shaders.methods.morph_source import GPUFaceImages
+    from curved_reflections.engine import look_at_view
+    from curved_reflections.engine.methods.morphing import morph_grid, morphing
+    from curved_reflections.engine.methods.sbc import build_sample_based_camera
+    from curved_reflections.engine.scene import scene_bounds
+    from curved_reflections.drawing.methods.morph_source import GPUFaceImages
     from curved_reflections.tools.numpy_morph_source import MorphSource
-    from curved_reflections.gpu_shaders.methods.projection import SBCTextures
-    from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
-    from curved_reflections.addon.frame_settings import FrameSettings
-    from curved_reflections.gpu_shaders.methods.morph_pass import MorphPass
-    from curved_reflections.operators.frame_pipeline import settings_of
-    from curved_reflections.operators import demo_scenes
-    from curved_reflections.operators.capture import capture_scene
-    from curved_reflections.operators.gpu_init import ensure_gpu
-    from curved_reflections.operators.render_inputs import BOUNDS_MARGIN, reflector_appearance
+    from curved_reflections.drawing.methods.projection import SBCTextures
+    from curved_reflections.drawing.reflection_draw import ReflectionRenderer
+    from curved_reflections.engine.frame_settings import FrameSettings
+    from curved_reflections.drawing.methods.morph_pass import MorphPass
+    from curved_reflections.blender.frame_pipeline import settings_of
+    from curved_reflections.blender import demo_scenes
+    from curved_reflections.blender.capture import capture_scene
+    from curved_reflections.blender.gpu_init import ensure_gpu
+    from curved_reflections.blender.render_inputs import BOUNDS_MARGIN, reflector_appearance
 
     ensure_gpu()
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
@@ -201,7 +201,7 @@ ITERATIVE_SCENES = ("sbc_fig3", "two_spheres")
 
 def _orbit(view, degrees: float, frames: int) -> list:
     """``frames`` views turning about the world's vertical axis through the origin."""
-    from curved_reflections.addon.view import View
+    from curved_reflections.engine.view import View
 
     views = []
     for k in range(frames):
@@ -219,19 +219,19 @@ def measure_iterative(kind: str, width: int, height: int, target_vertices: int, 
     import gpu
     from mathutils import Matrix
 
-    from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
-    from curved_reflections.addon.frame_settings import FrameSettings
-    from curved_reflections.gpu_shaders.methods.morph_pass import MorphPass
-    from curved_reflections.operators.frame_pipeline import settings_of
-    from curved_reflections.operators import methods
-    from curved_reflections.operators.capture import view_from_camera
-    from curved_reflections.operators.render_inputs import reflector_properties, world_color
+    from curved_reflections.drawing.reflection_draw import ReflectionRenderer
+    from curved_reflections.engine.frame_settings import FrameSettings
+    from curved_reflections.drawing.methods.morph_pass import MorphPass
+    from curved_reflections.blender.frame_pipeline import settings_of
+    from curved_reflections.blender import method_plan
+    from curved_reflections.blender.capture import view_from_camera
+    from curved_reflections.blender.render_inputs import reflector_properties, world_color
 
     scene, depsgraph, captured = bench_draw.built_scene(kind, width, height)
     start = time.perf_counter()
-    plan = methods.plan(scene, captured.reflectors)
+    plan = method_plan.plan(scene, captured.reflectors)
     plan_seconds = time.perf_counter() - start
-    assert len(plan.engines_of(methods.ITERATIVE)) == len(captured.reflectors), plan.choices
+    assert len(plan.engines_of(method_plan.ITERATIVE)) == len(captured.reflectors), plan.choices
     levels = bench_draw.levels_for(captured, target_vertices)
     meshes = bench_draw.scaled_meshes(captured.meshes, levels)
     renderer = ReflectionRenderer(captured.reflectors, meshes, passes=plan.pass_factories(),
@@ -294,8 +294,8 @@ def measure_animation(kind: str, frames: int, orbit_degrees: float) -> dict:
 
     import bpy
 
-    from curved_reflections.operators import demo_scenes
-    from curved_reflections.operators.gpu_init import ensure_gpu
+    from curved_reflections.blender import demo_scenes
+    from curved_reflections.blender.gpu_init import ensure_gpu
 
     ensure_gpu()
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
@@ -333,15 +333,15 @@ def measure_morph_frames(width: int, height: int, target_vertices: int, frames: 
     import gpu
     from mathutils import Matrix
 
-    from curved_reflections.addon import look_at_view
-    from curved_reflections.addon.methods.morphing import morph_grid, morphing
-    from curved_reflections.gpu_shaders.methods.morph_source import GPUFaceImages
-    from curved_reflections.gpu_shaders.methods.polish_gpu import GPUImagePolish
-    from curved_reflections.gpu_shaders.reflection_draw import ReflectionRenderer
-    from curved_reflections.addon.frame_settings import FrameSettings
-    from curved_reflections.gpu_shaders.methods.morph_pass import MorphPass
-    from curved_reflections.operators.frame_pipeline import settings_of
-    from curved_reflections.operators.render_inputs import reflector_properties, world_color
+    from curved_reflections.engine import look_at_view
+    from curved_reflections.engine.methods.morphing import morph_grid, morphing
+    from curved_reflections.drawing.methods.morph_source import GPUFaceImages
+    from curved_reflections.drawing.methods.polish_gpu import GPUImagePolish
+    from curved_reflections.drawing.reflection_draw import ReflectionRenderer
+    from curved_reflections.engine.frame_settings import FrameSettings
+    from curved_reflections.drawing.methods.morph_pass import MorphPass
+    from curved_reflections.blender.frame_pipeline import settings_of
+    from curved_reflections.blender.render_inputs import reflector_properties, world_color
 
     scene, _, captured = bench_draw.built_scene("sbc_fig3", width, height)
     mirror = captured.reflectors[0]

@@ -25,8 +25,8 @@ def test_imports_the_checkout_as_the_package_without_bpy(repo_root):
         from package_link import import_as_package
 
         package = import_as_package({str(repo_root)!r})
-        import curved_reflections.addon
-        from curved_reflections.addon import Reflector
+        import curved_reflections.engine
+        from curved_reflections.engine import Reflector
         assert package.__name__ == "curved_reflections"
         assert Path(package.__path__[0]).resolve() == Path({str(repo_root)!r}).resolve()
         assert Path(package.__path__[0]).name == "curved_reflections"

@@ -4,11 +4,11 @@
 import numpy as np
 import pytest
 
-from curved_reflections.addon import Reflector, look_at_view
+from curved_reflections.engine import Reflector, look_at_view
 from curved_reflections.tools.exact_paths import solve_second_order
-from curved_reflections.addon.methods.sbc.raymap import trace_ray_map
-from curved_reflections.addon.geometry.raytrace import ReflectorSet, reflect
-from curved_reflections.addon.geometry.sphere import icosphere
+from curved_reflections.engine.methods.sbc.raymap import trace_ray_map
+from curved_reflections.engine.geometry.raytrace import ReflectorSet, reflect
+from curved_reflections.engine.geometry.sphere import icosphere
 
 WEDGE = np.radians(70.0)
 #: Plane mirror B: through the y axis at 70 degrees to mirror A (the plane z = 0), facing into the wedge.

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from curved_reflections.addon.srgb import linear_to_srgb
+from curved_reflections.engine.srgb import linear_to_srgb
 from curved_reflections.tools import metrics
 
 PALETTE = {

@@ -11,12 +11,12 @@ include sizes not divisible by the down-sampling factor.
 import numpy as np
 import pytest
 
-from curved_reflections.addon.methods.sbc.raymap import trace_ray_map
-from curved_reflections.addon.geometry.raytrace import ReflectorSet
-from curved_reflections.addon.scene import Reflector, scene_bounds
-from curved_reflections.addon.geometry.shapes import vase
-from curved_reflections.addon.geometry.sphere import icosphere
-from curved_reflections.addon.view import look_at_view
+from curved_reflections.engine.methods.sbc.raymap import trace_ray_map
+from curved_reflections.engine.geometry.raytrace import ReflectorSet
+from curved_reflections.engine.scene import Reflector, scene_bounds
+from curved_reflections.engine.geometry.shapes import vase
+from curved_reflections.engine.geometry.sphere import icosphere
+from curved_reflections.engine.view import look_at_view
 
 #: Agreement of rays that both producers found, relative to the reflectors' size where
 #: they are lengths. Without refinement the GPU's float32 samples sit up to ~1/512 pixel

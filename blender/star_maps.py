@@ -1,0 +1,109 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Which reflectors are star-shaped, and their cube maps: made once per reflector shape.
+
+The iterative search (Roger & Holzschuch 2006) needs a reflector star-shaped around a
+centre and its cube map (``engine/methods/iterative/star.py``, ``reflector_map.py``). The
+verdict and the map are kept per shape (compared up to a translation with the
+:data:`CACHED_MAPS` kept): a viewport orbit, an animation frame in which the mirror did
+not change, or a mirror moved without turning reuses them (the map moves with its
+centre). The map is baked on the GPU when it is initialised
+(``drawing/methods/iterative_bake.py``, milliseconds), else traced on the CPU.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..engine.geometry.raytrace import ReflectorSet
+from ..engine.methods.iterative import StarShape, check_star_shaped
+from ..engine.methods.iterative.reflector_map import bake_reflector_map
+from ..engine.methods.iterative.star import verdict
+from ..drawing.methods.iterative_bake import bake_reflector_map_gpu
+from .gpu_init import gpu_ready
+
+#: Cube-map face size of the iterative search's reflector maps (texels along a side).
+FACE_SIZE = 256
+#: Reflector geometries whose verdict and map are kept.
+CACHED_MAPS = 16
+
+
+_maps: list = []  # _Entry, most recently used last
+
+
+def _bake(reflector, centre, face_size: int):
+    """The full-resolution map: on the GPU when it is ready, else traced on the CPU."""
+    if gpu_ready():
+        return bake_reflector_map_gpu(reflector, centre, face_size)
+    return bake_reflector_map(ReflectorSet([reflector]), centre, face_size)
+
+
+#: Vertex positions of two captures of one shape (relative to their first vertex) may
+#: differ by this share of its size: Blender's float32 matrices move the float64 capture.
+SHAPE_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True)
+class _Entry:
+    """One cached verdict and map, with the shape they were made for."""
+
+    topology: str
+    face_size: int
+    offsets: np.ndarray  # vertex positions relative to the first vertex
+    normals: np.ndarray
+    origin: np.ndarray  # the first vertex
+    shape: StarShape
+    reflector_map: object
+
+    def matches(self, reflector, topology: str, face_size: int) -> bool:
+        if (self.topology, self.face_size) != (topology, face_size):
+            return False
+        offsets = reflector.vertices - reflector.vertices[0]
+        tolerance = SHAPE_TOLERANCE * max(float(np.abs(offsets).max()), 1e-300)
+        return bool(np.abs(offsets - self.offsets).max() <= tolerance
+                    and np.abs(reflector.normals - self.normals).max() <= 1e-9)
+
+    def moved_to(self, reflector):
+        """The verdict and map, moved with the reflector's first vertex."""
+        shift = reflector.vertices[0] - self.origin
+        rmap = self.reflector_map
+        return (dataclasses.replace(self.shape, centre=self.shape.centre + shift),
+                None if rmap is None else dataclasses.replace(rmap, centre=rmap.centre + shift))
+
+
+def _topology(reflector) -> str:
+    digest = hashlib.sha1(np.ascontiguousarray(reflector.triangles).tobytes())
+    digest.update(str(len(reflector.vertices)).encode())
+    return digest.hexdigest()
+
+
+def star_map(reflector, face_size: int | None = None):
+    """(StarShape, ReflectorMap or None) of one reflector, cached by its shape: a mirror
+    moved without turning reuses its verdict and its map, moved with it
+    (``face_size``: default :data:`FACE_SIZE`)."""
+    face_size = FACE_SIZE if face_size is None else int(face_size)
+    topology = _topology(reflector)
+    for index, entry in enumerate(_maps):
+        if entry.matches(reflector, topology, face_size):
+            _maps.append(_maps.pop(index))
+            return entry.moved_to(reflector)
+    shape = check_star_shaped(reflector)
+    rmap = None
+    if shape.star_shaped:  # the full-resolution rays are checked again (a thin fold, a small hole)
+        bake = _bake(reflector, shape.centre, face_size)
+        shape = verdict(reflector.name, shape.centre, bake, shape.hidden_share)
+        rmap = bake.reflector_map if shape.star_shaped else None
+    _maps.append(_Entry(topology, face_size, reflector.vertices - reflector.vertices[0], reflector.normals.copy(),
+                        reflector.vertices[0].copy(), shape, rmap))
+    del _maps[:-CACHED_MAPS]
+    return shape, rmap
+
+
+
+
+def forget() -> None:
+    """Drop the cached verdicts and maps (another file is loaded, or unregister)."""
+    _maps.clear()

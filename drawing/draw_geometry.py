@@ -1,0 +1,199 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""What the renderer draws, as numpy arrays: the pre-pass's meshes (every diffuse mesh
+and reflector, with their colours, labels, normals and image textures) and the
+reflected meshes (the diffuse meshes pre-subdivided where a reflection curves them,
+SBC paper V-B, :mod:`..engine.geometry.subdivision`). Built once per scene change, no GPU needed.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..engine.methods.sbc import sheet_bounds
+from ..engine.geometry import closed_surfaces, subdivision
+from ..engine.scene import vertex_normals
+
+#: Float targets hold vertex indices exactly below 2^24.
+MAX_VERTICES = 1 << 24
+
+
+@dataclass(frozen=True)
+class DrawGeometry:
+    """What the passes draw, as arrays (no GPU needed to build it).
+
+    Pre-pass: every diffuse mesh, then every reflector, in one indexed triangle list;
+    positions relative to ``shift``; its triangles sorted by image, ``prepass_ranges``
+    the (image index or -1, first triangle, count) runs. Reflected meshes: all diffuse
+    meshes subdivided (:mod:`..engine.geometry.subdivision`) and concatenated, world positions, their
+    triangles sorted by image likewise (``ranges``), and within an image by
+    ``range_windings``: per range, the :func:`..engine.geometry.closed_surfaces.cullable_winding` of its
+    meshes (+1 or -1: closed solids no mirror lies in, whose triangles facing away from
+    the mirror may be culled; 0: the rest). ``images`` are the meshes' image textures,
+    (H, W, 4) float32 linear, rows bottom to top.
+    """
+
+    shift: np.ndarray  # (3,) float64
+    prepass_positions: np.ndarray  # (P, 3) float32, relative to shift
+    prepass_colors: np.ndarray  # (P, 4) float32 linear RGBA
+    prepass_labels: np.ndarray  # (P, 4) float32 (id, reflectivity, Fresnel F0 or -1, attenuation distance)
+    prepass_normals: np.ndarray  # (P, 4) float32 (normal, lit)
+    prepass_uvs: np.ndarray  # (P, 2) float32
+    prepass_triangles: np.ndarray  # (Tp, 3) int32
+    vertices: np.ndarray  # (V, 3) float64, reflected meshes
+    colors: np.ndarray  # (V, 4) float32
+    triangles: np.ndarray  # (T, 3) int64
+    diameter: float  # bounding-box diagonal of everything: bounds every reflected ray distance
+    reflector_sizes: np.ndarray = None  # (R,) bounding-box diagonal of each reflector
+    normals: np.ndarray = None  # (V, 3) float32 unit (zero where undefined)
+    lit: np.ndarray = None  # (V,) float32: 1 lit, 0 emission (unlit)
+    uvs: np.ndarray = None  # (V, 2) float32
+    images: tuple = ()
+    prepass_ranges: tuple = ()
+    ranges: tuple = ()
+    range_windings: tuple = ()
+    stats: dict = field(default_factory=dict)
+
+
+def _sorted_by_image(triangles: np.ndarray, image: np.ndarray) -> tuple[np.ndarray, tuple]:
+    """Triangles sorted by image index and within an image by their first vertex, and the
+    (image, first, count) runs. In vertex order, a triangle's neighbours follow it, and the
+    GPU finds their shared vertices already transformed: llvmpipe's vertex stage shades
+    the vertices of each chunk of indices once, so neighbours in the index buffer share
+    that work."""
+    order = np.lexsort((triangles.min(axis=1) if len(triangles) else np.zeros(0, int), image))
+    image = image[order]
+    starts = np.flatnonzero(np.r_[True, image[1:] != image[:-1]]) if len(image) else np.zeros(0, int)
+    counts = np.diff(np.r_[starts, len(image)])
+    return triangles[order], tuple((int(image[k]), int(k), int(c)) for k, c in zip(starts, counts))
+
+
+def _mesh_attributes(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Normals (N, 3) (the mesh's, else smooth ones from its faces), UVs (N, 2) and lit (N,)."""
+    normals = mesh.normals if getattr(mesh, "normals", None) is not None else vertex_normals(
+        mesh.vertices, mesh.triangles)
+    uvs = mesh.uvs if mesh.uvs is not None else np.zeros((len(mesh.vertices), 2))
+    lit = np.full(len(mesh.vertices), 0.0 if mesh.emissive else 1.0, np.float32)
+    return np.asarray(normals, np.float64), np.asarray(uvs, np.float64), lit
+
+
+def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=None,
+                     edge_fraction: float = subdivision.EDGE_FRACTION, fresnel_f0=None,
+                     attenuation_distance=None) -> DrawGeometry:
+    """Arrays of one scene for :class:`.reflection_draw.ReflectionRenderer`.
+
+    ``reflector_colors`` (R, 3 or 4) linear, default white; ``reflectivity`` (R,) in
+    [0, 1], default 1 (perfect mirrors); ``fresnel_f0`` (R,) Schlick's reflectance at
+    normal incidence, NaN or negative for no Fresnel (default none); ``attenuation_distance``
+    (R,) the distance over which reflections fade to the world (0 or default: none).
+    SBC paper section V-D. ``edge_fraction`` sets the pre-subdivision
+    (:func:`subdivision.subdivide`); ``None`` draws the meshes as they are.
+    """
+    start = time.perf_counter()
+    reflectors, meshes = list(reflectors), list(meshes)
+    n_reflectors = len(reflectors)
+    colors = np.ones((n_reflectors, 4), np.float32)
+    if reflector_colors is not None:
+        given = np.asarray(reflector_colors, dtype=np.float32).reshape(n_reflectors, -1)
+        colors[:, :given.shape[1]] = given[:, :4]
+    mirror = np.ones(n_reflectors, np.float32) if reflectivity is None else np.clip(
+        np.asarray(reflectivity, dtype=np.float32).reshape(n_reflectors), 0.0, 1.0)
+    f0 = np.full(n_reflectors, -1.0, np.float32) if fresnel_f0 is None else np.asarray(
+        fresnel_f0, dtype=np.float32).reshape(n_reflectors)
+    f0 = np.where(np.isfinite(f0) & (f0 >= 0), np.clip(f0, 0.0, 1.0), -1.0).astype(np.float32)
+    fade = np.zeros(n_reflectors, np.float32) if attenuation_distance is None else np.maximum(
+        np.asarray(attenuation_distance, dtype=np.float32).reshape(n_reflectors), 0.0)
+
+    images, image_of_mesh = [], []
+    for mesh in meshes:
+        image = getattr(mesh, "image", None)
+        image_of_mesh.append(-1 if image is None else len(images))
+        if image is not None:
+            images.append(np.ascontiguousarray(image, dtype=np.float32))
+    attributes = [_mesh_attributes(m) for m in meshes]
+
+    parts = [(m.vertices, m.triangles, m.colors, (0.0, 1.0, -1.0, 0.0), np.c_[n, lit], uv, image)
+             for m, (n, uv, lit), image in zip(meshes, attributes, image_of_mesh)]
+    parts += [(r.vertices, r.triangles, colors[k], (k + 1.0, mirror[k], f0[k], fade[k]), np.c_[r.normals, np.zeros(
+        len(r.vertices))], np.zeros((len(r.vertices), 2)), -1) for k, r in enumerate(reflectors)]
+    everything = np.concatenate([p[0] for p in parts]) if parts else np.zeros((1, 3))
+    lo, hi = everything.min(axis=0), everything.max(axis=0)
+    shift = 0.5 * (lo + hi)
+    positions, vertex_colors, labels, normals, uvs, triangles, tri_image, offset = [], [], [], [], [], [], [], 0
+    for vertices, tris, color, label, normal, uv, image in parts:
+        positions.append((vertices - shift).astype(np.float32))
+        vertex_colors.append(np.broadcast_to(np.asarray(color, np.float32), (len(vertices), 4)))
+        labels.append(np.broadcast_to(np.asarray(label, np.float32), (len(vertices), 4)))
+        normals.append(np.asarray(normal, np.float32))
+        uvs.append(np.asarray(uv, np.float32))
+        triangles.append(np.asarray(tris, dtype=np.int64) + offset)
+        tri_image.append(np.full(len(tris), image))
+        offset += len(vertices)
+    prepass_triangles, prepass_ranges = _sorted_by_image(
+        (np.concatenate(triangles) if triangles else np.zeros((0, 3))).astype(np.int32),
+        np.concatenate(tri_image) if tri_image else np.zeros(0, int))
+
+    centres, radii = subdivision.reflector_spheres(reflectors)
+    vertices, packed, mesh_triangles, mesh_image, mesh_winding, offset = [], [], [], [], [], 0
+    mirrors = [r.vertices for r in reflectors]
+    for mesh, (normal, uv, lit), image in zip(meshes, attributes, image_of_mesh):
+        sense = closed_surfaces.cullable_winding(mesh.vertices, mesh.triangles, mirrors)
+        # Colour, normal, UV and lit are interpolated together at new midpoints.
+        v, t, c = mesh.vertices, mesh.triangles, np.c_[mesh.colors, normal, uv, lit].astype(np.float32)
+        if edge_fraction is not None:
+            v, t, c = subdivision.subdivide(v, t, c, centres, radii, edge_fraction)
+        vertices.append(v)
+        packed.append(c)
+        mesh_triangles.append(t + offset)
+        mesh_image.append(np.full(len(t), image))
+        mesh_winding.append(np.full(len(t), sense))
+        offset += len(v)
+    if offset >= MAX_VERTICES:
+        raise ValueError(f"{offset} reflected vertices: float targets index below 2^24 only")
+    packed = np.concatenate(packed) if packed else np.zeros((0, 10), np.float32)
+    vertices = np.concatenate(vertices) if vertices else np.zeros((0, 3))
+    mesh_triangles = np.concatenate(mesh_triangles) if mesh_triangles else np.zeros((0, 3), np.int64)
+    # Vertices along a Morton curve: runs of them are compact chunks for per-sheet culling.
+    order = sheet_bounds.morton_order(vertices)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    vertices, packed, mesh_triangles = vertices[order], packed[order], rank[mesh_triangles]
+    vertex_normals = packed[:, 4:7]
+    length = np.linalg.norm(vertex_normals, axis=1, keepdims=True)
+    vertex_normals = np.divide(vertex_normals, length, out=np.zeros_like(vertex_normals), where=length > 0)
+    # One run per image and winding: (image + 1) * 3 + (winding + 1) orders both.
+    keys = (np.concatenate(mesh_image) + 1) * 3 + np.concatenate(mesh_winding) + 1 if mesh_image \
+        else np.zeros(0, int)
+    mesh_triangles, keyed = _sorted_by_image(mesh_triangles, keys)
+    ranges = tuple((key // 3 - 1, first, count) for key, first, count in keyed)
+    geometry = DrawGeometry(
+        shift=shift,
+        prepass_positions=np.concatenate(positions) if positions else np.zeros((0, 3), np.float32),
+        prepass_colors=np.concatenate(vertex_colors) if vertex_colors else np.zeros((0, 4), np.float32),
+        prepass_labels=np.concatenate(labels) if labels else np.zeros((0, 4), np.float32),
+        prepass_normals=np.concatenate(normals) if normals else np.zeros((0, 4), np.float32),
+        prepass_uvs=np.concatenate(uvs) if uvs else np.zeros((0, 2), np.float32),
+        prepass_triangles=prepass_triangles,
+        vertices=vertices,
+        colors=np.ascontiguousarray(packed[:, :4]),
+        triangles=mesh_triangles,
+        diameter=float(max(np.linalg.norm(hi - lo), 1e-9)),
+        reflector_sizes=np.array([np.linalg.norm(np.subtract(*r.bounds[::-1])) for r in reflectors], np.float64),
+        normals=vertex_normals.astype(np.float32),
+        lit=np.ascontiguousarray(packed[:, 9]),
+        uvs=np.ascontiguousarray(packed[:, 7:9]),
+        images=tuple(images),
+        prepass_ranges=prepass_ranges,
+        ranges=ranges,
+        range_windings=tuple(key % 3 - 1 for key, _, _ in keyed),
+    )
+    geometry.stats.update({
+        "mesh_triangles": int(sum(len(m.triangles) for m in meshes)),
+        "reflected_triangles": int(len(geometry.triangles)),
+        "reflected_vertices": int(len(geometry.vertices)),
+        "closed_triangles": int(sum(count for (_, _, count), w in zip(ranges, geometry.range_windings) if w)),
+        "prepare_seconds": time.perf_counter() - start,
+    })
+    return geometry

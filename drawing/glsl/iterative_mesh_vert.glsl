@@ -1,0 +1,59 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later */
+/* Reflected meshes of the iterative search, vertex stage (drawing/methods/iterative_draw.py),
+ * every frame after iterative_search.glsl.
+ *
+ * Roger & Holzschuch 2006, section 3.2 step 3: each vertex is placed where the current
+ * view sees its reflection point P (`search_result`, texel `vertex_index`, this frame's
+ * search), with the depth of SBC paper V-A for a first-order reflection, z / D for its
+ * distance z from P along the reflected ray (section 3.3.6 writes the same distance: the
+ * nearer reflected point wins). A vertex without an answer (not converged, facing away,
+ * hidden, inside the mirror) or behind the view gets `valid_interp` 0: the fragment
+ * stage discards every fragment of a triangle with such a corner (its interpolated
+ * validity is below 1 everywhere but at the valid corners), so an unanswered vertex is
+ * never drawn at a wrong place. It goes to the centre of its cell of a coarse grid
+ * (UNANSWERED_CELLS across the view, from its last search sample): its triangles
+ * without an answered corner collapse there and are dropped before rasterisation, and
+ * one with an answered corner reaches no farther than a cell. A flipped image
+ * (beyond the caustic, FLIPPED_CODE) gets -1: a triangle joining it to a direct image
+ * spans a fold of the mirror, its interpolated validity is below 1 in magnitude inside,
+ * and it is discarded as well. Shading data as
+ * reflection_mesh_vert.glsl: the true eye vector from the vertex toward P, and the
+ * distance. `mirror_point_interp`, P, lets the fragment stage drop a reflection whose
+ * reflector point the mirror hides, or whose ray does not reflect toward it.
+ * `snap_grid` (the view's cells across and up, 0: none): the live view places each
+ * vertex at the centre of its cell of a grid a few pixels apart (pixel centres for a
+ * one-pixel grid; reflected_meshes.SNAP_SHARE): a triangle within one cell collapses to
+ * a point and is dropped before rasterisation, and neighbours sharing a vertex still
+ * meet. */
+
+void main()
+{
+  ivec2 texel = ivec2(vertex_index % result_width, vertex_index / result_width);
+  vec4 found = texelFetch(search_result, texel, 0);
+  vec3 vertex = texelFetch(vertex_positions, texel, 0).xyz;
+  vec3 p = found.xyz;
+  vec4 clip = view_projection * vec4(p, 1.0);
+  bool valid = int(found.w) % 16 == FOUND_CODE && clip.w > 0.0;
+  bool flipped = int(found.w) >= FLIPPED_CODE;
+  vec3 to_mirror = p - vertex;
+  float distance = length(to_mirror);
+  color_interp = color;
+  normal_interp = normal_lit.xyz;
+  lit_interp = normal_lit.w;
+  uv_interp = uv;
+  eye_interp = to_mirror / max(distance, 1e-30);
+  distance_interp = distance;
+  mirror_point_interp = p;
+  first_order_interp = 1.0;
+  reflector_interp = reflector_id;
+  valid_interp = valid ? (flipped ? -1.0 : 1.0) : 0.0;
+  float depth = clamp(distance * inverse_diameter, 0.0, 1.0) * order_range;
+  vec2 ndc = clip.xy / clip.w;
+  if (!valid) {
+    ndc = (floor(ndc * (0.5 * UNANSWERED_CELLS)) + 0.5) / (0.5 * UNANSWERED_CELLS);
+  }
+  else if (snap_grid.x > 0.0) {
+    ndc = snapped(ndc, snap_grid);
+  }
+  gl_Position = clip.w > 0.0 ? vec4(ndc, depth * 2.0 - 1.0, 1.0) : vec4(0.0, 0.0, 1.0, 1.0);
+}

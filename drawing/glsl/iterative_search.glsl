@@ -1,0 +1,382 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later */
+/* The iterative search for reflection points (Roger & Holzschuch 2006), compute stage.
+ *
+ * The float32 twin of engine/methods/iterative/search.py, step by step: one invocation
+ * per diffuse vertex (texel of `vertex_positions`), every frame. The reflector is the
+ * cube map of its radius and normal around its centre O (`reflector_map`, layout in
+ * engine/methods/iterative/reflector_map.py); the vertex's reflection point P is where
+ * the normal bisects the directions to the eye and to the vertex:
+ *   1. first guess: the reflection on the sphere of the map's mean radius, by bisection
+ *      on the arc between the directions to the eye and to the vertex (section 3.3.4);
+ *   2. damped Newton in a gnomonic chart around it on the tangent part of the half
+ *      vector (section 3.3.2-3.3.3), Jacobian by finite differences, restarts around
+ *      the guess where a start fails;
+ *   3. stop when a step moves P by less than `stop_per_w` times the view's clip w at P
+ *      (a share of the accuracy in pixels, section 3.2);
+ *   4. checks: P faces the eye and the vertex (by the interpolated normal and by the map
+ *      surface's own), the residual vanishes, and on a non-convex mirror nothing of it
+ *      lies between P and either.
+ * Everything runs relative to O. Output texel: (P relative to the renderer's shift,
+ * (status + 8) + 16 * steps + FLIPPED_CODE * flipped), status as the numpy twin's
+ * (FOUND = 1), flipped: the image lies beyond the caustic (flipped_image). */
+
+#define FOUND 1
+#define NOT_CONVERGED 0
+#define NO_SURFACE -1
+#define FACES_AWAY -2
+#define OCCLUDED -3
+#define INSIDE -4
+
+/* Push constants: camera (eye relative to the shift, w 1; or the unit direction toward
+ * the viewer, w 0), w_row (the view-projection's last row, for clip w), stop_per_w,
+ * n_vertices, positions_width, warm (start from the answer of the last search, still in
+ * `result`, where it had one), self_map (the searched reflector's map) and n_maps.
+ * `reflector_maps` holds every star-shaped reflector's cube map, one below another;
+ * `map_params` two texels per map: (O relative to the shift, largest radius) and (first
+ * row, face size, convex, mean radius). */
+
+/* The map in use (use_map): its centre, radii, rows and size. */
+vec3 centre;
+float max_radius;
+float mean_radius;
+int map_row;
+int face_size;
+int convex;
+
+void use_map(int map)
+{
+  vec4 a = texelFetch(map_params, ivec2(2 * map, 0), 0);
+  vec4 b = texelFetch(map_params, ivec2(2 * map + 1, 0), 0);
+  centre = a.xyz;
+  max_radius = a.w;
+  map_row = int(b.x);
+  face_size = int(b.y);
+  convex = int(b.z);
+  mean_radius = b.w;
+}
+
+vec3 to_eye(vec3 p)
+{
+  return camera.w > 0.5 ? normalize(camera.xyz - centre - p) : camera.xyz;
+}
+
+/* Bilinear radius and normal of the map along unit direction d; false on a hole. */
+bool map_surface(vec3 d, out float radius, out vec3 normal)
+{
+  vec3 m = abs(d);
+  int axis = (m.x >= m.y && m.x >= m.z) ? 0 : ((m.y >= m.z) ? 1 : 2);
+  float major = d[axis];
+  float scale = 1.0 / max(abs(major), 1e-30);
+  float u = d[(axis + 1) % 3] * scale;
+  float v = d[(axis + 2) % 3] * scale;
+  int face = 2 * axis + (major < 0.0 ? 1 : 0);
+  float size = float(face_size);
+  float fx = (u + 1.0) * 0.5 * size + 0.5;
+  float fy = (v + 1.0) * 0.5 * size + 0.5;
+  float i = clamp(floor(fx), 0.0, size);
+  float j = clamp(floor(fy), 0.0, size);
+  float tx = fx - i;
+  float ty = fy - j;
+  ivec2 base = ivec2(int(i), map_row + face * (face_size + 2) + int(j));
+  vec4 a = texelFetch(reflector_maps, base, 0);
+  vec4 b = texelFetch(reflector_maps, base + ivec2(1, 0), 0);
+  vec4 c = texelFetch(reflector_maps, base + ivec2(0, 1), 0);
+  vec4 e = texelFetch(reflector_maps, base + ivec2(1, 1), 0);
+  vec4 value = (1.0 - tx) * (1.0 - ty) * a + tx * (1.0 - ty) * b + (1.0 - tx) * ty * c + tx * ty * e;
+  bool valid = min(min(a.x, b.x), min(c.x, e.x)) > 0.0;
+  radius = valid ? value.x : 0.0;
+  normal = value.yzw / max(length(value.yzw), 1e-30);
+  return valid;
+}
+
+bool inside_surface(vec3 p)
+{
+  float distance = length(p);
+  float radius;
+  vec3 normal;
+  bool valid = map_surface(p / max(distance, 1e-30), radius, normal);
+  return valid && distance < radius;
+}
+
+vec3 perpendicular(vec3 d)
+{
+  vec3 m = abs(d);
+  vec3 helper = (m.x <= m.y && m.x <= m.z) ? vec3(1.0, 0.0, 0.0) :
+                ((m.y <= m.z) ? vec3(0.0, 1.0, 0.0) : vec3(0.0, 0.0, 1.0));
+  return normalize(cross(d, helper));
+}
+
+vec3 sphere_guess(vec3 point)
+{
+  float distance = length(point);
+  vec3 b = point / max(distance, 1e-30);
+  vec3 a;
+  float reach;
+  if (camera.w > 0.5) {
+    vec3 eye = camera.xyz - centre;
+    a = normalize(eye);
+    reach = min(distance, length(eye));
+  }
+  else {
+    a = camera.xyz;
+    reach = distance;
+  }
+  float cosine = clamp(dot(a, b), -1.0, 1.0);
+  float theta = acos(cosine);
+  vec3 c = b - cosine * a;
+  float across = length(c);
+  c = across > 1e-9 ? c / across : perpendicular(a);
+  float sphere = min(mean_radius, 0.999 * reach);
+  float lo = 0.0;
+  float hi = theta;
+  for (int k = 0; k < GUESS_BISECTIONS; k++) {
+    float mid = 0.5 * (lo + hi);
+    vec3 u = cos(mid) * a + sin(mid) * c;
+    vec3 p = sphere * u;
+    float balance = dot(to_eye(p), u) - dot(normalize(point - p), u);
+    if (balance > 0.0) {
+      lo = mid;
+    }
+    else {
+      hi = mid;
+    }
+  }
+  float phi = 0.5 * (lo + hi);
+  return cos(phi) * a + sin(phi) * c;
+}
+
+/* The chart around the guess and the residual there. */
+vec3 chart_axis;
+vec3 chart_t1;
+vec3 chart_t2;
+vec3 vertex;
+
+bool evaluate(vec2 x, out vec2 f, out vec3 p, out vec3 n, out vec3 h)
+{
+  vec3 d = normalize(chart_axis + x.x * chart_t1 + x.y * chart_t2);
+  float radius;
+  bool valid = map_surface(d, radius, n);
+  p = radius * d;
+  h = to_eye(p) + normalize(vertex - p);
+  vec3 tangent = h - dot(h, n) * n;
+  f = vec2(dot(tangent, chart_t1), dot(tangent, chart_t2));
+  return valid;
+}
+
+float pixel_tolerance(vec3 p)
+{
+  return stop_per_w * abs(dot(w_row, vec4(p + centre, 1.0)));
+}
+
+/* Whether one of OCCLUSION_SAMPLES samples of the segment from `start` (relative to the
+ * map in use) along unit `direction`, where it runs inside the map's bounding sphere,
+ * lies inside its surface; samples denser next to the start where `dense_near_start`. */
+bool segment_blocked(vec3 start, vec3 direction, float length_, bool dense_near_start)
+{
+  float b = dot(start, direction);
+  float disc = b * b - (dot(start, start) - max_radius * max_radius);
+  if (disc <= 0.0) {
+    return false;
+  }
+  float root = sqrt(disc);
+  float t0 = max(-b - root, 0.0);
+  float t1 = min(-b + root, length_);
+  if (t1 <= t0) {
+    return false;
+  }
+  for (int k = 0; k < OCCLUSION_SAMPLES; k++) {
+    float fraction = dense_near_start ? pow(float(k + 1) / float(OCCLUSION_SAMPLES), 2.0) :
+                                        (float(k) + 0.5) / float(OCCLUSION_SAMPLES);
+    if (inside_surface(start + (t0 + (t1 - t0) * fraction) * direction)) {
+      return true;
+    }
+  }
+  return false;
+}
+
+/* The numpy twin's flipped_images: whether the vertex lies beyond the caustic of the
+ * reflected rays seen through its reflection point p (det [Q_u, Q_v, R] < 0 for the map
+ * (u, v, t) -> P + t R), from the chart samples pu, pv a step along each chart axis. */
+bool flipped_image(vec3 p, vec3 n, vec3 pu, vec3 pv, vec3 nu, vec3 nv)
+{
+  vec3 r = reflect(-to_eye(p), n);
+  float t = length(vertex - p);
+  vec3 qu = pu - p + t * (reflect(-to_eye(pu), nu) - r);
+  vec3 qv = pv - p + t * (reflect(-to_eye(pv), nv) - r);
+  return dot(cross(qu, qv), r) < 0.0;
+}
+
+/* Whether the last converged answer of newton() is a flipped image. */
+bool flipped;
+
+/* Whether the residual vanishes: the sine of the angle between the normal and the half
+ * vector below RESIDUAL_TOLERANCE. */
+bool residual_passes(vec3 n, vec3 h)
+{
+  return length(cross(n, h)) / max(length(h), 1e-30) < RESIDUAL_TOLERANCE;
+}
+
+/* The Newton step -J^-1 f for the Jacobian's columns ju, jv (zero where J is singular). */
+vec2 newton_step(vec2 ju, vec2 jv, vec2 f)
+{
+  float det = ju.x * jv.y - jv.x * ju.y;
+  return abs(det) > 1e-30 ? -vec2(jv.y * f.x - jv.x * f.y, ju.x * f.y - ju.y * f.x) / det : vec2(0.0);
+}
+
+int check(vec3 p, vec3 n, vec3 h, vec3 face)
+{
+  vec3 e = to_eye(p);
+  vec3 v = normalize(vertex - p);
+  if (!residual_passes(n, h)) {
+    return NOT_CONVERGED;
+  }
+  if (!(dot(n, e) > 0.0 && dot(n, v) > 0.0 && dot(face, e) > 0.0 && dot(face, v) > 0.0)) {
+    return FACES_AWAY;
+  }
+  if (convex == 0) {
+    float eye_length = camera.w > 0.5 ? length(camera.xyz - centre - p) : 1e30;
+    if (segment_blocked(p, e, eye_length, true) || segment_blocked(p, v, length(vertex - p), true)) {
+      return OCCLUDED;
+    }
+  }
+  return FOUND;
+}
+
+/* Damped Newton from chart point x; returns NOT_CONVERGED, NO_SURFACE or the verdict
+ * of check() on the converged sample (in p). */
+int newton(vec2 x, inout int steps, out vec3 p)
+{
+  vec2 f;
+  vec3 n, h, face;
+  if (!evaluate(x, f, p, n, h)) {
+    return NO_SURFACE;
+  }
+  for (int step = 0; step < MAX_ITERATIONS; step++) {
+    vec2 fu, fv, ft;
+    vec3 pt, nt, ht, pu, pv, nu, nv;
+    evaluate(x + vec2(DERIVATIVE_STEP, 0.0), fu, pu, nu, ht);
+    evaluate(x + vec2(0.0, DERIVATIVE_STEP), fv, pv, nv, ht);
+    /* The map surface's own normal: the ray from the eye must meet its front and the
+     * reflected ray leave it (as engine/reference/exact.py asks of the facet). */
+    vec3 facet = cross(pu - p, pv - p);
+    face = dot(facet, p) < 0.0 ? -facet : facet;
+    vec2 ju = (fu - f) / DERIVATIVE_STEP;
+    vec2 jv = (fv - f) / DERIVATIVE_STEP;
+    vec2 delta = newton_step(ju, jv, f);
+    float reach = length(delta);
+    if (reach > TRUST_RADIUS) {
+      delta *= TRUST_RADIUS / reach;
+    }
+    /* Line search: scales 1, 1/2, ... until |F| falls; the last one is taken regardless. */
+    float current = length(f);
+    float scale = 1.0;
+    vec3 previous = p;
+    vec3 previous_n = n;
+    bool valid = false;
+    for (int k = 0; k <= HALVINGS; k++) {
+      valid = evaluate(x + scale * delta, ft, pt, nt, ht);
+      if (valid && length(ft) < current || k == HALVINGS) {
+        break;
+      }
+      scale *= 0.5;
+    }
+    x += scale * delta;
+    f = ft;
+    p = pt;
+    n = nt;
+    h = ht;
+    steps += 1;
+    if (!valid || length(x) > MAX_CHART) {
+      return NO_SURFACE;
+    }
+    /* The step after this one, predicted with this step's Jacobian (a chord step): where
+     * it would move P by less than the tolerance, it is taken without new samples (P
+     * moved along the chart's tangents, the residual's normal and half vector kept),
+     * and the search has converged one step earlier. */
+    vec2 next = newton_step(ju, jv, f);
+    vec3 predicted = ((pu - previous) * next.x + (pv - previous) * next.y) / DERIVATIVE_STEP;
+    float tolerance = pixel_tolerance(p);
+    /* Only where the residual already passes check()'s test (a singular Jacobian
+     * predicts no step at all). */
+    bool settled = length(predicted) < tolerance && residual_passes(n, h);
+    if (length(p - previous) < tolerance || settled) {
+      flipped = flipped_image(previous, previous_n, pu, pv, nu, nv);  /* read only once converged */
+      if (settled) {
+        p += predicted;
+      }
+      return check(p, n, h, face);
+    }
+  }
+  return NOT_CONVERGED;
+}
+
+const vec2 starts[5] = vec2[5](vec2(0.0, 0.0), vec2(RESTART_OFFSET, 0.0), vec2(-RESTART_OFFSET, 0.0),
+                               vec2(0.0, RESTART_OFFSET), vec2(0.0, -RESTART_OFFSET));
+
+void main()
+{
+  ivec2 texel = ivec2(gl_GlobalInvocationID.xy);
+  int index = texel.y * positions_width + texel.x;
+  if (texel.x >= positions_width || index >= n_vertices) {
+    return;
+  }
+  use_map(self_map);
+  vertex = texelFetch(vertex_positions, texel, 0).xyz - centre;
+  vec4 last = imageLoad(result, texel);
+  bool resume = warm != 0 && int(last.w) % 16 == FOUND + 8;
+  int status = NO_SURFACE;
+  int steps = 0;
+  bool image_flipped = false;
+  vec3 p = vec3(0.0);
+  /* Last frame's answer first (attempt -1: the view moved a little), then the restarts
+   * around the sphere guess. A found answer faces the eye and the vertex, and on a
+   * non-convex mirror no part of the surface lies between them (check()): neither lies
+   * inside the mirror, which is tested only before the first restart. One loop calls
+   * newton() once: the compiled shader holds one copy of it, not one per start (a copy
+   * per start makes the search far slower on llvmpipe). */
+  int attempts = convex != 0 ? 1 : 5;  /* one reflection at most on a convex mirror */
+  for (int attempt = resume ? -1 : 0; attempt < attempts; attempt++) {
+    vec2 start = vec2(0.0);
+    if (attempt < 0) {
+      chart_axis = normalize(last.xyz - centre);
+    }
+    else {
+      if (attempt == 0) {
+        bool eye_inside = camera.w > 0.5 && inside_surface(camera.xyz - centre);
+        if (eye_inside || length(vertex) <= 1e-9 * max(max_radius, 1e-30) || inside_surface(vertex)) {
+          status = INSIDE;
+          break;
+        }
+        chart_axis = sphere_guess(vertex);
+      }
+      start = starts[attempt];
+    }
+    chart_t1 = perpendicular(chart_axis);
+    chart_t2 = cross(chart_axis, chart_t1);
+    vec3 answer;
+    int verdict = newton(start, steps, answer);
+    if (attempt == 0 || verdict == FOUND) {
+      status = verdict;
+      p = answer;
+      image_flipped = flipped;
+    }
+    if (verdict == FOUND) {
+      break;
+    }
+  }
+  /* The other star-shaped mirrors may block the reflected segment: there this point's
+   * reflection is of another mirror (a higher order). */
+  vec3 answer = p + centre;
+  vec3 target = vertex + centre;
+  for (int map = 0; map < n_maps && status == FOUND; map++) {
+    if (map != self_map) {
+      use_map(map);
+      vec3 to_point = target - answer;
+      if (segment_blocked(answer - centre, normalize(to_point), length(to_point), false)) {
+        status = OCCLUDED;
+      }
+    }
+  }
+  bool flip = status == FOUND && image_flipped;
+  imageStore(result, texel, vec4(answer, float(status + 8) + 16.0 * float(steps) + (flip ? float(FLIPPED_CODE) : 0.0)));
+}

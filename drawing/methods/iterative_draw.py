@@ -1,0 +1,202 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The iterative search on the GPU: every frame, every diffuse vertex, no CPU work.
+
+Roger & Holzschuch (2006), section 3.3.7: the search runs on the GPU, and its second
+strategy (compute the reflected positions in one pass, draw them in another), which
+the paper could not use for want of render-to-vertex-buffer, is the one here: a compute
+shader (``glsl/iterative_search.glsl``, the twin of ``engine/methods/iterative/search.py``)
+writes each vertex's reflection point into a float texture, one texel per vertex, and
+the reflected meshes' vertex stage (``glsl/iterative_mesh_vert.glsl``) reads its
+vertex's texel (``reflected_meshes.py``, shared with morphing). What is uploaded once:
+the diffuse vertices (a texture) with their shading data (a vertex buffer), and every star-shaped
+reflector's cube map (:class:`MapAtlas`: a search reads its own map and the others',
+which may block its reflected segments). What runs per frame: one dispatch and one
+draw per reflector, with the view in push constants.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import gpu
+import numpy as np
+
+from ...engine.methods.iterative import search as search_module
+from ..frame_pass import FramePass, PassInputs
+from ..gpu_data import data_texture
+from ..reflected_meshes import FLIPPED_CODE, ReflectedMeshes
+from ..shader_sources import glsl_source
+
+#: Invocations per work group of the search (along x).
+LOCAL_SIZE = 64
+
+
+def search_defines() -> dict:
+    """The engine's constants, as the search shader's ``#define`` s."""
+    s = search_module
+    return {"MAX_ITERATIONS": s.MAX_ITERATIONS, "GUESS_BISECTIONS": s.GUESS_BISECTIONS,
+            "DERIVATIVE_STEP": f"{s.DERIVATIVE_STEP:.9e}", "TRUST_RADIUS": f"{s.TRUST_RADIUS:.9e}",
+            "HALVINGS": s.HALVINGS, "MAX_CHART": f"{s.MAX_CHART:.9e}",
+            "RESIDUAL_TOLERANCE": f"{s.RESIDUAL_TOLERANCE:.9e}", "OCCLUSION_SAMPLES": s.OCCLUSION_SAMPLES,
+            "RESTART_OFFSET": f"{s.RESTARTS[1][0]:.9e}", "FLIPPED_CODE": FLIPPED_CODE}
+
+
+@functools.cache
+def search_shader():
+    """The compute shader of the search, built on first use."""
+    info = gpu.types.GPUShaderCreateInfo()
+    info.push_constant('VEC4', "camera")
+    info.push_constant('VEC4', "w_row")
+    info.push_constant('FLOAT', "stop_per_w")
+    info.push_constant('INT', "n_vertices")
+    info.push_constant('INT', "positions_width")
+    info.push_constant('INT', "warm")
+    info.push_constant('INT', "self_map")
+    info.push_constant('INT', "n_maps")
+    info.sampler(0, 'FLOAT_2D', "vertex_positions")
+    info.sampler(1, 'FLOAT_2D', "reflector_maps")
+    info.sampler(2, 'FLOAT_2D', "map_params")
+    info.image(0, 'RGBA32F', 'FLOAT_2D', "result", qualifiers={'READ', 'WRITE'})
+    info.local_group_size(LOCAL_SIZE, 1)
+    info.compute_source(glsl_source("iterative_search.glsl", search_defines()))
+    return gpu.shader.create_from_info(info)
+
+
+class MapAtlas:
+    """Every star-shaped reflector's cube map in one texture, one below another, and two
+    texels of parameters per map (``glsl/iterative_search.glsl``'s ``use_map``): each
+    search reads its own map and the others', which may block its reflected segments."""
+
+    def __init__(self, methods, shift):
+        maps = [m.reflector_map for m in methods]
+        width = max(rmap.texels.shape[1] for rmap in maps)
+        rows = np.cumsum([0] + [rmap.texels.shape[0] for rmap in maps])
+        texels = np.zeros((rows[-1], width, 4), np.float32)
+        params = np.zeros((2 * len(maps), 4), np.float32)
+        for k, rmap in enumerate(maps):
+            texels[rows[k]:rows[k + 1], :rmap.texels.shape[1]] = rmap.texels
+            params[2 * k] = (*(np.asarray(rmap.centre) - shift), rmap.max_radius)
+            params[2 * k + 1] = (rows[k], rmap.face_size, float(bool(rmap.convex)), rmap.mean_radius)
+        self.texture = data_texture(texels)
+        self.params = data_texture(params, len(params))
+
+
+class IterativePass(FramePass):
+    """The iterative method's GPU side for one renderer's reflected geometry (a
+    ``draw_geometry.DrawGeometry``, on the GPU as ``meshes``, a
+    :class:`..reflected_meshes.ReflectedMeshes`, made here when not given) and its
+    star-shaped reflectors (``engine.methods.iterative.IterativeReflector`` each), among
+    ``n_reflectors`` of the scene."""
+
+    name = "iterative"
+    searches = True
+
+    @classmethod
+    def of_inputs(cls, methods: tuple, inputs: PassInputs) -> "IterativePass":
+        return cls(inputs.geometry, methods, inputs.meshes, len(inputs.reflectors))
+
+    def __init__(self, geometry, methods, meshes: ReflectedMeshes | None = None, n_reflectors: int = 1):
+        self.geometry = geometry
+        self.methods = list(methods)
+        self.n_reflectors = n_reflectors
+        self.meshes = meshes if meshes is not None else ReflectedMeshes(geometry)
+        self.n_vertices = self.meshes.n_vertices
+        self._atlas = None
+        self._results: dict = {}
+        self.counts = {"searches": 0}
+
+    @property
+    def folded_reflectors(self) -> list:
+        """The searched mirrors that are not convex (a fold crowds several images, and
+        triangles across it are dropped) or not alone (another mirror's reflection, a
+        higher order, begins next to a drawn one)."""
+        return [m.index for m in self.methods if not m.reflector_map.convex or self.n_reflectors > 1]
+
+    @property
+    def accuracy_px(self) -> float | None:
+        """The finest Accuracy of the searched mirrors (their searches stop at a tenth of it)."""
+        return min((m.accuracy_px for m in self.methods), default=None)
+
+    @property
+    def mirrored_reflectors(self) -> list:
+        """The searched mirrors that are convex (``reflector_map.is_convex``)."""
+        return [m.index for m in self.methods if m.reflector_map.convex]
+
+    def update(self, view, warm: bool = False, skip=frozenset()) -> None:
+        """:meth:`search` (``skip`` never holds a searched reflector: a camera never draws one)."""
+        self.search(view, warm)
+
+    def frame_stats(self) -> dict:
+        return {"iterative": self.status_counts()}
+
+    def replace(self, method) -> None:
+        """Use ``method`` for its reflector from now on (a re-baked map; the maps are
+        uploaded again, the meshes are not)."""
+        self.methods = [method if m.index == method.index else m for m in self.methods]
+        self._atlas = None
+
+    def _ensure(self) -> None:
+        if self._atlas is None:
+            self._atlas = MapAtlas(self.methods, self.geometry.shift)
+        for method in self.methods:
+            if method.index not in self._results:
+                self._results[method.index] = self.meshes.answer_texture()
+
+    def search(self, view, warm: bool = False) -> None:
+        """This frame's search: one dispatch per reflector, into its result texture.
+        ``warm``: each vertex starts from its last answer (a viewport whose view moves
+        a little each frame); cold, the answer depends on this view alone."""
+        if self.n_vertices == 0 or not self.methods:
+            return
+        self._ensure()
+        shift = self.geometry.shift
+        world_to_clip = np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix)
+        translate = np.eye(4)
+        translate[:3, 3] = shift
+        w_row = (world_to_clip @ translate)[3]
+        pixel_scale = 2.0 / (float(view.projection_matrix[0][0]) * view.width)
+        if view.is_perspective:
+            camera = (*(view.eye - shift), 1.0)
+        else:
+            camera = (*view.backward, 0.0)
+        shader = search_shader()
+        shader.bind()
+        shader.uniform_float("camera", tuple(float(c) for c in camera))
+        shader.uniform_float("w_row", tuple(float(c) for c in w_row))
+        shader.uniform_int("n_vertices", self.n_vertices)
+        shader.uniform_int("positions_width", self.meshes.width)
+        shader.uniform_int("warm", int(bool(warm)))
+        shader.uniform_int("n_maps", len(self.methods))
+        shader.uniform_sampler("vertex_positions", self.meshes.positions)
+        shader.uniform_sampler("reflector_maps", self._atlas.texture)
+        shader.uniform_sampler("map_params", self._atlas.params)
+        for k, method in enumerate(self.methods):
+            shader.uniform_float("stop_per_w", search_module.STOP_FRACTION * method.accuracy_px * pixel_scale)
+            shader.uniform_int("self_map", k)
+            shader.image("result", self._results[method.index])
+            gpu.compute.dispatch(shader, *self.meshes.work_groups(LOCAL_SIZE))
+        self.counts["searches"] += 1
+
+    def answers(self) -> list:
+        """(reflector index, answer texture) of the last search, for ``ReflectedMeshes.draw``."""
+        return [(m.index, self._results[m.index]) for m in self.methods if m.index in self._results]
+
+    def read(self, reflector_index: int) -> search_module.SearchResult:
+        """The last search of one reflector, read back (tests, the status counts)."""
+        positions, code = self.meshes.read(self._results[reflector_index])
+        status = (code % 16 - 8).astype(np.int8)
+        return search_module.SearchResult(positions, status, (code % FLIPPED_CODE // 16).astype(np.int16),
+                                          code >= FLIPPED_CODE)
+
+    def status_counts(self) -> dict:
+        """{reflector name: {"found", "not_converged", "unanswered"}} of the last search,
+        read back: the vertices the search could not settle are counted, not drawn."""
+        counts = {}
+        for method in self.methods:
+            if method.index not in self._results:
+                continue
+            status = self.read(method.index).status
+            counts[method.name] = {"found": int((status == search_module.FOUND).sum()),
+                                   "not_converged": int((status == search_module.NOT_CONVERGED).sum()),
+                                   "unanswered": int((status != search_module.FOUND).sum())}
+        return counts

@@ -1,0 +1,228 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Reflected meshes placed from per-vertex answers computed on the GPU every frame.
+
+The methods that answer on the GPU each frame (the iterative search,
+``iterative_draw.py``; reflection morphing, ``morph_pass.py``) write one *answer texel*
+per diffuse vertex and reflector: (the vertex's first reflector point relative to the
+renderer's shift, a code whose value modulo 16 is :data:`FOUND_CODE` where there is an
+answer). :class:`ReflectedMeshes` holds what they share, uploaded once per geometry: the
+vertices as a float texture (what the compute stages read) and the indexed reflected
+meshes with their shading data; :meth:`ReflectedMeshes.draw` draws the meshes of each
+answer texture with ``glsl/iterative_mesh_vert.glsl`` (a vertex at its answer, a triangle
+with an unanswered corner discarded) and the sample-based camera's fragment stage.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import gpu
+import numpy as np
+
+from ..engine.methods.iterative import search as search_module
+from .draw_shaders import reflected_fragment_source, reflected_interface, shading_source
+from .frame_pass import REFLECTION_COSINE
+from .gpu_data import data_texture, read_texture, vertex_buffer
+from .shader_sources import glsl_source
+
+#: Texels per row of the vertex and answer textures.
+TEXTURE_WIDTH = 4096
+#: A reflected fragment is kept only where the interpolated validity of its triangle's
+#: corners reaches this: 1 inside triangles whose corners all have an answer, below it
+#: everywhere else but within 1e-4 of an edge's length from a valid corner.
+VALID_THRESHOLD = 0.9999
+#: An answer texel's code for a found answer: (FOUND + 8) + 16 steps, modulo 16 (the
+#: iterative search's status and step count; morphing writes FOUND_CODE itself).
+FOUND_CODE = search_module.FOUND + 8
+#: Added to the code of a flipped image (``search.flipped_images``): a triangle whose
+#: corners disagree spans a fold and is not drawn. Above 16 times any step count.
+FLIPPED_CODE = 2048
+#: The live view snaps reflected vertices to a grid of this share of its Accuracy (px):
+#: at most half a cell off on each axis (0.71 of a cell in all), the answer itself a
+#: tenth of the Accuracy off (``search.STOP_FRACTION``): within the Accuracy together.
+#: A reflection packs the scene's triangles into a mirror's few pixels (sbc_fig3: 46 %
+#: of them under a pixel across), and each costs its set-up and rasterisation; one
+#: whose corners snap to one point, or to two, has no area and is dropped first.
+SNAP_SHARE = 1.0
+#: A vertex without an answer is never drawn (its triangles' fragments are discarded),
+#: so it is placed wherever its triangles cost least: at the centre of its cell of a grid
+#: this many cells across the view. Its triangles with no answered corner (a third of
+#: each mirror's on the two-spheres demo) collapse to points and are dropped before
+#: set-up; one with an answered corner (1-2 %) reaches at most a cell away.
+UNANSWERED_CELLS = 64
+
+
+
+@functools.cache
+def reflected_shader(law_test: bool = True, hidden_test: bool = True):
+    """The reflected meshes' shader, built on first use (fragment stage shared with the
+    sample-based camera's reflected meshes), with or without the fragment stage's
+    law-of-reflection and hidden-point tests (:func:`fragment_tests`)."""
+    interface = reflected_interface("curved_reflections_iterative_interface", searched=True)
+    info = gpu.types.GPUShaderCreateInfo()
+    # In this order 120 bytes, within the 128 Vulkan guarantees (Blender counts 128).
+    info.push_constant('MAT4', "view_projection")
+    info.push_constant('VEC4', "camera")
+    info.push_constant('INT', "result_width")
+    info.push_constant('FLOAT', "inverse_diameter")
+    info.push_constant('FLOAT', "order_range")
+    info.push_constant('FLOAT', "reflector_id")
+    info.push_constant('INT', "use_image")
+    info.push_constant('FLOAT', "hidden_tolerance")
+    info.push_constant('FLOAT', "reflection_cosine")
+    info.push_constant('VEC2', "snap_grid")
+    info.sampler(0, 'FLOAT_2D', "search_result")
+    info.sampler(1, 'FLOAT_2D', "vertex_positions")
+    info.sampler(2, 'FLOAT_2D', "prepass_labels")
+    info.sampler(3, 'FLOAT_2D', "image")
+    info.sampler(4, 'FLOAT_2D', "prepass_normals")
+    info.vertex_in(0, 'INT', "vertex_index")
+    info.vertex_in(1, 'VEC4', "color")
+    info.vertex_in(2, 'VEC4', "normal_lit")
+    info.vertex_in(3, 'VEC2', "uv")
+    info.vertex_out(interface)
+    info.fragment_out(0, 'VEC4', "color_out")
+    info.vertex_source(shading_source() + glsl_source("iterative_mesh_vert.glsl", {
+        "FOUND_CODE": FOUND_CODE, "FLIPPED_CODE": FLIPPED_CODE, "UNANSWERED_CELLS": f"{UNANSWERED_CELLS:.1f}"}))
+    defines = f"#define SEARCHED\n#define VALID_THRESHOLD {VALID_THRESHOLD}\n"
+    defines += "#define LAW_TEST\n" * law_test + "#define HIDDEN_TEST\n" * hidden_test
+    info.fragment_source(reflected_fragment_source(defines))
+    return gpu.shader.create_from_info(info)
+
+
+def fragment_tests(reflector_index: int, setup: dict) -> tuple[bool, bool]:
+    """(law of reflection, hidden point): which of the fragment stage's tests can drop a
+    fragment of a reflector's answers (``glsl/reflection_mesh_frag.glsl``). The law of
+    reflection at its usual tolerance (``frame_pass.REFLECTION_COSINE``) guards against a
+    triangle whose corners lie in different sheets of the reflection, and a mirror whose
+    images are all mirrored (``setup["mirrored"]``, a convex one) has one sheet; a
+    tighter tolerance (a render's test of blended answers) can fail on any mirror. The
+    hidden-point test drops nothing with an infinite ``hidden_fraction`` (morphing's). A
+    test that cannot fail is compiled out rather than skipped by a uniform: llvmpipe runs
+    a branch on a uniform for every fragment anyway, and the two tests cost the morphing
+    pass's reflected meshes a fifth of their time (their texture reads and arithmetic on
+    every fragment, overdraw included)."""
+    law_test = (reflector_index not in setup.get("mirrored", frozenset())
+                or setup["reflection_cosine"] > REFLECTION_COSINE)
+    return law_test, math.isfinite(setup["hidden_fraction"])
+
+
+def snap_grid(view_size, snap_px: float) -> tuple:
+    """The ``snap_grid`` uniform of the reflected-mesh shaders: the view's cells across
+    and up for a grid ``snap_px`` pixels apart; (0, 0), no snapping, for 0."""
+    if not snap_px > 0:
+        return (0.0, 0.0)
+    return tuple(float(size) / snap_px for size in view_size)
+
+
+def _culled_faces(winding: int) -> str:
+    """The faces to cull of a closed solid of ``winding`` (``closed_surfaces.winding``) in
+    a mirrored image: seen from the mirror its far side winds as its near side does in a
+    direct view (counter-clockwise for outward normals, OpenGL's front), the mirror
+    reversing it; 'NONE' for a mesh that is not a closed solid."""
+    return {1: 'FRONT', -1: 'BACK'}.get(winding, 'NONE')
+
+
+class ReflectedMeshes:
+    """One renderer's diffuse vertices (a texture) and reflected meshes (an indexed batch)
+    on the GPU, uploaded on first use, and the draw of answer textures."""
+
+    def __init__(self, geometry):
+        self.geometry = geometry
+        self.n_vertices = len(geometry.vertices)
+        self.width = max(1, min(self.n_vertices, TEXTURE_WIDTH))
+        self.height = max(1, -(-self.n_vertices // self.width))
+        self._positions = None
+        self._batch = None
+
+    @property
+    def positions(self):
+        """The vertices relative to the shift, one RGBA32F texel each (rows of ``width``)."""
+        self._ensure()
+        return self._positions
+
+    def _ensure(self) -> None:
+        if self._positions is not None:
+            return
+        g = self.geometry
+        self._positions = data_texture((g.vertices - g.shift).astype(np.float32), self.width)
+        attributes = {"vertex_index": (np.arange(self.n_vertices, dtype=np.int32), 'I32', 'INT'),
+                      "color": (g.colors, 'F32', 'FLOAT'),
+                      "normal_lit": (np.c_[g.normals, g.lit].astype(np.float32), 'F32', 'FLOAT'),
+                      "uv": (g.uvs, 'F32', 'FLOAT')}
+        if len(g.triangles):
+            self._batch = gpu.types.GPUBatch(type='TRIS', buf=vertex_buffer(attributes), elem=gpu.types.GPUIndexBuf(
+                type='TRIS', seq=np.asarray(g.triangles, dtype=np.int32)))
+
+    def answer_texture(self):
+        """A new answer texture, one RGBA32F texel per vertex."""
+        return gpu.types.GPUTexture((self.width, self.height), format='RGBA32F')
+
+    def work_groups(self, local_size: int) -> tuple:
+        """The work groups of a compute stage with one invocation per vertex texel."""
+        return -(-self.width // local_size), self.height, 1
+
+    def draw(self, view_projection, targets, setup: dict, image_of, answers) -> None:
+        """The reflected meshes of each (reflector index, answer texture) of ``answers``
+        into the bound framebuffer (depth test on), placed by ``view_projection`` (a
+        ``mathutils.Matrix`` relative to the shift), against the pre-pass of ``targets``
+        (``frame_targets.FrameTargets``); ``image_of(k)`` is the texture of
+        image ``k`` (-1: none); ``setup`` as ``ReflectionRenderer.reflected_setup``, with
+        ``hidden_fraction``: a fragment whose reflector point lies farther from the eye
+        than the mirror surface the pre-pass saw there, by more than this fraction of the
+        reflector's bounding-box diagonal, is hidden by the mirror and dropped
+        (``FramePass.hidden_fraction``); and ``reflection_cosine``: one whose eye ray,
+        reflected about the mirror's normal there, leaves further than this cosine from
+        the fragment's point of the mesh is dropped (``FramePass.reflection_cosine``);
+        and optionally ``mirrored``: reflectors whose images are all mirrored
+        (``FramePass.mirrored_reflectors``), in which the triangles of closed solids that
+        face away from the mirror are culled by their winding (``range_windings``); and
+        ``snap_px`` (0: off), with ``view_size``: each vertex is placed at the centre of
+        its cell of a grid that many pixels apart, pixel centres for 1 (the live view,
+        within its Accuracy), and a reflected triangle within one cell, collapsed to a
+        point, is dropped before it is rasterised (:data:`SNAP_SHARE`). A vertex without
+        an answer goes to the centre of its cell of a coarser grid, always
+        (:data:`UNANSWERED_CELLS`)."""
+        answers = list(answers)
+        self._ensure()
+        if self._batch is None or not answers:
+            return
+        mirrored = setup.get("mirrored", frozenset())
+        windings = self.geometry.range_windings or (0,) * len(self.geometry.ranges)
+        for reflector_index, texture in answers:
+            law_test, hidden_test = fragment_tests(reflector_index, setup)
+            shader = reflected_shader(law_test, hidden_test)
+            shader.bind()
+            shader.uniform_float("view_projection", view_projection)
+            shader.uniform_int("result_width", self.width)
+            shader.uniform_float("inverse_diameter", setup["inverse_diameter"])
+            shader.uniform_float("order_range", setup["order_range"])
+            shader.uniform_sampler("vertex_positions", self._positions)
+            shader.uniform_sampler("prepass_labels", targets.prepass_labels)
+            shader.uniform_float("snap_grid", snap_grid(setup["view_size"], setup.get("snap_px", 0.0)))
+            shader.uniform_sampler("search_result", texture)
+            shader.uniform_float("reflector_id", float(reflector_index + 1))
+            if law_test or hidden_test:
+                shader.uniform_float("camera", setup["camera"])
+            if law_test:
+                shader.uniform_sampler("prepass_normals", targets.prepass_normals)
+                shader.uniform_float("reflection_cosine", setup["reflection_cosine"])
+            if hidden_test:
+                shader.uniform_float("hidden_tolerance",
+                                     setup["hidden_fraction"] * float(self.geometry.reflector_sizes[reflector_index]))
+            for (image, first, count), winding in zip(self.geometry.ranges, windings):
+                gpu.state.face_culling_set(_culled_faces(winding) if reflector_index in mirrored else 'NONE')
+                shader.uniform_int("use_image", int(image >= 0))
+                shader.uniform_sampler("image", image_of(image))
+                self._batch.draw_range(shader, elem_start=3 * first, elem_count=3 * count)
+        gpu.state.face_culling_set('NONE')
+
+    def read(self, texture) -> tuple[np.ndarray, np.ndarray]:
+        """An answer texture read back: (N, 3) world points (NaN where no answer) and the
+        (N,) int64 codes."""
+        texels = read_texture(texture, self.width, self.height).reshape(-1, 4)[:self.n_vertices]
+        texels = texels.astype(np.float64)
+        code = texels[:, 3].astype(np.int64)
+        found = code % 16 == FOUND_CODE
+        return np.where(found[:, None], texels[:, :3] + self.geometry.shift, np.nan), code

@@ -1,0 +1,68 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The frame pipeline that Render Image and the live view share (blender/frame_pipeline.py)."""
+
+import bpy
+import numpy as np
+import pytest
+
+from curved_reflections.engine.frame_settings import FrameSettings
+from curved_reflections.blender import demo_scenes, live
+from curved_reflections.blender.capture import view_from_camera
+from curved_reflections.blender.frame_pipeline import settings_of
+from curved_reflections.blender.render_image import render_scene
+
+WIDTH, HEIGHT = 128, 96
+
+
+@pytest.fixture
+def fig3(empty_scene, registered, gpu_ready):
+    scene = demo_scenes.build("sbc_fig3", bpy.context.scene, WIDTH, HEIGHT)
+    yield scene
+    live.clear(scene)
+
+
+def _live_frame(scene):
+    """The live view's pipeline for the scene camera's view, rendered offscreen with the
+    renderer and the camera it keeps for that view."""
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    state = live.start(scene, depsgraph, wait=True)
+    view = view_from_camera(scene.camera, scene, depsgraph)
+    camera = state.cameras[live.CAMERA_KEY]
+    assert camera.view.same_as(view)
+    return state, state.renderer.render(view, camera.sbc, state.world)
+
+
+@pytest.mark.parametrize("mode", ['AUTO', 'RUNTIME', 'PERTURBATION'])
+def test_render_image_and_the_live_view_draw_the_same_pixels(fig3, mode):
+    bpy.data.objects["MirrorSphere"].curved_reflections.mode = mode
+    rendered = render_scene(fig3, bpy.context.evaluated_depsgraph_get())
+    state, image = _live_frame(fig3)
+    assert rendered.stats["methods"] == {c.reflector: c.method for c in state.plan.choices}
+    assert (rendered.camera is None) == (state.cameras[live.CAMERA_KEY].sbc is None) == (mode != 'RUNTIME')
+    assert image.shape == rendered.image.shape == (HEIGHT, WIDTH, 4)
+    assert np.array_equal(image, rendered.image)
+    assert np.abs(image[..., :3] - image[0, 0, :3]).max() > 0.1  # a picture, not a blank frame
+
+
+def test_the_settings_record_reads_the_scene_and_its_overrides(fig3):
+    s = fig3.curved_reflections
+    s.max_order, s.downsample, s.accuracy_px, s.morph_polish_frames = 3, 4, 0.75, False
+    assert settings_of(fig3) == FrameSettings(max_order=3, downsample=4, accuracy_px=0.75, polish_frames=False,
+                                              morph_budget_mb=s.morph_gpu_budget_mb, polish_camera=True)
+    assert not settings_of(fig3, live=True).polish_camera
+    assert settings_of(fig3, max_order=1, accuracy_px=None).max_order == 1
+    assert settings_of(fig3, max_order=1, accuracy_px=None).accuracy_px == 0.75
+
+
+def test_one_rule_decides_whether_a_view_needs_a_camera(fig3):
+    """The searched ball alone at Max Order 2 needs none (it is convex: no higher order);
+    in Runtime mode every view needs one, for the ball's first order."""
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    view = view_from_camera(fig3.camera, fig3, depsgraph)
+    state = live.start(fig3, depsgraph, wait=True)
+    assert state.camera_job(view) is None and state.cameras[live.CAMERA_KEY].sbc is None
+    bpy.data.objects["MirrorSphere"].curved_reflections.mode = 'RUNTIME'
+    state = live.start(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
+    job = state.camera_job(view)
+    assert job is not None and job.first_order_left_out == frozenset() and job.settings == state.settings
+    assert state.cameras[live.CAMERA_KEY].sbc is not None

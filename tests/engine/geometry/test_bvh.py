@@ -1,0 +1,95 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+import numpy as np
+
+from curved_reflections.engine.geometry.bvh import build_bvh, descend, morton_codes, ray_box_test
+from curved_reflections.engine.geometry.sphere import icosphere
+
+
+def _sphere_bvh(subdivisions=3, leaf_size=4):
+    sphere = icosphere([1.0, 2.0, 3.0], 2.0, subdivisions)
+    return sphere, build_bvh(sphere.vertices, sphere.triangles, sphere.normals, leaf_size)
+
+
+def test_every_triangle_sits_in_exactly_one_leaf_slot():
+    sphere, bvh = _sphere_bvh()
+    placed = bvh.order[bvh.order >= 0]
+    assert sorted(placed.tolist()) == list(range(len(sphere.triangles)))
+    assert len(bvh.order) == bvh.leaf_size << bvh.depth
+
+
+def test_boxes_contain_their_triangles_at_every_level():
+    sphere, bvh = _sphere_bvh()
+    corners = sphere.vertices[sphere.triangles]
+    for level in range(bvh.depth + 1):
+        span = len(bvh.order) >> level
+        node = np.flatnonzero(bvh.order >= 0) // span
+        triangle = bvh.order[bvh.order >= 0]
+        assert np.all(bvh.box_lo[level][node] <= corners[triangle].min(axis=1) + 1e-12)
+        assert np.all(bvh.box_hi[level][node] >= corners[triangle].max(axis=1) - 1e-12)
+
+
+def test_cones_contain_the_vertex_normals_of_their_triangles():
+    sphere, bvh = _sphere_bvh()
+    normals = sphere.normals[sphere.triangles]  # (M, 3, 3)
+    for level in range(bvh.depth + 1):
+        span = len(bvh.order) >> level
+        node = np.flatnonzero(bvh.order >= 0) // span
+        triangle = bvh.order[bvh.order >= 0]
+        dots = np.einsum("tkd,td->tk", normals[triangle], bvh.cone_axis[level][node])
+        assert np.all(dots >= bvh.cone_cos[level][node][:, None] - 1e-12)
+    assert bvh.cone_cos[0][0] == -1.0  # the whole sphere faces every way
+    assert bvh.cone_cos[-1].max() > 0.95  # a leaf of a fine sphere faces one way
+
+
+def test_descend_with_an_always_true_test_returns_every_pair():
+    sphere, bvh = _sphere_bvh(subdivisions=2)
+    queries, triangles = descend(bvh, np.arange(3), lambda q, level, n: np.ones(len(q), bool))
+    assert len(queries) == 3 * len(sphere.triangles)
+    assert np.all(np.diff(queries) >= 0)
+
+
+def test_morton_codes_keep_neighbours_close():
+    points = np.array([[0, 0, 0], [1e-3, 0, 0], [1, 1, 1], [0.999, 1, 1]], dtype=float)
+    order = np.argsort(morton_codes(points))
+    assert {frozenset(order[:2]), frozenset(order[2:])} == {frozenset({0, 1}), frozenset({2, 3})}
+
+
+def _slab_reference(lo, hi, origin, direction, t_min, t_max):
+    """One ray against one box, written plainly: the parameter interval inside every slab."""
+    if np.any(lo > hi):
+        return False
+    near, far = t_min, t_max
+    for d in range(3):
+        if direction[d] == 0.0:
+            if not lo[d] <= origin[d] <= hi[d]:
+                return False
+            continue
+        t0, t1 = sorted(((lo[d] - origin[d]) / direction[d], (hi[d] - origin[d]) / direction[d]))
+        near, far = max(near, t0), min(far, t1)
+    return near <= far
+
+
+def test_ray_box_test_matches_a_plain_slab_test_and_rejects_empty_nodes():
+    # 80 triangles in leaves of 4: 20 leaves padded to 32, so the deepest levels hold empty nodes.
+    sphere = icosphere([0.0, 0.0, 0.0], 1.0, 1)
+    bvh = build_bvh(sphere.vertices, sphere.triangles, sphere.normals, 4)
+    rng = np.random.default_rng(7)
+    origins = rng.uniform(-2.0, 2.0, (300, 3))
+    directions = rng.normal(size=(300, 3))
+    directions[:20, 1] = 0.0  # parallel to a pair of slabs
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    t_min, t_max = np.full(300, 1e-9), rng.uniform(0.5, 4.0, 300)
+    test = ray_box_test(bvh, origins, directions, t_min, t_max)
+    empty_seen = 0
+    for level in range(bvh.depth + 1):
+        n_nodes = len(bvh.box_lo[level])
+        queries, nodes = np.repeat(np.arange(300), n_nodes), np.tile(np.arange(n_nodes), 300)
+        got = test(queries, level, nodes)
+        expected = [_slab_reference(bvh.box_lo[level][n], bvh.box_hi[level][n], origins[q], directions[q],
+                                    t_min[q], t_max[q]) for q, n in zip(queries, nodes)]
+        assert got.tolist() == expected
+        empty = ~(bvh.box_lo[level] <= bvh.box_hi[level]).all(axis=1)
+        empty_seen += int(empty.sum())
+        assert not got[empty[nodes]].any()
+    assert empty_seen > 0
+    assert got.any() and not got.all()  # at the leaves, the rays both meet and miss boxes
