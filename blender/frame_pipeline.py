@@ -5,7 +5,7 @@ capture (:mod:`.capture`: the evaluated scene as reflector and diffuse-mesh arra
 looks (each reflector's colour, reflectivity, Fresnel and fade distance,
 :func:`.render_inputs.reflector_properties`) -> grids (the baked morphing grids of the
 reflectors that want one, :func:`.morph_bake.load_grids`) -> plan (which registered
-method draws each reflector, :func:`.methods.plan`) -> renderer (the meshes on the GPU
+method draws each reflector, :func:`.method_plan.plan`) -> renderer (the meshes on the GPU
 and one per-frame pass per method, ``drawing/reflection_draw.py``) -> is a
 sample-based camera needed for this view (:meth:`FramePipeline.camera_job`: a reflector
 no per-frame pass draws in it, or a higher order) -> the camera (:meth:`CameraJob.build`,
