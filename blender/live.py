@@ -17,7 +17,7 @@ belongs to one view; V: projection runs per draw on the GPU):
   BSP trees of ``build_sample_based_camera``. A view change asks for a new one,
   debounced (:data:`DEBOUNCE_SECONDS` after the last change); while it builds, the
   previous camera keeps drawing. Editing a *reflector* (geometry, transform, marking
-  or unmarking one) re-bakes: capture again and rebuild every view's camera. Reflectors
+  or unmarking one) re-captures: capture again and rebuild every view's camera. Reflectors
   of more than :data:`BACKGROUND_TRIANGLES` are made ready for tracing (BVH, seal) on
   the worker too (:class:`.live_state.Preparing`): the last reflections draw, and the
   status line counts the seconds, until they land.
@@ -100,7 +100,7 @@ _states: dict[int, LiveScene] = {}
 
 
 def state_of(scene) -> LiveScene | None:
-    """The live state of ``scene``, or ``None`` when it is not baked."""
+    """The live state of ``scene``, or ``None`` when it is not started."""
     return _states.get(scene.session_uid)
 
 
@@ -177,7 +177,7 @@ def _restart_stale(state: LiveScene, reflectors: bool, wait: bool) -> None:
     stale = {key: c.view for key, c in state.cameras.items() if reflectors or not _inside(state.bounds, c.bounds)}
     for key, view in stale.items():
         if key not in state.requests:
-            _start(state, key, view, wait)
+            _start_camera(state, key, view, wait)
 
 
 def _covering_grids(state: LiveScene, view: View) -> list:
@@ -210,7 +210,7 @@ def _inside(bounds, camera_bounds) -> bool:
 # --- cameras (worker thread) ---------------------------------------------------------
 
 
-def _start(state: LiveScene, key, view: View, wait: bool) -> None:
+def _start_camera(state: LiveScene, key, view: View, wait: bool) -> None:
     """Build ``view``'s camera, if it needs one: on the worker, or here and now with ``wait``."""
     state.requests.pop(key, None)
     job, covering = state.camera_job(view), _covering_grids(state, view)
@@ -268,7 +268,7 @@ def _collect(state: LiveScene) -> bool:
 # --- the public operations ------------------------------------------------------------
 
 
-def bake(scene, depsgraph, views: dict | None = None, wait: bool = False) -> LiveScene:
+def start(scene, depsgraph, views: dict | None = None, wait: bool = False) -> LiveScene:
     """Capture ``scene`` and build a camera for each of ``views`` ({key: View}).
 
     Without views, the regions already drawn keep their keys and get new cameras; with
@@ -297,7 +297,7 @@ def bake(scene, depsgraph, views: dict | None = None, wait: bool = False) -> Liv
         return state
     state.report('INFO', "Building reflections...")
     for key, view in views.items():
-        _start(state, key, view, wait)
+        _start_camera(state, key, view, wait)
     if not wait:
         ensure_timer()
     return state
@@ -307,7 +307,7 @@ def refresh(scene, depsgraph, views: dict | None = None, wait: bool = False) -> 
     """Re-capture the scene and rebuild every view's camera now (what **Refresh** does);
     Auto tries again the methods a live check passed over."""
     method_plan.forget_measurements(scene)
-    return bake(scene, depsgraph, views, wait)
+    return start(scene, depsgraph, views, wait)
 
 
 def clear(scene) -> bool:
@@ -359,7 +359,7 @@ def process(scene, depsgraph, wait: bool = False, now: float | None = None) -> b
                 _restart_stale(state, reflectors, wait)
         for key, (view, asked) in list(state.requests.items()):
             if state.preparing is None and (wait or (now - asked >= DEBOUNCE_SECONDS and key not in state.jobs)):
-                _start(state, key, view, wait)
+                _start_camera(state, key, view, wait)
     except SceneInputError as error:
         state.report('ERROR', str(error))
     except Exception as error:  # noqa: BLE001 - the worker's preparation failed: say so, draw the last

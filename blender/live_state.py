@@ -54,7 +54,7 @@ class ViewCamera:
 
 @dataclass
 class CameraBuild:
-    """A view's camera on its way (``live._start``): what it is built for, and the
+    """A view's camera on its way (``live._start_camera``): what it is built for, and the
     renderer's projections its reflected triangles are made for on the worker."""
 
     future: Future  # -> (SampleBasedCamera or None, its projection or None)

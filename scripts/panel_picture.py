@@ -295,6 +295,8 @@ def draw_and_check(scene) -> None:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=REPO_ROOT / "docs" / "images" / "panel.png")
+    parser.add_argument("--resolution", type=int, nargs=2, default=(320, 240), metavar=("WIDTH", "HEIGHT"),
+                        help="the scene camera's view (its statistics; the picture is the panels')")
     parser.add_argument("--perturbation", action="store_true",
                         help="the ball in Perturbation mode on its declared exact sphere (panel_perturbation.png)")
     args = parser.parse_args(argv)
@@ -302,7 +304,7 @@ def main(argv=None) -> int:
     PACKAGE.register()
     try:
         bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-        scene = demo_scenes.build("sbc_fig3", bpy.context.scene, 320, 240)
+        scene = demo_scenes.build("sbc_fig3", bpy.context.scene, *args.resolution)
         bpy.ops.mesh.primitive_torus_add(major_radius=0.5, minor_radius=0.18, location=(2.2, -1.6, 0.4))
         ring = bpy.context.active_object
         ring.name = "Ring"

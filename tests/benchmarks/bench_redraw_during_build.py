@@ -83,7 +83,7 @@ def measure(width: int, height: int, builds: int, degrees: float, idle_repeats: 
                     view = _turned(base, degrees * turn)
                     bench_draw.scene_depth(framebuffer, plain, view)  # as Blender drew it (the plain draws keep it)
                     state.requests.pop(key, None)
-                    live._start(state, key, view, wait=False)  # what the debounced timer starts
+                    live._start_camera(state, key, view, wait=False)  # what the debounced timer starts
                     future = state.jobs[key][0]
                     start = time.perf_counter()
                     while not future.done():

@@ -20,7 +20,7 @@ from curved_reflections.blender import live
 #: The operators run on every case, with their arguments.
 OPERATORS = {
     "check_scene": {},
-    "bake": {},
+    "start_live": {},
     "refresh": {},
     "render_image": {"filepath": "{folder}/image.png"},
     "bake_morphing": {"processes": 1},
@@ -108,7 +108,7 @@ CASES = {
 #: Operators a case leaves alone: they do not read what it breaks.
 NOT_AFFECTED = {
     ("check_scene", "no_camera"), ("check_scene", "camera_inside_mirror"),
-    ("bake", "camera_inside_mirror"), ("refresh", "camera_inside_mirror"),
+    ("start_live", "camera_inside_mirror"), ("refresh", "camera_inside_mirror"),
     ("bake_morphing", "no_camera"), ("bake_morphing", "camera_inside_mirror"),
 }
 

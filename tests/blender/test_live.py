@@ -119,7 +119,7 @@ def test_moving_a_diffuse_object_moves_its_reflection_without_rebaking(fig3):
     bpy.context.view_layer.update()  # depsgraph_update_post fires in background mode
     assert state.captured.reflectors[0] is ball  # not read again
     # (Background mode processes the change at once: the drawn view's accuracy is checked too.)
-    assert state.counts == {"bakes": 1, "remeshes": 1, "builds": 1, "draws": 1, "projections": 1, "checks": 1}
+    assert state.counts == {"captures": 1, "remeshes": 1, "builds": 1, "draws": 1, "projections": 1, "checks": 1}
     assert state.cameras[live.CAMERA_KEY] is camera  # a mesh change re-projects: same camera
     after = _pixels_of(_draw(fig3, view)[1], "Cube", fig3).mean(axis=0)
     assert state.counts["projections"] == 2  # once, on the first draw after the change
@@ -211,7 +211,7 @@ def test_a_landing_camera_brings_its_reflected_triangles_and_its_first_draw_only
     bpy.ops.curved_reflections.start_live()
     state = live.state_of(fig3)
     moved = look_at_view((0.8, -6.4, 2.4), (0.0, 0.0, 0.9), fov_y_deg=30.0, width=WIDTH, height=HEIGHT)
-    live._start(state, live.CAMERA_KEY, moved, wait=False)
+    live._start_camera(state, live.CAMERA_KEY, moved, wait=False)
     state.jobs[live.CAMERA_KEY].future.result(timeout=60)
     live._collect(state)
     camera = state.cameras[live.CAMERA_KEY]
@@ -336,10 +336,10 @@ def test_a_view_whose_clip_start_cuts_into_the_sealed_ball_says_so(fig3):
     centre, radius = np.array(ball.matrix_world.translation), 0.5 * max(ball.dimensions)
     inside = look_at_view(centre - (0.0, 1.05 * radius, 0.0), centre, fov_y_deg=30.0, width=WIDTH, height=HEIGHT,
                           near=0.1 * radius)
-    live._start(state, live.CAMERA_KEY, inside, wait=True)
+    live._start_camera(state, live.CAMERA_KEY, inside, wait=True)
     assert state.cameras[live.CAMERA_KEY].sbc.ray_map.n_rays == 0
     assert state.level == 'WARNING' and "'MirrorSphere': the camera's clip start cuts into this mirror" in state.status
-    live._start(state, live.CAMERA_KEY, _camera_view(fig3), wait=True)
+    live._start_camera(state, live.CAMERA_KEY, _camera_view(fig3), wait=True)
     assert state.status == "Reflections up to date"
 
 

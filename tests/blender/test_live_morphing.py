@@ -77,7 +77,7 @@ def test_morphing_draws_inside_its_grid_and_runtime_outside(fig3_morphing):
     assert len(_pixels_of(morphed, "FloorA", scene)) > 200
 
     # A view outside the grid is drawn in runtime mode, and the panel says why.
-    live._start(state, "far", far, wait=True)
+    live._start_camera(state, "far", far, wait=True)
     assert state.cameras["far"].sbc is not None and state.cameras["far"].morph == []
     assert _draw(scene, far, "far")[0]
     assert morph_bake.reflector_modes(scene) == [
