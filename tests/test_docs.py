@@ -189,6 +189,10 @@ def test_every_module_reference_in_the_docstrings_resolves():
     assert unresolved == [], "references that do not resolve:\n" + "\n".join(map(str, unresolved))
 
 
+def test_the_overview_is_a_design_overview_not_a_notebook():
+    assert len((REPO_ROOT / "docs" / "overview.md").read_text(encoding="utf-8").splitlines()) <= 600
+
+
 def test_the_docs_describe_the_code_not_its_history():
     """No dated entries in the overview, the user guide or the README, and no benchmark
     page with a section about an earlier run (git history keeps those)."""

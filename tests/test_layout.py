@@ -222,3 +222,44 @@ def test_every_relative_import_names_a_module():
                   if (found := relative_imports(name, path.read_text(encoding="utf-8"), path.name == "__init__.py",
                                                 modules)[1])}
     assert unresolved == {}
+
+
+#: The types the renderer and the frame pipeline hand around without asking which one
+#: they hold: the per-frame passes, the projection sources, the sample-based camera.
+PASS_AND_SOURCE_TYPES = {"FramePass", "IterativePass", "MorphPass", "PerturbationPass", "SBCTextures",
+                         "CameraSource", "MorphSource", "SampleBasedCamera"}
+#: What a pass or a source answers by its protocol (``frame_pass.FramePass``, the
+#: projection source of ``drawing/methods/sbc_triangles.py``): never sniffed by name.
+PROTOCOL_ATTRIBUTES = {"ray_map", "view", "downsample", "groups", "on_gpu", "sheet_subdivisions", "project",
+                       "cones", "true_rays", "methods", "grids", "answers", "reflector_indices"}
+
+
+def _type_sniffs(source: str) -> list:
+    """(line, call) of each ``isinstance`` naming a pass or source type and each
+    ``hasattr`` / ``getattr`` naming a protocol attribute in ``source``."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if not isinstance(node, ast.Call) or not isinstance(node.func, ast.Name) or len(node.args) < 2:
+            continue
+        if node.func.id == "isinstance":
+            names = {n.id if isinstance(n, ast.Name) else n.attr for n in ast.walk(node.args[1])
+                     if isinstance(n, (ast.Name, ast.Attribute))}
+            if names & PASS_AND_SOURCE_TYPES:
+                found.append((node.lineno, ast.unparse(node)))
+        elif node.func.id in ("hasattr", "getattr") and isinstance(node.args[1], ast.Constant) \
+                and node.args[1].value in PROTOCOL_ATTRIBUTES:
+            found.append((node.lineno, ast.unparse(node)))
+    return found
+
+
+def test_no_pass_or_source_is_told_apart_by_its_type_or_its_attributes():
+    """In the layers that hand passes and sources around (the drawing and Blender layers;
+    the engine checks what it reads back from a cache file, which is no protocol)."""
+    sniffs = {name: found for name, path in _modules().items()
+              if name.split(".")[0] in ("drawing", "blender") and (found := _type_sniffs(path.read_text(encoding="utf-8")))}
+    assert sniffs == {}
+
+
+def test_a_type_sniff_is_found():
+    assert [line for line, _ in _type_sniffs("isinstance(x, projection.SBCTextures)\nhasattr(x, 'ray_map')\n"
+                                             "getattr(x, 'cones', None)\nisinstance(x, int)\n")] == [1, 2, 3]
