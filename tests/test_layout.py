@@ -255,8 +255,8 @@ def _type_sniffs(source: str) -> list:
 def test_no_pass_or_source_is_told_apart_by_its_type_or_its_attributes():
     """In the layers that hand passes and sources around (the drawing and Blender layers;
     the engine checks what it reads back from a cache file, which is no protocol)."""
-    sniffs = {name: found for name, path in _modules().items()
-              if name.split(".")[0] in ("drawing", "blender") and (found := _type_sniffs(path.read_text(encoding="utf-8")))}
+    layers = {name: path for name, path in _modules().items() if name.split(".")[0] in ("drawing", "blender")}
+    sniffs = {name: found for name, path in layers.items() if (found := _type_sniffs(path.read_text(encoding="utf-8")))}
     assert sniffs == {}
 
 
