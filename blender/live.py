@@ -426,8 +426,8 @@ def draw(scene, key, view: View) -> bool:
             state.report('INFO', "Reflections up to date")
         drawn = _draw_with(state, view, None)
         damaged = [grid for grid, _ in covering if grid.failure is not None]
-        for grid in damaged:
-            morph_bake.note_cache_fault(state.scene_status, grid.reflector_name, grid.failure)  # the panel names the file
+        for grid in damaged:  # the panel names the file
+            morph_bake.note_cache_fault(state.scene_status, grid.reflector_name, grid.failure)
         if damaged:
             request_view(state, key, view)  # their reflectors need a camera now
         return drawn
