@@ -110,7 +110,8 @@ def _missing_paths(path: Path, names: set) -> list:
     if is_doc:
         for match in _LINK.finditer(text):
             target = match.group(1).split("#")[0]
-            if target and "://" not in target and not target.startswith("mailto:") and not (path.parent / target).exists():
+            outside = "://" in target or target.startswith("mailto:")
+            if target and not outside and not (path.parent / target).exists():
                 missing.append((_name(path), match.group(1)))
     return missing
 

@@ -4,11 +4,12 @@
 
 In numpy the polish costs more than the node's projection itself (a BVH descent per
 image to find its triangle, then Newton in float64), too much for an animation's
-frames. Here one dispatch answers every image of a node (milliseconds): the shader walks from a grid cell's triangle across the mirror's
-edges instead of descending a BVH, so it needs two flat tables of the mirror
-(``ReflectorSet.triangle_grid``, ``ReflectorSet.edge_neighbours``), uploaded once per
-mirror (docs/benchmarks/morphing.md). Triangle indices travel as float32, exact below
-2**24 triangles.
+frames. Here one dispatch answers every image of a node (milliseconds): the shader
+walks from a grid cell's triangle across the mirror's edges instead of descending a
+BVH, so it needs two flat tables of the mirror (``ReflectorSet.triangle_grid``,
+``ReflectorSet.edge_neighbours``), uploaded once per mirror
+(docs/benchmarks/morphing.md). Triangle indices travel as float32, exact below 2**24
+triangles.
 """
 
 from __future__ import annotations

@@ -202,7 +202,8 @@ def test_panels_on_a_baked_scene_show_methods_stats_and_status(empty_scene, regi
 
     texts = _texts(_draw(STATISTICS, scene))
     for name, value in (("Rays", f"{state.stats['rays']:,}"), ("Leaves", f"{state.stats['leaves']:,}"),
-                        ("Build", f"{state.stats['build_ms']:.0f} ms"), ("Memory", f"{state.stats['memory_mb']:.1f} MB"),
+                        ("Build", f"{state.stats['build_ms']:.0f} ms"),
+                        ("Memory", f"{state.stats['memory_mb']:.1f} MB"),
                         ("Views", f"{state.stats['views']}")):
         assert texts[texts.index(name) + 1] == value
     assert "Draw" in texts

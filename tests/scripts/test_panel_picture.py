@@ -18,8 +18,8 @@ SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "panel_picture.py"
 def test_panel_picture_is_written(tmp_path, gpu_ready):
     out = tmp_path / "panel.png"
     environment = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "blender_user"))
-    run = subprocess.run([sys.executable, str(SCRIPT), "--out", str(out), "--resolution", "96", "72"], capture_output=True, text=True,
-                         timeout=600, env=environment)
+    command = [sys.executable, str(SCRIPT), "--out", str(out), "--resolution", "96", "72"]
+    run = subprocess.run(command, capture_output=True, text=True, timeout=600, env=environment)
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
     size = re.search(r"wrote .*panel\.png \((\d+)x(\d+)\)", run.stdout)
     assert size and out.stat().st_size > 5000

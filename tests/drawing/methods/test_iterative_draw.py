@@ -214,7 +214,8 @@ def test_a_triangle_across_a_fold_is_not_drawn(gpu_ready):
         for corner, drawn in ((a, across), (near[2], control)):
             mesh = DiffuseMesh("triangle", np.array([cloud[near[0]], cloud[near[1]], cloud[corner]]),
                                np.array([[0, 1, 2]]), np.ones((3, 4)))
-            renderer = ReflectionRenderer([reflector], [mesh], edge_fraction=None, passes=[IterativePass.factory([method])])
+            renderer = ReflectionRenderer([reflector], [mesh], edge_fraction=None,
+                                          passes=[IterativePass.factory([method])])
             pixels = _drawn_pixels(renderer, view)
             gpu = renderer.pass_named("iterative").read(0)  # the GPU's own verdicts (float32 may pick another root)
             corners = [np.flatnonzero((renderer.geometry.vertices == cloud[k]).all(axis=1))[0]
