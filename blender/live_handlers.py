@@ -9,6 +9,7 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
+from ..drawing.shader_cache import release_shaders
 from . import live, morph_bake, scene_changes, scene_status, star_maps
 from .capture import view_from_region
 
@@ -144,7 +145,8 @@ def register() -> None:
 
 
 def unregister() -> None:
-    """Remove the draw handler, the app handlers and the timer; drop all state."""
+    """Remove the draw handler, the app handlers and the timer; drop all state and the
+    GPU shaders built."""
     global _draw_handle
     scene_changes.disconnect(on_setting_changed)
     if _draw_handle is not None:
@@ -157,3 +159,4 @@ def unregister() -> None:
     live.shutdown()
     scene_status.forget_all()
     star_maps.forget()
+    release_shaders()

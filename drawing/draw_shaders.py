@@ -9,13 +9,13 @@ Push constants stay far below the 128 bytes Vulkan guarantees
 
 from __future__ import annotations
 
-import functools
 
 import gpu
 
 from ..engine.geometry import band_trace
 from .methods import projection
 from .shader_sources import glsl_source
+from .shader_cache import cached_shader
 
 #: Bytes of push constants per shader (Vulkan guarantees 128): the pre-pass's matrix is
 #: the largest; everything bigger (the cameras, the pre-pass images) is in textures.
@@ -51,7 +51,7 @@ def shading_source() -> str:
     return f"#define SHADE_AMBIENT {band_trace.SHADE_AMBIENT:.9e}\n" + glsl_source("reflection_shading.glsl")
 
 
-@functools.cache
+@cached_shader
 def _build_prepass():
     interface = gpu.types.GPUStageInterfaceInfo("curved_reflections_prepass_interface")
     interface.smooth('VEC4', "color_interp")
@@ -79,7 +79,7 @@ def _build_prepass():
     return gpu.shader.create_from_info(info)
 
 
-@functools.cache
+@cached_shader
 def _build_project():
     interface = gpu.types.GPUStageInterfaceInfo("curved_reflections_project_interface")
     interface.flat('VEC4', "projected")
@@ -126,7 +126,7 @@ def reflected_fragment_source(defines: str = "") -> str:
     return defines + shading_source() + glsl_source("reflection_mesh_frag.glsl")
 
 
-@functools.cache
+@cached_shader
 def _build_reflected():
     interface = reflected_interface("curved_reflections_reflected_interface")
     info = gpu.types.GPUShaderCreateInfo()
@@ -154,7 +154,7 @@ def _build_reflected():
     return gpu.shader.create_from_info(info)
 
 
-@functools.cache
+@cached_shader
 def _build_composite():
     info = gpu.types.GPUShaderCreateInfo()
     info.push_constant('VEC4', "world_color")

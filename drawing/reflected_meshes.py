@@ -14,7 +14,6 @@ with an unanswered corner discarded) and the sample-based camera's fragment stag
 
 from __future__ import annotations
 
-import functools
 import math
 
 import gpu
@@ -25,6 +24,7 @@ from .draw_shaders import reflected_fragment_source, reflected_interface, shadin
 from .frame_pass import REFLECTION_COSINE
 from .gpu_data import data_texture, read_texture, vertex_buffer
 from .shader_sources import glsl_source
+from .shader_cache import cached_shader
 
 #: Texels per row of the vertex and answer textures.
 TEXTURE_WIDTH = 4096
@@ -54,7 +54,7 @@ UNANSWERED_CELLS = 64
 
 
 
-@functools.cache
+@cached_shader
 def reflected_shader(law_test: bool = True, hidden_test: bool = True):
     """The reflected meshes' shader, built on first use (fragment stage shared with the
     sample-based camera's reflected meshes), with or without the fragment stage's

@@ -34,7 +34,6 @@ The shader is built on first use and cached, never at import.
 
 from __future__ import annotations
 
-import functools
 
 import gpu
 import numpy as np
@@ -43,6 +42,7 @@ from ...engine.geometry.closed_surfaces import is_convex
 from ...engine.methods.iterative.reflector_map import MapBake, ReflectorMap
 from ...engine.geometry.vectors import cross
 from ..gpu_data import read_texture, vertex_buffer
+from ..shader_cache import cached_shader
 
 #: A texel crosses the surface again where its last crossing lies farther than its first
 #: by more than this share of the reflector's size (bounding-box diagonal).
@@ -93,7 +93,7 @@ void main()
 """
 
 
-@functools.cache
+@cached_shader
 def _bake_shader():
     interface = gpu.types.GPUStageInterfaceInfo("curved_reflections_map_bake_interface")
     interface.smooth('VEC3', "position_interp")

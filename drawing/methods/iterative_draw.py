@@ -16,7 +16,6 @@ draw per reflector, with the view in push constants.
 
 from __future__ import annotations
 
-import functools
 
 import gpu
 import numpy as np
@@ -26,6 +25,7 @@ from ..frame_pass import FramePass, PassInputs
 from ..gpu_data import data_texture
 from ..reflected_meshes import FLIPPED_CODE, ReflectedMeshes
 from ..shader_sources import glsl_source
+from ..shader_cache import cached_shader
 
 #: Invocations per work group of the search (along x).
 LOCAL_SIZE = 64
@@ -41,7 +41,7 @@ def search_defines() -> dict:
             "RESTART_OFFSET": f"{s.RESTARTS[1][0]:.9e}", "FLIPPED_CODE": FLIPPED_CODE}
 
 
-@functools.cache
+@cached_shader
 def search_shader():
     """The compute shader of the search, built on first use."""
     info = gpu.types.GPUShaderCreateInfo()

@@ -26,7 +26,6 @@ is literal:
 
 from __future__ import annotations
 
-import functools
 import math
 from collections import OrderedDict
 
@@ -42,6 +41,7 @@ from ..gpu_data import data_texture
 from ..reflected_meshes import FOUND_CODE, ReflectedMeshes
 from ..shader_sources import glsl_source, normal_equations_glsl
 from .polish_gpu import GPUImagePolish, polish_answers
+from ..shader_cache import cached_shader
 
 #: Image slots per vertex and grid: a convex mirror shows a point once, a concave one
 #: two or three times.
@@ -93,7 +93,7 @@ def blend_defines(n_nodes: int = 4, regular: int = SLOTS, widened: int = SLOTS, 
             "FOUND_CODE": FOUND_CODE}
 
 
-@functools.cache
+@cached_shader
 def blend_shader(n_nodes: int = 4, regular: int = SLOTS, widened: int = SLOTS, blend_nodes: int = 4,
                  ridge: float = morph_surface.QUADRIC_RIDGE):
     """The compute shader of the blend for cells of ``n_nodes`` nodes, the first

@@ -17,7 +17,6 @@ silhouette band is ray traced either way.
 
 from __future__ import annotations
 
-import functools
 
 import gpu
 import numpy as np
@@ -26,6 +25,7 @@ from ...engine.methods.perturbation import answers, candidates, projector, taylo
 from ..gpu_data import data_texture
 from ..reflected_meshes import FOUND_CODE
 from ..shader_sources import glsl_source
+from ..shader_cache import cached_shader
 
 #: Invocations per work group (along x).
 LOCAL_SIZE = 64
@@ -52,7 +52,7 @@ def step_defines() -> dict:
             "SAME_IMAGE_PX": f"{answers.SAME_IMAGE_PX:.9e}", "FOUND_CODE": f"{float(FOUND_CODE):.1f}"}
 
 
-@functools.cache
+@cached_shader
 def step_shader():
     """The compute shader of the step, built on first use."""
     info = gpu.types.GPUShaderCreateInfo()

@@ -14,7 +14,6 @@ triangles.
 
 from __future__ import annotations
 
-import functools
 from collections import OrderedDict
 
 import gpu
@@ -24,6 +23,7 @@ from ...engine.methods.morphing.image_polish import FRAME_POLISH_ROUNDS
 from ...engine.reference import exact
 from ..gpu_data import data_texture, read_texture
 from ..shader_sources import glsl_source
+from ..shader_cache import cached_shader
 
 #: Invocations per work group (along x).
 LOCAL_SIZE = 64
@@ -62,7 +62,7 @@ def polish_defines() -> dict:
             "ABANDON_DISTANCE": f"{exact.ABANDON_DISTANCE:.9e}", "ABANDON_AFTER": exact.ABANDON_AFTER}
 
 
-@functools.cache
+@cached_shader
 def polish_shader(frame_answers: bool = False):
     """The compute shader of the polish, built on first use: of a list of (point, image)
     rows into a result texture, or with ``frame_answers`` of a frame's answer texture in

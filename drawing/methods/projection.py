@@ -55,6 +55,7 @@ from ..gpu_data import data_texture, points_batch
 from ..shader_sources import glsl_source
 from . import sbc_pack
 from .reflected_depth import reflected_depth
+from ..shader_cache import cached_shader
 
 #: Newton's step tolerance on the GPU (chart coordinates span [-1, 1]; float32 resolves ~1e-7).
 STEP_TOLERANCE = 1e-6
@@ -185,7 +186,7 @@ void main()
 """
 
 
-@functools.cache
+@cached_shader
 def _point_shader():
     """Projects each vertex and writes its result to the texel of its index (built on first use)."""
     interface = gpu.types.GPUStageInterfaceInfo("curved_reflections_sbc_points_interface")
