@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Accuracy shown live (issue 20): per reflector, the method that drew it in the view and
+"""Accuracy shown live: per reflector, the method that drew it in the view and
 its error there, measured on a few of its answers against exactly traced rays
 (``engine/spot_check.py``) once the view has settled.
 

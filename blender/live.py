@@ -17,8 +17,8 @@ belongs to one view; V: projection runs per draw on the GPU):
   BSP trees of ``build_sample_based_camera``. A view change asks for a new one,
   debounced (:data:`DEBOUNCE_SECONDS` after the last change); while it builds, the
   previous camera keeps drawing. Editing a *reflector* (geometry, transform, marking
-  or unmarking one) re-captures: capture again and rebuild every view's camera. Reflectors
-  of more than :data:`BACKGROUND_TRIANGLES` are made ready for tracing (BVH, seal) on
+  or unmarking one) captures the reflectors again and rebuilds every view's camera.
+  Reflectors of more than :data:`BACKGROUND_TRIANGLES` are made ready for tracing (BVH, seal) on
   the worker too (:class:`.live_state.Preparing`): the last reflections draw, and the
   status line counts the seconds, until they land.
 - **projection** (once per camera and per mesh change): the meshes' vertices
@@ -90,7 +90,7 @@ MAX_VIEWS = 8
 COUNT_SECONDS = 2.0
 #: Reflectors of more triangles than this (all together) are made ready for tracing on
 #: the worker when the viewport should not wait: a million-triangle mirror's BVH and seal
-#: took 8 s on the main thread (docs/benchmarks/cliffs.md).
+#: take seconds (docs/benchmarks/cliffs.md), which the main thread must not spend.
 BACKGROUND_TRIANGLES = 100_000
 #: Key of the view a Start or Refresh uses when there is no 3D view (background mode).
 CAMERA_KEY = "scene camera"

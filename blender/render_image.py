@@ -133,8 +133,8 @@ def _prefetch(renderer, view, last_eye) -> None:
     """Put on the GPU what the passes' worker finished during the last frame, and start
     the work of the next frames around this frame's camera (``FramePass.prefetch``): a
     frame's band trace and capture keep one core busy and leave the other to the worker,
-    and an octree grid's node costs 0.2 s of numpy (sbc_fig3), four or eight of them a
-    frame that enters a new cell (docs/benchmarks/octree_animation.md). The cells the
+    and an octree grid's node costs a fraction of a second of numpy, four or eight of
+    them a frame that enters a new cell (docs/benchmarks/octree_animation.md). The cells the
     camera reaches in the next PREDICTED_FRAMES frames, if it keeps its last move, go
     first. Only work the main thread would do the same way (``exact``), so that a
     frame's image does not depend on which work was ready."""

@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Every method on the same scenes and camera paths, in one run (issue 20): accuracy
+"""Every method on the same scenes and camera paths, in one run: accuracy
 against the exact solver, label disagreement with Cycles, time per frame with the
 camera moving, preparation time and baked data, and a plot of accuracy against time.
 
@@ -237,7 +237,7 @@ def summary(results: dict) -> list:
 def report(results: dict, command: str, plot_path: str) -> str:
     args = results["settings"]
     lines = [
-        "# Every method on the same scenes (issue 20)", "",
+        "# Every method on the same scenes", "",
         f"Generated {results['started']} UTC by `{command}` on {results['machine']} in "
         f"{results['total_seconds'] / 60:.1f} min; every number comes from this one run.", "",
         f"Scenes at {args['width']}x{args['height']}; the camera circles the mirror at 2.3 radii, "
