@@ -27,7 +27,7 @@ $(STAMP): requirements.txt
 	touch $@
 
 test: venv
-	$(ISOLATED) $(PY) -m pytest tests --ignore=tests/benchmarks
+	$(ISOLATED) $(PY) -m pytest tests --ignore=tests/benchmarks --durations=15
 
 demo: venv
 	$(ISOLATED) $(PY) scripts/demo.py --out out/demo
