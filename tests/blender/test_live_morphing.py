@@ -132,13 +132,13 @@ def test_render_image_draws_from_the_grid_on_the_gpu(fig3_morphing):
     # Each frame's blend is polished on the mirror (Polish Every Frame, on by default), so
     # the hidden-point test applies; on this quadric mirror the polish moves images by a
     # fraction of a pixel: 1.73 % of the image differs, 1.70 % with the blend alone.
-    blended = state.renderer.pass_named("morphing")
-    assert blended.polish_frames and blended.hidden_fraction < 1.0
+    morph = state.renderer.pass_named("morphing")
+    assert morph.polish_frames and morph.hidden_fraction < 1.0
     scene.curved_reflections.morph_polish_frames = False
     alone = FrameState()
     blended = render_scene(scene, bpy.context.evaluated_depsgraph_get(), state=alone)
-    blended = alone.renderer.pass_named("morphing")
-    assert not blended.polish_frames and blended.hidden_fraction == np.inf
+    morph = alone.renderer.pass_named("morphing")
+    assert not morph.polish_frames and morph.hidden_fraction == np.inf
     assert (np.abs(blended.image[..., :3] - runtime.image[..., :3]).max(axis=2) > 0.05).mean() < 0.03
     scene.curved_reflections.morph_polish_frames = True
     # The band along the silhouette without a reflection and the strip between it and the
