@@ -116,7 +116,7 @@ class FramePipeline:
         mode's missing one first: Render Image) and plan every reflector's method."""
         loaded = morph_bake.load_grids(scene, captured.reflectors, bake_missing=bake_missing)
         self.plan = method_plan.plan(scene, captured.reflectors, self.settings.accuracy_px,
-                                 grids={grid.reflector_name: (grid, matrix) for grid, matrix in loaded})
+                                     grids={grid.reflector_name: (grid, matrix) for grid, matrix in loaded})
         self.grids = self.plan.drawn_grids()
 
     def new_renderer(self, scene, captured, properties: dict | None = None, seal: bool = True) -> None:

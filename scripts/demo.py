@@ -245,7 +245,7 @@ def run_scene(kind: str, args, out: Path) -> list[Row]:
         results.append(entry.render(scene, reflectors, out / f"{kind}_{entry.name}.png"))
     rows, maps = measure(kind, results, mask, palette)
     write_png(out / f"{kind}_side_by_side.png",
-                 side_by_side(results, mask, maps["contact"], maps["differences"]))
+              side_by_side(results, mask, maps["contact"], maps["differences"]))
     for row in rows:
         row.notes += f"; {int(mask.sum())} reflector px, {int(maps['contact'].sum())} near contact"
     ours = next((r for r in results if r.name == OURS), None)

@@ -99,7 +99,7 @@ def _missing_paths(path: Path, names: set) -> list:
     # Docs: from the repository root, or (links) from the doc's folder; sources: from their
     # own folder or any folder above it.
     bases = [REPO_ROOT, path.parent] if is_doc else [path.parent, *[p for p in path.parents if
-                                                                   p == REPO_ROOT or REPO_ROOT in p.parents]]
+                                                                    p == REPO_ROOT or REPO_ROOT in p.parents]]
     missing = []
     for match in _PATH.finditer(text):
         if not _exists(match.group(1), bases):

@@ -50,7 +50,7 @@ import numpy as np
 
 from ..engine.geometry.bvh import descend
 from ..engine.reference.exact import (CONE_SLACK, INSIDE_TOLERANCE, _first_hit_of_view_ray, _foot,
-                                     first_of_duplicates, half_vector_may_meet_cone, turn_toward)
+                                      first_of_duplicates, half_vector_may_meet_cone, turn_toward)
 from ..engine.geometry.raytrace import ReflectorSet, reflect
 from ..engine.geometry.vectors import cross, dot, lengths, normalized, unit
 from ..engine.view import View

@@ -59,7 +59,7 @@ class FlatMirrorPass(FramePass):
             towards = mirrored - eye
             t = ((mirror.point - eye) @ mirror.normal) / (towards @ mirror.normal)
             same_side = np.sign((vertices - mirror.point) @ mirror.normal) == np.sign((eye - mirror.point)
-                                                                                     @ mirror.normal)
+                                                                                      @ mirror.normal)
             valid = same_side & (t > 0.0) & (t < 1.0)
             texels = np.zeros((self.meshes.n_vertices, 4), np.float32)
             texels[valid, :3] = eye + t[valid, None] * towards[valid] - self.geometry.shift
@@ -113,14 +113,14 @@ def test_a_method_registered_by_a_test_draws_a_reflector(flat_scene, flat_method
     for name in ("Cube", "Column1", "Column2"):  # in front of the mirror: seen directly and reflected
         colour = np.array(palette[name])
         seen = [(np.abs(image[..., :3] - colour).max(axis=2) < 0.02).sum() for image in (flat.image,
-                                                                                           unreflected.image)]
+                                                                                         unreflected.image)]
         assert seen[0] > seen[1] + 20, (name, seen)
     differing = np.abs(flat.image[..., :3] - runtime.image[..., :3]).max(axis=2) > 0.05
     assert differing.mean() < 0.01  # the plug-in draws what the sample-based camera draws
 
 
 def test_a_reflector_the_method_refuses_is_drawn_in_runtime_mode_with_the_reason(empty_scene, registered,
-                                                                                  gpu_ready, flat_method):
+                                                                                 gpu_ready, flat_method):
     scene = demo_scenes.build("sbc_fig3", bpy.context.scene, WIDTH, HEIGHT)
     bpy.data.objects["MirrorSphere"].curved_reflections.mode = FLAT
     rendered = render_scene(scene, bpy.context.evaluated_depsgraph_get())

@@ -112,7 +112,7 @@ def test_classes_tuple_and_status_while_running(morph_ops, empty_scene):
     assert [cls.bl_idname for cls in morph_ops.classes] == ["curved_reflections.bake_morphing",
                                                             "curved_reflections.clear_morphing"]
     status_of(empty_scene).bake = {"running": True, "done": 3, "total": 405, "reflector": "Ball",
-                                          "message": ""}
+                                   "message": ""}
     assert morph_ops.morph_status(empty_scene) == "Baking Ball: 3/405 nodes (Esc cancels)"
     assert not bpy.ops.curved_reflections.bake_morphing.poll()
     status_of(empty_scene).bake = {}

@@ -312,7 +312,7 @@ class PerturbationMethod:
         point_of, seed_of = point_of[first_of], seed_of[first_of]
         model_error = group.model_error[seed_of]
         first, last, estimate, pixel = taylor_step(view, group.seeds, group.quadrics, points[point_of], seed_of,
-                                                  model_error, REACH * group.stride)
+                                                   model_error, REACH * group.stride)
         # Along a convex mirror's edge the distance falls toward the silhouette, and
         # each edge seed is a candidate whose step leaves the mirror: where the point
         # has a candidate with a local step, those are not followed.

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from curved_reflections.engine.geometry.segments import (ranks_in_runs, segment_max, segment_mean, segment_min,
-                                                        segment_sum, solve_least_squares)
+                                                         segment_sum, solve_least_squares)
 
 
 def test_segment_reductions_match_per_node_loops():

@@ -16,7 +16,7 @@ import pytest
 from curved_reflections.engine.geometry import shapes
 from curved_reflections.engine.reference.exact import solve_reflections
 from curved_reflections.engine.methods.iterative import (IterativeReflector, check_star_shaped, prepare_iterative,
-                                                        search_reflections)
+                                                         search_reflections)
 from curved_reflections.engine.methods.iterative.search import FOUND, INSIDE, NO_SURFACE
 from curved_reflections.engine.projection import NOT_PROJECTED, SEARCH_ANSWER
 from curved_reflections.engine.geometry.raytrace import ReflectorSet

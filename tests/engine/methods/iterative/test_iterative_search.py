@@ -7,7 +7,7 @@ import pytest
 
 from curved_reflections.engine.reference.exact import solve_reflections
 from curved_reflections.engine.methods.iterative import (IterativeReflector, check_star_shaped, prepare_iterative,
-                                                        search_reflections)
+                                                         search_reflections)
 from curved_reflections.engine.methods.iterative import search as search_module
 from curved_reflections.engine.geometry.closed_surfaces import is_convex
 from curved_reflections.engine.methods.iterative.reflector_map import face_coordinates, texel_directions

@@ -12,7 +12,7 @@ from curved_reflections.engine.reference.exact import solve_reflections
 from curved_reflections.tools.exact_analytic import polish_on_surfaces
 from curved_reflections.tools.exact_paths import solve_second_order
 from curved_reflections.engine.methods.perturbation import (AnalyticSurface, PerturbationMethod, PerturbationSettings,
-                                                           newton, osculating_quadrics, perturb, trace_seed_paths)
+                                                            newton, osculating_quadrics, perturb, trace_seed_paths)
 from curved_reflections.engine.methods.perturbation.seeds import seed_paths_to, seed_quadrics
 from curved_reflections.engine.projection import PERTURBATION_ANSWER
 from curved_reflections.engine.geometry.raytrace import ReflectorSet
