@@ -32,7 +32,6 @@ def cached_shader(build):
             _exit_hook = True
         return cached(*args, **kwargs)
 
-    shader.cache_clear = cached.cache_clear
     _caches.append(cached)
     return shader
 

@@ -48,8 +48,6 @@ from ..shader_cache import cached_shader
 SLOTS = 3
 #: Invocations per work group of the blend (along x).
 LOCAL_SIZE = 64
-#: GPU memory for node images, by default (the scene's ``morph_gpu_budget_mb``).
-DEFAULT_BUDGET_MB = DEFAULT_MORPH_BUDGET_MB
 #: The float32 blend's bound on the reflection law's residual on the fitted surface (the
 #: numpy twin asks 1e-8 of float64 Newton steps; float32 reaches about 1e-7).
 SURFACE_RESIDUAL = 1e-5
@@ -142,7 +140,7 @@ class NodeTextures:
     :class:`MorphPass`: key (grid, node) -> texture, the least recently used dropped
     first once they pass ``budget_mb``."""
 
-    def __init__(self, budget_mb: float = DEFAULT_BUDGET_MB):
+    def __init__(self, budget_mb: float = DEFAULT_MORPH_BUDGET_MB):
         self.budget_bytes = int(budget_mb * 2 ** 20)
         self._textures: OrderedDict = OrderedDict()  # key -> (texture, bytes, (regular, widened) slots used)
         self.nbytes = 0
@@ -212,7 +210,7 @@ class MorphPass(FramePass):
                    inputs.convex_mirrors, settings.polish_frames)
 
     def __init__(self, geometry, grids, meshes: ReflectedMeshes | None = None,
-                 budget_mb: float = DEFAULT_BUDGET_MB, accuracy_px: float | None = None,
+                 budget_mb: float = DEFAULT_MORPH_BUDGET_MB, accuracy_px: float | None = None,
                  convex_mirrors: ConvexMirrors | None = None, polish_frames: bool = False):
         self.geometry = geometry
         #: Each frame's blended answers polished on the mirror (:meth:`_polish`), where the
