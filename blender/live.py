@@ -24,7 +24,7 @@ belongs to one view; V: projection runs per draw on the GPU):
 - **projection** (once per camera and per mesh change): the meshes' vertices
   projected with the camera, kept by the renderer as reflected triangles whose
   vertices sit at their *first reflector points in world space*
-  (``ReflectionRenderer.projection``). A new camera's is made on the worker right
+  (``camera_pass.CameraPass``). A new camera's is made on the worker right
   after it, with numpy (``camera_source.CameraSource``), and only put on the GPU by
   the first draw after it landed; after a mesh change the next draw projects on the
   GPU (main thread). Not on every redraw.
@@ -68,7 +68,7 @@ from ..engine.errors import SceneInputError
 from ..engine.methods.morphing.morphing import ViewOutsideGrid
 from ..engine.scene import scene_bounds
 from ..engine.view import View
-from ..drawing.methods.projection import SBCTextures
+from ..drawing.methods.sbc_gpu import SBCTextures
 from ..drawing.reflection_draw import MAX_TRACED_FRACTION
 from ..drawing.traced_pixels import trace_doubtful
 from . import accuracy, live_status, live_workers, method_plan, method_registry, morph_bake
@@ -214,19 +214,19 @@ def _start_camera(state: LiveScene, key, view: View, wait: bool) -> None:
     """Build ``view``'s camera, if it needs one: on the worker, or here and now with ``wait``."""
     state.requests.pop(key, None)
     job, covering = state.camera_job(view), _covering_grids(state, view)
-    projections = state.renderer.sbc
+    maker = state.renderer.camera_pass.maker
     future = Future()
     if job is None:
         future.set_result((None, None))
     elif wait:
         try:
-            future.set_result(live_workers.build_camera(job, projections))
+            future.set_result(live_workers.build_camera(job, maker))
         except Exception as error:  # noqa: BLE001 - reported as the status line
             future.set_exception(error)
     else:
-        future = live_workers.builder().submit(live_workers.build_camera, job, projections)
+        future = live_workers.builder().submit(live_workers.build_camera, job, maker)
     bounds = state.camera_bounds() if job is None else job.bounds
-    state.jobs[key] = CameraBuild(future, view, bounds, state.settings, state.generation, covering, projections)
+    state.jobs[key] = CameraBuild(future, view, bounds, state.settings, state.generation, covering, maker)
     if future.done():
         _collect(state)
 
@@ -255,7 +255,7 @@ def _collect(state: LiveScene) -> bool:
         state.failed.pop(key, None)
         state.cameras[key] = ViewCamera(build.view, sbc, build.bounds, build.settings, build.generation,
                                         build.covering, last_drawn=time.monotonic(),
-                                        projected=None if projected is None else (build.projections, projected))
+                                        projected=None if projected is None else (build.maker, projected))
         state.counts["builds"] += 1
         live_status.update_stats(state, sbc, build.covering)
         live_status.report_visibility(state, build.view, sbc)
@@ -451,10 +451,11 @@ def _projection_source(state: LiveScene, camera: ViewCamera | None):
     dropped) the camera's GPU textures, which project on this draw."""
     if camera is None or camera.sbc is None:
         return None
-    if (camera.source is not None and camera.source.on_gpu) or state.renderer.sbc.holds(camera.source):
+    camera_pass = state.renderer.camera_pass
+    if (camera.source is not None and camera.source.on_gpu) or camera_pass.holds(camera.source):
         return camera.source
     projected, camera.projected = camera.projected, None
-    if projected is not None and projected[0] is state.renderer.sbc and state.renderer.sbc.adopt(projected[1]):
+    if projected is not None and projected[0] is camera_pass.maker and camera_pass.adopt(projected[1]):
         camera.source = projected[1].source
     else:
         camera.source = SBCTextures(camera.sbc)

@@ -36,7 +36,7 @@ class ViewCamera:
     morph: list = field(default_factory=list)  # (MorphingGrid, matrix) of the grids covering the view
     source: object = None  # what the renderer projects with (made on the first draw: needs the GPU)
     last_drawn: float = 0.0
-    #: (the renderer's CameraProjections, its CachedProjection of this camera not yet on
+    #: (the renderer's CameraTriangleMaker, its CameraTriangles of this camera not yet on
     #: the GPU): made on the worker with the camera, adopted on the first draw.
     projected: tuple | None = None
     #: The pixels of the camera's unreliable cells, traced on a worker once the camera's
@@ -55,7 +55,7 @@ class ViewCamera:
 @dataclass
 class CameraBuild:
     """A view's camera on its way (``live._start_camera``): what it is built for, and the
-    renderer's projections its reflected triangles are made for on the worker."""
+    renderer's triangle maker its reflected triangles are made with on the worker."""
 
     future: Future  # -> (SampleBasedCamera or None, its projection or None)
     view: View
@@ -63,7 +63,7 @@ class CameraBuild:
     settings: FrameSettings
     generation: int
     covering: list  # (MorphingGrid, matrix) of the grids covering the view
-    projections: object  # the renderer's CameraProjections
+    maker: object  # the renderer's CameraTriangleMaker (its camera pass's)
 
 
 @dataclass

@@ -27,14 +27,14 @@ BACKGROUND_NICENESS = 10
 _executors: dict = {}
 
 
-def build_camera(job: CameraJob, projections):
+def build_camera(job: CameraJob, maker):
     """The view's ray map and BSP trees (``frame_pipeline.CameraJob``), then the
-    reflected triangles of the renderer's meshes (``projections``, a
-    ``CameraProjections``) projected with numpy (``camera_source.CameraSource``): the
+    reflected triangles of the renderer's meshes (``maker``, a
+    ``CameraTriangleMaker``) projected with numpy (``camera_source.CameraSource``): the
     camera's landing then costs the main thread no projection pass, only the upload
-    (``CameraProjections.adopt``). Returns both."""
+    (``CameraPass.adopt``). Returns both."""
     sbc = job.build()
-    return sbc, projections.triangles(CameraSource(sbc), sbc.ray_map.view, sbc, job.first_order_left_out)
+    return sbc, maker.triangles(CameraSource(sbc), sbc.ray_map.view, sbc, job.first_order_left_out)
 
 
 def prepare_reflectors(reflectors, meshes):

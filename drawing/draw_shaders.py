@@ -4,7 +4,7 @@ sample-based camera, reflected meshes and composite, each built from ``glsl/`` o
 use and cached (never at import or register time).
 
 Push constants stay far below the 128 bytes Vulkan guarantees
-(:data:`PUSH_CONSTANT_BYTES`); the cameras travel in textures (``projection.SBCTextures``).
+(:data:`PUSH_CONSTANT_BYTES`); the cameras travel in textures (``sbc_gpu.SBCTextures``).
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from __future__ import annotations
 import gpu
 
 from ..engine.geometry import band_trace
-from .methods import projection
+from .methods import sbc_gpu
 from .shader_sources import glsl_source
 from .shader_cache import cached_shader
 
@@ -93,12 +93,12 @@ def _build_project():
     info.push_constant('IVEC2', "target_size")
     info.push_constant('FLOAT', "inverse_diameter")
     info.push_constant('FLOAT', "order_range")
-    projection.declare_samplers(info)
+    sbc_gpu.declare_samplers(info)
     info.vertex_in(0, 'VEC3', "position")
     info.vertex_out(interface)
     info.fragment_out(0, 'VEC4', "projected_out")
     info.fragment_out(1, 'VEC4', "eye_out")
-    info.vertex_source(projection.library_source() + shading_source() + glsl_source("reflection_project_vert.glsl"))
+    info.vertex_source(sbc_gpu.library_source() + shading_source() + glsl_source("reflection_project_vert.glsl"))
     info.fragment_source(glsl_source("reflection_project_frag.glsl"))
     return gpu.shader.create_from_info(info)
 

@@ -1,27 +1,36 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""What the renderer asks of a method that answers every vertex on the GPU each frame.
+"""What the renderer asks of a method that draws reflections: the pass protocol.
 
-The iterative search (``methods/iterative_draw.py``), the morphing grids, tetrahedral and
-octree (``methods/morph_pass.py``), and perturbation (``methods/perturbation_pass.py``)
-each write one answer texture per reflector (and image slot) that
-:class:`.reflected_meshes.ReflectedMeshes` draws. The renderer (``reflection_draw.py``)
-holds them as a tuple of :class:`FramePass` and never asks which method one is: it
-updates them for the view, draws their answers, and traces the pixels each says its
+Every method is a :class:`FramePass`. The renderer (``reflection_draw.py``) holds them as
+one tuple and never asks which method one is: for each frame it makes one
+:class:`Frame` (the view, the targets, the sample-based camera's source if any), and
+every pass, in order, updates for it (:meth:`FramePass.update`), claims the reflectors
+whose first-order reflections it draws instead of the passes after it
+(:meth:`FramePass.claims`), and draws its reflected geometry into the frame's reflection
+target (:meth:`FramePass.draw`); the renderer then traces the pixels each pass says its
 method cannot be trusted on.
+
+The sample-based camera (``methods/camera_pass.py``) comes first: it draws the reflected
+triangles made once per camera and claims the first orders it drew. The iterative search
+(``methods/iterative_draw.py``), the morphing grids, tetrahedral and octree
+(``methods/morph_pass.py``), and perturbation (``methods/perturbation_pass.py``) answer
+every vertex on the GPU each frame: one answer texture per reflector (and image slot),
+which :class:`.reflected_meshes.ReflectedMeshes` draws (the default :meth:`FramePass.draw`).
 """
 
 from __future__ import annotations
 
 import functools
-import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from ..engine.frame_settings import FrameSettings
+from .reflected_meshes import REFLECTION_COSINE, SNAP_SHARE
+from .screen_space import camera_position
 
-#: 20 degrees: an answer from another sheet of a curved mirror (across a fold, a crease,
-#: another image in the same slot) misses by far more; an interpolated point of a small
-#: reflected triangle by far less.
-REFLECTION_COSINE = math.cos(math.radians(20.0))
+#: Depth range of the per-frame passes' first-order reflections (as SBC V-A's g for max
+#: order 1); they never share pixels with another method's, the pre-pass ids keep each
+#: reflection on its own mirror.
+FIRST_ORDER_RANGE = 0.5
 
 
 @dataclass(frozen=True)
@@ -41,12 +50,45 @@ class PassInputs:
     settings: FrameSettings
 
 
+@dataclass(frozen=True)
+class Frame:
+    """What every pass of one frame consumes (made by ``ReflectionRenderer.draw_passes``).
+
+    ``view``: the view drawn; ``warm``: a viewport frame, which may start from the last
+    frame's answers and snaps its reflected vertices within ``accuracy_px``; a render is
+    cold, so that its image depends on its view alone and is placed exactly.
+    ``source``: the projection source of a sample-based camera (``None``: no camera this
+    frame) and ``camera`` the camera itself when known. ``targets``
+    (``frame_targets.FrameTargets``) hold the pre-pass; ``world_to_clip`` places world
+    points (relative to the geometry's shift) on screen; ``images(k)`` is image ``k``'s
+    texture (-1: none). ``claimed``: the reflectors whose first-order reflections an
+    earlier pass draws this frame (:meth:`FramePass.claims`), which the later ones skip.
+    """
+
+    view: object
+    targets: object
+    world_to_clip: object
+    images: object
+    warm: bool = False
+    accuracy_px: float | None = None
+    source: object = None
+    camera: object = None
+    claimed: frozenset = frozenset()
+
+    def claiming(self, reflectors) -> "Frame":
+        """This frame with ``reflectors`` claimed as well."""
+        reflectors = frozenset(reflectors)
+        return self if reflectors <= self.claimed else replace(self, claimed=self.claimed | reflectors)
+
+
 class FramePass:
     """One method's per-frame GPU work for one renderer. Subclasses implement
-    :meth:`of_inputs`, :meth:`update` and :meth:`answers`, and hold ``methods`` (one per
-    reflector, each with its ``index``) or override :attr:`reflector_indices`; the rest
-    says how the renderer's band trace treats the pass's reflectors and what work it does
-    off the drawing thread, and defaults to *not at all*."""
+    :meth:`of_inputs`, :meth:`update` and :meth:`answers`, hold ``geometry`` and
+    ``meshes`` (the :class:`PassInputs`'), and hold ``methods`` (one per reflector, each
+    with its ``index``) or override :attr:`reflector_indices`; a pass that draws other
+    than answer textures overrides :meth:`draw`. The rest says how the renderer's band
+    trace treats the pass's reflectors and what work it does off the drawing thread, and
+    defaults to *not at all*."""
 
     #: The pass's name in statistics and in ``ReflectionRenderer.pass_named``.
     name = "pass"
@@ -92,15 +134,37 @@ class FramePass:
         """Every reflector this pass may draw."""
         return [method.index for method in self.methods]
 
-    def update(self, view, warm: bool = False, skip=frozenset()) -> None:
-        """This frame's answers for ``view``. ``warm``: start from the last frame's (a
-        viewport moving a little); a render is cold, so that its image depends on its
-        view alone. ``skip``: reflectors a sample-based camera draws this frame instead."""
+    def update(self, frame: Frame) -> None:
+        """This frame's answers for ``frame.view`` (``frame.warm``: start from the last
+        frame's), leaving out the reflectors in ``frame.claimed``."""
         raise NotImplementedError
+
+    def claims(self) -> frozenset:
+        """The reflectors whose first-order reflections the last update drew for the
+        passes after this one (they skip them)."""
+        return frozenset()
 
     def answers(self) -> list:
         """(reflector index, answer texture) of the last update, for ``ReflectedMeshes.draw``."""
         raise NotImplementedError
+
+    def draw(self, frame: Frame) -> None:
+        """The reflected meshes at the last update's answers into ``frame.targets``'
+        reflection target (bound by the caller, depth test on)."""
+        self.meshes.draw(frame.world_to_clip, frame.targets, self.reflected_setup(frame), frame.images,
+                         self.answers())
+
+    def reflected_setup(self, frame: Frame) -> dict:
+        """The uniforms of this pass's reflected meshes in ``frame`` (``ReflectedMeshes.draw``):
+        a warm frame's vertices snap to a grid within the pass's Accuracy
+        (``reflected_meshes.SNAP_SHARE``); a render places them exactly, and tests the law
+        of reflection at :attr:`rendered_reflection_cosine`."""
+        view, accuracy = frame.view, self.accuracy_px if frame.warm else None
+        return {"inverse_diameter": 1.0 / self.geometry.diameter, "order_range": FIRST_ORDER_RANGE,
+                "camera": camera_position(view, self.geometry.shift), "hidden_fraction": self.hidden_fraction,
+                "reflection_cosine": self.reflection_cosine if frame.warm else self.rendered_reflection_cosine,
+                "mirrored": frozenset(self.mirrored_reflectors), "view_size": (float(view.width), float(view.height)),
+                "snap_px": 0.0 if accuracy is None else SNAP_SHARE * float(accuracy)}
 
     def drawn_in(self, view) -> frozenset:
         """The reflectors whose first-order reflections this pass draws in ``view`` (a

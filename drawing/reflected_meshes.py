@@ -21,13 +21,16 @@ import numpy as np
 
 from ..engine.methods.iterative import search as search_module
 from .draw_shaders import reflected_fragment_source, reflected_interface, shading_source
-from .frame_pass import REFLECTION_COSINE
 from .gpu_data import data_texture, read_texture, vertex_buffer
 from .shader_sources import glsl_source
 from .shader_cache import cached_shader
 
 #: Texels per row of the vertex and answer textures.
 TEXTURE_WIDTH = 4096
+#: 20 degrees: an answer from another sheet of a curved mirror (across a fold, a crease,
+#: another image in the same slot) misses by far more; an interpolated point of a small
+#: reflected triangle by far less.
+REFLECTION_COSINE = math.cos(math.radians(20.0))
 #: A reflected fragment is kept only where the interpolated validity of its triangle's
 #: corners reaches this: 1 inside triangles whose corners all have an answer, below it
 #: everywhere else but within 1e-4 of an edge's length from a valid corner.
@@ -94,7 +97,7 @@ def reflected_shader(law_test: bool = True, hidden_test: bool = True):
 def fragment_tests(reflector_index: int, setup: dict) -> tuple[bool, bool]:
     """(law of reflection, hidden point): which of the fragment stage's tests can drop a
     fragment of a reflector's answers (``glsl/reflection_mesh_frag.glsl``). The law of
-    reflection at its usual tolerance (``frame_pass.REFLECTION_COSINE``) guards against a
+    reflection at its usual tolerance (:data:`REFLECTION_COSINE`) guards against a
     triangle whose corners lie in different sheets of the reflection, and a mirror whose
     images are all mirrored (``setup["mirrored"]``, a convex one) has one sheet; a
     tighter tolerance (a render's test of blended answers) can fail on any mirror. The
@@ -168,7 +171,7 @@ class ReflectedMeshes:
         into the bound framebuffer (depth test on), placed by ``view_projection`` (a
         ``mathutils.Matrix`` relative to the shift), against the pre-pass of ``targets``
         (``frame_targets.FrameTargets``); ``image_of(k)`` is the texture of
-        image ``k`` (-1: none); ``setup`` as ``ReflectionRenderer.reflected_setup``, with
+        image ``k`` (-1: none); ``setup`` as ``FramePass.reflected_setup``, with
         ``hidden_fraction``: a fragment whose reflector point lies farther from the eye
         than the mirror surface the pre-pass saw there, by more than this fraction of the
         reflector's bounding-box diagonal, is hidden by the mirror and dropped

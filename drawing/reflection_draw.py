@@ -20,17 +20,19 @@ Three passes, all into float targets of the view's size:
 2. **Reflections**: the reflected ("virtual") meshes, each vertex placed where the view
    sees its first reflector point, with the depth of SBC V-A (k - 1 + z / D) g for
    order k and distance z along the reflected ray (lower orders before higher ones, the
-   nearer point within an order). Two kinds of source, any mix of them per reflector:
+   nearer point within an order). Every method is a pass (:mod:`.frame_pass`), any mix
+   of them per reflector, drawn in order:
 
-   a. a *sample-based camera* (SBC IV): its reflected triangles are made **once per
-      camera** (:mod:`.methods.sbc_triangles`, cached) and drawn every frame with
-      ``glsl/reflection_mesh_vert.glsl``; in the camera's own view exactly at its
-      projected pixels. From a moved view (a new camera still building) the reflection
-      stays on the mirror in world space, nearly right, instead of lagging as pixels of
-      the old view;
-   b. the *per-frame passes*: the iterative search (:mod:`.methods.iterative_draw`) and the
-      morphing grids (:mod:`.methods.morph_pass`) answer every vertex on the GPU each frame,
-      and :mod:`.reflected_meshes` draws the meshes at their answers.
+   a. the *sample-based camera* (SBC IV, :mod:`.methods.camera_pass`): its reflected
+      triangles are made **once per camera** (:mod:`.methods.sbc_triangles`, kept) and
+      drawn every frame with ``glsl/reflection_mesh_vert.glsl``; in the camera's own
+      view exactly at its projected pixels. From a moved view (a new camera still
+      building) the reflection stays on the mirror in world space, nearly right,
+      instead of lagging as pixels of the old view;
+   b. the *per-frame passes*: the iterative search (:mod:`.methods.iterative_draw`), the
+      morphing grids (:mod:`.methods.morph_pass`) and perturbation
+      (:mod:`.methods.perturbation_pass`) answer every vertex on the GPU each frame, and
+      :mod:`.reflected_meshes` draws the meshes at their answers.
 
    The fragment stage keeps only pixels whose pre-pass id is the vertex's first
    reflector (history[0] + 1): reflections stay inside the visible footprint of their
@@ -69,7 +71,7 @@ of order k > 1 the eye vector of lighting runs to the first reflector point, not
 last.
 
 :class:`ReflectionRenderer` holds one scene's geometry (subdivided once), its GPU
-batches and the projections of the last cameras drawn; :meth:`ReflectionRenderer.draw`
+batches and its passes (the last cameras' reflected triangles kept); :meth:`ReflectionRenderer.draw`
 draws any view with any sample-based camera of it and composites into the framebuffer
 that is bound, so a viewport draw handler can call it with the region's matrices
 (``blender.capture.view_from_region``); :meth:`ReflectionRenderer.render` draws
@@ -90,21 +92,17 @@ from ..engine.geometry import band_trace, subdivision
 from ..engine.frame_settings import FrameSettings
 from ..engine.geometry.closed_surfaces import ConvexMirrors
 from . import draw_shaders
-from .methods import projection
 from .draw_geometry import prepare_geometry
-from .frame_pass import REFLECTION_COSINE, PassInputs
+from .frame_pass import Frame, PassInputs
 from .frame_targets import FrameTargets
 from .gpu_data import data_texture, read_depth, read_texture, saved_state, vertex_buffer
-from .reflected_meshes import SNAP_SHARE, ReflectedMeshes, snap_grid
+from .reflected_meshes import ReflectedMeshes
 from .traced_pixels import traced_rgba, traced_texture
 from .screen_space import (FULL_SCREEN, box_corners, box_on_screen, camera_position, depth_bias, pixel_box,
                            view_projection)
-from .methods.sbc_triangles import MIXED_SUBDIVISIONS, CachedProjection, CameraProjections
+from .methods.camera_pass import CameraPass
+from .methods.sbc_triangles import MIXED_SUBDIVISIONS, CameraTriangleMaker
 
-#: Depth range of the iterative search's first-order reflections (as SBC V-A's g for
-#: max order 1); they never share pixels with another method's, the pre-pass ids keep
-#: each reflection on its own mirror.
-ITERATIVE_ORDER_RANGE = 0.5
 #: A bare renderer's settings (tests, benchmarks): the per-frame passes to half a pixel,
 #: a camera's answers polished, each frame's blend not.
 PLAIN_SETTINGS = FrameSettings(accuracy_px=0.5, polish_frames=False)
@@ -149,10 +147,11 @@ def _rgba(color) -> tuple:
 class ReflectionRenderer:
     """One scene's reflected geometry and GPU batches; draws it for any view and camera.
 
-    Build it once per scene change (subdivision runs here, once per mesh). The projection
-    of the meshes with a sample-based camera is made once per camera
-    (:meth:`projection`, cached until another camera's textures are drawn) and
-    :meth:`draw` or :meth:`render` draws any view with it. ``cull``: project in each
+    Build it once per scene change (subdivision runs here, once per mesh). Its
+    :attr:`passes` draw the reflections (:mod:`.frame_pass`'s protocol): first the
+    sample-based camera's (:attr:`camera_pass`, whose reflected triangles are made once
+    per camera and kept), then the per-frame passes'. :meth:`draw` or :meth:`render`
+    draws any view with any camera of it. ``cull``: project in each
     sheet only the vertex chunks that meet the sheet's k-DOP
     (``engine/methods/sbc/sheet_bounds.py``; needs the camera itself, not only its
     textures). ``settings`` (:class:`~..engine.frame_settings.FrameSettings`): with
@@ -177,17 +176,18 @@ class ReflectionRenderer:
         self.meshes = ReflectedMeshes(self.geometry)
         self.convex_mirrors = convex = ConvexMirrors(reflectors)  # tested once, for every pass
         inputs = PassInputs(self.geometry, self.meshes, tuple(reflectors), reflector_set, convex, settings)
-        #: Every per-frame pass (:class:`.frame_pass.FramePass`), made by the factories
-        #: ``passes`` (``MethodPlan.pass_factories``), which the frame code treats alike.
-        self.passes = tuple(make(inputs) for make in passes)
-        polish = settings.polish_camera
+        per_frame = tuple(make(inputs) for make in passes)
         self.stats = dict(self.geometry.stats)
         self.counts = {"projections": 0, "frames": 0}
-        #: The sample-based cameras' reflected triangles, made once per camera.
-        # The passes, not a bound method: no reference cycle keeps a finished render
-        # (a gigabyte for a million-triangle mirror) alive until a full garbage collection.
-        self.sbc = CameraProjections(self.geometry, functools.partial(_drawn_by, self.passes), self.counts,
-                                     mixed_subdivisions, cull, polish, convex)
+        # The per-frame passes, not a bound method: no reference cycle keeps a finished
+        # render (a gigabyte for a million-triangle mirror) alive until a full collection.
+        maker = CameraTriangleMaker(self.geometry, functools.partial(_drawn_by, per_frame), self.counts,
+                                    mixed_subdivisions, cull, settings.polish_camera, convex)
+        #: The sample-based camera's pass: its reflected triangles, made once per camera.
+        self.camera_pass = CameraPass(maker, len(reflectors))
+        #: Every pass (:class:`.frame_pass.FramePass`), in drawing order: the camera's,
+        #: then those the factories ``passes`` made (``MethodPlan.pass_factories``).
+        self.passes = (self.camera_pass,) + per_frame
         self._reflectors, self._meshes = list(reflectors), list(meshes)
         #: The mirrors' ray-tracing set when the caller has one (its band tracer shares it).
         self._reflector_set = reflector_set
@@ -248,8 +248,8 @@ class ReflectionRenderer:
         return self._tracer
 
     def invalidate(self) -> None:
-        """Forget the cached projections: the next draw projects again."""
-        self.sbc.invalidate()
+        """Forget the cameras' reflected triangles: the next draw projects again."""
+        self.camera_pass.invalidate()
 
     def draw(self, view, textures, world_color=(0.0, 0.0, 0.0, 1.0), reflectors_only: bool = False,
              fill_radius: int | None = None, camera=None, accuracy_px: float | None = None,
@@ -259,7 +259,7 @@ class ReflectionRenderer:
         caller (:meth:`composite`). What a viewport draw handler calls, with the
         region's view (``blender.capture.view_from_region``); nothing is read back.
 
-        ``textures`` is a sample-based camera as ``projection.SBCTextures``, ``camera``
+        ``textures`` is a sample-based camera as ``sbc_gpu.SBCTextures``, ``camera``
         the camera itself (optional; see :meth:`draw_passes`), ``accuracy_px`` the
         Accuracy it was built to (the viewport snaps its reflected triangles within it,
         see :meth:`draw_passes`; ``None``: placed exactly); ``world_color`` the
@@ -302,18 +302,18 @@ class ReflectionRenderer:
     def draw_passes(self, view, textures, camera=None, warm: bool = False,
                     mirrors_only: bool = False, accuracy_px: float | None = None,
                     scissor: tuple | None = None) -> FrameTargets:
-        """The pre-pass and the reflected triangles of ``view`` into its frame targets.
+        """The pre-pass and every pass's reflections of ``view`` into its frame targets.
 
-        The reflected triangles come from :meth:`projection` of ``textures``: made now
-        when these textures are not the cached ones, else reused. The projection is made
-        in the camera's own view: ``camera.ray_map.view`` when the camera is given, else
-        ``view`` (which must then be the camera's view). A ``view`` other than the
-        camera's (the viewport moved, a new camera is being built) draws the cached
-        first reflector points where ``view`` sees them. The iterative search's
-        reflectors are searched for ``view`` itself; ``warm`` starts each vertex from
-        its last answer and snaps the per-frame passes' reflected vertices to a grid
-        within their Accuracy (the viewport's :meth:`draw` does; a render does not, so
-        that its image depends on its view alone and is placed exactly).
+        One :class:`.frame_pass.Frame` goes to every pass in order. The camera's pass
+        draws the reflected triangles of ``textures`` (a projection source; ``None``: no
+        camera), made the first time these textures are drawn, in the camera's own view:
+        ``camera.ray_map.view`` when the camera is given, else the source's. A ``view``
+        other than the camera's (the viewport moved, a new camera is being built) draws
+        their first reflector points where ``view`` sees them. The per-frame passes
+        answer for ``view`` itself; ``warm`` starts each vertex from its last answer and
+        snaps the passes' reflected vertices to a grid within their Accuracy (the
+        viewport's :meth:`draw` does; a render does not, so that its image depends on its
+        view alone and is placed exactly).
         ``mirrors_only``: the pre-pass draws the reflectors alone, not the diffuse meshes
         (a viewport overlay, whose composite the scene's own depth hides where something
         stands in front of a mirror); their pixels then keep the reflectors' labels
@@ -328,11 +328,9 @@ class ReflectionRenderer:
         if self._batches is None:
             self._batches = self._make_batches()
         batches, g = self._batches, self.geometry
-        camera_view = camera.ray_map.view if camera is not None else view if textures is None else textures.view
-        cached = None if textures is None else self.projection(textures, camera_view, camera)
         targets = self.targets(view.width, view.height)
         width, height = targets.width, targets.height
-        world_to_clip = view_projection(view, g.shift)
+        frame = Frame(view, targets, view_projection(view, g.shift), self._image, warm, accuracy_px, textures, camera)
         with saved_state():
             gpu.state.blend_set('NONE')
             gpu.state.face_culling_set('NONE')  # mirrors are two-sided; reflections flip winding
@@ -345,47 +343,24 @@ class ReflectionRenderer:
                     gpu.state.depth_mask_set(True)
                     shader = draw_shaders.shader("prepass")
                     shader.bind()
-                    shader.uniform_float("view_projection", world_to_clip)
+                    shader.uniform_float("view_projection", frame.world_to_clip)
                     shader.uniform_float("camera", camera_position(view, g.shift))
                     for image, batch in batches["prepass_mirrors" if mirrors_only else "prepass"]:
                         shader.uniform_int("use_image", int(image >= 0))
                         shader.uniform_sampler("image", self._image(image))
                         batch.draw(shader)
-            # A pass's reflector is drawn here unless the camera's projection draws it.
-            for frame_pass in self.passes:
-                frame_pass.update(view, warm, skip=frozenset() if cached is None else
-                                  frozenset(frame_pass.reflector_indices) - cached.per_frame)
+            for frame_pass in self.passes:  # each skips the reflectors an earlier one claimed
+                frame_pass.update(frame)
+                frame = frame.claiming(frame_pass.claims())
+            self.stats.update(self.camera_pass.frame_stats())
             with targets.reflection.bind():
                 gpu.state.viewport_set(0, 0, width, height)
                 _scissor_set(scissor)
                 targets.reflection.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
-                if self._answers():
-                    gpu.state.depth_test_set('LESS')
-                    gpu.state.depth_mask_set(True)
-                    for frame_pass in self.passes:
-                        self.meshes.draw(world_to_clip, targets,
-                                         self.reflected_setup(view, frame_pass, live=warm), self._image,
-                                         frame_pass.answers())
-                if cached is not None and cached.batch is not None:
-                    gpu.state.depth_test_set('LESS')
-                    gpu.state.depth_mask_set(True)
-                    shader = draw_shaders.shader("reflected")
-                    shader.bind()
-                    shader.uniform_float("view_projection", world_to_clip)
-                    shader.uniform_float("view_size", (float(width), float(height)))
-                    shader.uniform_float("snap_grid", snap_grid((width, height), SNAP_SHARE * accuracy_px
-                                                                if warm and accuracy_px else 0.0))
-                    shader.uniform_int("use_camera_pixel", int(view.same_as(cached.camera_view)))
-                    shader.uniform_float("camera", camera_position(view, g.shift))
-                    shader.uniform_float("order_range", cached.order_range)
-                    shader.uniform_float("reflection_cosine", REFLECTION_COSINE)
-                    shader.uniform_sampler("prepass_labels", targets.prepass_labels)
-                    shader.uniform_sampler("prepass_normals", targets.prepass_normals)
-                    for image, first, count in cached.runs:
-                        shader.uniform_int("use_image", int(image >= 0))
-                        shader.uniform_sampler("image", self._image(image))
-                        cached.batch.draw_range(shader, elem_start=first, elem_count=count)
-        self.stats["mixed_triangles"] = 0 if cached is None else cached.mixed_triangles
+                gpu.state.depth_test_set('LESS')
+                gpu.state.depth_mask_set(True)
+                for frame_pass in self.passes:
+                    frame_pass.draw(frame)
         self.counts["frames"] += 1
         targets.traced = None
         return targets
@@ -400,19 +375,6 @@ class ReflectionRenderer:
             found.setdefault(index, []).append(self.meshes.read(texture)[0])
         return {index: np.stack(slots) for index, slots in found.items()}
 
-    def reflected_setup(self, view, frame_pass, live: bool = False) -> dict:
-        """The uniforms of ``frame_pass``'s reflected meshes in ``view`` (``ReflectedMeshes.draw``);
-        ``live``: a viewport frame, whose vertices snap to a grid within the pass's
-        Accuracy (``reflected_meshes.SNAP_SHARE``; a render places them exactly, and
-        tests the law of reflection at the pass's ``rendered_reflection_cosine``)."""
-        accuracy = frame_pass.accuracy_px if live else None
-        return {"inverse_diameter": 1.0 / self.geometry.diameter, "order_range": ITERATIVE_ORDER_RANGE,
-                "camera": camera_position(view, self.geometry.shift), "hidden_fraction": frame_pass.hidden_fraction,
-                "reflection_cosine": frame_pass.reflection_cosine if live else frame_pass.rendered_reflection_cosine,
-                "mirrored": frozenset(frame_pass.mirrored_reflectors), "view_size": (float(view.width),
-                                                                                     float(view.height)),
-                "snap_px": 0.0 if accuracy is None else SNAP_SHARE * float(accuracy)}
-
     def _answers(self) -> list:
         return [answer for frame_pass in self.passes for answer in frame_pass.answers()]
 
@@ -420,15 +382,6 @@ class ReflectionRenderer:
         """The union over the passes of one of their :class:`.frame_pass.FramePass` lists
         (``kind``: the pass -> its list)."""
         return [index for frame_pass in self.passes for index in kind(frame_pass)]
-
-    def projection(self, textures, camera_view, camera=None) -> CachedProjection:
-        """The reflected triangles of ``textures``'s camera, built in ``camera_view``:
-        the cached ones when they were made from these textures (the last
-        :data:`.methods.sbc_triangles.CACHED_PROJECTIONS` cameras drawn are kept: one per viewport region),
-        else made now."""
-        cached = self.sbc.projection(textures, camera_view, camera)
-        self.stats.update(cached.stats)
-        return cached
 
     def composite(self, targets: FrameTargets, world_color=(0.0, 0.0, 0.0, 1.0), reflectors_only: bool = False,
                   fill_radius: int = 0, origin=None, scene_depth=None, rect=None) -> None:
@@ -559,17 +512,10 @@ class ReflectionRenderer:
         different histories are traced too (:func:`band_trace.history_boundary`).
         """
         start = time.perf_counter()
-        textures = source
-        if camera is not None:
-            cached = self.sbc.last
-            # The same camera again (a second render of it) keeps its projection.
-            textures = cached.source if cached is not None and cached.camera is camera else (
-                projection.SBCTextures(camera))
+        textures = source if camera is None else self.camera_pass.source_for(camera)
         uploaded = time.perf_counter()
         downsample = 0 if textures is None else textures.downsample
         targets = self.draw_passes(view, textures, camera)
-        if camera is not None:
-            self.sbc.last.camera = camera
         drawn = time.perf_counter()
         traced = 0
         morphed = self._reflectors_of(lambda p: p.gap_reflectors) if trace_gaps else []

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..drawing.methods.morph_pass import SLOTS
-from ..drawing.methods.projection import reflected_depth
+from ..drawing.methods.reflected_depth import reflected_depth
 
 #: Images of one point in one reflector drawn at most (sheets per grid), as on the GPU.
 MAX_IMAGES = SLOTS
@@ -50,7 +50,7 @@ class MorphSource:
         self.downsample = 1  # a vertex's image is blended on its own, not read from a ray map
         self.sheet_subdivisions = [MIXED_SUBDIVISIONS] * len(self.groups)
 
-    def project(self, projections, positions, batch, draws: list, n_texels: int, setup: dict, static: bool = False,
+    def project(self, maker, positions, batch, draws: list, n_texels: int, setup: dict, static: bool = False,
                 camera=None):
         """(n_texels, 4) (pixel, depth, valid) and (eye vector, reflected distance) per
         drawn texel, as the renderer's GPU pass writes them; ``batch`` is not used."""
@@ -63,7 +63,7 @@ class MorphSource:
             key = (grid_index, int(first), int(count))
             if key not in blended:
                 grid, matrix = self.grids[grid_index]
-                static_key = (projections.vertices_token, key[1:]) if static else None
+                static_key = (maker.vertices_token, key[1:]) if static else None
                 blended[key] = grid.project(positions[first:first + count], self.view, matrix,
                                             static_key=static_key)
             result = blended[key]

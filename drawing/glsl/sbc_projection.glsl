@@ -17,8 +17,8 @@
  * Float32 instead of float64: Newton runs on p - origin with tails stored relative to
  * the patch's origin (see sbc_pack.py); tolerances are float32-sized where the engine's
  * float64 ones would be below float32 resolution (SBC_STEP_TOLERANCE, and the floor
- * SBC_ROUNDING_TOLERANCE of the residual test; see drawing/methods/projection.py).
- * The SBC_* constants are #defined by drawing/methods/projection.py from the engine's own
+ * SBC_ROUNDING_TOLERANCE of the residual test; see drawing/methods/sbc_gpu.py).
+ * The SBC_* constants are #defined by drawing/methods/sbc_gpu.py from the engine's own
  * constants. Samplers: sbc_groups, sbc_nodes, sbc_leaves, sbc_patches,
  * sbc_scalars, sbc_rays (RGBA32F, read with texelFetch only). */
 

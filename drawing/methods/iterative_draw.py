@@ -21,7 +21,7 @@ import gpu
 import numpy as np
 
 from ...engine.methods.iterative import search as search_module
-from ..frame_pass import FramePass, PassInputs
+from ..frame_pass import Frame, FramePass, PassInputs
 from ..gpu_data import data_texture
 from ..reflected_meshes import FLIPPED_CODE, ReflectedMeshes
 from ..shader_sources import glsl_source
@@ -122,9 +122,10 @@ class IterativePass(FramePass):
         """The searched mirrors that are convex (``reflector_map.is_convex``)."""
         return [m.index for m in self.methods if m.reflector_map.convex]
 
-    def update(self, view, warm: bool = False, skip=frozenset()) -> None:
-        """:meth:`search` (``skip`` never holds a searched reflector: a camera never draws one)."""
-        self.search(view, warm)
+    def update(self, frame: Frame) -> None:
+        """:meth:`search` (``frame.claimed`` never holds a searched reflector: the
+        search draws it in every view, :meth:`drawn_in`, so a camera leaves it out)."""
+        self.search(frame.view, frame.warm)
 
     def frame_stats(self) -> dict:
         return {"iterative": self.status_counts()}

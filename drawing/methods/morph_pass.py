@@ -36,7 +36,7 @@ from ...engine.methods.morphing import morph_grid, morph_surface, morphing
 from ...engine.baking.bake_cache import CacheError
 from ...engine.geometry.closed_surfaces import ConvexMirrors
 from ...engine.frame_settings import DEFAULT_MORPH_BUDGET_MB
-from ..frame_pass import FramePass, PassInputs
+from ..frame_pass import Frame, FramePass, PassInputs
 from ..gpu_data import data_texture
 from ..reflected_meshes import FOUND_CODE, ReflectedMeshes
 from ..shader_sources import glsl_source, normal_equations_glsl
@@ -273,9 +273,10 @@ class MorphPass(FramePass):
         """The reflectors whose grid covers ``view``."""
         return frozenset(self.grids[k][0].reflector_index for k, _ in self.covering(view))
 
-    def update(self, view, warm: bool = False, skip=frozenset()) -> None:
-        """:meth:`blend` (a blend depends on the view alone: ``warm`` changes nothing)."""
-        self.blend(view, skip)
+    def update(self, frame: Frame) -> None:
+        """:meth:`blend`, but not for the reflectors a camera claimed (a blend depends on
+        the view alone: ``frame.warm`` changes nothing)."""
+        self.blend(frame.view, frame.claimed)
 
     def covering(self, view) -> list:
         """(grid index, (tetrahedron, nodes, weights, frame)) of each grid whose

@@ -20,7 +20,7 @@ from collections import OrderedDict
 
 import numpy as np
 
-from . import projection
+from . import sbc_gpu
 
 #: Face cameras kept packed in GPU textures (a tetrahedron uses four nodes of six faces).
 PACKED_FACES = 48
@@ -29,8 +29,8 @@ PACKED_FACES = 48
 class GPUFaceImages:
     """A node's cube-face cameras projecting on the GPU (``MorphingGrid.face_images``).
 
-    Each face SBC is packed into textures once (:class:`.projection.SBCTextures`, the
-    last :data:`PACKED_FACES` kept) and projects with :func:`.projection.project_points`;
+    Each face SBC is packed into textures once (:class:`.sbc_gpu.SBCTextures`, the
+    last :data:`PACKED_FACES` kept) and projects with :func:`.sbc_gpu.project_points`;
     the first reflector point is the face pixel's view ray at the projected depth, as
     ``SampleBasedCamera.project`` gives it. Needs the GPU: call from the main thread.
     """
@@ -43,12 +43,12 @@ class GPUFaceImages:
     def __call__(self, sbc, points) -> np.ndarray:
         entry = self._packed.pop(id(sbc), None)
         if entry is None or entry[0] is not sbc:
-            entry = (sbc, projection.SBCTextures(sbc))
+            entry = (sbc, sbc_gpu.SBCTextures(sbc))
             self.packs += 1
             while len(self._packed) >= self.capacity:
                 self._packed.popitem(last=False)
         self._packed[id(sbc)] = entry
-        result = projection.project_points(entry[1], points)
+        result = sbc_gpu.project_points(entry[1], points)
         images = np.full(result.pixels.shape[:2] + (3,), np.nan)
         if result.valid.any():
             origins, directions = sbc.ray_map.view.pixel_rays(result.pixels[result.valid])

@@ -16,7 +16,7 @@ import numpy as np
 from ...engine.methods.perturbation import PerturbationMethod, PerturbationSettings, PerturbationStats
 from ...engine.methods.perturbation.projector import grazing
 from ...engine.geometry.raytrace import ReflectorSet
-from ..frame_pass import FramePass, PassInputs
+from ..frame_pass import Frame, FramePass, PassInputs
 from ..gpu_data import data_texture
 from ..reflected_meshes import FOUND_CODE, ReflectedMeshes
 from .perturbation_gpu import RANKS, PerturbationStep
@@ -51,9 +51,10 @@ class PerturbationPass(FramePass):
         self.counts = {"projections": 0}
         self.last_stats = None
 
-    def update(self, view, warm: bool = False, skip=frozenset()) -> None:
-        """:meth:`project` (``skip`` never holds one of its reflectors: a camera never draws one)."""
-        self.project(view)
+    def update(self, frame: Frame) -> None:
+        """:meth:`project` (``frame.claimed`` never holds one of its reflectors: it draws
+        them in every view, :meth:`drawn_in`, so a camera leaves them out)."""
+        self.project(frame.view)
 
     @property
     def engine(self) -> PerturbationMethod:

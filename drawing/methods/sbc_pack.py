@@ -62,7 +62,7 @@ the coefficients, which are already functions of the chart coordinates.
 
 :func:`pack_sample_based_camera` is plain numpy (testable without a GPU);
 :func:`unpack_sample_based_camera` reads the arrays back for tests;
-``projection.SBCTextures`` uploads them as ``gpu`` textures.
+``sbc_gpu.SBCTextures`` uploads them as ``gpu`` textures.
 """
 
 from __future__ import annotations

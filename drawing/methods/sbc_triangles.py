@@ -24,18 +24,19 @@ c. *Mixed triangles* (SBC V-B: one or two corners project, none stitched): each 
    triangle. Inside, a block of :data:`MIXED_COARSE_FACTOR` ^ 2 sub-triangles that all
    project is kept as one triangle over its projected corners.
 
-The result, a :class:`CachedProjection`, is one vertex buffer whose vertices hold their
+The result, a :class:`CameraTriangles`, is one vertex buffer whose vertices hold their
 first reflector point in world space, depth, eye vector, distance and mesh data; the
-renderer draws it every frame with ``glsl/reflection_mesh_vert.glsl``.
+camera's pass (``camera_pass.CameraPass``) keeps it and draws it every frame with
+``glsl/reflection_mesh_vert.glsl``.
 
 What is projected comes from a *projection source*, one protocol for every kind: its
 ``groups`` (a reflection history per sheet), ``downsample`` (ray-map pixels per cell),
 ``view`` (the view it was made for), ``on_gpu`` (it projects a batch of points on the
 GPU, else their positions in numpy), ``sheet_subdivisions`` (a cap per sheet on the
-mixed-triangle sub-grid, or None) and ``project(projections, positions, batch, draws,
+mixed-triangle sub-grid, or None) and ``project(maker, positions, batch, draws,
 n_texels, setup, static, camera)`` -> the (pixel, depth, kind) and (eye vector,
-distance) texels of :meth:`CameraProjections.project_pass`. A camera's GPU textures
-(``projection.SBCTextures``) and the camera in numpy (``camera_source.CameraSource``)
+distance) texels of :meth:`CameraTriangleMaker.project_pass`. A camera's GPU textures
+(``sbc_gpu.SBCTextures``) and the camera in numpy (``camera_source.CameraSource``)
 are sources; so is the numpy morphing blend the benchmarks compare with
 (``tools/numpy_morph_source.py``).
 """
@@ -54,8 +55,8 @@ from ...engine.geometry.closed_surfaces import ConvexMirrors, turned_away
 from ...engine.methods.sbc import sheet_bounds
 from ...engine.geometry import subdivision
 from .. import draw_shaders
-from . import projection
-from ..gpu_data import points_batch, read_texture, saved_state, vertex_buffer
+from . import sbc_gpu
+from ..gpu_data import points_batch, read_texture, saved_state
 
 #: A mixed triangle (SBC V-B) is drawn as a triangular grid of n sub-triangles along each
 #: edge (n^2 in all), each sub-vertex projected on its own; n is a power of two up to this,
@@ -96,8 +97,6 @@ def _runs(values: np.ndarray) -> list:
 #: Vertices per chunk of the per-sheet culling: runs of the Morton-sorted vertices
 #: (:func:`sheet_bounds.morton_order`), each with its AABB.
 CHUNK_VERTICES = 512
-#: Cameras whose projections a renderer keeps (a viewport region each, as blender/live.py's MAX_VIEWS).
-CACHED_PROJECTIONS = 8
 
 
 def _subdivision_caps(source, sheets: list):
@@ -117,17 +116,18 @@ def _culling(camera, diameter: float):
 
 
 @dataclass
-class CachedProjection:
+class CameraTriangles:
     """The reflected triangles of one sample-based camera over the renderer's meshes.
 
     Made once per camera (or per mesh change: a new renderer) by
-    :meth:`ReflectionRenderer.projection`, drawn every frame. Every vertex of a drawn
+    :meth:`CameraTriangleMaker.triangles`, kept and drawn every frame by
+    ``camera_pass.CameraPass``. Every vertex of a drawn
     reflected triangle holds its first reflector point in world space, its depth (order
     and distance along the reflected ray, SBC V-A), its camera-view pixel, its eye vector
     and reflected distance (SBC V-C, V-D) and its mesh's colour, normal and UVs.
     """
 
-    source: object  # the projection.SBCTextures or other source it was made from (identity = the cache key)
+    source: object  # the sbc_gpu.SBCTextures or other source it was made from (identity = the key it is kept by)
     camera_view: object  # the view the camera was built for
     batch: object  # GPUBatch of the triangles (un-indexed), or None when nothing is reflected
     runs: tuple  # (image index or -1, first vertex, vertex count), in drawing order
@@ -173,13 +173,13 @@ def _coarse_cover(n: int, m: int) -> tuple[np.ndarray, np.ndarray]:
     return coarse_of_fine, coarse_in_fine
 
 
-class CameraProjections:
-    """The reflected triangles of the sample-based cameras drawn over one renderer's
-    geometry (a ``draw_geometry.DrawGeometry``), the last :data:`CACHED_PROJECTIONS` kept.
+class CameraTriangleMaker:
+    """Makes the reflected triangles of a sample-based camera over one renderer's
+    geometry (a ``draw_geometry.DrawGeometry``): :meth:`triangles`.
 
     ``per_frame_reflectors(view)``: the reflectors whose first-order sheets the
     per-frame passes draw instead (left out of a projection); ``counts``: the renderer's
-    counters (``"projections"`` is counted here). ``cull``: project in each sheet only
+    counters (``"projections"``, counted by ``camera_pass.CameraPass`` as it uploads them). ``cull``: project in each sheet only
     the vertex chunks that meet the sheet's k-DOP (:mod:`...engine.methods.sbc.sheet_bounds`; needs the
     camera itself, not only its textures). ``polish``: the GPU's ray-list and fold-cell
     answers are polished on the true rays on the CPU (needs the camera too; exact, but
@@ -200,9 +200,6 @@ class CameraProjections:
         self._convex = ConvexMirrors() if convex_mirrors is None else convex_mirrors
         #: Names these vertices for sources that keep work for them (MorphSource).
         self.vertices_token = object()
-        #: The projection drawn last.
-        self.last = None
-        self._cache: dict = {}  # id(textures) -> CachedProjection, least recently drawn first
         self._points = None
         g = geometry
         self._triangle_image = np.full(len(g.triangles), -1, np.int64)
@@ -215,59 +212,13 @@ class CameraProjections:
             self._triangle_winding[first:first + count] = winding
         self._chunk_boxes = sheet_bounds.chunk_boxes(g.vertices, CHUNK_VERTICES) if len(g.vertices) else None
 
-    def projection(self, textures, camera_view, camera=None) -> CachedProjection:
-        """The reflected triangles of ``textures``'s camera, built in ``camera_view``:
-        the cached ones when they were made from these textures (one per viewport
-        region), else made now."""
-        cached = self._cache.get(id(textures))
-        if cached is None or cached.source is not textures:
-            batch = self._vertex_points() if textures.on_gpu else None
-            cached = self._uploaded(self.triangles(textures, camera_view, camera, vertex_batch=batch))
-        self._keep(cached)
-        return cached
-
-    def adopt(self, cached: CachedProjection) -> bool:
-        """Keep ``cached``, made by :meth:`triangles` elsewhere (a live view's worker
-        thread, with a source that projects on the CPU), as its source's projection: it
-        is put on the GPU now. False, and nothing kept, when the per-frame passes now draw
-        other reflectors in its view than when it was made."""
-        if cached.per_frame != self.per_frame_reflectors(cached.camera_view):
-            return False
-        self._keep(self._uploaded(cached))
-        return True
-
-    def holds(self, source) -> bool:
-        """Whether the projection of ``source`` is kept (a draw with it projects nothing)."""
-        cached = self._cache.get(id(source))
-        return cached is not None and cached.source is source
-
-    def _keep(self, cached: CachedProjection) -> None:
-        self._cache.pop(id(cached.source), None)
-        while len(self._cache) >= CACHED_PROJECTIONS:
-            self._cache.pop(next(iter(self._cache)))
-        self._cache[id(cached.source)] = cached  # most recently used last
-        self.last = cached
-
-    def _uploaded(self, cached: CachedProjection) -> CachedProjection:
-        """``cached`` with its vertex arrays in one GPU vertex buffer (main thread)."""
-        self.counts["projections"] += 1
-        if cached.arrays is not None:
-            buffer = vertex_buffer({name: (values, 'F32', 'FLOAT') for name, values in cached.arrays.items()})
-            cached.batch, cached.arrays = gpu.types.GPUBatch(type='TRIS', buf=buffer), None
-        return cached
-
-    def invalidate(self) -> None:
-        """Forget the cached projections: the next draw projects again."""
-        self.last = None
-        self._cache.clear()
-
     @property
     def convex_reflectors(self) -> frozenset:
         """Indices of the mirrors that bound a convex body (``convex_mirrors``), whose
         first-order sheets leave out the far sides of closed solids (:meth:`_facing_away`)."""
         return self._convex.indices
 
-    def _vertex_points(self):
+    def vertex_points(self):
         """The renderer's vertices as a POINTS batch (the projection pass's input)."""
         if self._points is None:
             self._points = points_batch(self.geometry.vertices.astype(np.float32))
@@ -293,7 +244,7 @@ class CameraProjections:
         return [(int(a) * CHUNK_VERTICES, int(min(b * CHUNK_VERTICES, n) - a * CHUNK_VERTICES))
                 for a, b in zip(starts, ends)]
 
-    def triangles(self, textures, camera_view, camera=None, per_frame=None, vertex_batch=None) -> CachedProjection:
+    def triangles(self, textures, camera_view, camera=None, per_frame=None, vertex_batch=None) -> CameraTriangles:
         """Project the meshes with the camera of ``textures`` (SBC V-A) and decide, from
         the read-back, which reflected triangles are drawn (V-B): per sheet, those with
         every corner projected in it or, across a seam, in another sheet of its history
@@ -305,7 +256,7 @@ class CameraProjections:
         source that projects on the CPU (``camera_source.CameraSource``) and the
         reflectors the per-frame passes draw in ``camera_view`` (``per_frame``), it runs
         no GPU call and changes nothing here: a worker thread may run it. ``vertex_batch``:
-        the vertices as a GPU batch, for the GPU pass of ``projection.SBCTextures``.
+        the vertices as a GPU batch, for the GPU pass of ``sbc_gpu.SBCTextures``.
         """
         start = time.perf_counter()
         g = self.geometry
@@ -314,7 +265,7 @@ class CameraProjections:
         if per_frame is None:
             per_frame = self.per_frame_reflectors(camera_view)
         if n_vertices == 0 or not histories or not len(g.triangles):
-            return CachedProjection(textures, camera_view, None, (), 0, 0, {
+            return CameraTriangles(textures, camera_view, None, (), 0, 0, {
                 "projection_seconds": 0.0, "projected_vertices": 0, "unculled_vertices": 0, "mixed_sub_triangles": 0},
                 per_frame=per_frame)
         world_to_clip = np.asarray(camera_view.projection_matrix) @ np.asarray(camera_view.view_matrix)
@@ -353,7 +304,7 @@ class CameraProjections:
         pieces = [p for p in pieces if len(p[1]["world_depth"])]
         if not pieces:
             stats["projection_seconds"] = time.perf_counter() - start
-            return CachedProjection(textures, camera_view, None, (), 0, n_mixed, stats, per_frame=per_frame)
+            return CameraTriangles(textures, camera_view, None, (), 0, n_mixed, stats, per_frame=per_frame)
         runs, first = [], 0
         for image, arrays in pieces:
             count = len(arrays["world_depth"])
@@ -365,7 +316,7 @@ class CameraProjections:
         names = ("world_depth", "pixel_reflector", "eye_distance", "color", "normal_lit", "uv")
         arrays = {name: np.concatenate([p[1][name] for p in pieces]).astype(np.float32) for name in names}
         stats["projection_seconds"] = time.perf_counter() - start
-        return CachedProjection(textures, camera_view, None, tuple(runs), first // 3, n_mixed, stats,
+        return CameraTriangles(textures, camera_view, None, tuple(runs), first // 3, n_mixed, stats,
                                 per_frame=per_frame, order_range=setup["order_range"], arrays=arrays)
 
     def project_pass(self, textures, batch, draws: list, n_texels: int, setup: dict):
@@ -374,7 +325,7 @@ class CameraProjections:
         texels offset + index. Returns the two targets read back, (n_texels, 4) each:
         (pixel, depth, valid) and (eye vector, reflected distance)
         (``glsl/reflection_project_vert.glsl``); texels of points not drawn are 0 (invalid)."""
-        columns = max(1, min(n_texels, projection.sbc_pack.TEXTURE_WIDTH))
+        columns = max(1, min(n_texels, sbc_gpu.sbc_pack.TEXTURE_WIDTH))
         rows = max(1, -(-n_texels // columns))
         points = gpu.types.GPUTexture((columns, rows), format='RGBA32F')
         eyes = gpu.types.GPUTexture((columns, rows), format='RGBA32F')
@@ -413,7 +364,7 @@ class CameraProjections:
         vertices, which a source may keep work for between views (morphing's node
         images, SBC paper VI). With the ``camera`` of the textures, risky answers are
         polished on the true rays as its numpy projection polishes them
-        (:func:`.projection.polish_readback`)."""
+        (:func:`.sbc_gpu.polish_readback`)."""
         return source.project(self, positions, batch, draws, n_texels, setup, static, camera)
 
     def _vertex_arrays(self, positions, points, eyes, reflector: float, color, normal_lit, uv) -> dict:

@@ -179,7 +179,7 @@ def measure(kind: str, width: int, height: int, target_vertices: int, repeats: i
 
     from curved_reflections.engine.methods.sbc import build_sample_based_camera
     from curved_reflections.engine.scene import scene_bounds
-    from curved_reflections.drawing.methods.projection import SBCTextures
+    from curved_reflections.drawing.methods.sbc_gpu import SBCTextures
     from curved_reflections.drawing.reflection_draw import ReflectionRenderer
     from curved_reflections.engine.frame_settings import FrameSettings
     from curved_reflections.blender.capture import view_from_camera
@@ -230,7 +230,7 @@ def measure(kind: str, width: int, height: int, target_vertices: int, repeats: i
         with offscreen.bind():
             framebuffer = gpu.state.active_framebuffer_get()
             framebuffer.clear(color=(0.0, 0.0, 0.0, 1.0), depth=1.0)
-            renderer.projection(textures, view, sbc)  # made once, as after a camera lands
+            renderer.camera_pass.triangles_of(textures, view, sbc)  # made once, as after a camera lands
             projections = renderer.counts["projections"]
             for repeat in range(warmup + repeats):
                 for name, call in calls.items():
@@ -238,9 +238,9 @@ def measure(kind: str, width: int, height: int, target_vertices: int, repeats: i
                     seconds = timed(call, framebuffer)
                     if repeat >= warmup:
                         times[name].append(seconds)
-            # Every frame above drew the cached projection (the empty camera's is cached too).
+            # Every frame above drew the kept triangles (the empty camera's are kept too).
             assert renderer.counts["projections"] == projections + 1, renderer.counts
-            cached = renderer.projection(textures, view, sbc)
+            cached = renderer.camera_pass.triangles_of(textures, view, sbc)
             projection_ms = _projection_times(renderer, textures, view, sbc, framebuffer, projection_repeats)
     finally:
         offscreen.free()
@@ -264,16 +264,16 @@ MOVED_DEGREES = 2.0
 
 
 def _projection_times(renderer, textures, view, sbc, framebuffer, repeats: int) -> dict:
-    """Median milliseconds of one projection (``ReflectionRenderer.projection`` after
+    """Median milliseconds of one projection (``CameraPass.triangles_of`` after
     ``invalidate``: what a landed camera or a mesh edit costs, once), with the per-sheet
     culling on and off, and the share of the GPU passes (with their read-backs) in it;
     also how many vertex projections each made."""
     result = {}
     for cull in (True, False):
-        renderer.sbc.cull = cull
+        renderer.camera_pass.maker.cull = cull
         totals, gpu_parts = [], []
         spent = [0.0]
-        original = renderer.sbc.project_pass
+        original = renderer.camera_pass.maker.project_pass
 
         def counted(*args, **kwargs):
             start = time.perf_counter()
@@ -281,22 +281,22 @@ def _projection_times(renderer, textures, view, sbc, framebuffer, repeats: int) 
             spent[0] += time.perf_counter() - start
             return value
 
-        renderer.sbc.project_pass = counted
+        renderer.camera_pass.maker.project_pass = counted
         try:
             for _ in range(repeats):
                 renderer.invalidate()
                 spent[0] = 0.0
-                totals.append(timed(lambda: renderer.projection(textures, view, sbc), framebuffer))
+                totals.append(timed(lambda: renderer.camera_pass.triangles_of(textures, view, sbc), framebuffer))
                 gpu_parts.append(spent[0])
         finally:
-            del renderer.sbc.project_pass
+            del renderer.camera_pass.maker.project_pass
         key = "culled" if cull else "unculled"
         result[key] = 1000.0 * statistics.median(totals)
         result[key + " gpu"] = 1000.0 * statistics.median(gpu_parts)
-        result[key + " vertices"] = int(renderer.stats["projected_vertices"])
-    renderer.sbc.cull = True
+        result[key + " vertices"] = int(renderer.camera_pass.last.stats["projected_vertices"])
+    renderer.camera_pass.maker.cull = True
     renderer.invalidate()
-    renderer.projection(textures, view, sbc)
+    renderer.camera_pass.triangles_of(textures, view, sbc)
     return result
 
 

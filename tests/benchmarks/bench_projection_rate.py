@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Projection throughput (issue #3): ``SampleBasedCamera.project`` in numpy against its GLSL
-twin on the GPU (``drawing/methods/projection.project_points``), measured in one run.
+twin on the GPU (``drawing/methods/sbc_gpu.project_points``), measured in one run.
 
     .venv/bin/python tests/benchmarks/bench_projection_rate.py      # docs/benchmarks/projection_rate.md
     .venv/bin/python tests/benchmarks/bench_projection_rate.py --quick --out /tmp/rate.md
@@ -53,7 +53,7 @@ def _timed(function, repeats: int) -> tuple[float, object]:
 
 def measure(name: str, n_points: int, repeats: int) -> dict:
     from curved_reflections.engine.methods.sbc import build_sample_based_camera
-    from curved_reflections.drawing.methods.projection import SBCTextures, project_points
+    from curved_reflections.drawing.methods.sbc_gpu import SBCTextures, project_points
 
     parts = bench_sbc.demo_scene(name, 4000) if name in bench_sbc.DEMO_SCENES else \
         bench_sbc.held_out_scene(name, 4000)

@@ -18,7 +18,7 @@ against), each ending with a one-pixel read-back:
 - **redraw during a build**: the same, as often as it fits while the build runs;
 - **plain**: the renderer's diffuse triangles drawn once with one colour (bench_draw);
 - **the redraw when the camera lands**: the first draw with the new camera, which puts
-  the reflected triangles the worker made on the GPU (``CameraProjections.adopt``);
+  the reflected triangles the worker made on the GPU (``CameraPass.adopt``);
 
 and the build's wall time (the camera and its triangles). Medians and maxima over ``--builds`` view turns.
 """

@@ -83,8 +83,9 @@ def measure(width: int, height: int, steps: int, jumps: int) -> dict:
     from curved_reflections.engine.scene import scene_bounds
     from curved_reflections.drawing.methods.morph_source import GPUFaceImages
     from curved_reflections.tools.numpy_morph_source import MorphSource
-    from curved_reflections.drawing.methods.projection import SBCTextures
+    from curved_reflections.drawing.methods.sbc_gpu import SBCTextures
     from curved_reflections.drawing.reflection_draw import ReflectionRenderer
+    from curved_reflections.drawing.frame_pass import Frame
     from curved_reflections.engine.frame_settings import FrameSettings
     from curved_reflections.drawing.methods.morph_pass import MorphPass
     from curved_reflections.blender.frame_pipeline import settings_of
@@ -118,7 +119,7 @@ def measure(width: int, height: int, steps: int, jumps: int) -> dict:
 
     def projection_ms(source, view, camera=None) -> float:
         begin = time.perf_counter()
-        renderer.projection(source, view, camera)
+        renderer.camera_pass.triangles_of(source, view, camera)
         return 1000.0 * (time.perf_counter() - begin)
 
     # Warm-up: shaders compiled, textures of a first camera packed.
@@ -252,7 +253,7 @@ def measure_iterative(kind: str, width: int, height: int, target_vertices: int, 
         searched.search(view, warm=True)
         gpu.state.depth_test_set('LESS')
         gpu.state.depth_mask_set(True)
-        setup = renderer.reflected_setup(view, searched, live=True)
+        setup = searched.reflected_setup(Frame(view, targets, None, None, warm=True))
         if not cull:
             setup["mirrored"] = frozenset()
         renderer.meshes.draw(matrix(view), targets, setup, renderer._image, searched.answers())
@@ -373,8 +374,8 @@ def measure_morph_frames(width: int, height: int, target_vertices: int, frames: 
         gpu.state.depth_mask_set(True)
         view_projection = Matrix((np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix)
                                   @ translate).tolist())
-        renderer.meshes.draw(view_projection, targets, renderer.reflected_setup(view, blended, live=True),
-                             renderer._image,
+        renderer.meshes.draw(view_projection, targets,
+                             blended.reflected_setup(Frame(view, targets, None, None, warm=True)), renderer._image,
                              blended.answers())
         gpu.state.depth_test_set('NONE')
         gpu.state.depth_mask_set(False)

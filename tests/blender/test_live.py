@@ -205,8 +205,8 @@ def test_a_landing_camera_brings_its_reflected_triangles_and_its_first_draw_only
     it: the first draw with it runs no projection pass on the GPU. After a mesh change
     (a new renderer) the worker's triangles no longer fit, and the draw projects on the GPU."""
     from curved_reflections.drawing.methods.camera_source import CameraSource
-    from curved_reflections.drawing.methods.projection import SBCTextures
-    from curved_reflections.drawing.methods.sbc_triangles import CameraProjections
+    from curved_reflections.drawing.methods.sbc_gpu import SBCTextures
+    from curved_reflections.drawing.methods.sbc_triangles import CameraTriangleMaker
 
     bpy.ops.curved_reflections.start_live()
     state = live.state_of(fig3)
@@ -222,7 +222,7 @@ def test_a_landing_camera_brings_its_reflected_triangles_and_its_first_draw_only
         raise AssertionError("a projection pass on the main thread")
 
     with monkeypatch.context() as patch:
-        patch.setattr(CameraProjections, "project_pass", no_gpu_pass)
+        patch.setattr(CameraTriangleMaker, "project_pass", no_gpu_pass)
         drawn, image = _draw(fig3, moved)
     assert drawn and len(_pixels_of(image, "Cube", fig3)) > 0
     assert isinstance(camera.source, CameraSource) and state.counts["projections"] == projections + 1

@@ -9,7 +9,7 @@ import bpy
 import numpy as np
 import pytest
 
-from curved_reflections.drawing.frame_pass import FramePass, PassInputs
+from curved_reflections.drawing.frame_pass import Frame, FramePass, PassInputs
 from curved_reflections.drawing.gpu_data import data_texture
 from curved_reflections.drawing.reflected_meshes import FOUND_CODE
 from curved_reflections.blender import demo_scenes, method_plan, method_registry
@@ -52,8 +52,8 @@ class FlatMirrorPass(FramePass):
         self.geometry, self.meshes, self.methods = inputs.geometry, inputs.meshes, list(methods)
         self._answers = []
 
-    def update(self, view, warm: bool = False, skip=frozenset()) -> None:
-        vertices, eye, self._answers = self.geometry.vertices, view.eye, []
+    def update(self, frame: Frame) -> None:
+        vertices, eye, self._answers = self.geometry.vertices, frame.view.eye, []
         for mirror in self.methods:
             mirrored = vertices - 2.0 * ((vertices - mirror.point) @ mirror.normal)[:, None] * mirror.normal
             towards = mirrored - eye

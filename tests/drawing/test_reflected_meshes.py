@@ -7,7 +7,7 @@ not reflect toward them."""
 import numpy as np
 
 from curved_reflections.engine import DiffuseMesh, Reflector, look_at_view
-from curved_reflections.drawing.frame_pass import FramePass
+from curved_reflections.drawing.frame_pass import Frame, FramePass
 
 EYE = np.array([0.0, 0.0, 5.0])
 #: The diffuse patches' height: above the eye, behind the camera (out of the pre-pass).
@@ -78,10 +78,17 @@ def _drawn(hidden_fraction: float, reflection_cosine: float, tilt_degrees: float
         gpu.state.viewport_set(0, 0, targets.width, targets.height)
         gpu.state.depth_test_set('LESS')
         gpu.state.depth_mask_set(True)
-        setup = {**renderer.reflected_setup(view, FramePass()), "hidden_fraction": hidden_fraction,
+        setup = {**_bare_setup(renderer, view), "hidden_fraction": hidden_fraction,
                  "reflection_cosine": reflection_cosine, "snap_px": snap_px, "mirrored": mirrored}
         renderer.meshes.draw(view_projection, targets, setup, renderer._image, [(0, answers)])
     return read_texture(targets.reflection_colors, targets.width, targets.height)
+
+
+def _bare_setup(renderer, view) -> dict:
+    """The uniforms of a pass with the base class's tolerances over the renderer's geometry."""
+    bare = FramePass()
+    bare.geometry = renderer.geometry
+    return bare.reflected_setup(Frame(view, None, None, None))
 
 
 def _at(points, image):
@@ -212,7 +219,7 @@ def _box_reflection(cull: bool, reversed_sense: bool = False) -> np.ndarray:
     translate = np.eye(4)
     translate[:3, 3] = g.shift
     view_projection = Matrix((np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix) @ translate).tolist())
-    setup = {**renderer.reflected_setup(view, FramePass()), "mirrored": frozenset({0} if cull else ())}
+    setup = {**_bare_setup(renderer, view), "mirrored": frozenset({0} if cull else ())}
     culled_faces = reflected_meshes._culled_faces
     if reversed_sense:
         reflected_meshes._culled_faces = lambda winding: culled_faces(-winding)

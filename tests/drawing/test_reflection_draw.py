@@ -283,7 +283,7 @@ def test_draw_into_a_bound_offscreen_as_a_draw_handler_would(gpu_ready):
     pixel off the mirrors as it was (an overlay over Blender's own viewport drawing)."""
     import gpu
 
-    from curved_reflections.drawing.methods.projection import SBCTextures
+    from curved_reflections.drawing.methods.sbc_gpu import SBCTextures
     from curved_reflections.drawing.reflection_draw import ReflectionRenderer
 
     meshes = [_square("Near", 2.5, 1.0, (1.0, 0.0, 0.0)), _square("Far", 4.0, 4.0, (0.0, 1.0, 0.0))]
@@ -346,7 +346,7 @@ def test_the_overlay_is_hidden_where_the_scene_depth_has_an_object_in_front(gpu_
     import gpu
 
     from curved_reflections.engine.view import View
-    from curved_reflections.drawing.methods.projection import SBCTextures
+    from curved_reflections.drawing.methods.sbc_gpu import SBCTextures
     from curved_reflections.drawing.reflection_draw import ReflectionRenderer
 
     blocker = _square("Blocker", 0.0, 0.5, (1.0, 0.0, 1.0))
@@ -421,7 +421,7 @@ def test_redraws_reuse_the_projection_and_a_moved_view_places_the_world_reflecto
     drawn where the moved view sees the *first reflector points* (world space) of the
     reflected geometry: the red square's centre reflects at the moved view's pixel of
     its reflector point, not at its pixel in the old view."""
-    from curved_reflections.drawing.methods.projection import SBCTextures
+    from curved_reflections.drawing.methods.sbc_gpu import SBCTextures
     from curved_reflections.drawing.reflection_draw import ReflectionRenderer
 
     mirror = icosphere((0.0, 0.0, 0.0), 1.0, 4, name="Mirror")
@@ -457,7 +457,7 @@ def test_the_viewport_snaps_the_cameras_reflected_triangles_within_its_accuracy(
     drawn at the centre of its cell of a grid that many pixels apart: the red square's
     reflection moves, by at most half a cell (and a pixel of rasterisation) on each axis;
     a render (not warm) places it exactly."""
-    from curved_reflections.drawing.methods.projection import SBCTextures
+    from curved_reflections.drawing.methods.sbc_gpu import SBCTextures
     from curved_reflections.drawing.reflection_draw import ReflectionRenderer
 
     mirror = icosphere((0.0, 0.0, 0.0), 1.0, 4, name="Mirror")

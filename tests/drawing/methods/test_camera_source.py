@@ -28,7 +28,7 @@ def _square(name, y, size, colour):
 
 def test_the_cpu_projection_gives_the_gpu_passes_reflected_triangles(gpu_ready):
     from curved_reflections.drawing.methods.camera_source import CameraSource
-    from curved_reflections.drawing.methods.projection import SBCTextures
+    from curved_reflections.drawing.methods.sbc_gpu import SBCTextures
     from curved_reflections.drawing.reflection_draw import ReflectionRenderer
 
     mirrors = [icosphere((-1.1, 0.0, 0.0), 1.0, 3, name="Left"), icosphere((1.1, 0.0, 0.0), 1.0, 3, name="Right")]
@@ -37,10 +37,11 @@ def test_the_cpu_projection_gives_the_gpu_passes_reflected_triangles(gpu_ready):
     sbc = build_sample_based_camera(mirrors, view, scene_bounds(mirrors, meshes, margin=1.0), max_order=2,
                                     downsample=2)
     assert any(len(history) == 2 for history in sbc.groups)  # second-order sheets too
-    projections = ReflectionRenderer(mirrors, meshes, settings=FrameSettings(polish_camera=False)).sbc
-    gpu = projections.triangles(SBCTextures(sbc), view, sbc, vertex_batch=projections._vertex_points())
-    cpu = projections.triangles(CameraSource(sbc), view, sbc)
-    assert projections.counts["projections"] == 0 and projections.last is None  # nothing kept, nothing drawn
+    camera_pass = ReflectionRenderer(mirrors, meshes, settings=FrameSettings(polish_camera=False)).camera_pass
+    maker = camera_pass.maker
+    gpu = maker.triangles(SBCTextures(sbc), view, sbc, vertex_batch=maker.vertex_points())
+    cpu = maker.triangles(CameraSource(sbc), view, sbc)
+    assert maker.counts["projections"] == 0 and camera_pass.last is None  # nothing kept, nothing drawn
 
     assert cpu.triangles == gpu.triangles > 100 and cpu.runs == gpu.runs
     assert cpu.mixed_triangles == gpu.mixed_triangles > 0

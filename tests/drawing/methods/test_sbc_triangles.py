@@ -8,7 +8,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from curved_reflections.drawing.methods.sbc_triangles import MIXED_SUBDIVISIONS, CameraProjections
+from curved_reflections.drawing.methods.sbc_triangles import MIXED_SUBDIVISIONS, CameraTriangleMaker
 
 
 def _right_triangle(x):
@@ -27,7 +27,7 @@ def _sheet(fold_ratio: float):
     points[0, :, 3] = 1.0
     points[0, -2:, 3] = 0.0  # the mixed triangle: only its first corner projects
     geometry = SimpleNamespace(vertices=vertices, triangles=triangles, ranges=[(0, 0, len(triangles))], range_windings=(0,))
-    return CameraProjections(geometry, per_frame_reflectors=(), counts={}), points
+    return CameraTriangleMaker(geometry, per_frame_reflectors=(), counts={}), points
 
 
 def test_a_mixed_triangle_with_no_projected_neighbour_is_sized_by_its_sheets_typical_magnification():
@@ -54,4 +54,4 @@ def test_only_convex_mirrors_cull_the_far_sides_of_closed_solids():
     dented = SimpleNamespace(vertices=vertices, triangles=sphere.triangles)
     projections, _ = _sheet(fold_ratio=2.0)
     convex = ConvexMirrors([ball, dented])
-    assert CameraProjections(projections.geometry, (), {}, convex_mirrors=convex).convex_reflectors == {0}
+    assert CameraTriangleMaker(projections.geometry, (), {}, convex_mirrors=convex).convex_reflectors == {0}

@@ -38,7 +38,7 @@ Float32 versus the engine's float64 (the only intended differences):
   ray-list cells) keeps the engine's tolerance but is evaluated in float32, so a point
   within float32 rounding of such a boundary (about 1e-7 of the coordinates) can fall
   on the other side. Measured: 1 decision of 300,000 differed, a point 6e-7 beyond the
-  engine's tolerance at its segment's head (tests/drawing/methods/test_projection_gpu.py).
+  engine's tolerance at its segment's head (tests/drawing/methods/test_sbc_gpu.py).
 """
 
 from __future__ import annotations
@@ -123,7 +123,7 @@ class SBCTextures:
     """One sample-based camera in GPU textures (needs an initialised GPU): a projection
     source (``sbc_triangles``' protocol) that projects on the GPU."""
 
-    #: Projects on the GPU, a batch of the points at a time (``CameraProjections.project_pass``).
+    #: Projects on the GPU, a batch of the points at a time (``CameraTriangleMaker.project_pass``).
     on_gpu = True
     #: Mixed triangles use the renderer's sub-grids.
     sheet_subdivisions = None
@@ -142,16 +142,16 @@ class SBCTextures:
     def downsample(self) -> int:
         return self.packed.downsample
 
-    def project(self, projections, positions, batch, draws: list, n_texels: int, setup: dict,
+    def project(self, maker, positions, batch, draws: list, n_texels: int, setup: dict,
                 static: bool = False, camera=None):
-        """The GPU projection pass of ``draws`` (``CameraProjections.project_pass``) over
+        """The GPU projection pass of ``draws`` (``CameraTriangleMaker.project_pass``) over
         ``positions`` (``batch``: their point batch, made here when None); with the
         ``camera`` these textures were packed from, risky answers are polished on the
         true rays where the renderer polishes (:func:`polish_readback`)."""
         if batch is None:
             batch = points_batch(np.asarray(positions, np.float32))
-        points, eyes = projections.project_pass(self, batch, draws, n_texels, setup)
-        if projections.polish and camera is not None and camera.true_rays is not None:
+        points, eyes = maker.project_pass(self, batch, draws, n_texels, setup)
+        if maker.polish and camera is not None and camera.true_rays is not None:
             polish_readback(camera, positions, draws, points, eyes, setup)
         return points, eyes
 

@@ -70,7 +70,7 @@ def case(request):
 
 
 def test_gpu_projection_matches_numpy(gpu_ready, case):
-    from curved_reflections.drawing.methods.projection import SBCTextures, project_points
+    from curved_reflections.drawing.methods.sbc_gpu import SBCTextures, project_points
 
     name, sbc, points = case
     textures = SBCTextures(sbc)
@@ -126,7 +126,7 @@ def test_gpu_answers_polished_on_the_cpu_match_numpys_polished_projection(gpu_re
     """The renderer polishes the GPU's ray-list and fold-cell answers on the true rays
     with ``SampleBasedCamera.polish_answers`` (true_rays.py); that gives numpy's own
     polished projection, to the same tolerances as the unpolished twins."""
-    from curved_reflections.drawing.methods.projection import SBCTextures, project_points
+    from curved_reflections.drawing.methods.sbc_gpu import SBCTextures, project_points
 
     name, sbc, points = case
     gpu = project_points(SBCTextures(sbc), points)
@@ -267,7 +267,7 @@ def test_no_reflector_in_view_packs_empty_textures():
 
 
 def test_no_reflector_in_view_projects_nothing(gpu_ready):
-    from curved_reflections.drawing.methods.projection import SBCTextures, project_points
+    from curved_reflections.drawing.methods.sbc_gpu import SBCTextures, project_points
 
     result = project_points(SBCTextures(_looking_away()), np.zeros((5, 3)))
     assert result.groups == [] and result.valid.shape == (0, 5) and result.pixels.shape == (0, 5, 2)
