@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Accuracy shown live: per reflector, the method that drew it in the view and
-its error there, measured on a few of its answers against exactly traced rays
-(``engine/spot_check.py``) once the view has settled.
+"""Accuracy shown live: per reflector, the method that drew it in the view, its error
+there, measured on a few of its answers against exactly traced rays, and the exact
+images it left out (``engine/spot_check.py``), once the view has settled.
 
 The answers checked are the ones drawn: the per-frame passes' answer textures read back
 (iterative search, baked grids, perturbation: ``ReflectionRenderer.answered``), or, for
@@ -19,7 +19,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..engine.spot_check import SpotCheck, spot_check
+from ..engine.spot_check import SpotCheck, coverage_check, shown_answers, spot_check
+from ..drawing.frame_pass import FramePass
+from ..drawing.reflected_meshes import REFLECTION_COSINE
 from . import method_plan
 
 #: A view unchanged this long (seconds) is checked.
@@ -84,8 +86,12 @@ def measure(plan, reflector_set, renderer, view, camera, sample: int | None = No
     for index, answered in drawn.items():
         name = reflector_set.reflectors[index].name
         method = planned.get(name, method_plan.RUNTIME) if answered.per_frame else method_plan.RUNTIME
-        found[name] = Measured(method, spot_check(reflector_set, view, index, vertices[answered.vertices],
-                                                  answered.answers, **options))
+        points = vertices[answered.vertices]
+        answers = shown_answers(reflector_set, view, index, points, answered.answers, REFLECTION_COSINE,
+                                FramePass.hidden_fraction)
+        check = spot_check(reflector_set, view, index, points, answers, **options)
+        check = check.with_coverage(*coverage_check(reflector_set, view, index, points, answers))
+        found[name] = Measured(method, check)
     return found
 
 

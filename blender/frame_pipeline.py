@@ -32,7 +32,7 @@ from ..engine.methods.sbc.sbc_build import build_sample_based_camera, clip_start
 from ..engine.scene import scene_bounds
 from ..engine.view import View
 from ..drawing.reflection_draw import ReflectionRenderer
-from . import method_plan, morph_bake
+from . import accuracy, method_plan, morph_bake
 from .capture import capture_scene
 from .render_inputs import BOUNDS_MARGIN, reflector_properties, world_color
 
@@ -171,6 +171,22 @@ class FramePipeline:
         if len(per_frame) >= len(self.captured.reflectors) and not higher_orders:
             return None
         return CameraJob(self.reflector_set, view, self.camera_bounds(), self.settings, per_frame)
+
+    def check_methods(self, scene, view: View) -> bool:
+        """Measure the reflectors a per-frame method drew in the frame just drawn of
+        ``view`` (``accuracy.measure``: the answers' error and the exact images they
+        missed, against exactly traced rays); where one fails the scene's Accuracy, its
+        method is passed over (``method_plan.note_measured``: Auto's next, or Runtime) and
+        the plan and the renderer are made again. Returns whether they were: the frame is
+        drawn again."""
+        if all(choice.method == method_plan.RUNTIME for choice in self.plan.choices):
+            return False
+        found = accuracy.measure(self.plan, self.reflector_set, self.renderer, view, None)
+        if not method_plan.note_measured(scene, found):
+            return False
+        self.plan_reflectors(scene, self.captured)
+        self.new_renderer(scene, self.captured, seal=False)
+        return True
 
     def warnings(self, view: View) -> list:
         """What the frame of ``view`` should warn about: a clip start inside a mirror."""

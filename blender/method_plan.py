@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from ..engine.spot_check import MAX_MISSED_SHARE
 from . import method_registry
 from .method_registry import AUTO, ITERATIVE, MORPHING, OCTREE, PERTURBATION, RUNTIME, PlanInputs  # noqa: F401
 from .scene_status import status_of
@@ -81,9 +82,15 @@ def _candidates(mode: str) -> list:
 
 def choose(inputs: PlanInputs, index: int, reflector, mode: str) -> tuple:
     """(MethodChoice, engine) of one reflector in ``mode``: the first candidate that
-    offers to draw it, else Runtime; the reason lists the refusals first."""
+    offers to draw it and was not measured outside the Accuracy on it
+    (``inputs.outside``, :func:`note_measured`), else Runtime; the reason lists the
+    refusals first."""
     refusals = []
     for method in _candidates(mode):
+        if method.name in inputs.outside:
+            refusals.append(f"{method.label}: {inputs.outside[method.name]} in a view "
+                            f"(Accuracy {inputs.accuracy_px:g} px)")
+            continue
         offer = method.offer(inputs, index, reflector)
         if offer.draws:
             reason = "; ".join(refusals + [offer.reason])
@@ -103,7 +110,7 @@ def plan(scene, reflectors, accuracy_px: float | None = None, grids: dict | None
     result = MethodPlan()
     for index, reflector in enumerate(reflectors):
         mode = mode_of(scene, reflector.name)
-        outside = status.outside_accuracy.get(reflector.name, {}) if mode == AUTO else {}
+        outside = status.outside_accuracy.get(reflector.name, {})
         choice, engine = choose(PlanInputs(scene, accuracy, grids or {}, outside), index, reflector, mode)
         result.choices.append(choice)
         if engine is not None:
@@ -132,24 +139,30 @@ def wants_grid(scene, reflector) -> bool:
 
 
 def note_measured(scene, measured: dict) -> bool:
-    """Keep the live view's checks (``accuracy.measure``: {reflector: Measured}) for the
-    panel; an Auto reflector whose method measured outside the scene's Accuracy (95 % of
-    its checked answers within it, ``SpotCheck.within``) is drawn by the next method
-    from then on until Refresh. Returns whether that happened now (the caller plans
-    again)."""
+    """Keep the checks (``accuracy.measure``: {reflector: Measured}) for the panel; a
+    reflector whose method measured outside the scene's Accuracy (95 % of its checked
+    answers within it and at most 5 % of the exact images missed, ``SpotCheck.within``)
+    is drawn by the next method Auto tries, or in an explicit mode by Runtime, from then
+    on until Refresh. Returns whether that happened now (the caller plans again)."""
     status = status_of(scene)
     status.measured = dict(measured)
     accuracy = float(scene.curved_reflections.accuracy_px)
     replaced = False
     for name, found in measured.items():
-        if mode_of(scene, name) != AUTO or found.method == RUNTIME or found.check.within(accuracy):
+        if found.method == RUNTIME or found.check.within(accuracy):
             continue
         failed = status.outside_accuracy.setdefault(name, {})
         if found.method not in failed:
-            failed[found.method] = f"p95 {found.check.percentile(95):.2f} px" if found.check.confirmed else \
-                "no answer confirmed"
+            failed[found.method] = _shortfall(found.check, accuracy)
             replaced = True
     return replaced
+
+
+def _shortfall(check, accuracy: float) -> str:
+    """Why a check failed the Accuracy, for the panel: the images it left out, else its error."""
+    if check.missed > MAX_MISSED_SHARE * check.images:
+        return f"{check.missed} of {check.images} exact images not drawn"
+    return f"p95 {check.percentile(95):.2f} px" if check.confirmed else "no answer confirmed"
 
 
 def measured(scene) -> dict:

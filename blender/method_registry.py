@@ -139,9 +139,6 @@ def _offer_iterative(inputs: PlanInputs, index: int, reflector) -> Offer:
     shape, reflector_map = star_maps.star_map(reflector)
     if reflector_map is None:
         return refuse(shape.reason)
-    if ITERATIVE in inputs.outside:
-        return refuse(f"the iterative search measured {inputs.outside[ITERATIVE]} in a view "
-                      f"(Accuracy {inputs.accuracy_px:g} px)")
     centre = ", ".join(f"{round(float(c), 2) + 0.0:.2f}" for c in shape.centre)  # no "-0.00"
     return Offer(True, f"star-shaped around ({centre}): iterative search on the GPU",
                  IterativeReflector(index, reflector.name, reflector_map, inputs.accuracy_px))
@@ -158,9 +155,6 @@ def _offer_grid(method: str, label: str):
         grid = inputs.grids.get(reflector.name)
         if grid is None or grid[0].settings.kind != get(method).grid:
             return refuse("no baked morphing grid" if method == MORPHING else f"no baked {label.lower()} grid")
-        if method in inputs.outside:
-            return refuse(f"its baked grid measured {inputs.outside[method]} in a view "
-                          f"(Accuracy {inputs.accuracy_px:g} px)")
         return Offer(True, f"its baked {label.lower()} grid draws it", grid)
     return offer
 

@@ -45,6 +45,11 @@ PREFETCHED_NODES = 2
 #: Frames ahead whose cells an animation's prefetch serves first, the camera's last move
 #: extrapolated.
 PREDICTED_FRAMES = 6
+#: An animation checks the per-frame methods (``FramePipeline.check_methods``) on its
+#: first frame and every this many frames after: a check costs a fraction of a frame on
+#: a folded mirror (the exact solver on a hundred points), and a mirror's folds do not
+#: come and go from one frame to the next.
+CHECK_EVERY_FRAMES = 8
 
 
 @dataclass
@@ -53,7 +58,8 @@ class ReflectionRender:
 
     ``seconds`` holds ``capture`` (the scene), ``plan`` (the view and what changed of
     the pipeline: :meth:`.frame_pipeline.FramePipeline.update`), ``sbc`` (ray map and BSP trees),
-    ``draw`` (the passes, the band trace, the composite and the read-back) and
+    ``draw`` (the passes, the band trace, the composite, the read-back, and the
+    check of the per-frame methods with any frame drawn again after it) and
     ``total``; ``stats`` the camera's and the renderer's figures, ``methods``
     ({reflector: method}) and ``warnings`` (messages for the user).
     """
@@ -97,9 +103,13 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
     times slower: see docs/benchmarks/morph_animation.md). ``state`` keeps the pipeline
     between the frames of an animation, and with it the passes' work for the next
     frames (the grids' nodes around the camera) runs on a worker thread while the frame
-    is drawn (:func:`_prefetch`). Bad input (no camera, no reflector, a reflector
-    without faces, the camera inside a reflector) raises :class:`SceneInputError`
-    naming the object; the GPU is initialised if needed.
+    is drawn (:func:`_prefetch`). The reflectors a per-frame method drew are checked in
+    the frame (their error and the exact images they missed,
+    ``FramePipeline.check_methods``; an animation every :data:`CHECK_EVERY_FRAMES`
+    frames): a method that fails the Accuracy is passed over, and the frame is drawn
+    again with the next. Bad input (no camera, no reflector, a reflector without faces,
+    the camera inside a reflector) raises :class:`SceneInputError` naming the object;
+    the GPU is initialised if needed.
     """
     settings = settings_of(scene, max_order=max_order, downsample=downsample, accuracy_px=accuracy_px)
     animating = state is not None
@@ -109,15 +119,21 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
     ensure_gpu()
     state.update(scene, depsgraph, settings)
     planned_at = time.perf_counter()
-    job = state.camera_job(view)
-    if job is None or job.first_order_left_out:
-        check_view_outside_reflectors(state.reflector_set, view)
-    sbc = None if job is None else job.build()
     if animating:
         _prefetch(state.renderer, view, state.last_eye)
         state.last_eye = view.eye if view.is_perspective else None
-    built_at = time.perf_counter()
-    image = state.renderer.render(view, sbc, state.world, trace_edges=trace_edges, trace_gaps=trace_gaps)
+    checking = not animating or state.frames % CHECK_EVERY_FRAMES == 0
+    built_at = planned_at
+    while True:  # once, or again after a method was passed over (each method once at most)
+        job = state.camera_job(view)
+        if job is None or job.first_order_left_out:
+            check_view_outside_reflectors(state.reflector_set, view)
+        started = time.perf_counter()
+        sbc = None if job is None else job.build()
+        built_at += time.perf_counter() - started
+        image = state.renderer.render(view, sbc, state.world, trace_edges=trace_edges, trace_gaps=trace_gaps)
+        if not (checking and state.check_methods(scene, view)):
+            break
     end = time.perf_counter()
     state.frames += 1
     seconds = {"capture": state.capture_seconds, "plan": planned_at - start - state.capture_seconds,

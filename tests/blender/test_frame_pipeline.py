@@ -66,3 +66,47 @@ def test_one_rule_decides_whether_a_view_needs_a_camera(fig3):
     job = state.camera_job(view)
     assert job is not None and job.first_order_left_out == frozenset() and job.settings == state.settings
     assert state.cameras[live.CAMERA_KEY].sbc is not None
+
+
+def _fold(mirror, amplitude: float) -> None:
+    """Make ``mirror`` (the demo's ball) a ball with bumps of ``amplitude`` times its
+    radius: star-shaped around its centre, and folded where the bumps are strong."""
+    from curved_reflections.engine.geometry.sphere import bumpy_icosphere
+
+    bumpy = bumpy_icosphere((0.0, 0.0, 0.0), 1.0, 4, amplitude)
+    mesh = bpy.data.meshes.new("Bumpy")
+    mesh.from_pydata(bumpy.vertices.tolist(), [], bumpy.triangles.tolist())
+    mesh.shade_smooth()
+    mirror.data = mesh
+    mirror.scale = (1.0, 1.0, 1.0)
+
+
+@pytest.mark.parametrize("amplitude, kept", [(0.04, True), (0.15, False)])
+def test_auto_passes_over_a_search_that_misses_a_folded_mirrors_images(fig3, amplitude, kept):
+    """With bumps of 15 % of the ball's radius a column is seen two or three times, and
+    the iterative search finds one image per vertex: every answer it draws is exact, but
+    the check counts the exact images it left out, and Auto passes it over with that
+    reason (to Runtime: no grid is baked). With gentle bumps (4 %) it is kept."""
+    from curved_reflections.blender import method_plan
+    from curved_reflections.blender.frame_pipeline import FramePipeline
+
+    _fold(bpy.data.objects["MirrorSphere"], amplitude)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    pipeline = FramePipeline()
+    pipeline.update(fig3, depsgraph, settings_of(fig3))
+    assert [c.method for c in pipeline.plan.choices] == [method_plan.ITERATIVE]
+    view = view_from_camera(fig3.camera, fig3, depsgraph)
+    searched = pipeline.renderer
+    searched.render(view, None, pipeline.world)
+    assert pipeline.check_methods(fig3, view) is not kept
+    check = method_plan.measured(fig3)["MirrorSphere"].check
+    assert check.images > 40 and check.within(1.0) is kept
+    if kept:
+        assert check.missed == 0 and pipeline.renderer is searched
+        return
+    assert check.missed > 0.2 * check.images and check.percentile(95) < 0.5  # right where drawn, but missing
+    [choice] = pipeline.plan.choices
+    assert choice.method == method_plan.RUNTIME and pipeline.renderer is not searched
+    assert f"Iterative (GPU): {check.missed} of {check.images} exact images not drawn in a view" in choice.reason
+    assert pipeline.camera_job(view) is not None  # the next draw builds a camera for it
+    assert not pipeline.check_methods(fig3, view)  # nothing of Auto's left to check

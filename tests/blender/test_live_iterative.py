@@ -229,7 +229,7 @@ def test_auto_passes_over_a_method_measured_outside_the_accuracy_until_refresh(f
     live.process(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)  # plans again
     [choice] = method_plan.last_choices(fig3)
     assert choice.method == method_plan.RUNTIME
-    assert "the iterative search measured p95 3.00 px in a view (Accuracy 1 px)" in choice.reason
+    assert "Iterative (GPU): p95 3.00 px in a view (Accuracy 1 px)" in choice.reason
     assert not state.plan.engines_of(method_plan.ITERATIVE)
     assert _draw(fig3, view)[0] or state.requests  # a camera is built for it now
     monkeypatch.undo()

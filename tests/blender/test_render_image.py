@@ -280,3 +280,25 @@ def test_perturbation_mode_draws_what_the_camera_draws(fig3):
     render_scene(fig3, depsgraph)
     reason = method_plan.last_choices(fig3)[0].reason
     assert "from the declared sphere" in reason and "Perturbation on the mesh" in reason
+
+
+def test_a_frame_is_drawn_again_when_auto_passes_a_method_over(fig3, monkeypatch):
+    """Render Image checks the per-frame methods in the frame it drew (``FramePipeline.check_methods``,
+    tested in test_frame_pipeline.py); when the check passed a method over, the frame is
+    drawn again, and checked again. An animation checks its first frame, then every
+    CHECK_EVERY_FRAMES frames."""
+    from curved_reflections.blender import render_image
+    from curved_reflections.drawing.reflection_draw import ReflectionRenderer
+
+    checks, renders = [], []
+    check, render = render_image.FrameState.check_methods, ReflectionRenderer.render
+    monkeypatch.setattr(render_image.FrameState, "check_methods",
+                        lambda self, scene, view: checks.append(check(self, scene, view)) or len(checks) == 1)
+    monkeypatch.setattr(ReflectionRenderer, "render", lambda self, *a, **k: renders.append(1) or render(self, *a, **k))
+    state = render_image.FrameState()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    render_image.render_scene(fig3, depsgraph, state=state)
+    assert checks == [False, False] and len(renders) == 2  # the first frame and its redraw, each checked
+    for _ in range(render_image.CHECK_EVERY_FRAMES):
+        render_image.render_scene(fig3, depsgraph, state=state)
+    assert len(checks) == 3 and len(renders) == 2 + render_image.CHECK_EVERY_FRAMES

@@ -8,8 +8,9 @@ import pytest
 from curved_reflections.engine import look_at_view
 from curved_reflections.engine.reference.exact import solve_reflections
 from curved_reflections.engine.geometry.raytrace import ReflectorSet
-from curved_reflections.engine.spot_check import MAX_ERROR_PX, SpotCheck, spot_check
-from curved_reflections.engine.geometry.sphere import icosphere
+from curved_reflections.engine.spot_check import (COVERED_PX, MAX_ERROR_PX, SpotCheck, coverage_check, shown_answers,
+                                                  spot_check)
+from curved_reflections.engine.geometry.sphere import bumpy_icosphere, icosphere
 
 CENTRE = np.array([0.0, 0.0, 1.0])
 
@@ -70,3 +71,83 @@ def test_no_answer_nothing_checked(case):
     check = spot_check(reflector_set, view, 0, points, np.full((2, len(points), 3), np.nan))
     assert check == SpotCheck(0, check.errors) and not check.within(1.0)
     assert check.summary() == "no reflection to check in this view"
+
+
+def test_every_exact_image_drawn_misses_none(case):
+    reflector_set, view, points, answers = case
+    images, missed = coverage_check(reflector_set, view, 0, points, answers)
+    assert images > 60 and missed == 0
+
+
+@pytest.fixture(scope="module")
+def folded():
+    """A ball with bumps of 15 % of its radius: nearly half the points around it are seen
+    two or more times; answers[k] holds each point's k-th exact image."""
+    mirror = bumpy_icosphere(CENTRE, 1.0, 4, 0.15, name="Bumpy")
+    reflector_set = ReflectorSet([mirror])
+    view = look_at_view(CENTRE + np.array([2.5, -3.0, 1.2]), CENTRE, fov_y_deg=40.0, width=320, height=240)
+    directions = np.random.default_rng(5).normal(size=(400, 3))
+    points = CENTRE + 2.0 * directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    exact = solve_reflections(reflector_set, view, points)
+    exact = exact.select(exact.visible)
+    exact = exact.select(np.argsort(exact.point, kind="stable"))
+    slot = np.concatenate([np.arange(n) for n in np.bincount(exact.point, minlength=len(points))])
+    answers = np.full((slot.max() + 1, len(points), 3), np.nan)
+    answers[slot, exact.point] = exact.position
+    return reflector_set, view, points, answers
+
+
+def test_one_image_per_point_of_a_folded_mirror_is_counted_as_missing_the_others(folded):
+    """The iterative search's failure on a folded mirror: every drawn answer exact (the
+    spot check alone passes it), but a point's second and third images are not drawn."""
+    reflector_set, view, points, answers = folded
+    assert (np.isfinite(answers[1, :, 0])).sum() > 0.3 * np.isfinite(answers[0, :, 0]).sum()
+    first_only = answers[:1]
+    images, missed = coverage_check(reflector_set, view, 0, points, first_only)
+    assert images > 100 and 0.3 * images < missed < 0.7 * images
+    check = spot_check(reflector_set, view, 0, points, first_only)
+    assert check.within(0.05)  # every answer drawn is right ...
+    check = check.with_coverage(images, missed)
+    assert not check.within(0.05)  # ... but the mirror is not drawn right
+    assert f"; {missed} of {images} exact images not drawn" in check.summary()
+    assert coverage_check(reflector_set, view, 0, points, answers) == (images, 0)
+
+
+def test_an_answer_far_from_the_missing_image_does_not_cover_it(folded):
+    reflector_set, view, points, answers = folded
+    shifted = answers.copy()
+    pixels, _ = view.to_pixels(answers[1])
+    moved = pixels + np.array([2.0 * COVERED_PX, 0.0])  # each second image drawn twice too far
+    origins, directions = view.pixel_rays(np.nan_to_num(moved))
+    hits = reflector_set.intersect(origins, directions)
+    shifted[1] = np.where((hits.hit & np.isfinite(moved[:, 0]))[:, None], origins + hits.t[:, None] * directions,
+                          np.nan)
+    dropped = answers.copy()
+    dropped[1] = np.nan
+    missing = coverage_check(reflector_set, view, 0, points, dropped)[1]
+    assert missing > 20 and coverage_check(reflector_set, view, 0, points, shifted)[1] >= 0.8 * missing
+
+
+def test_answers_the_renderer_would_not_show_are_not_checked(case):
+    """Answers on the ball's far side (hidden behind its front, which the fragment stage's
+    hidden-point test drops), answers whose law of reflection fails at the pixel (dropped
+    too), and answers off the image are left out, the exact ones kept."""
+    reflector_set, view, points, answers = case
+    hidden_fraction, cosine = 0.003, np.cos(np.radians(20.0))
+    shown = shown_answers(reflector_set, view, 0, points, answers, cosine, hidden_fraction)
+    assert np.array_equal(np.isfinite(shown), np.isfinite(answers))
+    far_side = 2.0 * CENTRE - answers  # the antipode of each answer
+    assert not np.isfinite(shown_answers(reflector_set, view, 0, points, far_side, cosine, hidden_fraction)).any()
+    swapped = answers.copy()
+    valid = np.flatnonzero(np.isfinite(answers[0, :, 0]))
+    swapped[0, valid] = answers[0, np.roll(valid, len(valid) // 2)]  # another point's image: the law fails
+    kept = np.isfinite(shown_answers(reflector_set, view, 0, points, swapped, cosine, hidden_fraction)[0, valid, 0])
+    assert kept.mean() < 0.1
+    aside = look_at_view(view.eye, CENTRE + np.array([0.0, 0.0, 1.6]), fov_y_deg=40.0, width=320, height=240)
+    pixels, _ = aside.to_pixels(answers[0, valid])
+    inside = ((pixels >= 0) & (pixels <= (320, 240))).all(axis=1)
+    assert 0.2 < inside.mean() < 0.8  # the ball half out of the image
+    off = shown_answers(reflector_set, aside, 0, points, answers, cosine, hidden_fraction)
+    assert np.array_equal(np.isfinite(off[0, valid, 0]), inside)
+    assert spot_check(reflector_set, aside, 0, points, answers).checked == 96
+    assert spot_check(reflector_set, aside, 0, points, answers).unconfirmed == 0
