@@ -19,7 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..engine.spot_check import SpotCheck, coverage_check, shown_answers, spot_check
+from ..engine.spot_check import SpotCheck, checked_points, coverage_check, shown_answers, spot_check
 from ..drawing.frame_pass import FramePass
 from ..drawing.reflected_meshes import REFLECTION_COSINE
 from . import method_plan
@@ -86,11 +86,15 @@ def measure(plan, reflector_set, renderer, view, camera, sample: int | None = No
     for index, answered in drawn.items():
         name = reflector_set.reflectors[index].name
         method = planned.get(name, method_plan.RUNTIME) if answered.per_frame else method_plan.RUNTIME
-        points = vertices[answered.vertices]
-        answers = shown_answers(reflector_set, view, index, points, answered.answers, REFLECTION_COSINE,
+        pool = checked_points(vertices[answered.vertices], reflector_set.reflectors[index].vertices)
+        points = vertices[answered.vertices[pool]]
+        answers = shown_answers(reflector_set, view, index, points, answered.answers[:, pool], REFLECTION_COSINE,
                                 FramePass.hidden_fraction)
         check = spot_check(reflector_set, view, index, points, answers, **options)
-        check = check.with_coverage(*coverage_check(reflector_set, view, index, points, answers))
+        owners = renderer.geometry.vertex_mesh[answered.vertices[pool]]
+        coverage = coverage_check(reflector_set, view, index, points, answers, groups=owners)
+        check = check.with_coverage(coverage, renderer.geometry.mesh_names[coverage.group] if coverage.group >= 0
+                                    else "")
         found[name] = Measured(method, check)
     return found
 

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ..engine.spot_check import MAX_MISSED_SHARE
 from . import method_registry
 from .method_registry import AUTO, ITERATIVE, MORPHING, OCTREE, PERTURBATION, RUNTIME, PlanInputs  # noqa: F401
 from .scene_status import status_of
@@ -153,16 +152,9 @@ def note_measured(scene, measured: dict) -> bool:
             continue
         failed = status.outside_accuracy.setdefault(name, {})
         if found.method not in failed:
-            failed[found.method] = _shortfall(found.check, accuracy)
+            failed[found.method] = found.check.shortfall()
             replaced = True
     return replaced
-
-
-def _shortfall(check, accuracy: float) -> str:
-    """Why a check failed the Accuracy, for the panel: the images it left out, else its error."""
-    if check.missed > MAX_MISSED_SHARE * check.images:
-        return f"{check.missed} of {check.images} exact images not drawn"
-    return f"p95 {check.percentile(95):.2f} px" if check.confirmed else "no answer confirmed"
 
 
 def measured(scene) -> dict:

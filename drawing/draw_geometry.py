@@ -43,6 +43,7 @@ class DrawGeometry:
     prepass_uvs: np.ndarray  # (P, 2) float32
     prepass_triangles: np.ndarray  # (Tp, 3) int32
     vertices: np.ndarray  # (V, 3) float64, reflected meshes
+    vertex_mesh: np.ndarray  # (V,) int32: the index of each vertex's diffuse mesh in mesh_names
     colors: np.ndarray  # (V, 4) float32
     triangles: np.ndarray  # (T, 3) int64
     diameter: float  # bounding-box diagonal of everything: bounds every reflected ray distance
@@ -51,6 +52,7 @@ class DrawGeometry:
     lit: np.ndarray = None  # (V,) float32: 1 lit, 0 emission (unlit)
     uvs: np.ndarray = None  # (V, 2) float32
     images: tuple = ()
+    mesh_names: tuple = ()  # the diffuse meshes' names
     prepass_ranges: tuple = ()
     ranges: tuple = ()
     range_windings: tuple = ()
@@ -137,14 +139,16 @@ def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=Non
 
     centres, radii = subdivision.reflector_spheres(reflectors)
     vertices, packed, mesh_triangles, mesh_image, mesh_winding, offset = [], [], [], [], [], 0
+    owners = []
     mirrors = [r.vertices for r in reflectors]
-    for mesh, (normal, uv, lit), image in zip(meshes, attributes, image_of_mesh):
+    for index, (mesh, (normal, uv, lit), image) in enumerate(zip(meshes, attributes, image_of_mesh)):
         sense = closed_surfaces.cullable_winding(mesh.vertices, mesh.triangles, mirrors)
         # Colour, normal, UV and lit are interpolated together at new midpoints.
         v, t, c = mesh.vertices, mesh.triangles, np.c_[mesh.colors, normal, uv, lit].astype(np.float32)
         if edge_fraction is not None:
             v, t, c = subdivision.subdivide(v, t, c, centres, radii, edge_fraction)
         vertices.append(v)
+        owners.append(np.full(len(v), index, np.int32))
         packed.append(c)
         mesh_triangles.append(t + offset)
         mesh_image.append(np.full(len(t), image))
@@ -160,6 +164,7 @@ def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=Non
     rank = np.empty_like(order)
     rank[order] = np.arange(len(order))
     vertices, packed, mesh_triangles = vertices[order], packed[order], rank[mesh_triangles]
+    owners = np.concatenate(owners)[order] if owners else np.zeros(0, np.int32)
     vertex_normals = packed[:, 4:7]
     length = np.linalg.norm(vertex_normals, axis=1, keepdims=True)
     vertex_normals = np.divide(vertex_normals, length, out=np.zeros_like(vertex_normals), where=length > 0)
@@ -177,6 +182,7 @@ def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=Non
         prepass_uvs=np.concatenate(uvs) if uvs else np.zeros((0, 2), np.float32),
         prepass_triangles=prepass_triangles,
         vertices=vertices,
+        vertex_mesh=owners,
         colors=np.ascontiguousarray(packed[:, :4]),
         triangles=mesh_triangles,
         diameter=float(max(np.linalg.norm(hi - lo), 1e-9)),
@@ -185,6 +191,7 @@ def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=Non
         lit=np.ascontiguousarray(packed[:, 9]),
         uvs=np.ascontiguousarray(packed[:, 7:9]),
         images=tuple(images),
+        mesh_names=tuple(mesh.name for mesh in meshes),
         prepass_ranges=prepass_ranges,
         ranges=ranges,
         range_windings=tuple(key % 3 - 1 for key, _, _ in keyed),

@@ -8,8 +8,8 @@ import pytest
 from curved_reflections.engine import look_at_view
 from curved_reflections.engine.reference.exact import solve_reflections
 from curved_reflections.engine.geometry.raytrace import ReflectorSet
-from curved_reflections.engine.spot_check import (COVERED_PX, MAX_ERROR_PX, SpotCheck, coverage_check, shown_answers,
-                                                  spot_check)
+from curved_reflections.engine.spot_check import (COVERED_PX, MAX_ERROR_PX, MAX_MISSED_SHARE, SpotCheck, coverage_check,
+                                                  shown_answers, spot_check)
 from curved_reflections.engine.geometry.sphere import bumpy_icosphere, icosphere
 
 CENTRE = np.array([0.0, 0.0, 1.0])
@@ -75,8 +75,8 @@ def test_no_answer_nothing_checked(case):
 
 def test_every_exact_image_drawn_misses_none(case):
     reflector_set, view, points, answers = case
-    images, missed = coverage_check(reflector_set, view, 0, points, answers)
-    assert images > 60 and missed == 0
+    coverage = coverage_check(reflector_set, view, 0, points, answers)
+    assert coverage.images > 60 and coverage.missed == 0 and coverage.group == -1
 
 
 @pytest.fixture(scope="module")
@@ -103,14 +103,15 @@ def test_one_image_per_point_of_a_folded_mirror_is_counted_as_missing_the_others
     reflector_set, view, points, answers = folded
     assert (np.isfinite(answers[1, :, 0])).sum() > 0.3 * np.isfinite(answers[0, :, 0]).sum()
     first_only = answers[:1]
-    images, missed = coverage_check(reflector_set, view, 0, points, first_only)
+    coverage = coverage_check(reflector_set, view, 0, points, first_only)
+    images, missed = coverage.images, coverage.missed
     assert images > 100 and 0.3 * images < missed < 0.7 * images
     check = spot_check(reflector_set, view, 0, points, first_only)
     assert check.within(0.05)  # every answer drawn is right ...
-    check = check.with_coverage(images, missed)
+    check = check.with_coverage(coverage)
     assert not check.within(0.05)  # ... but the mirror is not drawn right
     assert f"; {missed} of {images} exact images not drawn" in check.summary()
-    assert coverage_check(reflector_set, view, 0, points, answers) == (images, 0)
+    assert coverage_check(reflector_set, view, 0, points, answers).missed == 0 and coverage.group == -1
 
 
 def test_an_answer_far_from_the_missing_image_does_not_cover_it(folded):
@@ -124,8 +125,8 @@ def test_an_answer_far_from_the_missing_image_does_not_cover_it(folded):
                           np.nan)
     dropped = answers.copy()
     dropped[1] = np.nan
-    missing = coverage_check(reflector_set, view, 0, points, dropped)[1]
-    assert missing > 20 and coverage_check(reflector_set, view, 0, points, shifted)[1] >= 0.8 * missing
+    missing = coverage_check(reflector_set, view, 0, points, dropped).missed
+    assert missing > 20 and coverage_check(reflector_set, view, 0, points, shifted).missed >= 0.8 * missing
 
 
 def test_answers_the_renderer_would_not_show_are_not_checked(case):
@@ -151,3 +152,23 @@ def test_answers_the_renderer_would_not_show_are_not_checked(case):
     assert np.array_equal(np.isfinite(off[0, valid, 0]), inside)
     assert spot_check(reflector_set, aside, 0, points, answers).checked == 96
     assert spot_check(reflector_set, aside, 0, points, answers).unconfirmed == 0
+
+
+def test_one_object_whose_images_are_left_out_fails_however_small(folded):
+    """Grouped by object, a method that misses the images of one small object (here
+    every second image of the 15 points of group 1) is found there,
+    where the whole sample's share would pass it."""
+    reflector_set, view, points, answers = folded
+    groups = np.zeros(len(points), np.int64)
+    seen_twice = np.flatnonzero(np.isfinite(answers[1, :, 0]))
+    groups[seen_twice[:15]] = 1
+    groups[-40:] = 2
+    wrong = answers.copy()
+    wrong[1:, groups == 1] = np.nan
+    ungrouped = coverage_check(reflector_set, view, 0, points, wrong, sample=96)
+    assert ungrouped.group == -1 and ungrouped.missed <= MAX_MISSED_SHARE * ungrouped.images
+    grouped = coverage_check(reflector_set, view, 0, points, wrong, groups=groups)
+    assert grouped.group == 1 and grouped.missed > 0.3 * grouped.images
+    check = SpotCheck(96, np.zeros(96)).with_coverage(grouped, "Cube")
+    assert not check.within(1.0) and check.shortfall() == f"{grouped.missed} of {grouped.images} exact images of Cube not drawn"
+    assert coverage_check(reflector_set, view, 0, points, answers, groups=groups).group == -1
