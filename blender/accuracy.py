@@ -46,20 +46,21 @@ class Drawn(NamedTuple):
     per_frame: bool  # from a per-frame pass (else from the sample-based camera)
 
 
-def drawn_answers(reflector_set, renderer, camera, sample: int = CAMERA_SAMPLE, seed: int = 0,
+def drawn_answers(reflector_set, renderer, camera, sample: int | None = None, seed: int = 0,
                   chosen: np.ndarray | None = None) -> dict:
     """{reflector index: Drawn}: the first reflector points (world space, NaN where none)
     the last frame drew for the renderer's vertices: every vertex of the per-frame passes'
-    reflectors, and ``sample`` vertices (seeded) projected by ``camera`` (the sample-based
-    camera the frame was drawn with, or None) for the reflectors it drew (``chosen``:
-    these vertex indices instead). What the live check and ``bench_methods.py`` measure,
-    whichever method drew."""
+    reflectors, and ``sample`` vertices (seeded; default :data:`CAMERA_SAMPLE`, read at
+    each call) projected by ``camera`` (the sample-based camera the frame was drawn with,
+    or None) for the reflectors it drew (``chosen``: these vertex indices instead). What
+    the live check and ``bench_methods.py`` measure, whichever method drew."""
     vertices = renderer.geometry.vertices
     every = np.arange(len(vertices))
     found = {index: Drawn(every, answers, True) for index, answers in renderer.answered().items()}
     if camera is None or len(vertices) == 0:
         return found
     if chosen is None:
+        sample = CAMERA_SAMPLE if sample is None else sample
         chosen = np.sort(np.random.default_rng(seed).choice(len(vertices), size=min(sample, len(vertices)),
                                                             replace=False))
     projection = camera.project(vertices[chosen])

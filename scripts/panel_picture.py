@@ -20,7 +20,8 @@ With ``--perturbation`` the ball is in Perturbation mode on its declared exact s
 
     .venv/bin/python scripts/panel_picture.py --perturbation --out docs/images/panel_perturbation.png
 
-Prints one line per panel (``panel Statistics: closed, 0 rows``), then the file written.
+Prints one line per panel (``panel Statistics: closed, 0 rows``), one per mirror checked
+in the view (``checked Ring: In this view (Runtime): p95 ...``), then the file written.
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ import gpu  # noqa: E402
 from gpu_extras.batch import batch_for_shader  # noqa: E402
 from mathutils import Matrix  # noqa: E402
 
-from curved_reflections.blender import demo_scenes, live, panel  # noqa: E402
+from curved_reflections.blender import accuracy, demo_scenes, live, method_plan, panel  # noqa: E402
 from curved_reflections.blender.capture import view_from_camera  # noqa: E402
 from curved_reflections.blender.gpu_init import ensure_gpu  # noqa: E402
 from curved_reflections.blender.png import write_png  # noqa: E402
@@ -299,7 +300,11 @@ def main(argv=None) -> int:
                         help="the scene camera's view (its statistics; the picture is the panels')")
     parser.add_argument("--perturbation", action="store_true",
                         help="the ball in Perturbation mode on its declared exact sphere (panel_perturbation.png)")
+    parser.add_argument("--check-sample", type=int, default=accuracy.CAMERA_SAMPLE, metavar="VERTICES",
+                        help="vertices the Runtime camera projects for the live accuracy check (the tests' "
+                             "quick run: fewer)")
     args = parser.parse_args(argv)
+    accuracy.CAMERA_SAMPLE = args.check_sample
     ensure_gpu()
     PACKAGE.register()
     try:
@@ -317,11 +322,14 @@ def main(argv=None) -> int:
         bpy.ops.curved_reflections.start_live()
         draw_and_check(scene)
         panels = record_panels(scene, mirror)
+        checks = {name: accuracy.panel_line(found) for name, found in method_plan.measured(scene).items()}
         image = draw_rows(layout_rows(panels))
     finally:
         PACKAGE.unregister()
     for cls, is_open, _header, body in panels:
         print(f"panel {cls.bl_label}: {'open' if is_open else 'closed'}, {sum(bool(r['items']) for r in body)} rows")
+    for name, line in sorted(checks.items()):
+        print(f"checked {name}: {line}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     write_png(args.out, image.astype(np.float32) / 255.0)
     print(f"wrote {args.out} ({image.shape[1]}x{image.shape[0]})")

@@ -1,10 +1,11 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Run in fresh Pythons by test_packaging: the render-farm bake of the user guide.
 
-``python farm_probe.py install EXTENSION.zip SCENE.blend CACHE [NODES]``: installs the zip
-(the user folder is ``BLENDER_USER_RESOURCES``) and saves a scene with a mirror ball in
-Morphing mode whose cache folder is CACHE (a grid of NODES nodes along x, default 2, by
-2 by 2); and ``python farm_probe.py kettle KETTLE.blend``: a scene the user guide's
+``python farm_probe.py install EXTENSION.zip SCENE.blend CACHE [NODES [MARGIN]]``: installs
+the zip (the user folder is ``BLENDER_USER_RESOURCES``) and saves a scene with a mirror ball
+in Morphing mode whose cache folder is CACHE (a grid of NODES nodes along x, default 2, by
+2 by 2, reaching MARGIN ball sizes beyond it, default 2.5: the farther, the smaller the ball
+in the nodes' cube faces and the quicker a node bakes); and ``python farm_probe.py kettle KETTLE.blend``: a scene the user guide's
 examples open, a mirror ball and a box in Auto mode, two frames. ``python farm_probe.py bake SCENE.blend
 RANGE [CACHE]``: what a farm task runs, as the user guide writes it for the ``bpy``
 module (CACHE, when given, replaces the scene's cache folder for this run).
@@ -26,13 +27,13 @@ def _ball(mode):
     return ball
 
 
-def install(zip_path, blend_path, cache, nodes="2"):
+def install(zip_path, blend_path, cache, nodes="2", margin="2.5"):
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     bpy.ops.extensions.package_install_files(filepath=zip_path, repo='user_default', enable_on_install=True)
     scene = bpy.context.scene
     _ball('MORPHING')
     scene.curved_reflections.morph_grid = (int(nodes), 2, 2)
-    scene.curved_reflections.morph_margin = 2.5  # nodes far from the ball: small cube faces, a quick bake
+    scene.curved_reflections.morph_margin = float(margin)  # nodes far from the ball: small cube faces, a quick bake
     scene.curved_reflections.morph_cache_dir = cache
     bpy.ops.wm.save_as_mainfile(filepath=blend_path)
 

@@ -187,13 +187,16 @@ def test_perturbation_mode_draws_live_with_no_camera_and_the_torus_too(fig3, cap
     assert drawn and passes.counts["projections"] == 2 and np.abs(other - image).max() > 0.1
 
 
-def test_the_drawn_methods_accuracy_is_measured_when_the_view_settles(fig3):
+def test_the_drawn_methods_accuracy_is_measured_when_the_view_settles(fig3, monkeypatch):
     """Once the view has not changed for a moment, the live view checks the drawn
     answers against exactly traced rays (engine/spot_check.py); the panel shows it. The
     ball's iterative search: sub-pixel. A torus beside it, drawn by a Runtime camera,
     is measured too."""
     from curved_reflections.blender import accuracy
 
+    # The Runtime camera's check projects 1000 of the scene's vertices, not 3000: most of
+    # the time is their polish on the true rays; 33 of them land on the ring (82 of 3000).
+    monkeypatch.setattr(accuracy, "CAMERA_SAMPLE", 1000)
     _torus(fig3)
     state = live.start(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
     view = _camera_view(fig3)

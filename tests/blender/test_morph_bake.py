@@ -198,8 +198,8 @@ def test_a_damaged_node_costs_only_its_reflector_and_a_bake_repairs_it(empty_sce
     for _, future in state.renderer.pass_named("morphing")._pending.values():
         future.result(timeout=120)  # the prefetch started by the draw reads node files too
     directory = next(morph_ops.cache_directory(empty_scene).glob("Ball-*"))
-    for path in directory.glob("node_*.npz"):
-        path.write_bytes(b"damaged")
+    damaged_file = sorted(directory.glob("node_*.npz"))[0]  # one node of the eye's cell (all 8 are read)
+    damaged_file.write_bytes(b"damaged")
     state = live.refresh(empty_scene, bpy.context.evaluated_depsgraph_get(), views={"v": view}, wait=True)
     drawn, after = _draw(empty_scene, view, "v")  # the fault is met here, the others draw on
     assert drawn and state.drawing
@@ -212,9 +212,9 @@ def test_a_damaged_node_costs_only_its_reflector_and_a_bake_repairs_it(empty_sce
     assert drawn and state.cameras["v"].sbc is not None
     assert _touched(runtime).sum() > 0.8 * _touched(before).sum()
 
-    damaged = len(list(directory.glob("node_*.npz*")))  # overwritten, some renamed *.damaged when read
+    assert damaged_file.name in line or damaged_file.name in str(grid.failure)
     assert bpy.ops.curved_reflections.bake_morphing(processes=1) == {'FINISHED'}
-    assert f"Ball: baked {damaged} nodes" in morph_ops.morph_status(empty_scene)
+    assert "Ball: baked 1 nodes" in morph_ops.morph_status(empty_scene)  # the damaged one alone
     assert bake_cache.baked_nodes(directory, 8)[0].all()
     state = live.refresh(empty_scene, bpy.context.evaluated_depsgraph_get(), views={"v": view}, wait=True)
     drawn, repaired = _draw(empty_scene, view, "v")

@@ -123,7 +123,7 @@ def test_a_farm_bakes_node_ranges_side_by_side_into_one_cache(extension_zip, tmp
         return subprocess.Popen([sys.executable, probe, *map(str, args)], env=env, stdout=subprocess.PIPE,
                                 stderr=subprocess.STDOUT, text=True)
 
-    installing = run("install", extension_zip, blend, shared)
+    installing = run("install", extension_zip, blend, shared, 2, 8.0)  # 8 nodes, 8 ball sizes out: quick
     assert installing.wait(timeout=120) == 0, installing.stdout.read()
     halves = [run("bake", blend, nodes) for nodes in ("0-3", "4-")]
     outputs = [half.communicate(timeout=600)[0] for half in halves]
@@ -157,11 +157,12 @@ def _python_examples(guide: Path) -> list:
 def test_the_user_guides_python_examples_run_as_written(extension_zip, tmp_path, repo_root):
     """Every Python example of docs/user_guide.md, run as written in a fresh Python with the
     zip installed, in a folder holding the files they open: kettle.blend (a mirror ball in
-    Auto mode, two frames) and scene.blend (a ball in Morphing mode, a 50 x 2 x 2 grid, so
-    that its nodes 0-99 exist)."""
+    Auto mode, two frames) and scene.blend (a ball in Morphing mode, a 25 x 2 x 2 grid, so
+    that its nodes 0-99 exist; reaching 12 ball sizes beyond it, so that the ball is small
+    in the nodes' cube faces and the 100 nodes bake in seconds)."""
     probe = str(Path(__file__).with_name("farm_probe.py"))
     env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "user"))
-    for args in (["install", extension_zip, tmp_path / "scene.blend", tmp_path / "cache", "25"],
+    for args in (["install", extension_zip, tmp_path / "scene.blend", tmp_path / "cache", "25", "12"],
                  ["kettle", tmp_path / "kettle.blend"]):
         done = subprocess.run([sys.executable, probe, *map(str, args)], env=env, capture_output=True, text=True,
                               timeout=300)
@@ -175,6 +176,8 @@ def test_the_user_guides_python_examples_run_as_written(extension_zip, tmp_path,
                               timeout=600)
         output = done.stdout + done.stderr
         assert done.returncode == 0 and "Traceback" not in output, f"example {k}:\n{example}\n{output[-3000:]}"
+        if "bake_morphing" in example:
+            assert "Ball: baked 100 nodes" in output, output[-3000:]
     assert (Path("/tmp") / "kettle_reflections.png").is_file()
     assert sorted(p.name for p in (Path("/tmp") / "kettle").glob("frame_*.png"))[:2] == ["frame_0001.png",
                                                                                         "frame_0002.png"]

@@ -2,8 +2,9 @@
 """scripts/panel_picture.py draws the Reflections tab from the panels' own draw code.
 
 Run as from the command line (its own Blender state, in a child process); its log names
-each panel drawn, open or closed as by default, with its rows, and the picture's size
-follows from them.
+each panel drawn, open or closed as by default, with its rows, and each mirror's accuracy
+checked in the scene camera's view; the picture's size follows from the rows. The check
+projects a 300-vertex sample (``--check-sample``; 3000 by default, most of the run's time).
 """
 
 import os
@@ -18,7 +19,8 @@ SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "panel_picture.py"
 def test_panel_picture_is_written(tmp_path, gpu_ready):
     out = tmp_path / "panel.png"
     environment = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "blender_user"))
-    command = [sys.executable, str(SCRIPT), "--out", str(out), "--resolution", "96", "72"]
+    command = [sys.executable, str(SCRIPT), "--out", str(out), "--resolution", "96", "72",
+               "--check-sample", "300"]
     run = subprocess.run(command, capture_output=True, text=True, timeout=600, env=environment)
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
     size = re.search(r"wrote .*panel\.png \((\d+)x(\d+)\)", run.stdout)
@@ -26,6 +28,9 @@ def test_panel_picture_is_written(tmp_path, gpu_ready):
     panels = dict(re.findall(r"^panel (.+): ((?:open|closed), \d+ rows)$", run.stdout, re.MULTILINE))
     assert list(panels) == ["Curved Reflections", "Mirror", "Reflectors", "Quality", "Morphing Grids", "Statistics"]
     assert panels["Morphing Grids"] == panels["Statistics"] == "closed, 0 rows"  # closed: the header alone
+    # Both mirrors measured in the view, by the method that drew them, with answers confirmed.
+    checks = dict(re.findall(r"^checked (\w+): In this view \((\w+)\): p95 [\d.]+ px", run.stdout, re.MULTILINE))
+    assert checks == {"MirrorSphere": "Iterative", "Ring": "Runtime"}, run.stdout[-3000:]
     rows = {name: int(state.split(", ")[1].split()[0]) for name, state in panels.items()}
     # The live buttons and status; the mirror's settings; both mirrors with their reasons; the quality settings.
     assert rows["Curved Reflections"] >= 5 and rows["Mirror"] >= 9 and rows["Reflectors"] >= 8 and rows["Quality"] >= 6

@@ -6,6 +6,8 @@ the exact solver's image (engine/reference/exact.py) and gives its first reflect
 distance; a point no reflected ray reaches (inside the mirror) gets no image.
 """
 
+from functools import lru_cache
+
 import numpy as np
 
 from curved_reflections.engine import look_at_view
@@ -87,9 +89,11 @@ def test_images_within_a_step_of_the_mirror_edge_converge():
     assert np.linalg.norm(pixels - images, axis=1).max() < 0.01
 
 
+@lru_cache(maxsize=None)
 def _facing_spheres(n_points: int, seed: int):
     """Two facing mirror spheres and points around them (not used while tuning), with
-    every visible second-order path of the exact solver (tools/exact_paths.py)."""
+    every visible second-order path of the exact solver (tools/exact_paths.py). Solved
+    once per (n_points, seed): two tests here share one scene, and no caller writes to it."""
     from curved_reflections.tools.exact_paths import solve_second_order
 
     reflectors = [icosphere((0.0, 0.0, 1.0), 1.0, 4, "A"), icosphere((3.0, 0.3, 1.1), 0.8, 4, "B")]

@@ -4,14 +4,17 @@
 import numpy as np
 
 from curved_reflections.engine import look_at_view
-from curved_reflections.engine.methods.sbc import build_sample_based_camera
+from curved_reflections.engine.geometry.raytrace import ReflectorSet
 from curved_reflections.engine.methods.sbc.bsp import _band_ends, focal_distances
+from curved_reflections.engine.methods.sbc.raymap import trace_ray_map
 
 from test_sbc import _bowl, ellipsoid
 
 
 def _ray_map(reflector, view, bounds):
-    ray_map = build_sample_based_camera([reflector], view, bounds, downsample=2).ray_map
+    """The ray map a camera at down-sampling 2 is built on (``build_sample_based_camera``
+    traces it first; the camera's trees and traced cells are not needed here)."""
+    ray_map = trace_ray_map(ReflectorSet([reflector]), view, bounds, 2, 1)
     return ray_map, ray_map.group_grid(0)
 
 

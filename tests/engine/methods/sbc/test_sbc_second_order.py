@@ -34,13 +34,20 @@ def scene():
     return reflector_set, view, points, exact.select(exact.visible)
 
 
-def test_second_order_projections_match_the_exact_solver(scene):
+@pytest.fixture(scope="module")
+def whole(scene):
+    """The scene's camera at Max Order 2, every group in it, and its projection of the points."""
+    reflector_set, view, points, _ = scene
+    sbc = build_sample_based_camera(reflector_set, view, BOUNDS, max_order=2, downsample=2)
+    return sbc, sbc.project(points)
+
+
+def test_second_order_projections_match_the_exact_solver(scene, whole):
     reflector_set, view, points, exact = scene
     # d = 2 on a 240 x 160 view: the second-order footprints (each sphere's image of the
     # other) are a few dozen rays across; at d = 4 only a dozen, and p95 reaches 0.9 px.
-    sbc = build_sample_based_camera(reflector_set, view, BOUNDS, max_order=2, downsample=2)
+    sbc, projection = whole
     assert {(0, 1), (1, 0)} <= set(sbc.groups)
-    projection = sbc.project(points)
     errors, projected, false = [], 0, 0
     for history in ((0, 1), (1, 0)):
         mine = (exact.history[:, 0] == history[0]) & (exact.history[:, 1] == history[1])
@@ -59,18 +66,18 @@ def test_second_order_projections_match_the_exact_solver(scene):
     assert false <= 0.02 * projected
 
 
-def test_a_camera_for_the_higher_orders_alone_projects_them_as_the_whole_camera(scene):
+def test_a_camera_for_the_higher_orders_alone_projects_them_as_the_whole_camera(scene, whole):
     """Both balls' first orders drawn by another method (the iterative search): the camera
     leaves their groups out, and its second-order answers are the whole camera's."""
     reflector_set, view, points, _ = scene
-    whole = build_sample_based_camera(reflector_set, view, BOUNDS, max_order=2, downsample=2)
+    whole, theirs = whole
     higher = build_sample_based_camera(reflector_set, view, BOUNDS, max_order=2, downsample=2,
                                        first_order_left_out=frozenset({0, 1}))
     assert higher.first_order_left_out == {0, 1}
     assert {tuple(h) for h in higher.groups} == {h for h in map(tuple, whole.groups) if len(h) > 1} == {(0, 1), (1, 0)}
     assert higher.stats["n_sheets"] < whole.stats["n_sheets"]
     assert higher.stats["n_rays"] == whole.stats["n_rays"]  # the ray map is the same: it finds the second orders
-    mine, theirs = higher.project(points), whole.project(points)
+    mine = higher.project(points)
     # The same sheets, in the same order (a history has one group per sheet).
     second = [k for k, h in enumerate(theirs.groups) if len(h) > 1]
     assert [tuple(theirs.groups[k]) for k in second] == [tuple(h) for h in mine.groups]
