@@ -8,8 +8,8 @@ mesh (``true_rays.polish_on_true_rays``, the iteration Roger & Holzschuch 2006, 
 3.2, use to find reflections), which converges to the exact reflection nearest to it.
 The distance between the two pixels is the answer's error. An answer whose iteration
 does not converge within MAX_ERROR_PX (no true reflection near it: a reflection drawn
-where there is none, or one off by more) is counted as *unconfirmed*. Cheap: a few
-hundred traced rays, so the live view runs it whenever the view settles.
+where there is none, or one off by more) is counted as *unconfirmed*. A few hundred
+traced rays.
 
 Only answers the picture shows are measured (:func:`shown_answers`): the renderer's
 fragment stage drops a reflected fragment whose pixel sees another mirror, or where the
@@ -23,7 +23,10 @@ the mirror's reflections out, and its drawn answers all check out. A seeded samp
 points answered for is solved exactly (``reference/exact.py``: every visible first-order
 reflection on the reflector), and an exact image with no drawn answer within
 :data:`COVERED_PX` is *missed*. Images seen at a grazing angle (the band along the
-mirror's silhouette, which a render traces and the viewport fills) are not counted.
+mirror's silhouette, which a render traces and the viewport fills) are not counted. The
+sample is taken per object and half among the points nearest the mirror
+(:func:`checked_points`): an object almost touching a mirror has few vertices and large
+reflections, and is where methods leave images out (contact).
 """
 
 from __future__ import annotations
