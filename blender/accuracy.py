@@ -19,7 +19,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..engine.spot_check import SpotCheck, checked_points, coverage_check, shown_answers, spot_check
+from ..engine.spot_check import (CONTACT_SHARE, SpotCheck, checked_points, coverage_check, mirror_distances,
+                                 shown_answers, spot_check)
 from ..drawing.frame_pass import FramePass
 from ..drawing.reflected_meshes import REFLECTION_COSINE
 from . import method_plan
@@ -47,16 +48,19 @@ class Drawn(NamedTuple):
 
 
 def drawn_answers(reflector_set, renderer, camera, sample: int | None = None, seed: int = 0,
-                  chosen: np.ndarray | None = None) -> dict:
+                  chosen: np.ndarray | None = None, answered: dict | None = None) -> dict:
     """{reflector index: Drawn}: the first reflector points (world space, NaN where none)
     the last frame drew for the renderer's vertices: every vertex of the per-frame passes'
     reflectors, and ``sample`` vertices (seeded; default :data:`CAMERA_SAMPLE`, read at
     each call) projected by ``camera`` (the sample-based camera the frame was drawn with,
     or None) for the reflectors it drew (``chosen``: these vertex indices instead). What
-    the live check and ``bench_methods.py`` measure, whichever method drew."""
+    the live check and ``bench_methods.py`` measure, whichever method drew. ``answered``:
+    ``renderer.answered()``, read back on the drawing thread already (the rest runs
+    anywhere)."""
     vertices = renderer.geometry.vertices
     every = np.arange(len(vertices))
-    found = {index: Drawn(every, answers, True) for index, answers in renderer.answered().items()}
+    answered = renderer.answered() if answered is None else answered
+    found = {index: Drawn(every, answers, True) for index, answers in answered.items()}
     if camera is None or len(vertices) == 0:
         return found
     if chosen is None:
@@ -87,13 +91,17 @@ def measure(plan, reflector_set, renderer, view, camera, sample: int | None = No
     for index, answered in drawn.items():
         name = reflector_set.reflectors[index].name
         method = planned.get(name, method_plan.RUNTIME) if answered.per_frame else method_plan.RUNTIME
-        pool = checked_points(vertices[answered.vertices], reflector_set.reflectors[index].vertices)
+        mirror = reflector_set.reflectors[index].vertices
+        distances = mirror_distances(vertices[answered.vertices], mirror)
+        pool = checked_points(distances)
         points = vertices[answered.vertices[pool]]
         answers = shown_answers(reflector_set, view, index, points, answered.answers[:, pool], REFLECTION_COSINE,
                                 FramePass.hidden_fraction)
         check = spot_check(reflector_set, view, index, points, answers, **options)
         owners = renderer.geometry.vertex_mesh[answered.vertices[pool]]
-        coverage = coverage_check(reflector_set, view, index, points, answers, groups=owners)
+        size = float(np.linalg.norm(mirror.max(axis=0) - mirror.min(axis=0)))
+        coverage = coverage_check(reflector_set, view, index, points, answers, groups=owners,
+                                  distances=distances[pool], contact_distance=CONTACT_SHARE * size)
         check = check.with_coverage(coverage, renderer.geometry.mesh_names[coverage.group] if coverage.group >= 0
                                     else "")
         found[name] = Measured(method, check)

@@ -376,17 +376,50 @@ def process(scene, depsgraph, wait: bool = False, now: float | None = None) -> b
 
 def _check_when_settled(state: LiveScene, scene, now: float, wait: bool) -> bool:
     """Measure the drawn methods' accuracy in the last view once it has not changed for
-    ``accuracy.SETTLE_SECONDS`` (at once with ``wait``); Auto plans again when a method
-    measured outside the Accuracy (``method_plan.note_measured``). Returns whether a check is
-    still to come."""
+    ``accuracy.SETTLE_SECONDS`` (at once with ``wait``): the answers are read back from
+    the GPU here, and measured on a worker (exact solves: tenths of a second, which the
+    viewport must not wait for); a later call takes the result up (:func:`_take_check`).
+    Returns whether a check is still to come."""
+    if state.checking is not None:
+        return _take_check(state, scene)
     if state.last_view is None or state.last_view[3] or state.renderer is None:
         return False
     view, since, camera, _ = state.last_view
     if not wait and now - since < accuracy.SETTLE_SECONDS:
         return True
     state.last_view = (view, since, camera, True)
+    renderer, plan, reflector_set = state.renderer, state.plan, state.reflector_set
+    answered = renderer.answered()
+
+    def check() -> dict:
+        drawn = accuracy.drawn_answers(reflector_set, renderer, camera, answered=answered)
+        return accuracy.measure(plan, reflector_set, renderer, view, camera, drawn=drawn)
+
+    if wait:
+        future = Future()
+        try:
+            future.set_result(check())
+        except Exception as error:  # noqa: BLE001 - reported by _take_check
+            future.set_exception(error)
+    else:
+        future = live_workers.tracer().submit(check)
+        ensure_timer()
+    state.checking = (future, renderer)
+    return _take_check(state, scene)
+
+
+def _take_check(state: LiveScene, scene) -> bool:
+    """The finished check's figures for the panel; Auto plans again when a method measured
+    outside the Accuracy (``method_plan.note_measured``). A check of a renderer the scene
+    has replaced since is dropped. Returns whether a check is still to come."""
+    future, renderer = state.checking
+    if not future.done():
+        return True
+    state.checking = None
+    if renderer is not state.renderer:
+        return False
     try:
-        found = accuracy.measure(state.plan, state.reflector_set, state.renderer, view, camera)
+        found = future.result()
     except Exception as error:  # noqa: BLE001 - a failed check must not stop the live view's timer
         state.report('WARNING', f"Accuracy check failed: {type(error).__name__}: {error}")
         return False

@@ -101,6 +101,8 @@ class LiveScene(FramePipeline):
     #: The last view drawn, when it was first drawn, the camera it was drawn with, and
     #: whether its accuracy has been checked (``accuracy.measure`` once it settles).
     last_view: tuple | None = None
+    #: (the check of the last view running on a worker, the renderer it measures).
+    checking: tuple | None = None
 
     def report(self, level: str, message: str) -> None:
         self.level, self.status = level, message

@@ -48,17 +48,18 @@ MAX_ERROR_PX = 12.0
 #: and exact images are sampled among them.
 POOL = 1024
 #: Mirror vertices the distances of :func:`checked_points` are measured to (a sample).
-NEAR_VERTICES = 1024
+NEAR_VERTICES = 256
 #: Points solved exactly per reflector and view for the coverage count: their visible
 #: images on the reflector are the ones counted (one to three per point).
 COVERAGE_SAMPLE = 96
 #: An exact image with a drawn answer of its point this close (px) is drawn: the images
 #: of one point in a fold lie tens of pixels apart, a method's error is below one.
 COVERED_PX = 4.0
-#: An exact image whose eye ray meets the mirror at a cosine below this (about 84
-#: degrees from the normal) lies in the silhouette's band, which a render traces: not
-#: counted.
-GRAZING_COSINE = 0.1
+#: An exact image whose eye ray meets the mirror at a cosine below this (about 76
+#: degrees from the normal) lies in the band along the silhouette (on a ball 100 px
+#: across, its outer 3 px: cos ~ sqrt(2 d / r)), which a render traces and a viewport
+#: fills, and where images crowd into few pixels: not counted.
+GRAZING_COSINE = 0.25
 #: A method draws a mirror right when at most this share of its exact images is missed
 #: (the complement of :meth:`SpotCheck.within`'s 95 %), ...
 MAX_MISSED_SHARE = 0.05
@@ -67,8 +68,14 @@ MAX_MISSED_SHARE = 0.05
 #: mirror's rim, a few images, is judged with the rest).
 MIN_MISSED = 2
 MIN_GROUP_IMAGES = 8
-#: Points of each object solved exactly for the coverage count (``groups``).
-GROUP_SAMPLE = 24
+#: Points of each object solved exactly for the coverage count (``groups``), drawn at
+#: random: the exact solver costs about a millisecond a point on a curved mirror of 20k
+#: triangles, so most objects get a few ...
+GROUP_SAMPLE = 8
+#: ... and an object within CONTACT_SHARE of the mirror's size of it (contact, where
+#: methods leave a tenth of an object's images out) this many.
+CONTACT_SAMPLE = 32
+CONTACT_SHARE = 0.1
 
 
 @dataclass(frozen=True)
@@ -170,15 +177,17 @@ class Coverage:
 
 def coverage_check(reflector_set: ReflectorSet, view: View, reflector_index: int, points: np.ndarray,
                    answers: np.ndarray, sample: int = COVERAGE_SAMPLE, seed: int = 0,
-                   groups: np.ndarray | None = None) -> Coverage:
+                   groups: np.ndarray | None = None, distances: np.ndarray | None = None,
+                   contact_distance: float = 0.0) -> Coverage:
     """The exact images a method's first-order answers for one reflector leave out.
 
     ``points`` and ``answers`` as :func:`spot_check`: every point the method answered
     for (with an answer or not), its answers per image slot. Up to ``sample`` points
     (seeded) are solved exactly, or with ``groups`` ((P,) int: each point's object) up
-    to :data:`GROUP_SAMPLE` of each group's: a method that fails on one object (the
-    near face of a cube almost touching the mirror) fails there, however small the
-    object. Each visible, not grazing, exact image of a chosen point on this reflector
+    to :data:`GROUP_SAMPLE` of each group's, :data:`CONTACT_SAMPLE` of a group with a
+    point within ``contact_distance`` of the mirror (``distances``, (P,):
+    :func:`mirror_distances`): a method that fails on one object (the near face of a
+    cube almost touching the mirror) fails there, however small the object. Each visible, not grazing, exact image of a chosen point on this reflector
     is missed unless an answer of the same point lies within :data:`COVERED_PX` of it on
     screen.
     """
@@ -187,7 +196,11 @@ def coverage_check(reflector_set: ReflectorSet, view: View, reflector_index: int
     rng = np.random.default_rng(seed + 1)
     grouped = groups is not None
     groups, per_group = (np.asarray(groups), GROUP_SAMPLE) if grouped else (np.zeros(len(points), np.int64), sample)
-    chosen = np.concatenate([rng.choice(members, size=min(per_group, len(members)), replace=False)
+    def size_of(members):
+        near = distances is not None and distances[members].min() <= contact_distance
+        return CONTACT_SAMPLE if grouped and near else per_group
+
+    chosen = np.concatenate([rng.choice(members, size=min(size_of(members), len(members)), replace=False)
                              for members in (np.flatnonzero(groups == g) for g in np.unique(groups))] or
                             [np.zeros(0, np.int64)]).astype(np.int64)
     if len(chosen) == 0:
@@ -244,24 +257,31 @@ def shown_answers(reflector_set: ReflectorSet, view: View, reflector_index: int,
     return answers
 
 
-def checked_points(points: np.ndarray, mirror_vertices: np.ndarray, size: int = POOL, seed: int = 0) -> np.ndarray:
-    """Indices (sorted) of up to ``size`` of ``points`` that a check looks at: half drawn
-    at random, half the nearest to the mirror among four times as many drawn at random.
-    Objects almost touching a mirror are where methods fail (contact: a near face left
-    out), and they have few vertices but large reflections: a uniform sample alone would
-    rarely meet them."""
+def mirror_distances(points: np.ndarray, mirror_vertices: np.ndarray, seed: int = 0) -> np.ndarray:
+    """(P,) each point's distance to the nearest of :data:`NEAR_VERTICES` of the mirror's
+    vertices (drawn at random, seeded): how near it is to the mirror, roughly."""
     rng = np.random.default_rng(seed)
-    if len(points) <= size:
-        return np.arange(len(points))
-    uniform = rng.choice(len(points), size=size // 2, replace=False)
-    candidates = rng.choice(len(points), size=min(len(points), 4 * size), replace=False)
     mirror = np.asarray(mirror_vertices, np.float64)
     mirror = mirror[rng.choice(len(mirror), size=min(len(mirror), NEAR_VERTICES), replace=False)]
-    distance = np.full(len(candidates), np.inf)
-    for start in range(0, len(candidates), 256):
-        chunk = points[candidates[start:start + 256]]
-        gaps = np.linalg.norm(chunk[:, None, :] - mirror[None], axis=2)
-        distance[start:start + 256] = gaps.min(axis=1)
-    nearest = candidates[np.argsort(distance)]
+    mirror_squares = np.einsum("ij,ij->i", mirror, mirror)
+    squared = np.empty(len(points))
+    for first in range(0, len(points), 4096):
+        chunk = np.asarray(points[first:first + 4096], np.float64)
+        # |p - m|^2 = |p|^2 - 2 p.m + |m|^2, the nearest sampled vertex's.
+        squared[first:first + 4096] = (np.einsum("ij,ij->i", chunk, chunk)
+                                       + (mirror_squares[None] - 2.0 * chunk @ mirror.T).min(axis=1))
+    return np.sqrt(np.maximum(squared, 0.0))
+
+
+def checked_points(distances: np.ndarray, size: int = POOL, seed: int = 0) -> np.ndarray:
+    """Indices (sorted) of up to ``size`` points that a check looks at, of points at
+    ``distances`` from the mirror (:func:`mirror_distances`): half drawn at random, half
+    the nearest. Objects almost touching a mirror are where methods fail (contact: a
+    near face left out), and they have few vertices but large reflections: a uniform
+    sample alone would rarely meet them."""
+    if len(distances) <= size:
+        return np.arange(len(distances))
+    uniform = np.random.default_rng(seed).choice(len(distances), size=size // 2, replace=False)
+    nearest = np.argsort(distances, kind="stable")
     near = nearest[~np.isin(nearest, uniform)][:size - len(uniform)]
     return np.sort(np.concatenate([uniform, near]))

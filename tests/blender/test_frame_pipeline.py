@@ -34,8 +34,10 @@ def _live_frame(scene):
 
 @pytest.mark.parametrize("mode", ['AUTO', 'RUNTIME', 'PERTURBATION'])
 def test_render_image_and_the_live_view_draw_the_same_pixels(fig3, mode):
-    # The cube moved off the ball: Perturbation leaves out images of an object this near
-    # (the next test), and Render Image's check would draw it in Runtime mode.
+    # Nothing touching the ball: Perturbation leaves out images of what almost touches the
+    # mirror (the cube, the floor; a test below), and Render Image's check would draw it
+    # in Runtime mode.
+    bpy.data.objects["MirrorSphere"].location.z += 0.3
     bpy.data.objects["Cube"].location.x += 0.6
     bpy.data.objects["MirrorSphere"].curved_reflections.mode = mode
     rendered = render_scene(fig3, bpy.context.evaluated_depsgraph_get())
@@ -107,7 +109,7 @@ def test_auto_passes_over_a_search_that_misses_a_folded_mirrors_images(fig3, amp
     assert replaced is not kept, check.summary()
     assert check.within(1.0) is kept
     if kept:
-        assert check.images > 100 and check.missed <= 1 and pipeline.renderer is searched
+        assert check.images > 60 and check.missed <= 1 and pipeline.renderer is searched
         return
     # Right where drawn, but an object's images missing (the worst object's count).
     assert check.missed >= 2 and check.missed > 0.2 * check.images and check.percentile(95) < 0.5
@@ -137,7 +139,8 @@ def test_an_explicit_mode_that_leaves_out_a_near_objects_images_falls_back_to_ru
         pipeline = FramePipeline()
         pipeline.update(fig3, depsgraph, settings_of(fig3))
         pipeline.renderer.render(view, None, pipeline.world)
-        assert pipeline.check_methods(fig3, view) is not kept
+        replaced = pipeline.check_methods(fig3, view)
+        assert replaced is not kept, (mode, method_plan.measured(fig3)["MirrorSphere"].check.summary())
         check = method_plan.measured(fig3)["MirrorSphere"].check
         [choice] = pipeline.plan.choices
         if kept:

@@ -191,7 +191,10 @@ def test_a_view_change_is_debounced_built_on_the_worker_and_the_old_camera_draws
     assert live.process(fig3, depsgraph, now=asked + live.DEBOUNCE_SECONDS + 1e-3)  # now on the worker
     future = state.jobs[live.CAMERA_KEY].future
     future.result(timeout=60)
-    # Collected; and the view drawn meanwhile, settled, is checked (engine/spot_check.py): nothing pending.
+    # Collected; and the view drawn meanwhile, settled, is checked (engine/spot_check.py) on
+    # a worker: pending until the check lands, then nothing.
+    assert live.process(fig3, depsgraph, now=time.monotonic() + 1.0) and state.checking is not None
+    state.checking[0].result(timeout=60)
     assert not live.process(fig3, depsgraph, now=time.monotonic() + 1.0)
     new = state.cameras[live.CAMERA_KEY]
     assert new is not old and new.view is moved and state.counts["builds"] == 2

@@ -256,15 +256,22 @@ def test_a_view_whose_near_plane_cuts_the_mirror_is_filled_not_traced(fig3, tmp_
     assert "mirror pixels without a reflection were filled, not ray traced" in capfd.readouterr().out
 
 
+def _lift_off_the_floor() -> None:
+    """sbc_fig3 with nothing touching its ball: the ball 0.3 above the floor, the cube
+    moved 0.6 away from it."""
+    bpy.data.objects["MirrorSphere"].location.z += 0.3
+    bpy.data.objects["Cube"].location.x += 0.6
+
+
 def test_perturbation_mode_draws_what_the_camera_draws(fig3):
     """Perturbation (Chen & Arvo 2000) on the mesh and on the declared exact sphere: each
     image agrees with the Runtime camera's on nearly every pixel, and the plan says why.
-    The cube is moved off the ball: Perturbation leaves out images of an object 3 % of the
-    radius away, and Render Image's check then draws the ball in Runtime mode
-    (test_frame_pipeline.py)."""
+    The ball is lifted off the floor and the cube moved off the ball: Perturbation leaves
+    out images of what almost touches the mirror, and Render Image's check then draws the
+    ball in Runtime mode (test_frame_pipeline.py)."""
     from curved_reflections.blender.render_image import render_scene
 
-    bpy.data.objects["Cube"].location.x += 0.6
+    _lift_off_the_floor()
     depsgraph = bpy.context.evaluated_depsgraph_get()
     settings = bpy.data.objects["MirrorSphere"].curved_reflections
     settings.mode = 'RUNTIME'
