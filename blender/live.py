@@ -71,7 +71,7 @@ from ..engine.view import View
 from ..drawing.methods.sbc_gpu import SBCTextures
 from ..drawing.reflection_draw import MAX_TRACED_FRACTION
 from ..drawing.traced_pixels import trace_doubtful
-from . import accuracy, live_status, live_workers, method_plan, method_registry, morph_bake
+from . import live_check, live_status, live_workers, method_plan, method_registry, morph_bake
 from .capture import capture_scene, view_from_camera
 from .frame_pipeline import settings_of
 from .live_state import CameraBuild, LiveScene, Preparing, Tracing, ViewCamera
@@ -369,65 +369,13 @@ def process(scene, depsgraph, wait: bool = False, now: float | None = None) -> b
     traced, tracing = _traces_landed(state)
     if _collect(state) or any(frame_pass.prefetched for frame_pass in passes) or traced:
         tag_redraw()
-    checking = _check_when_settled(state, scene, now, wait)
+    checking, landed = live_check.check_when_settled(state, scene, now, wait)
+    if landed:
+        tag_redraw()
+    if checking and not wait:
+        ensure_timer()  # the check runs on a worker: the timer takes it up
     return bool(state.jobs or state.requests or state.dirty_meshes or state.dirty_reflectors or tracing
                 or state.preparing is not None or any(frame_pass.prefetching for frame_pass in passes) or checking)
-
-
-def _check_when_settled(state: LiveScene, scene, now: float, wait: bool) -> bool:
-    """Measure the drawn methods' accuracy in the last view once it has not changed for
-    ``accuracy.SETTLE_SECONDS`` (at once with ``wait``): the answers are read back from
-    the GPU here, and measured on a worker (exact solves: tenths of a second, which the
-    viewport must not wait for); a later call takes the result up (:func:`_take_check`).
-    Returns whether a check is still to come."""
-    if state.checking is not None:
-        return _take_check(state, scene)
-    if state.last_view is None or state.last_view[3] or state.renderer is None:
-        return False
-    view, since, camera, _ = state.last_view
-    if not wait and now - since < accuracy.SETTLE_SECONDS:
-        return True
-    state.last_view = (view, since, camera, True)
-    renderer, plan, reflector_set = state.renderer, state.plan, state.reflector_set
-    answered = renderer.answered()
-
-    def check() -> dict:
-        drawn = accuracy.drawn_answers(reflector_set, renderer, camera, answered=answered)
-        return accuracy.measure(plan, reflector_set, renderer, view, camera, drawn=drawn)
-
-    if wait:
-        future = Future()
-        try:
-            future.set_result(check())
-        except Exception as error:  # noqa: BLE001 - reported by _take_check
-            future.set_exception(error)
-    else:
-        future = live_workers.tracer().submit(check)
-        ensure_timer()
-    state.checking = (future, renderer)
-    return _take_check(state, scene)
-
-
-def _take_check(state: LiveScene, scene) -> bool:
-    """The finished check's figures for the panel; Auto plans again when a method measured
-    outside the Accuracy (``method_plan.note_measured``). A check of a renderer the scene
-    has replaced since is dropped. Returns whether a check is still to come."""
-    future, renderer = state.checking
-    if not future.done():
-        return True
-    state.checking = None
-    if renderer is not state.renderer:
-        return False
-    try:
-        found = future.result()
-    except Exception as error:  # noqa: BLE001 - a failed check must not stop the live view's timer
-        state.report('WARNING', f"Accuracy check failed: {type(error).__name__}: {error}")
-        return False
-    state.counts["checks"] += 1
-    if method_plan.note_measured(scene, found):
-        state.dirty_reflectors = True  # plan again: the replaced method's reflector changes hands
-    tag_redraw()
-    return state.dirty_reflectors
 
 
 def draw(scene, key, view: View) -> bool:

@@ -63,10 +63,13 @@ GRAZING_COSINE = 0.25
 #: A method draws a mirror right when at most this share of its exact images is missed
 #: (the complement of :meth:`SpotCheck.within`'s 95 %), ...
 MAX_MISSED_SHARE = 0.05
-#: ... or of one object's, where it misses at least this many (one miss in a small
-#: sample is not a failure) of at least MIN_GROUP_IMAGES (an object seen only along the
-#: mirror's rim, a few images, is judged with the rest).
-MIN_MISSED = 2
+#: ... or, of one object's, more than MAX_OBJECT_MISSED_SHARE and at least MIN_MISSED
+#: of at least MIN_GROUP_IMAGES (an object seen only along the mirror's rim, a few
+#: images, is judged with the rest). Measured on sbc_fig3's cube 3 % of the radius from
+#: the ball: the iterative search misses up to 6 % of its sampled images near the
+#: contact, perturbation 10-15 %; a small sample's one or two misses are noise.
+MAX_OBJECT_MISSED_SHARE = 0.1
+MIN_MISSED = 3
 MIN_GROUP_IMAGES = 8
 #: Points of each object solved exactly for the coverage count (``groups``), drawn at
 #: random: the exact solver costs about a millisecond a point on a curved mirror of 20k
@@ -74,7 +77,7 @@ MIN_GROUP_IMAGES = 8
 GROUP_SAMPLE = 8
 #: ... and an object within CONTACT_SHARE of the mirror's size of it (contact, where
 #: methods leave a tenth of an object's images out) this many.
-CONTACT_SAMPLE = 32
+CONTACT_SAMPLE = 48
 CONTACT_SHARE = 0.1
 
 
@@ -221,7 +224,7 @@ def coverage_check(reflector_set: ReflectorSet, view: View, reflector_index: int
         mine = group_of == group
         counted = Coverage(int(np.count_nonzero(mine)), int(np.count_nonzero(missed & mine)), int(group))
         if counted.images >= MIN_GROUP_IMAGES and counted.missed >= MIN_MISSED and \
-                counted.missed > MAX_MISSED_SHARE * counted.images and (
+                counted.missed > MAX_OBJECT_MISSED_SHARE * counted.images and (
                 worst.group < 0 or counted.missed * worst.images > worst.missed * counted.images):
             worst = counted
     return worst
