@@ -308,7 +308,8 @@ def _mode_cell(mode: dict) -> str:
 def _check_cell(row: dict) -> str:
     if not row["checks"]:
         return "not checked (Runtime from the start: the check measures per-frame methods)"
-    return "<br>".join(f"{n}: {line}" if len(row["checks"]) > 1 else line for n, line in row["checks"].items())
+    several = len(row["frames"][0]["methods"]) > 1
+    return "<br>".join(f"{n}: {line}" if several else line for n, line in row["checks"].items())
 
 
 def table(rows: list) -> list:
@@ -353,6 +354,21 @@ def findings(rows: list) -> list:
         if missed:
             parts.append("**missed** by " + ", ".join(f"{r['name']} ({r['ratio']:.1f}x)" for r in missed))
         lines.append(text + "; ".join(parts) + ".")
+    cameras = [r for r in done if all(m != "RUNTIME" for f in r["frames"] for m in f["methods"].values())
+               and statistics.median(f["stages"]["sbc"] for f in r["frames"]) > 0.1]
+    if cameras:
+        built = {r["name"]: statistics.median(f["stages"]["sbc"] for f in r["frames"]) for r in cameras}
+        lines.append("- A per-frame method drew every mirror, yet each frame also built a sample-based camera "
+                     "(Max Order 2: the mirror's reflections of itself or of the other mirror): " + ", ".join(
+                         f"{r['name']} (camera {built[r['name']]:.1f} s of a {r['seconds_median']:.1f} s frame)"
+                         for r in cameras) + ".")
+    passed = [r["name"] for r in done for m in r["modes"] if m["mode"] == "PERTURBATION" and "tried" not in m
+              and "error" not in m and all(v == "PERTURBATION" for v in m["methods"].values())]
+    failed = [r["name"] for r in done for m in r["modes"] if m["mode"] == "PERTURBATION"
+              and any(v == "RUNTIME" for v in m["methods"].values())]
+    if passed or failed:
+        lines.append(f"- Perturbation mode passed the accuracy check on frame 1 on: {', '.join(passed) or 'none'}; "
+                     f"failed it (exact images not drawn) and fell back to Runtime on: {', '.join(failed) or 'none'}.")
     runtime = [r for r in done if any(m == "RUNTIME" for f in r["frames"] for m in f["methods"].values())]
     if runtime:
         lines.append("- Auto drew with Runtime (a camera per frame, the slow path) on: " + ", ".join(
@@ -370,8 +386,10 @@ def details(rows: list) -> list:
     for row in rows:
         if "error" in row:
             continue
+        stage = {k: statistics.median(f["stages"][k] for f in row["frames"]) for k in ("sbc", "draw")}
         lines.append(f"- **{row['name']}** ({row['triangles']:,} mirror triangles, {row['mirror_px']:,} mirror px "
-                     f"on frame 1, {'star-shaped' if row['star_shaped'] else 'not star-shaped'}; Workbench "
+                     f"on frame 1, {'star-shaped' if row['star_shaped'] else 'not star-shaped'}; a frame's median "
+                     f"camera build {stage['sbc']:.1f} s and drawing {stage['draw']:.1f} s; Workbench "
                      f"{row['workbench_seconds']:.2f} s/frame, Cycles {row['cycles_seconds']:.1f} s/frame; labels "
                      f"on the middle frame {row['middle']}: {_pct(row['labels_middle'])} %). Auto's panel, frame 1: "
                      + "; ".join(f"{c[0]}: {c[2]}" for c in row["frames"][0]["choices"]) + ".")
@@ -417,6 +435,9 @@ def report(rows: list, args, command: str, machine: str, strips: dict) -> str:
              "`FramePipeline.check_methods` runs it on frame 1 of an animation and every 8 frames after).", "",
              "Issue 44's targets: labels <= 2 % on every sampled frame; <= 2x Workbench for star-shaped mirrors, "
              "<= 3x for the others."]
+    if args.work is not None:
+        lines[4:4] = [f"`--work` given: the mirrors whose results were in that folder already (a stopped earlier "
+                      "sitting of the same command) were read, not measured again.", ""]
     for half, title in HALVES:
         group = [r for r in rows if r["half"] == half]
         if not group:

@@ -20,5 +20,7 @@ def test_quick_run_reports_both_halves(run_quick, tmp_path):
         seconds, ratio, first, last, modes, _check = row.groups()
         assert float(seconds) > 0.0 and float(ratio) > 0.0, report
         assert 0.0 <= float(first) < 50.0 and 0.0 <= float(last) < 50.0, report
-        assert modes.count("%") == 3, report  # Iterative, Perturbation, Runtime
+        cells = modes.split("<br>")  # Iterative, Perturbation, Runtime: what drew and its labels
+        assert [c.split()[0].rstrip(":") for c in cells] == ["Iterative", "Perturbation", "Runtime"], report
+        assert all(re.search(r": [0-9.]+ %", c) for c in cells), report
         assert "What the numbers show" in section
