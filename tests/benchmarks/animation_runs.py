@@ -15,12 +15,14 @@ from pathlib import Path
 import numpy as np
 
 
-def orbit(scene, target, frames: int, degrees: float) -> None:
+def orbit(scene, target, frames: int, degrees: float, radius: float | None = None) -> None:
     """The scene camera on a circle of 2.3 radii of ``target`` (an object) around it,
     0.7 radii up, turning ``degrees`` a frame and tracking it, with a 70-degree lens
-    (near the mirror, its surroundings stay in view), keyframed over ``frames``."""
+    (near the mirror, its surroundings stay in view), keyframed over ``frames``.
+    ``radius``: default half the target's largest dimension (give it for an empty
+    standing for several mirrors)."""
     centre = np.array(target.matrix_world.translation)
-    radius = 0.5 * float(max(target.dimensions))
+    radius = 0.5 * float(max(target.dimensions)) if radius is None else float(radius)
     camera = scene.camera
     camera.data.angle = np.radians(70.0)
     camera.constraints.clear()
@@ -42,6 +44,14 @@ def time_against_workbench(scene, folder: Path, frames: int) -> tuple[float, flo
     assert bpy.ops.curved_reflections.render_image(filepath=str(folder / "ours_###"), animation=True) == {
         'FINISHED'}
     ours = (time.perf_counter() - start) / frames
+    return ours, workbench_seconds(scene, folder, frames)
+
+
+def workbench_seconds(scene, folder: Path, frames: int) -> float:
+    """Seconds per frame of Workbench's ``render.render(animation=True)`` over the
+    scene's frames (PNGs written to ``folder``), the scene's own Workbench settings."""
+    import bpy
+
     engine = scene.render.engine
     scene.render.engine = 'BLENDER_WORKBENCH'
     scene.render.filepath = str(folder / "workbench_")
@@ -49,7 +59,7 @@ def time_against_workbench(scene, folder: Path, frames: int) -> tuple[float, flo
     bpy.ops.render.render(animation=True)
     workbench = (time.perf_counter() - start) / frames
     scene.render.engine = engine
-    return ours, workbench
+    return workbench
 
 
 def sampled_frames(scene, folder: Path, frames: int, sampled: int, samples: int, variants) -> list:
