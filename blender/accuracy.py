@@ -109,6 +109,6 @@ def measure(plan, reflector_set, renderer, view, camera, sample: int | None = No
 
 
 def panel_line(measured: Measured) -> str:
-    """The panel's line for one reflector, e.g. ``In this view: p95 0.21 px, max 0.6 px
+    """The panel's line for one reflector, e.g. ``In this view: p95 0.21 px, max 0.62 px
     (96 checked)``."""
     return f"In this view ({measured.method.title()}): {measured.check.summary()}"

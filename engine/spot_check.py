@@ -124,10 +124,10 @@ class SpotCheck:
         return f"p95 {self.percentile(95):.2f} px" if self.confirmed else "no answer confirmed"
 
     def summary(self) -> str:
-        """One panel line, e.g. ``p95 0.31 px, max 0.8 px (96 checked)``."""
+        """One panel line, e.g. ``p95 0.31 px, max 0.84 px (96 checked)``."""
         if self.checked == 0:
             return "no reflection to check in this view"
-        text = (f"p95 {self.percentile(95):.2f} px, max {self.errors.max():.1f} px" if self.confirmed
+        text = (f"p95 {self.percentile(95):.2f} px, max {self.errors.max():.2f} px" if self.confirmed
                 else "no answer confirmed")
         text += f" ({self.checked} checked"
         if self.unconfirmed:
