@@ -384,7 +384,7 @@ def draw(scene, key, view: View) -> bool:
 
     A view that differs from the camera's asks for a new camera (with Auto Refresh);
     meanwhile the old one draws: its reflected triangles are cached in world space
-    (``ReflectionRenderer.projection``), so any view, of any size, places them. The
+    (``camera_pass.CameraPass``), so any view, of any size, places them. The
     projection runs on the first draw with a camera (one landed, or the renderer is new
     after a mesh change) and is reused by later draws. Returns whether anything was
     drawn. Raises what drawing raises (the callers catch it).

@@ -9,7 +9,7 @@ A demo scene (``blender/demo_scenes.py``) is built with bpy and captured; its di
 meshes are split uniformly (every triangle into four, conforming) until the reflected
 geometry the renderer draws (after its own pre-subdivision, SBC paper V-B) is nearest
 ``--vertices`` vertices. The scene camera's sample-based camera is built once (SBC IV)
-and its projection made once (``ReflectionRenderer.projection``, as after a camera
+and its projection made once (``CameraPass.triangles_of``, as after a camera
 lands). Then, into one ``GPUOffScreen`` of the view's size, alternately, **per frame**:
 
 - **reflected**: ``ReflectionRenderer.draw`` (what the viewport's draw handler calls):
@@ -377,7 +377,7 @@ def report(results: list, command: str, machine: str, note: str = "") -> str:
         "calls after warm-up, in one run. *Moved view*: the same frame from the view turned "
         f"{MOVED_DEGREES:g} degrees with the old camera (what is drawn while a new camera builds).",
         "- **Per rebuild** (once per camera landed, per diffuse mesh edit): the projection "
-        "(`ReflectionRenderer.projection` after `invalidate`): every vertex projected in every sheet on the "
+        "(`CameraPass.triangles_of` after `invalidate`): every vertex projected in every sheet on the "
         "GPU, read back, the drawn triangles decided and subdivided on the CPU, uploaded.",
         "- On llvmpipe the GPU is the CPU: compare the ratio, not the milliseconds.",
     ]
