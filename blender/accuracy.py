@@ -81,7 +81,10 @@ def measure(plan, reflector_set, renderer, view, camera, sample: int | None = No
     ``camera``: the sample-based camera it drew with (None when the per-frame passes
     drew every reflector); ``sample``: answers checked per reflector (default
     ``spot_check.SAMPLE``); ``drawn``: :func:`drawn_answers` when the caller has read
-    them already."""
+    them already. Per reflector, of a pool of the answered points, half of them the
+    nearest to the mirror (``spot_check.checked_points``): the answers the picture shows
+    (``shown_answers``), their error (``spot_check``) and the exact images they miss,
+    object by object (``coverage_check``)."""
     vertices = renderer.geometry.vertices
     planned = {choice.reflector: choice.method for choice in plan.choices}
     options = {} if sample is None else {"sample": sample}
@@ -99,9 +102,9 @@ def measure(plan, reflector_set, renderer, view, camera, sample: int | None = No
                                 FramePass.hidden_fraction)
         check = spot_check(reflector_set, view, index, points, answers, **options)
         owners = renderer.geometry.vertex_mesh[answered.vertices[pool]]
-        size = float(np.linalg.norm(mirror.max(axis=0) - mirror.min(axis=0)))
+        contact = CONTACT_SHARE * float(renderer.geometry.reflector_sizes[index])
         coverage = coverage_check(reflector_set, view, index, points, answers, groups=owners,
-                                  distances=distances[pool], contact_distance=CONTACT_SHARE * size)
+                                  distances=distances[pool], contact_distance=contact)
         check = check.with_coverage(coverage, renderer.geometry.mesh_names[coverage.group] if coverage.group >= 0
                                     else "")
         found[name] = Measured(method, check)
