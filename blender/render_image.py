@@ -123,22 +123,22 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
         _prefetch(state.renderer, view, state.last_eye)
         state.last_eye = view.eye if view.is_perspective else None
     checking = not animating or state.frames % CHECK_EVERY_FRAMES == 0
-    built_at = planned_at
+    build_seconds = 0.0
     while True:  # once, or again after a method was passed over (each method once at most)
         job = state.camera_job(view)
         if job is None or job.first_order_left_out:
             check_view_outside_reflectors(state.reflector_set, view)
         started = time.perf_counter()
         sbc = None if job is None else job.build()
-        built_at += time.perf_counter() - started
+        build_seconds += time.perf_counter() - started
         image = state.renderer.render(view, sbc, state.world, trace_edges=trace_edges, trace_gaps=trace_gaps)
         if not (checking and state.check_methods(scene, view)):
             break
     end = time.perf_counter()
     state.frames += 1
     seconds = {"capture": state.capture_seconds, "plan": planned_at - start - state.capture_seconds,
-               "sbc": built_at - planned_at,
-               "draw": end - built_at, "total": end - start,
+               "sbc": build_seconds,
+               "draw": end - planned_at - build_seconds, "total": end - start,
                "trace": sbc.stats.get("trace_seconds", float("nan")) if sbc is not None else 0.0}
     stats = {**(sbc.stats if sbc is not None else {}), **state.renderer.stats,
              "methods": {c.reflector: c.method for c in state.plan.choices}, "warnings": state.warnings(view)}

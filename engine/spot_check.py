@@ -170,8 +170,8 @@ def spot_check(reflector_set: ReflectorSet, view: View, reflector_index: int, po
 @dataclass(frozen=True)
 class Coverage:
     """Exact images counted and missed (:func:`coverage_check`): of the worst group of
-    points (``group``: an object) where one misses more than :data:`MAX_MISSED_SHARE` of
-    its images, else of all of them (``group`` -1)."""
+    points (``group``: an object) where one misses more than
+    :data:`MAX_OBJECT_MISSED_SHARE` of its images, else of all of them (``group`` -1)."""
 
     images: int
     missed: int
@@ -190,22 +190,18 @@ def coverage_check(reflector_set: ReflectorSet, view: View, reflector_index: int
     to :data:`GROUP_SAMPLE` of each group's, :data:`CONTACT_SAMPLE` of a group with a
     point within ``contact_distance`` of the mirror (``distances``, (P,):
     :func:`mirror_distances`): a method that fails on one object (the near face of a
-    cube almost touching the mirror) fails there, however small the object. Each visible, not grazing, exact image of a chosen point on this reflector
-    is missed unless an answer of the same point lies within :data:`COVERED_PX` of it on
-    screen.
+    cube almost touching the mirror) fails there, however small the object. Each
+    visible, not grazing, exact image of a chosen point on this reflector is missed
+    unless an answer of the same point lies within :data:`COVERED_PX` of it on screen.
     """
     points = np.asarray(points, dtype=np.float64)
     answers = np.asarray(answers, dtype=np.float64).reshape(-1, len(points), 3)
     rng = np.random.default_rng(seed + 1)
-    grouped = groups is not None
-    groups, per_group = (np.asarray(groups), GROUP_SAMPLE) if grouped else (np.zeros(len(points), np.int64), sample)
-    def size_of(members):
-        near = distances is not None and distances[members].min() <= contact_distance
-        return CONTACT_SAMPLE if grouped and near else per_group
-
-    chosen = np.concatenate([rng.choice(members, size=min(size_of(members), len(members)), replace=False)
-                             for members in (np.flatnonzero(groups == g) for g in np.unique(groups))] or
-                            [np.zeros(0, np.int64)]).astype(np.int64)
+    if groups is None:
+        chosen = rng.choice(len(points), size=min(sample, len(points)), replace=False)
+    else:
+        groups = np.asarray(groups)
+        chosen = _per_object_sample(groups, distances, contact_distance, rng)
     if len(chosen) == 0:
         return Coverage(0, 0)
     exact = solve_reflections(reflector_set, view, points[chosen])
@@ -218,9 +214,9 @@ def coverage_check(reflector_set: ReflectorSet, view: View, reflector_index: int
     drawn = drawn.reshape(len(answers), len(exact.point), 2)
     distance = np.linalg.norm(drawn - exact.pixel[None], axis=2)  # (K, S), NaN where no answer
     missed = ~(np.nan_to_num(distance, nan=np.inf) <= COVERED_PX).any(axis=0)
-    group_of = groups[chosen[exact.point]]
     worst = Coverage(len(missed), int(np.count_nonzero(missed)))
-    for group in np.unique(group_of) if grouped else ():
+    group_of = None if groups is None else groups[chosen[exact.point]]
+    for group in () if groups is None else np.unique(group_of):
         mine = group_of == group
         counted = Coverage(int(np.count_nonzero(mine)), int(np.count_nonzero(missed & mine)), int(group))
         if counted.images >= MIN_GROUP_IMAGES and counted.missed >= MIN_MISSED and \
@@ -228,6 +224,20 @@ def coverage_check(reflector_set: ReflectorSet, view: View, reflector_index: int
                 worst.group < 0 or counted.missed * worst.images > worst.missed * counted.images):
             worst = counted
     return worst
+
+
+def _per_object_sample(groups: np.ndarray, distances: np.ndarray | None, contact_distance: float,
+                       rng) -> np.ndarray:
+    """Indices of :data:`GROUP_SAMPLE` points of each group drawn at random, or
+    :data:`CONTACT_SAMPLE` of a group with a point within ``contact_distance`` of the
+    mirror (``distances``)."""
+    picked = []
+    for group in np.unique(groups):
+        members = np.flatnonzero(groups == group)
+        near = distances is not None and distances[members].min() <= contact_distance
+        size = min(CONTACT_SAMPLE if near else GROUP_SAMPLE, len(members))
+        picked.append(rng.choice(members, size=size, replace=False))
+    return np.concatenate(picked) if picked else np.zeros(0, np.int64)
 
 
 def shown_answers(reflector_set: ReflectorSet, view: View, reflector_index: int, points: np.ndarray,
