@@ -39,7 +39,6 @@ import datetime
 import json
 import math
 import os
-import shlex
 import statistics
 import subprocess
 import sys
@@ -521,8 +520,7 @@ def main(argv=None) -> int:
     args = parse_args(argv)
     if args.worker:
         return worker(args)
-    command = " ".join([".venv/bin/python", "tests/benchmarks/bench_held_out_family.py"]
-                       + [shlex.quote(a) for a in argv])
+    command = bench_draw.command_line("bench_held_out_family.py", argv)
     work = Path(tempfile.mkdtemp(prefix="held_out_family_")) if args.work is None else args.work
     work.mkdir(parents=True, exist_ok=True)
     rows, machine = [], "unknown machine"

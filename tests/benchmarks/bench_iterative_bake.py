@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import shlex
 import sys
 import time
 from pathlib import Path
@@ -101,8 +100,7 @@ def main(argv=None) -> int:
         r = results[-1]
         print(f"S={size}, {r['triangles']} triangles: GPU bake {r['gpu']:.3f} s, CPU bake {r['cpu']:.3f} s, "
               f"hole flags differ at {r['differ']} texels", flush=True)
-    command = " ".join([".venv/bin/python", "tests/benchmarks/bench_iterative_bake.py"]
-                       + [shlex.quote(a) for a in argv])
+    command = bench_draw.command_line("bench_iterative_bake.py", argv)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(report(results, command, bench_draw._machine()), encoding="utf-8")
     print(f"wrote {args.out}")

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import shlex
 import statistics
 import sys
 import time
@@ -154,8 +153,7 @@ def main(argv=None) -> int:
         r = results[-1]
         print(f"{name}: numpy {r['numpy'] / 1e6:.2f} M/s, GPU {r['gpu'] / 1e6:.2f} M/s, agree {r['agree']:.4f}",
               flush=True)
-    command = " ".join([".venv/bin/python", "tests/benchmarks/bench_projection_rate.py"]
-                       + [shlex.quote(a) for a in argv])
+    command = bench_draw.command_line("bench_projection_rate.py", argv)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(report(results, command, bench_draw._machine()), encoding="utf-8")
     print(f"wrote {args.out}")
