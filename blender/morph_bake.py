@@ -300,6 +300,8 @@ class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
                 done = f"baked {result.n_built} nodes in {result.seconds:.1f} s ({result.nbytes / 2**20:.1f} MB)"
                 if result.n_skipped:
                     done += f", {result.n_skipped} were baked already"
+                elif result.replaced:
+                    done += "; the mirror's shape or its grid settings changed since its last bake, so no node was reused"
                 if result.directory is None:
                     done += f"; {result.n_baked} of {result.n_nodes} nodes baked, the other ranges still to bake"
                 status.grid_lines[reflector.name] = done

@@ -58,7 +58,8 @@ class BakeResult:
     (by this bake or others), else None (cancelled, or other ranges still to bake)."""
 
     cancelled: bool
-    key: str
+    key: str  # the grid's key (topology, settings, engine: ``bake_cache.cache_key``)
+    shape: str  # the shape it was baked for (``bake_cache.shape_key`` of its first bake)
     directory: object
     n_nodes: int  # nodes of the grid
     n_built: int  # nodes this bake built
@@ -70,6 +71,7 @@ class BakeResult:
     nbytes: int  # bytes of the built cameras (arrays), all nodes
     processes: int
     peak_rss_mb: float  # largest resident set of the parent or of any worker
+    replaced: bool  # a grid of this reflector was baked before, for another shape or other settings
 
 
 def default_processes() -> int:
@@ -86,7 +88,7 @@ def _bake_node(node: int):
     kind = bake_cache.GRID_KINDS[work["settings"].kind]
     camera = kind.build(work["reflector_set"], work["positions"][node], work["bounds"], work["settings"])
     arrays = kind.to_arrays(camera) if camera.status == NODE_OK else None
-    bake_cache.write_node(work["directory"], node, work["key"], arrays)
+    bake_cache.write_node(work["directory"], node, work["node_key"], arrays)
     return node, (camera.seconds, camera.cpu_seconds), camera.nbytes
 
 
@@ -135,10 +137,15 @@ def bake_grid(reflector: Reflector, matrix, settings: MorphSettings, cache_dir, 
     positions = grid.node_positions()
     total = grid.n_nodes
     nodes = range(total) if nodes is None else nodes
-    directory = bake_cache.grid_directory(cache_dir, reflector.name, key)
+    found = bake_cache.find_grid(cache_dir, local, key)
+    replaced = found is None and bool(bake_cache.grid_folders(cache_dir, reflector.name))
+    directory, shape = found or (None, bake_cache.shape_key(local))
+    directory = directory or bake_cache.grid_directory(cache_dir, reflector.name, key, shape)
+    node_key = bake_cache.node_key(key, shape)
     directory.mkdir(parents=True, exist_ok=True)
-    bake_cache.write_manifest(directory, key, local, grid, settings)
-    todo = [n for n in nodes if not bake_cache.node_is_baked(directory, n, key)]
+    if found is None:
+        bake_cache.write_manifest(directory, key, shape, local, grid, settings)
+    todo = [n for n in nodes if not bake_cache.node_is_baked(directory, n, node_key)]
     # Nearest the reflector first: there it fills most of the cube faces and a node costs
     # the most, and a worker left alone with one of those at the end would keep the bake waiting.
     centre, _ = reflector_set.bounding_sphere
@@ -152,7 +159,7 @@ def bake_grid(reflector: Reflector, matrix, settings: MorphSettings, cache_dir, 
     if progress is not None and skipped:
         progress(done, len(nodes))
     _WORK.update(reflector_set=reflector_set, positions=positions, bounds=bounds, settings=settings,
-                 directory=directory, key=key)
+                 directory=directory, node_key=node_key)
     try:
         if processes == 1 or len(todo) <= 1:
             results = map(_bake_node, todo)
@@ -179,9 +186,10 @@ def bake_grid(reflector: Reflector, matrix, settings: MorphSettings, cache_dir, 
     baked = int(bake_cache.baked_nodes(directory, total)[0].sum())
     complete = not cancelled and baked == total
     if complete:
-        bake_cache.remove_stale(cache_dir, reflector.name, key)
-    return BakeResult(cancelled, key, directory if complete else None, total, done - skipped, skipped, baked,
-                      time.perf_counter() - start, node_seconds, node_cpu, nbytes, processes, _peak_rss_mb())
+        bake_cache.remove_stale(cache_dir, reflector.name, directory)
+    return BakeResult(cancelled, key, shape, directory if complete else None, total, done - skipped, skipped, baked,
+                      time.perf_counter() - start, node_seconds, node_cpu, nbytes, processes, _peak_rss_mb(),
+                      replaced)
 
 
 def load_for(reflector: Reflector, matrix, settings: MorphSettings, cache_dir, reflector_index: int = 0,

@@ -5,26 +5,33 @@ Layout under the cache directory (the Blender layer passes one folder per .blend
 ``blender/morph_bake.cache_directory``, so files never share or delete each other's
 grids)::
 
-    <reflector name>-<key[:16]>/grid.npz            manifest: key, box, settings, geometry
-    <reflector name>-<key[:16]>/node_00012.npz      one node: a panoramic camera (six faces' SBC
-                                                    arrays) or a ray octree (its rays and leaves)
-    <reflector name>-<key[:16]>/node_00013.inside   a node inside the mirror (no camera)
+    <reflector name>-<key[:16]>-<shape[:8]>/grid.npz           manifest: key, shape, box, settings,
+                                                               geometry
+    <reflector name>-<key[:16]>-<shape[:8]>/node_00012.npz     one node: a panoramic camera (six
+                                                               faces' SBC arrays) or a ray octree
+    <reflector name>-<key[:16]>-<shape[:8]>/node_00013.inside  a node inside the mirror (no camera)
 
 Every file is plain arrays (``np.savez``; node files compressed, their arrays packed into
 one buffer, ``packed_arrays``), read with ``allow_pickle=False``, and written
 atomically (a temporary name, then ``os.replace``), so that several processes, on one
 machine or on a render farm's, can bake ranges of one grid's nodes into the same folder
 at once: the manifest is the same bytes whoever writes it, a node is either absent or
-whole, and a node already baked (its file present and of this key) is not baked again. A grid is usable once every node has its file.
+whole, and a node already baked (its file present and of this grid) is not baked again.
+A grid is usable once every node has its file.
 
-The folder's key is a SHA-256 of the reflector's topology, the grid settings and the
-engine (its version and the bytes of the modules a bake runs); every node file carries
-the key too (a node file copied from another grid is refused); the manifest also holds
-the geometry in the reflector's rigid frame, compared with the current one to 1e-6 of
-its size at load. So a rigidly moved reflector keeps its cache, any change of shape,
-scale or settings makes it stale, and a cache baked for other geometry or settings is
-never loaded. Missing, stale, incomplete and corrupt caches raise :class:`CacheError`
-with a message for the user, never a traceback. A node file found damaged when it is
+A grid is identified by two things. Its *key* is a SHA-256 of the reflector's topology,
+the grid settings and the engine (its version and the bytes of the modules a bake runs).
+Its *shape* is the geometry in the reflector's rigid frame: the manifest holds it,
+compared with the current one to 1e-6 of its size (a rigidly moved mirror comes back to
+its frame only to float32 rounding, so positions cannot be hashed), and names it by a
+SHA-256 of the bytes the first bake stored. A grid is found by its key and the shape it
+was baked for (:func:`find_grid`), and every node file carries both (:func:`node_key`),
+so a mirror whose vertices moved (same topology, same object transform) gets a new
+folder and every node baked afresh, and a node file of another shape or grid is refused.
+So a rigidly moved reflector keeps its cache, any change of shape, scale or settings
+makes it stale, and a cache baked for other geometry or settings is never loaded.
+Missing, stale, incomplete and corrupt caches raise :class:`CacheError` with a message
+for the user, never a traceback. A node file found damaged when it is
 read is renamed ``*.damaged``: the grid then reads as incomplete, and the next bake
 builds that node again.
 
@@ -105,6 +112,20 @@ def cache_key(local_reflector: Reflector, settings: MorphSettings) -> str:
     return digest.hexdigest()
 
 
+def shape_key(local_reflector: Reflector) -> str:
+    """SHA-256 of the geometry's bytes in the rigid frame: the name of a shape's grid
+    folder when it is first baked (later bakes and loads find it by tolerance)."""
+    digest = hashlib.sha256()
+    for array in (local_reflector.vertices, local_reflector.normals):
+        digest.update(np.ascontiguousarray(array, dtype=np.float64).tobytes())
+    return digest.hexdigest()
+
+
+def node_key(key: str, shape: str) -> str:
+    """What every file of one grid carries: its key and its shape."""
+    return f"{key}:{shape}"
+
+
 def same_geometry(local_reflector: Reflector, vertices: np.ndarray, normals: np.ndarray) -> bool:
     """The stored geometry (in the rigid frame) matches this reflector's to the tolerance."""
     lo, hi = local_reflector.bounds
@@ -119,17 +140,35 @@ def safe_name(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", name)[:60] or "reflector"
 
 
-def grid_directory(cache_dir, reflector_name: str, key: str) -> Path:
-    return Path(cache_dir) / f"{safe_name(reflector_name)}-{key[:16]}"
+def grid_directory(cache_dir, reflector_name: str, key: str, shape: str) -> Path:
+    return Path(cache_dir) / f"{safe_name(reflector_name)}-{key[:16]}-{shape[:8]}"
 
 
-def _siblings(cache_dir, reflector_name: str) -> list[Path]:
-    """Finished cache folders of this reflector (any key)."""
+def grid_folders(cache_dir, reflector_name: str, key: str = "") -> list[Path]:
+    """Cache folders of this reflector: of any key, or of ``key`` (any shape)."""
     root = Path(cache_dir)
     if not root.is_dir():
         return []
-    pattern = re.compile(re.escape(safe_name(reflector_name)) + r"-[0-9a-f]{16}$")
-    return [p for p in root.iterdir() if p.is_dir() and pattern.match(p.name)]
+    stem = re.escape(safe_name(reflector_name)) + "-" + (re.escape(key[:16]) if key else "[0-9a-f]{16}")
+    pattern = re.compile(stem + r"(-[0-9a-f]{8})?$")
+    return sorted(p for p in root.iterdir() if p.is_dir() and pattern.match(p.name))
+
+
+def find_grid(cache_dir, local_reflector: Reflector, key: str) -> tuple[Path, str] | None:
+    """The folder and shape of this reflector's grid of ``key`` baked for its current
+    geometry (to :data:`GEOMETRY_TOLERANCE`), or None. A folder whose manifest cannot be
+    read is passed over (:func:`load_grid` reports it when it is the only one)."""
+    for directory in grid_folders(cache_dir, local_reflector.name, key):
+        try:
+            with np.load(directory / MANIFEST, allow_pickle=False) as manifest:
+                stored_key, shape = str(manifest["key"]), str(manifest["shape_key"])
+                matches = stored_key == node_key(key, shape) and same_geometry(
+                    local_reflector, manifest["vertices"], manifest["normals"])
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+            continue
+        if matches:
+            return directory, shape
+    return None
 
 
 def node_file(directory: Path, node: int) -> Path:
@@ -233,15 +272,17 @@ GRID_KINDS = {TETRAHEDRAL: GridKind(build_node, node_arrays, node_from_arrays, M
               OCTREE: GridKind(build_octree_node, octree_node_arrays, octree_node_from_arrays, OctreeGrid)}
 
 
-def write_manifest(directory: Path, key: str, local_reflector: Reflector, grid: TetrahedralGrid,
+def write_manifest(directory: Path, key: str, shape: str, local_reflector: Reflector, grid: TetrahedralGrid,
                    settings: MorphSettings) -> None:
-    """The grid's manifest, atomically (the same bytes from every process baking it)."""
+    """The grid's manifest, atomically (the same bytes from every process baking one
+    shape: ``shape`` hashes the geometry it stores)."""
     lo, hi = local_reflector.bounds
     reflector_name, reflector_size = local_reflector.name, float(np.max(hi - lo))
 
     def write(path):
         with open(path, "wb") as stream:
-            np.savez(stream, key=np.array(key), engine=np.array(ENGINE_VERSION),
+            np.savez(stream, key=np.array(node_key(key, shape)), shape_key=np.array(shape),
+                     engine=np.array(ENGINE_VERSION),
                      vertices=local_reflector.vertices, normals=local_reflector.normals,
                      name=np.array(reflector_name), lo=grid.lo, hi=grid.hi, shape=np.array(grid.shape),
                      settings=np.array(repr(settings.as_tuple())), margin=np.array(settings.margin),
@@ -316,29 +357,30 @@ def load_grid(cache_dir, local_reflector: Reflector, key: str, reflector_index: 
     (missing / stale / corrupt) else. ``polish``: its nodes' grazing and extended images
     are polished on the mirror (``MorphingGrid.mirror``)."""
     reflector_name = local_reflector.name
-    directory = grid_directory(cache_dir, reflector_name, key)
-    if not (directory / MANIFEST).is_file():
-        if _siblings(cache_dir, reflector_name):
+    found = find_grid(cache_dir, local_reflector, key)
+    if found is None:
+        for directory in grid_folders(cache_dir, reflector_name, key):
+            if (directory / MANIFEST).is_file():
+                _read(directory / MANIFEST, reflector_name)  # an unreadable manifest is said as such
+        if grid_folders(cache_dir, reflector_name):
             raise CacheError(reflector_name, "stale", "the morphing cache was baked for other geometry or "
                              "settings; bake again (runtime mode until then)")
         raise CacheError(reflector_name, "missing", "no morphing cache yet; bake it (runtime mode until then)")
+    directory, shape = found
     manifest = _read(directory / MANIFEST, reflector_name)
     try:
-        stored_key = str(manifest["key"])
-        shape = tuple(int(n) for n in manifest["shape"])
-        settings = MorphSettings(grid=shape, margin=float(manifest["margin"]),
+        shape_of_grid = tuple(int(n) for n in manifest["shape"])
+        settings = MorphSettings(grid=shape_of_grid, margin=float(manifest["margin"]),
                                  face_resolution=int(manifest["face_resolution"]),
                                  downsample=int(manifest["downsample"]), accuracy_px=float(manifest["accuracy_px"]),
                                  overlap_cells=int(manifest["overlap_cells"]), extension=float(manifest["extension"]),
                                  kind=str(manifest["kind"]), octree_depth=int(manifest["octree_depth"]))
-        grid = TetrahedralGrid(np.asarray(manifest["lo"], float), np.asarray(manifest["hi"], float), shape)
+        grid = TetrahedralGrid(np.asarray(manifest["lo"], float), np.asarray(manifest["hi"], float), shape_of_grid)
         size = float(manifest["reflector_size"])
-        geometry = same_geometry(local_reflector, np.asarray(manifest["vertices"], float),
-                                 np.asarray(manifest["normals"], float))
     except (KeyError, ValueError, TypeError, SceneInputError) as error:
         raise CacheError(reflector_name, "corrupt", f"the morphing cache manifest is incomplete ({error}); "
                          "clear it and bake again") from None
-    if stored_key != key or str(manifest.get("engine", "")) != ENGINE_VERSION or not geometry:
+    if str(manifest.get("engine", "")) != ENGINE_VERSION:
         raise CacheError(reflector_name, "stale", "the morphing cache was baked for other geometry or settings; "
                          "bake again (runtime mode until then)")
     present, status = baked_nodes(directory, grid.n_nodes)
@@ -348,7 +390,7 @@ def load_grid(cache_dir, local_reflector: Reflector, key: str, reflector_index: 
                          "finish it (runtime mode until then)")
     kind = GRID_KINDS[settings.kind]
     return kind.grid(reflector_name, reflector_index, grid, settings, status,
-                     _LazyNodes(directory, reflector_name, key, kind.from_arrays), size,
+                     _LazyNodes(directory, reflector_name, node_key(key, shape), kind.from_arrays), size,
                      mirror=MirrorOnDemand(local_reflector, settings) if polish else None)
 
 
@@ -370,7 +412,7 @@ def clear_cache(cache_dir, reflector_name: str | None = None) -> int:
     if reflector_name is None:
         folders = [p for p in root.iterdir() if p.is_dir()]
     else:
-        folders = _siblings(cache_dir, reflector_name) + [
+        folders = grid_folders(cache_dir, reflector_name) + [
             p for p in root.iterdir() if p.is_dir() and p.name.startswith(safe_name(reflector_name) + "-")
             and ".partial-" in p.name]
     for folder in folders:
@@ -378,10 +420,10 @@ def clear_cache(cache_dir, reflector_name: str | None = None) -> int:
     return len(folders)
 
 
-def remove_stale(cache_dir, reflector_name: str, key: str) -> int:
-    """Remove this reflector's grids of other keys (a finished bake replaced them)."""
-    final = grid_directory(cache_dir, reflector_name, key)
-    stale = [old for old in _siblings(cache_dir, reflector_name) if old != final]
+def remove_stale(cache_dir, reflector_name: str, final: Path) -> int:
+    """Remove this reflector's grids but ``final`` (a finished bake replaced them: other
+    keys or shapes)."""
+    stale = [old for old in grid_folders(cache_dir, reflector_name) if old != final]
     for old in stale:
         shutil.rmtree(old, ignore_errors=True)
     return len(stale)

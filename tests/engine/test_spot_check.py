@@ -66,11 +66,21 @@ def test_reflections_drawn_where_there_is_none_are_unconfirmed(case):
     assert "more than 12 px off or not there" in check.summary()
 
 
-def test_no_answer_nothing_checked(case):
+def test_no_answer_nothing_checked_and_every_exact_image_missed(case):
+    """No answer drawn: nothing to check, so the answers alone pass; the exact images
+    they leave out fail the method."""
     reflector_set, view, points, _ = case
-    check = spot_check(reflector_set, view, 0, points, np.full((2, len(points), 3), np.nan))
-    assert check == SpotCheck(0, check.errors) and not check.within(1.0)
+    silent = np.full((2, len(points), 3), np.nan)
+    check = spot_check(reflector_set, view, 0, points, silent)
+    assert check == SpotCheck(0, check.errors) and check.within(1.0)
     assert check.summary() == "no reflection to check in this view"
+    coverage = coverage_check(reflector_set, view, 0, points, silent)
+    assert coverage.images > 60 and coverage.missed == coverage.images
+    covered = check.with_coverage(coverage)
+    assert not covered.within(1.0)
+    assert covered.shortfall() == f"{coverage.images} of {coverage.images} exact images not drawn"
+    # A view where the mirror shows no point at all: nothing to judge, nothing failed.
+    assert SpotCheck(0, np.zeros(0), images=0, missed=0).within(1.0)
 
 
 def test_every_exact_image_drawn_misses_none(case):

@@ -79,7 +79,7 @@ def test_loaded_grid_projects_and_is_pickle_free(sphere, baked):
 def test_processes_give_the_same_grid_as_one_process(sphere, baked, tmp_path, monkeypatch):
     folder, parallel, _ = baked
     serial = bake.bake_grid(sphere, np.eye(4), SETTINGS, tmp_path, processes=1)
-    assert serial.key == parallel.key
+    assert serial.key == parallel.key and serial.shape == parallel.shape
     for node in range(18):
         a, b = (bake_cache.read_node_arrays(bake_cache.node_file(result.directory, node))
                 for result in (parallel, serial))
@@ -140,13 +140,56 @@ def test_stale_missing_and_corrupt_caches_give_clear_errors(sphere, baked, tmp_p
     assert bake_cache.cache_state(tmp_path, sphere, result.key) == "missing"
 
 
+def test_a_reshaped_mirror_gets_a_grid_of_its_own_shape(sphere, tmp_path):
+    """Issue 46: the vertices moved (same topology, same transform, same settings). The
+    bake builds every node for the new shape in a folder of its own, the loaded grid's
+    nodes are that shape's (the same arrays as a bake in an empty folder), a node file of
+    the old shape is refused, and a cancelled bake of the new shape leaves the old grid
+    for the old shape (undo)."""
+    import shutil
+
+    settings = G.MorphSettings(grid=(2, 2, 2), margin=0.8, face_resolution=16)
+    axes = np.array([1.0, 0.75, 1.3])
+    ellipsoid = Reflector(sphere.name, CENTRE + (sphere.vertices - CENTRE) * axes, sphere.triangles,
+                          sphere.normals / axes)
+    assert bake_cache.cache_key(ellipsoid, settings) == bake_cache.cache_key(sphere, settings)
+    first = bake.bake_grid(sphere, np.eye(4), settings, tmp_path / "cache", processes=1)
+    shutil.copytree(tmp_path / "cache", tmp_path / "before")
+    cancel = threading.Event()
+    cancelled = bake.bake_grid(ellipsoid, np.eye(4), settings, tmp_path / "before", processes=1, cancel=cancel,
+                               progress=lambda done, total: cancel.set())
+    assert cancelled.cancelled and cancelled.n_skipped == 0 and cancelled.replaced
+    assert bake.load_for(sphere, np.eye(4), settings, tmp_path / "before").grid.shape == (2, 2, 2)
+
+    second = bake.bake_grid(ellipsoid, np.eye(4), settings, tmp_path / "cache", processes=1)
+    assert second.replaced and second.n_skipped == 0 and second.n_built == second.n_nodes == 8
+    assert second.key == first.key and second.shape != first.shape
+    assert [p.name for p in (tmp_path / "cache").iterdir()] == [second.directory.name]
+    fresh = bake.bake_grid(ellipsoid, np.eye(4), settings, tmp_path / "fresh", processes=1)
+    assert not fresh.replaced and fresh.shape == second.shape
+    with pytest.raises(bake_cache.CacheError, match="other geometry or settings"):
+        bake.load_for(sphere, np.eye(4), settings, tmp_path / "cache")
+    loaded = bake.load_for(ellipsoid, np.eye(4), settings, tmp_path / "cache")
+    ok = np.flatnonzero(loaded.node_status == G.NODE_OK)
+    assert len(ok) >= 4
+    for node in ok:
+        a, b = (bake_cache.read_node_arrays(bake_cache.node_file(result.directory, node)) for result in (second, fresh))
+        assert str(a["key"]) == bake_cache.node_key(second.key, second.shape)
+        assert all(np.array_equal(a[k], b[k]) for k in a if k != "seconds" and "stats" not in k), node
+        loaded.nodes[node]  # reads
+    old_node = bake_cache.grid_directory(tmp_path / "before", sphere.name, first.key, first.shape)
+    shutil.copy(bake_cache.node_file(old_node, ok[0]), bake_cache.node_file(second.directory, ok[0]))
+    with pytest.raises(bake_cache.CacheError, match="belongs to another grid"):
+        bake.load_for(ellipsoid, np.eye(4), settings, tmp_path / "cache").nodes[ok[0]]
+
+
 def test_corrupt_files_raise_cache_errors_not_tracebacks(sphere, baked, tmp_path):
     import shutil
 
     folder, result, _ = baked
     copy = tmp_path / "copy"
     shutil.copytree(folder, copy)
-    directory = bake_cache.grid_directory(copy, sphere.name, result.key)
+    directory = bake_cache.grid_directory(copy, sphere.name, result.key, result.shape)
     node = int(np.flatnonzero(bake.load_for(sphere, np.eye(4), SETTINGS, copy).node_status == G.NODE_OK)[0])
     bake_cache.node_file(directory, node).write_bytes(b"not a zip file")
     grid = bake.load_for(sphere, np.eye(4), SETTINGS, copy)
@@ -170,7 +213,7 @@ def test_cancel_half_way_keeps_the_previous_cache_and_the_next_bake_resumes(sphe
     folder, result, _ = baked
     copy = tmp_path / "copy"
     shutil.copytree(folder, copy)
-    old_folder = bake_cache.grid_directory(copy, sphere.name, result.key)
+    old_folder = bake_cache.grid_directory(copy, sphere.name, result.key, result.shape)
     before = sorted((p.name, p.stat().st_size) for p in old_folder.iterdir())
     cancel = threading.Event()
     seen = []
@@ -192,7 +235,7 @@ def test_cancel_half_way_keeps_the_previous_cache_and_the_next_bake_resumes(sphe
         bake.load_for(sphere, np.eye(4), other, copy)
     assert error.value.reason == "incomplete"
     # The next bake builds only the nodes still missing, then retires the old grid.
-    built = bake_cache.baked_nodes(bake_cache.grid_directory(copy, sphere.name, outcome.key), 27)[0].sum()
+    built = bake_cache.baked_nodes(bake_cache.grid_directory(copy, sphere.name, outcome.key, outcome.shape), 27)[0].sum()
     assert built >= outcome.n_built
     finished = bake.bake_grid(sphere, np.eye(4), other, copy, processes=2)
     assert finished.n_skipped == built and finished.n_built == 27 - built and finished.directory is not None
@@ -206,7 +249,7 @@ def test_damaged_or_foreign_node_files_are_refused_and_baked_again(sphere, baked
     folder, result, _ = baked
     copy = tmp_path / "copy"
     shutil.copytree(folder, copy)
-    directory = bake_cache.grid_directory(copy, sphere.name, result.key)
+    directory = bake_cache.grid_directory(copy, sphere.name, result.key, result.shape)
     ok = np.flatnonzero(bake.load_for(sphere, np.eye(4), SETTINGS, copy).node_status == G.NODE_OK)
     damaged, foreign = int(ok[0]), int(ok[1])
     path = bake_cache.node_file(directory, damaged)
@@ -263,7 +306,7 @@ def test_two_processes_baking_ranges_side_by_side_give_the_single_process_grid(b
     outputs = [run.communicate(timeout=300)[0] for run in runs]
     assert all(run.returncode == 0 for run in runs), outputs
     assert sorted(int(o.split()[1]) for o in outputs) == [9, 9]
-    directory = bake_cache.grid_directory(shared, "Mirror Ball", result.key)
+    directory = bake_cache.grid_directory(shared, "Mirror Ball", result.key, result.shape)
     assert bake_cache.baked_nodes(directory, 18)[0].all()
     for node in range(18):
         ours, theirs = bake_cache.node_file(directory, node), bake_cache.node_file(result.directory, node)
