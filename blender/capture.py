@@ -150,18 +150,29 @@ def _a(word: str) -> str:
     return f"{'an' if word[:1] in 'aeiou' else 'a'} {word}"
 
 
+#: ``DepsgraphObjectInstance.persistent_id`` entry of a geometry that is no instance of
+#: an instance list (Blender's INT_MAX): an object's own geometry, listed again.
+NO_INSTANCE_INDEX = 2**31 - 1
+
+
 def _own_geometry(instance) -> bool:
     """Whether ``instance`` is an object's own evaluated geometry listed as an instance of
     itself: Blender lists a curve, text, surface or metaball object once as itself and
     once so. The object itself is captured; capturing both drew it twice, and a metaball
-    mirror's copy blocked its own reflected rays."""
+    mirror's copy blocked its own reflected rays. Geometry Nodes instances of geometry
+    (Instance on Points of a mesh, not of an object) are listed as instances of their
+    object too, but each with its index in the instance list: they are captured."""
     return (instance.is_instance and instance.parent is not None
-            and instance.object.original == instance.parent.original)
+            and instance.object.original == instance.parent.original
+            and instance.persistent_id[1] == NO_INSTANCE_INDEX)
 
 
 def _instance_name(instance) -> str:
     if instance.is_instance and instance.parent is not None:
-        return f"{instance.object.name} (instanced by {instance.parent.name})"
+        obj = instance.object
+        # A Geometry Nodes instance of geometry is listed under its instancer's name: its mesh names it.
+        name = obj.data.name if obj.original == instance.parent.original and obj.data is not None else obj.name
+        return f"{name} (instanced by {instance.parent.name})"
     return instance.object.name
 
 

@@ -110,11 +110,15 @@ class FramePipeline:
     key: tuple = ()
     capture_seconds: float = 0.0
     reused: int = 0
+    #: What the last plan has to warn about (a grid that could not be baked).
+    plan_warnings: list = field(default_factory=list)
 
     def plan_reflectors(self, scene, captured, bake_missing: bool = False) -> None:
         """Load the baked grids the reflectors want (with ``bake_missing``, bake a grid
         mode's missing one first: Render Image) and plan every reflector's method."""
-        loaded = morph_bake.load_grids(scene, captured.reflectors, bake_missing=bake_missing)
+        self.plan_warnings = []
+        loaded = morph_bake.load_grids(scene, captured.reflectors, bake_missing=bake_missing,
+                                       warnings=self.plan_warnings)
         self.plan = method_plan.plan(scene, captured.reflectors, self.settings.accuracy_px,
                                      grids={grid.reflector_name: (grid, matrix) for grid, matrix in loaded})
         self.grids = self.plan.drawn_grids()
@@ -189,6 +193,7 @@ class FramePipeline:
         return True
 
     def warnings(self, view: View) -> list:
-        """What the frame of ``view`` should warn about: a clip start inside a mirror."""
+        """What the frame of ``view`` should warn about: a clip start inside a mirror, and
+        what the plan met (a grid that could not be baked)."""
         inside = clip_start_inside(self.reflector_set, view) if view.is_perspective else []
-        return [clip_start_message(name) for name in inside]
+        return [clip_start_message(name) for name in inside] + self.plan_warnings

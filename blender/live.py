@@ -119,6 +119,11 @@ def _capture(state: LiveScene, scene, depsgraph, reflectors: bool, wait: bool = 
     ``wait``: returns False then, the capture landing later (``_finish_preparing``)."""
     remesh = not (reflectors or state.reflector_set is None)
     captured = capture_scene(depsgraph, reflectors_as_before=state.captured.reflectors if remesh else None)
+    if remesh and [r.name for r in captured.reflectors] != [r.name for r in state.captured.reflectors]:
+        # A reflector hidden, shown or renamed sends no update of its own: the meshes'
+        # capture finds it, and the reflectors are captured again with them.
+        remesh = False
+        captured = capture_scene(depsgraph)
     scene_bounds(captured.reflectors, captured.meshes)  # bad input raises here, before any work
     if remesh:
         state.counts["remeshes"] += 1
@@ -132,6 +137,16 @@ def _capture(state: LiveScene, scene, depsgraph, reflectors: bool, wait: bool = 
     state.preparing = Preparing(future, captured, time.monotonic(), triangles)
     _report_preparing(state)
     return False
+
+
+def _capture_failed(state: LiveScene, error: SceneInputError) -> None:
+    """The scene cannot be captured (its only mirror deleted, hidden or unmarked, a
+    mirror left without faces...): the last renderer holds mirrors the scene no longer
+    has, so nothing is drawn, and cameras on their way are dropped (a new generation),
+    until a capture succeeds; the status line says why."""
+    state.report('ERROR', str(error))
+    state.drawing = False
+    state.generation += 1
 
 
 def _adopt(state: LiveScene, scene, captured, reflector_set) -> None:
@@ -288,7 +303,7 @@ def start(scene, depsgraph, views: dict | None = None, wait: bool = False) -> Li
             if not views:
                 views = {CAMERA_KEY: view_from_camera(scene.camera, scene, depsgraph)}
     except SceneInputError as error:
-        state.report('ERROR', str(error))
+        _capture_failed(state, error)
         raise
     state.failed.clear()
     if not ready:  # the views' cameras are built once the reflectors are ready
@@ -361,7 +376,7 @@ def process(scene, depsgraph, wait: bool = False, now: float | None = None) -> b
             if state.preparing is None and (wait or (now - asked >= DEBOUNCE_SECONDS and key not in state.jobs)):
                 _start_camera(state, key, view, wait)
     except SceneInputError as error:
-        state.report('ERROR', str(error))
+        _capture_failed(state, error)
     except Exception as error:  # noqa: BLE001 - the worker's preparation failed: say so, draw the last
         state.preparing = None
         state.report('ERROR', f"Preparing the reflectors failed: {type(error).__name__}: {error}")

@@ -82,23 +82,60 @@ def on_save_pre(*_args) -> None:
     _SAVED_FROM.update({scene.name: cache_directory(scene) for scene in bpy.data.scenes})
 
 
+#: Guards a scene's running bake against a save carrying its folder meanwhile.
+_CARRY_LOCK = threading.Lock()
+
+
 @persistent
 def on_save_post(*_args) -> None:
     """A file saved under a new name takes its grids along: an unsaved file's are moved,
-    another file's copied (that file keeps its own)."""
+    another file's copied (that file keeps its own). A scene whose bake is running keeps
+    baking into the folder it started in, and its grids are carried once it ends
+    (:func:`_carry_after_bake`): moving the folder under the bake broke it."""
     for scene in bpy.data.scenes:
         old, new = _SAVED_FROM.get(scene.name), cache_directory(scene)
-        if old is None or old == new or not old.is_dir() or new.exists():
+        if old is None or old == new:
+            continue
+        status = status_of(scene)
+        with _CARRY_LOCK:
+            if status.bake.get("running"):
+                earlier = status.bake.get("carry")  # saved twice during the bake: from where it bakes
+                status.bake["carry"] = (earlier[0] if earlier else old, new)
+                continue
+        if not old.is_dir() or new.exists():
             continue
         try:
-            if old.name == "unsaved":
-                shutil.move(str(old), str(new))
-            else:
-                shutil.copytree(old, new)
+            _carry(old, new)
         except OSError as error:
-            status_of(scene).bake = {"running": False, "done": 0, "total": 0, "reflector": "",
-                                     "message": f"The morphing grids were not carried to {new}: {error}"}
+            status.bake = {"running": False, "done": 0, "total": 0, "reflector": "",
+                           "message": f"The morphing grids were not carried to {new}: {error}"}
     _SAVED_FROM.clear()
+
+
+def _carry(old: Path, new: Path) -> None:
+    """Move an unsaved file's grids to its new folder, or copy another file's there (the
+    grids already in the new folder stay)."""
+    if old.name == "unsaved" and not new.exists():
+        shutil.move(str(old), str(new))
+        return
+    shutil.copytree(old, new, dirs_exist_ok=True)
+    if old.name == "unsaved":
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def _carry_after_bake(state: dict) -> str:
+    """Once a bake ends (``state``: its scene's ``SceneStatus.bake``): carry its file's
+    grids to where a save during the bake moved the file; what went wrong, or ""."""
+    with _CARRY_LOCK:
+        carry = state.pop("carry", None)
+        state["running"] = False
+    if carry is None or not carry[0].is_dir():
+        return ""
+    try:
+        _carry(*carry)
+    except OSError as error:
+        return f"the morphing grids were not carried to {carry[1]}: {error}"
+    return ""
 
 
 #: Cube-face resolution of the baked cameras (MorphSettings' default); tests lower it.
@@ -160,13 +197,14 @@ def load_morphing(reflector, matrix, scene, reflector_index: int = 0):
     return grid
 
 
-def load_grids(scene, reflectors, bake_missing: bool = False) -> list:
+def load_grids(scene, reflectors, bake_missing: bool = False, warnings: list | None = None) -> list:
     """(grid, object matrix) of each reflector in Morphing or Octree mode (or Auto, where
     it is not star-shaped) whose baked grid matches it; the others are drawn in runtime mode
     (:func:`load_morphing` records why). With ``bake_missing`` (Render Image) a reflector
     set to Morphing or Octree mode whose grid is missing, stale or unfinished is baked first, in
-    this process, on every core. The grids' nodes project, and their images are
-    polished (*Polish Node Images*), on the GPU."""
+    this process, on every core; where that bake cannot write its cache, a message
+    naming the reflector is added to ``warnings``. The grids' nodes project, and their
+    images are polished (*Polish Node Images*), on the GPU."""
     faces, polish = GPUFaceImages(), GPUImagePolish()
     grids = []
     for index, reflector in enumerate(reflectors):
@@ -176,7 +214,7 @@ def load_grids(scene, reflectors, bake_missing: bool = False) -> list:
         matrix = np.array(obj.matrix_world, dtype=np.float64)
         grid = load_morphing(reflector, matrix, scene, index)
         if grid is None and bake_missing and obj.curved_reflections.mode in method_plan.GRID_MODES \
-                and _bake_if_missing(reflector, matrix, scene):
+                and _bake_if_missing(reflector, matrix, scene, warnings):
             grid = load_morphing(reflector, matrix, scene, index)
         if grid is not None:
             grid.face_images, grid.image_polish = faces, polish
@@ -184,10 +222,11 @@ def load_grids(scene, reflectors, bake_missing: bool = False) -> list:
     return grids
 
 
-def _bake_if_missing(reflector, matrix, scene) -> bool:
+def _bake_if_missing(reflector, matrix, scene, warnings: list | None = None) -> bool:
     """Bake this reflector's grid where none matching it is whole (the nodes already baked
     are kept); returns whether it baked. A damaged node file is found, and rebuilt by the
-    next bake, when it is read."""
+    next bake, when it is read. A cache folder that cannot be written leaves the
+    reflector in runtime mode, with the reason in its panel line and in ``warnings``."""
     settings, directory = reflector_settings(scene, reflector), cache_directory(scene)
     try:
         bake.load_for(reflector, matrix, settings, directory)
@@ -197,7 +236,15 @@ def _bake_if_missing(reflector, matrix, scene) -> bool:
         reason = {"missing": "none baked yet", "stale": "it was baked for other geometry or settings",
                   "incomplete": "its bake is unfinished"}.get(getattr(error, "reason", ""), error.problem)
         print(f"Curved Reflections: baking the morphing grid of {reflector.name!r} first: {reason}")
-        bake.bake_grid(reflector, matrix, settings, directory)
+        try:
+            bake.bake_grid(reflector, matrix, settings, directory)
+        except OSError as failure:  # a cache folder that is read-only, full, or not a folder
+            message = (f"{reflector.name!r}: its morphing grid could not be baked into {str(directory)!r} "
+                       f"({failure.strerror or failure}); drawn in runtime mode (set a writable Cache Folder)")
+            status_of(scene).grid_lines[reflector.name] = f"runtime mode: {message.partition(': ')[2]}"
+            if warnings is not None:
+                warnings.append(message)
+            return False
         return True
     return False
 
@@ -311,7 +358,8 @@ class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
         except Exception as error:  # the bake thread's boundary: report, never leave "running" behind
             outcome.append(f"bake failed: {type(error).__name__}: {error}")
         finally:
-            state.update(running=False, message="; ".join(outcome))
+            carried = _carry_after_bake(state)
+            state.update(running=False, message="; ".join(outcome + ([carried] if carried else [])))
         return outcome
 
     def _start(self, context):
