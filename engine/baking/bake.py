@@ -143,6 +143,7 @@ def bake_grid(reflector: Reflector, matrix, settings: MorphSettings, cache_dir, 
     directory = directory or bake_cache.grid_directory(cache_dir, reflector.name, key, shape)
     node_key = bake_cache.node_key(key, shape)
     directory.mkdir(parents=True, exist_ok=True)
+    bake_cache.remove_abandoned(directory)
     if found is None:
         bake_cache.write_manifest(directory, key, shape, local, grid, settings)
     todo = [n for n in nodes if not bake_cache.node_is_baked(directory, n, node_key)]

@@ -47,6 +47,7 @@ import os
 import re
 import shutil
 import threading
+import time
 import zipfile
 from collections import OrderedDict
 from dataclasses import dataclass
@@ -71,6 +72,9 @@ DAMAGED_SUFFIX = ".damaged"
 #: Nodes kept in memory by a loaded grid (a view reads its cell's eight: a tetrahedron's
 #: four and the rest of its cube, or an octree cell's; neighbours come next).
 NODES_IN_MEMORY = 16
+#: A temporary file untouched this long (s) is a write that never finished: writing a
+#: node takes seconds, so no process baking into the folder is still writing it.
+ABANDONED_AFTER_S = 600.0
 #: Largest difference (in reflector sizes; unit normals: absolute) between the baked and
 #: the current geometry in the rigid frame for a cache to be used.
 GEOMETRY_TOLERANCE = 1e-6
@@ -189,6 +193,22 @@ def _atomic(path: Path, write) -> None:
     finally:
         if temporary.exists():
             temporary.unlink()
+
+
+def remove_abandoned(directory: Path, older_than_s: float = ABANDONED_AFTER_S) -> int:
+    """Remove the temporary files of writes that never finished (a worker killed while
+    it wrote, a disk that filled up): ``.*.tmp`` files untouched for ``older_than_s``
+    (other processes may be writing the recent ones). Returns how many."""
+    removed = 0
+    cutoff = time.time() - older_than_s
+    for path in Path(directory).glob(".*.tmp"):
+        try:
+            if path.stat().st_mtime < cutoff:
+                path.unlink()
+                removed += 1
+        except OSError:  # gone meanwhile, or not ours to remove
+            continue
+    return removed
 
 
 def write_node(directory: Path, node: int, key: str, arrays: dict | None) -> None:

@@ -17,6 +17,7 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -240,8 +241,11 @@ def test_a_farm_worker_killed_mid_node(files, tmp_path, capfd):
     assert len(list(folder.glob("node_*.npz"))) == 2 and len(list(folder.glob(".*.tmp"))) == 1
     assert _loaded() is None
     assert "the morphing cache has 2 of 8 nodes" in morph_bake.morph_status(files)
+    (abandoned,) = folder.glob(".*.tmp")
+    os.utime(abandoned, (time.time() - 3600.0,) * 2)  # the next bake comes an hour later
     assert bpy.ops.curved_reflections.bake_morphing(processes=1) == {'FINISHED'}
     assert "baked 6 nodes" in capfd.readouterr().out
+    assert not abandoned.exists() and not list(folder.glob(".*.tmp"))
     assert _loaded() is not None
     baked = render()
     bpy.data.objects["Ball"].curved_reflections.mode = 'RUNTIME'
