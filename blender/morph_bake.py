@@ -185,11 +185,24 @@ def morphing_reflectors(context):
     return chosen
 
 
+def adopt_renamed_grid(reflector, matrix, scene, settings: MorphSettings) -> bool:
+    """Whether a grid this reflector had under an old name (the mirror was renamed, or
+    a rename undone) was given its name (``bake_cache.adopt_grid``)."""
+    return bake.adopt_renamed(reflector, matrix, settings, cache_directory(scene), bpy.data.objects.keys()) is not None
+
+
 def load_morphing(reflector, matrix, scene, reflector_index: int = 0):
-    """The baked grid for this reflector as it is now, or None (runtime mode) with the reason recorded."""
+    """The baked grid for this reflector as it is now (its grid under an old name too),
+    or None (runtime mode) with the reason recorded."""
+    settings, directory = reflector_settings(scene, reflector), cache_directory(scene)
+    polish = scene.curved_reflections.morph_polish_nodes
     try:
-        grid = bake.load_for(reflector, matrix, reflector_settings(scene, reflector), cache_directory(scene),
-                             reflector_index, polish=scene.curved_reflections.morph_polish_nodes)
+        try:
+            grid = bake.load_for(reflector, matrix, settings, directory, reflector_index, polish=polish)
+        except bake_cache.CacheError as error:
+            if error.reason not in ("missing", "stale") or not adopt_renamed_grid(reflector, matrix, scene, settings):
+                raise
+            grid = bake.load_for(reflector, matrix, settings, directory, reflector_index, polish=polish)
     except SceneInputError as error:
         status_of(scene).grid_lines[reflector.name] = f"{error.problem}"
         return None
@@ -370,6 +383,8 @@ class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
             jobs = [(reflector, matrix, reflector_settings(context.scene, reflector))
                     for reflector, matrix in jobs]
             bake.parse_node_range(self.nodes, int(np.prod(jobs[0][2].grid)))
+            for reflector, matrix, settings in jobs:  # a renamed mirror bakes on into its grid
+                adopt_renamed_grid(reflector, matrix, context.scene, settings)
         except (SceneInputError, ValueError) as error:
             self.report({'ERROR'}, str(error))
             return None

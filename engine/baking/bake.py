@@ -199,3 +199,10 @@ def load_for(reflector: Reflector, matrix, settings: MorphSettings, cache_dir, r
     else); ``polish``: its nodes' grazing and extended images are polished on the mirror."""
     local = reflector_in_frame(reflector, rigid_frame(matrix))
     return bake_cache.load_grid(cache_dir, local, bake_cache.cache_key(local, settings), reflector_index, polish)
+
+
+def adopt_renamed(reflector: Reflector, matrix, settings: MorphSettings, cache_dir, names_in_use):
+    """``bake_cache.adopt_grid`` for a world-space reflector: the grid of a mirror that
+    was renamed, moved to its new name (None where there is none to adopt)."""
+    local = reflector_in_frame(reflector, rigid_frame(matrix))
+    return bake_cache.adopt_grid(cache_dir, local, bake_cache.cache_key(local, settings), names_in_use)

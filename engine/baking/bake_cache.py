@@ -28,6 +28,7 @@ SHA-256 of the bytes the first bake stored. A grid is found by its key and the s
 was baked for (:func:`find_grid`), and every node file carries both (:func:`node_key`),
 so a mirror whose vertices moved (same topology, same object transform) gets a new
 folder and every node baked afresh, and a node file of another shape or grid is refused.
+A renamed mirror takes its grid along (:func:`adopt_grid`).
 So a rigidly moved reflector keeps its cache, any change of shape, scale or settings
 makes it stale, and a cache baked for other geometry or settings is never loaded.
 Missing, stale, incomplete and corrupt caches raise :class:`CacheError` with a message
@@ -158,20 +159,54 @@ def grid_folders(cache_dir, reflector_name: str, key: str = "") -> list[Path]:
     return sorted(p for p in root.iterdir() if p.is_dir() and pattern.match(p.name))
 
 
+def _shape_of(directory: Path, local_reflector: Reflector, key: str) -> str | None:
+    """The shape of the grid in ``directory`` where it is of ``key`` and of this
+    reflector's current geometry (to :data:`GEOMETRY_TOLERANCE`), else None (also where
+    its manifest cannot be read: :func:`load_grid` reports that when it is the only one)."""
+    try:
+        with np.load(directory / MANIFEST, allow_pickle=False) as manifest:
+            shape = str(manifest["shape_key"])
+            matches = str(manifest["key"]) == node_key(key, shape) and same_geometry(
+                local_reflector, manifest["vertices"], manifest["normals"])
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+        return None
+    return shape if matches else None
+
+
 def find_grid(cache_dir, local_reflector: Reflector, key: str) -> tuple[Path, str] | None:
     """The folder and shape of this reflector's grid of ``key`` baked for its current
-    geometry (to :data:`GEOMETRY_TOLERANCE`), or None. A folder whose manifest cannot be
-    read is passed over (:func:`load_grid` reports it when it is the only one)."""
+    geometry, or None."""
     for directory in grid_folders(cache_dir, local_reflector.name, key):
-        try:
-            with np.load(directory / MANIFEST, allow_pickle=False) as manifest:
-                stored_key, shape = str(manifest["key"]), str(manifest["shape_key"])
-                matches = stored_key == node_key(key, shape) and same_geometry(
-                    local_reflector, manifest["vertices"], manifest["normals"])
-        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
-            continue
-        if matches:
+        shape = _shape_of(directory, local_reflector, key)
+        if shape is not None:
             return directory, shape
+    return None
+
+
+def adopt_grid(cache_dir, local_reflector: Reflector, key: str, names_in_use) -> Path | None:
+    """A renamed mirror's grid: where this reflector has no grid of ``key`` for its
+    shape, one baked under a name no object has now (``names_in_use``: every object's)
+    for the same key and shape is moved to this reflector's name, so renaming a mirror
+    (or undoing the rename) costs no bake. Returns the grid's new folder, or None. The
+    manifest keeps the name it was baked under; nothing reads it."""
+    root = Path(cache_dir)
+    if not root.is_dir() or find_grid(cache_dir, local_reflector, key) is not None:
+        return None
+    in_use = {safe_name(name) for name in names_in_use}
+    pattern = re.compile(r"(.+)-" + re.escape(key[:16]) + r"-[0-9a-f]{8}$")
+    for directory in sorted(root.iterdir()):
+        match = pattern.match(directory.name)
+        if match is None or match.group(1) in in_use or not directory.is_dir():
+            continue
+        shape = _shape_of(directory, local_reflector, key)
+        if shape is None:
+            continue
+        target = grid_directory(cache_dir, local_reflector.name, key, shape)
+        try:
+            os.rename(directory, target)  # atomic; refused where the target exists and is not empty
+        except OSError:
+            continue
+        return target
     return None
 
 

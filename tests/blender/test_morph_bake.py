@@ -101,6 +101,25 @@ def test_bake_load_stale_and_clear(empty_scene, morph_ops):
     assert not any(morph_ops.cache_directory(empty_scene).iterdir())
 
 
+def test_a_renamed_mirror_keeps_its_grid_and_an_undone_rename_too(empty_scene, morph_ops):
+    ball = _mirror_scene(empty_scene)
+    assert bpy.ops.curved_reflections.bake_morphing(processes=1) == {'FINISHED'}
+    files = {p.name: p.stat().st_mtime_ns for p in morph_ops.cache_directory(empty_scene).rglob("node_*")}
+    for name in ("Kettle", "Ball"):  # renamed, then the rename undone
+        ball.name = name
+        bpy.context.view_layer.update()
+        reflector, matrix = _captured(bpy.context, morph_ops)
+        assert morph_ops.load_morphing(reflector, matrix, empty_scene) is not None
+        assert f"{name}: morphing (baked grid loaded)" in morph_ops.morph_status(empty_scene)
+        (folder,) = morph_ops.cache_directory(empty_scene).iterdir()
+        assert folder.name.startswith(f"{name}-")
+        assert {p.name: p.stat().st_mtime_ns for p in folder.glob("node_*")} == files
+    ball.name = "Kettle"
+    assert bpy.ops.curved_reflections.bake_morphing(processes=1) == {'FINISHED'}
+    assert "Kettle: baked 0 nodes" in morph_ops.morph_status(empty_scene)
+    assert "8 were baked already" in morph_ops.morph_status(empty_scene)
+
+
 def test_bake_without_a_morphing_reflector_reports_an_error(empty_scene, morph_ops):
     _mirror_scene(empty_scene, mode='RUNTIME')
     with pytest.raises(RuntimeError, match="No visible reflector is in Morphing or Octree mode"):

@@ -183,6 +183,31 @@ def test_a_reshaped_mirror_gets_a_grid_of_its_own_shape(sphere, tmp_path):
         bake.load_for(ellipsoid, np.eye(4), settings, tmp_path / "cache").nodes[ok[0]]
 
 
+def test_a_renamed_mirror_takes_its_grid_along(sphere, baked, tmp_path):
+    """A grid baked under a name no object has now, of the same key and shape, is moved to
+    the mirror's new name (no bake); not while an object still has the old name, nor for
+    another shape."""
+    import shutil
+
+    folder, result, _ = baked
+    copy = tmp_path / "copy"
+    shutil.copytree(folder, copy)
+    kettle = Reflector("Kettle", sphere.vertices, sphere.triangles, sphere.normals)
+    with pytest.raises(bake_cache.CacheError) as missing:
+        bake.load_for(kettle, np.eye(4), SETTINGS, copy)
+    assert missing.value.reason == "missing"
+    assert bake.adopt_renamed(kettle, np.eye(4), SETTINGS, copy, {"Kettle", sphere.name}) is None  # a copy kept it
+    other_shape = Reflector("Kettle", sphere.vertices * 1.1, sphere.triangles, sphere.normals)
+    assert bake.adopt_renamed(other_shape, np.eye(4), SETTINGS, copy, {"Kettle"}) is None
+    adopted = bake.adopt_renamed(kettle, np.eye(4), SETTINGS, copy, {"Kettle"})
+    assert adopted == bake_cache.grid_directory(copy, "Kettle", result.key, result.shape)
+    assert [p.name for p in copy.iterdir()] == [adopted.name]
+    assert bake.load_for(kettle, np.eye(4), SETTINGS, copy).grid.shape == (3, 3, 2)
+    again = bake.bake_grid(kettle, np.eye(4), SETTINGS, copy, processes=1)
+    assert again.n_built == 0 and again.n_skipped == 18 and not again.replaced
+    assert bake.adopt_renamed(kettle, np.eye(4), SETTINGS, copy, {"Kettle"}) is None  # it has its grid
+
+
 def test_corrupt_files_raise_cache_errors_not_tracebacks(sphere, baked, tmp_path):
     import shutil
 
