@@ -69,9 +69,11 @@ def captured_key(captured) -> tuple:
 
 def clip_start_message(name: str) -> str:
     """What Render Image and the live view say when the view starts inside a sealed mirror
-    (``sbc_build.clip_start_inside``)."""
-    return (f"{name!r}: the camera's clip start cuts into this mirror (or the camera is on it), and inside "
-            "it reflects nothing: move the camera back or lower its Clip Start")
+    (``sbc_build.clip_start_inside``): what is drawn there, and how to see the mirror's
+    outside instead."""
+    return (f"{name!r}: the camera's clip start cuts into this mirror (or the camera is on it); its inside, "
+            "closed and empty, meets no light and is drawn black, as Cycles shows it: move the camera back or "
+            "lower its Clip Start to see its outside")
 
 
 @dataclass(frozen=True)

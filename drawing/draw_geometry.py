@@ -39,7 +39,7 @@ class DrawGeometry:
     prepass_positions: np.ndarray  # (P, 3) float32, relative to shift
     prepass_colors: np.ndarray  # (P, 4) float32 linear RGBA
     prepass_labels: np.ndarray  # (P, 4) float32 (id, reflectivity, Fresnel F0 or -1, attenuation distance)
-    prepass_normals: np.ndarray  # (P, 4) float32 (normal, lit)
+    prepass_normals: np.ndarray  # (P, 4) float32 (normal, lit) of diffuse meshes, (normal, sealed) of reflectors
     prepass_uvs: np.ndarray  # (P, 2) float32
     prepass_triangles: np.ndarray  # (Tp, 3) int32
     vertices: np.ndarray  # (V, 3) float64, reflected meshes
@@ -83,14 +83,17 @@ def _mesh_attributes(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=None,
                      edge_fraction: float = subdivision.EDGE_FRACTION, fresnel_f0=None,
-                     attenuation_distance=None) -> DrawGeometry:
+                     attenuation_distance=None, sealed=None) -> DrawGeometry:
     """Arrays of one scene for :class:`.reflection_draw.ReflectionRenderer`.
 
     ``reflector_colors`` (R, 3 or 4) linear, default white; ``reflectivity`` (R,) in
     [0, 1], default 1 (perfect mirrors); ``fresnel_f0`` (R,) Schlick's reflectance at
     normal incidence, NaN or negative for no Fresnel (default none); ``attenuation_distance``
     (R,) the distance over which reflections fade to the world (0 or default: none).
-    SBC paper section V-D. ``edge_fraction`` sets the pre-subdivision
+    SBC paper section V-D. ``sealed`` (R,): each reflector's ``ReflectorSet.sealed``
+    (its winding where it is closed and holds nothing, else 0; default 0), the fourth
+    component of its pre-pass normals, with which the pre-pass marks the pixels whose
+    view ray starts inside it (``glsl/reflection_prepass_frag.glsl``). ``edge_fraction`` sets the pre-subdivision
     (:func:`subdivision.subdivide`); ``None`` draws the meshes as they are.
     """
     start = time.perf_counter()
@@ -107,6 +110,8 @@ def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=Non
     f0 = np.where(np.isfinite(f0) & (f0 >= 0), np.clip(f0, 0.0, 1.0), -1.0).astype(np.float32)
     fade = np.zeros(n_reflectors, np.float32) if attenuation_distance is None else np.maximum(
         np.asarray(attenuation_distance, dtype=np.float32).reshape(n_reflectors), 0.0)
+    sense = np.zeros(n_reflectors, np.float32) if sealed is None else np.sign(
+        np.asarray(sealed, dtype=np.float32).reshape(n_reflectors))
 
     images, image_of_mesh = [], []
     for mesh in meshes:
@@ -118,8 +123,8 @@ def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=Non
 
     parts = [(m.vertices, m.triangles, m.colors, (0.0, 1.0, -1.0, 0.0), np.c_[n, lit], uv, image)
              for m, (n, uv, lit), image in zip(meshes, attributes, image_of_mesh)]
-    parts += [(r.vertices, r.triangles, colors[k], (k + 1.0, mirror[k], f0[k], fade[k]), np.c_[r.normals, np.zeros(
-        len(r.vertices))], np.zeros((len(r.vertices), 2)), -1) for k, r in enumerate(reflectors)]
+    parts += [(r.vertices, r.triangles, colors[k], (k + 1.0, mirror[k], f0[k], fade[k]), np.c_[r.normals, np.full(
+        len(r.vertices), sense[k])], np.zeros((len(r.vertices), 2)), -1) for k, r in enumerate(reflectors)]
     everything = np.concatenate([p[0] for p in parts]) if parts else np.zeros((1, 3))
     lo, hi = everything.min(axis=0), everything.max(axis=0)
     shift = 0.5 * (lo + hi)

@@ -168,6 +168,7 @@ def _build_composite():
     info.sampler(2, 'FLOAT_2D', "reflection_colors")
     info.sampler(3, 'FLOAT_2D', "traced_colors")
     info.sampler(4, 'FLOAT_2D', "prepass_depth")
+    info.sampler(5, 'FLOAT_2D', "prepass_normals")
     info.vertex_in(0, 'VEC2', "position")
     info.fragment_out(0, 'VEC4', "color_out")
     info.depth_write('ANY')  # the pre-pass depth of each pixel, for the overlay's depth test

@@ -45,10 +45,13 @@ Three passes, all into float targets of the view's size:
 3. **Composite** (SBC V-D): on reflector pixels, the traced or else the drawn reflection,
    faded toward the world colour by min(1, (d / A)^2) for its distance d from the mirror
    along the reflected ray when the reflector has a fade distance A, else the world
-   colour; mixed with the reflector's own colour by the reflection weight (1 = perfect
-   mirror); elsewhere the pre-pass colour (or nothing, for a viewport overlay:
-   ``reflectors_only``, whose mirror pixels are depth-tested against the scene's depth
-   at their own, :func:`screen_space.depth_bias`).
+   colour; black where the pre-pass saw a sealed mirror's inner side (the view ray starts
+   inside a closed mirror that holds nothing, the clip start cutting into it, and meets
+   no light: as Cycles renders it; such pixels are never traced); mixed with the
+   reflector's own colour by the reflection weight (1 = perfect mirror); elsewhere the
+   pre-pass colour (or nothing, for a viewport overlay: ``reflectors_only``, whose mirror
+   pixels are depth-tested against the scene's depth at their own,
+   :func:`screen_space.depth_bias`).
 
 The sample-based camera cannot place a reflection in the last ray-map cell before a
 footprint's edge (the silhouette, or an object in front of the mirror), nor between
@@ -170,7 +173,8 @@ class ReflectionRenderer:
                  attenuation_distance=None, mixed_subdivisions: int = MIXED_SUBDIVISIONS, cull: bool = True,
                  passes=(), settings: FrameSettings = PLAIN_SETTINGS, reflector_set=None):
         self.geometry = prepare_geometry(reflectors, meshes, reflector_colors, reflectivity, edge_fraction,
-                                         fresnel_f0, attenuation_distance)
+                                         fresnel_f0, attenuation_distance,
+                                         None if reflector_set is None else reflector_set.sealed)
         self.settings = settings
         #: The diffuse meshes on the GPU, placed by the per-frame passes' answers.
         self.meshes = ReflectedMeshes(self.geometry)
@@ -421,6 +425,7 @@ class ReflectionRenderer:
             shader.uniform_sampler("reflection_colors", targets.reflection_colors)
             shader.uniform_sampler("traced_colors", targets.traced if targets.traced is not None else targets.no_trace)
             shader.uniform_sampler("prepass_depth", targets.prepass_depth)
+            shader.uniform_sampler("prepass_normals", targets.prepass_normals)
             shader.uniform_float("depth_bias", (0.0, 0.0) if scene_depth is None else depth_bias(scene_depth))
             self._batches["screen"].draw(shader)
 
@@ -476,6 +481,9 @@ class ReflectionRenderer:
                 band_trace.band_pixels(np.where(folded, searched_labels, 0.0), drawn, reach, edges_of_drawn=True),
                 band_trace.rim_gap_pixels(np.where(blended, searched_labels, 0.0), drawn, max(radius, RIM_GAP_PX))]),
                 axis=0)
+        # Pixels whose view ray starts inside a sealed mirror are black (the composite), not traced.
+        inside = read_texture(targets.prepass_normals, *size)[..., 3] > 0.5
+        pixels, doubtful = (p[~inside[p[:, 1], p[:, 0]]] for p in (pixels, doubtful))
         self.stats["untraced_pixels"] = 0
         if not len(holes_of) and len(pixels) > MAX_TRACED_FRACTION * targets.width * targets.height:
             # Not a band but most of the mirror (the near plane cutting it, the eye on it):

@@ -17,8 +17,9 @@
  * silhouette or an object in front of it. Where the caller traced those pixels
  * (engine/geometry/band_trace.py), `traced_colors` holds them (alpha 1). Without tracing
  * (`fill_radius` > 0, e.g. d), a reflector pixel within `fill_radius` of its
- * footprint's edge that has no reflection takes the reflection of the nearest pixel
- * within `fill_radius` that has one on the same reflector, a cheap guess. Elsewhere, or
+ * footprint's edge (or of where the clip start cuts into a sealed mirror, below) that
+ * has no reflection takes the reflection of the nearest pixel within `fill_radius` that
+ * has one on the same reflector, a cheap guess. Elsewhere, or
  * where there is none, it shows the world.
  *
  * Reflector properties (SBC V-D): the label's y is the reflection weight (reflectivity,
@@ -26,6 +27,12 @@
  * distance A (0: none). A reflection's alpha (and a traced one's) is 1 + its distance d
  * from the mirror along the reflected ray; it fades to the world colour by
  * min(1, (d / A)^2), the paper's quadratic fall-off with distance.
+ *
+ * Inside a sealed mirror: where the pre-pass marks the pixel's view ray as starting
+ * inside a closed mirror that holds nothing (`prepass_normals` w, the camera's clip
+ * start cutting into the mirror: reflection_prepass_frag.glsl), the ray would bounce
+ * inside without end and meet no light: the reflection is black, whatever was drawn or
+ * traced there, and is not faded (Cycles shows black there once its bounces run out).
  *
  * Depth: a mirror pixel is drawn at its pre-pass depth brought nearer by `depth_bias`
  * (a, s): z - s (a - z) (screen_space.depth_bias). A viewport overlay's pre-pass draws
@@ -61,7 +68,10 @@ void main()
   vec4 reflection = texelFetch(reflection_colors, texel, 0);
   vec4 traced = texelFetch(traced_colors, texel, 0);
   vec3 reflected = world_color.rgb;
-  if (traced.a > 0.5) {
+  if (texelFetch(prepass_normals, texel, 0).w > 0.5) {
+    reflected = vec3(0.0);
+  }
+  else if (traced.a > 0.5) {
     reflected = attenuated(traced.rgb, traced.a, label.z);
   }
   else if (reflection.a > 0.5) {
@@ -78,8 +88,10 @@ void main()
                      any(greaterThanEqual(texel, size - ivec2(fill_radius)));
     for (int dy = -fill_radius; dy <= fill_radius && !near_edge; dy++) {
       for (int dx = -fill_radius; dx <= fill_radius; dx++) {
-        if (abs(texelFetch(prepass_labels, texel + ivec2(dx, dy), 0).x - label.x) >= 0.5) {
-          near_edge = true;
+        ivec2 other = texel + ivec2(dx, dy);
+        if (abs(texelFetch(prepass_labels, other, 0).x - label.x) >= 0.5 ||
+            texelFetch(prepass_normals, other, 0).w > 0.5) {
+          near_edge = true;  /* the footprint's edge, or where the clip start cuts into it */
           break;
         }
       }
@@ -94,7 +106,8 @@ void main()
         }
         int distance2 = dx * dx + dy * dy;
         vec4 candidate = texelFetch(reflection_colors, other, 0);
-        if (distance2 < best && candidate.a > 0.5 && abs(texelFetch(prepass_labels, other, 0).x - label.x) < 0.5) {
+        if (distance2 < best && candidate.a > 0.5 && abs(texelFetch(prepass_labels, other, 0).x - label.x) < 0.5 &&
+            texelFetch(prepass_normals, other, 0).w < 0.5) {
           best = distance2;
           nearest = candidate;
         }

@@ -6,7 +6,17 @@
  * label: (id, reflection weight, attenuation distance, eye depth of the surface: `eye_depth`). The weight is the reflector's
  * reflectivity, times Schlick's Fresnel term F0 + (1 - F0)(1 - cos t)^5 with cos t = |n . e|
  * when F0 is given (SBC paper, section V-D: the reflected share grows at grazing angles).
- * Target 2: the smooth normal (for the per-frame passes' law-of-reflection test). */
+ * Target 2: the smooth normal (for the per-frame passes' law-of-reflection test) and, as
+ * w, 1 where the pixel's view ray starts inside a sealed mirror, else 0.
+ *
+ * A sealed mirror (ReflectorSet.seal_empty_interiors) is a closed solid that holds
+ * nothing; its vertices' `lit_interp` is its winding: +1 where its triangles wind
+ * counter-clockwise seen from outside, -1 the other way (0: not sealed). Seen from
+ * outside, the first surface of a closed solid along a ray is one of its outer sides;
+ * a pixel that shows its inner side (its triangle's winding seen from the eye against
+ * the solid's) has a view ray starting inside it: the camera's clip start cuts into the
+ * mirror. Such a ray bounces inside without end and meets no light: the composite
+ * draws it black (reflection_composite_frag.glsl), as Cycles shows it. */
 
 void main()
 {
@@ -27,7 +37,11 @@ void main()
     float f0 = label_interp.z;
     weight *= f0 + (1.0 - f0) * pow(1.0 - cosine, 5.0);
   }
+  float inside = 0.0;
+  if (label_interp.x > 0.5 && lit_interp != 0.0 && gl_FrontFacing != (lit_interp > 0.0)) {
+    inside = 1.0;
+  }
   color_out = vec4(rgb, 1.0);
   label_out = vec4(label_interp.x, weight, label_interp.w, eye_depth(position_interp, camera));
-  normal_out = vec4(normal_interp, 0.0);
+  normal_out = vec4(normal_interp, inside);
 }

@@ -35,6 +35,9 @@ SHADE_AMBIENT = 0.3
 #: on a 1.3M-triangle sphere): the grid pays for itself from one ray per this many
 #: triangles, or at once where it is built already.
 GRID_TRIANGLES_PER_RAY = 10
+#: What a ray that meets a sealed mirror from inside shows (``BandTracer.trace``): black,
+#: at distance 0 from the mirror (a fade distance does not turn it into the world).
+NO_LIGHT = (0.0, 0.0, 0.0, 0.0)
 
 
 def shade(albedo: np.ndarray, lit: np.ndarray, normals: np.ndarray, to_eye: np.ndarray) -> np.ndarray:
@@ -123,7 +126,11 @@ class BandTracer:
         Paths stop at the first diffuse hit, when they leave the scene (world colour), at
         an invalid reflection (a grazing ray turned into the mirror: world colour), or
         on a reflector after ``max_order`` reflections (world colour, as the drawing
-        shows where no reflection group of that order exists).
+        shows where no reflection group of that order exists). A ray that meets a sealed
+        mirror from inside (``ReflectorSet.from_inside``: an eye ray starting inside it,
+        the camera's clip start cutting into it) shows black at distance 0
+        (:data:`NO_LIGHT`): inside a closed mirror that holds nothing it would bounce
+        without end and meet no light, as Cycles shows it once its bounces run out.
         """
         pixels = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
         out = np.tile(np.asarray(world_color, dtype=np.float64)[:4], (len(pixels), 1))
@@ -142,6 +149,10 @@ class BandTracer:
                                                       hits.normal[diffuse], -directions[diffuse])
                 out[alive[diffuse], 3] = hits.t[diffuse] if order > 0 else 0.0
             mirror = hit & (owner >= 0) & (owner < self.n_reflectors)
+            inside = np.zeros_like(mirror)
+            inside[mirror] = self.mirrors.from_inside(directions[mirror], hits.triangle[mirror])
+            out[alive[inside]] = NO_LIGHT
+            mirror &= ~inside
             if order == max_order:
                 break
             valid = mirror & reflection_valid(directions, np.nan_to_num(hits.normal), np.nan_to_num(hits.face_normal))

@@ -332,7 +332,8 @@ def test_background_threads_yield_the_cores_to_drawing():
 
 def test_a_view_whose_clip_start_cuts_into_the_sealed_ball_says_so(fig3):
     """The ball holds nothing, so a view whose near clip plane starts inside it sees only
-    its inside, which reflects nothing: the status line names it and says why."""
+    its inside, where a ray meets no light: every pixel is drawn black (as Cycles shows
+    it), and the status line names the ball and says so."""
     bpy.ops.curved_reflections.start_live()
     state = live.state_of(fig3)
     ball = bpy.data.objects["MirrorSphere"]
@@ -342,8 +343,42 @@ def test_a_view_whose_clip_start_cuts_into_the_sealed_ball_says_so(fig3):
     live._start_camera(state, live.CAMERA_KEY, inside, wait=True)
     assert state.cameras[live.CAMERA_KEY].sbc.ray_map.n_rays == 0
     assert state.level == 'WARNING' and "'MirrorSphere': the camera's clip start cuts into this mirror" in state.status
+    assert "drawn black" in state.status
+    drawn, image = _draw(fig3, inside)
+    assert drawn and np.all(image[..., :3] == 0.0)
     live._start_camera(state, live.CAMERA_KEY, _camera_view(fig3), wait=True)
     assert state.status == "Reflections up to date"
+
+
+@pytest.mark.parametrize("mode", ['AUTO', 'RUNTIME'])
+def test_where_the_clip_start_cuts_a_disc_off_the_sealed_ball_its_inside_is_drawn_black(fig3, mode):
+    """The scene camera with its clip start half a radius short of the ball's centre: in
+    the cut-away disc the view rays start inside the ball (the exact trace from the near
+    plane, ``band_trace.BandTracer``, says no light), and the live view draws those
+    pixels black, in both modes (the iterative search answers every vertex from the eye,
+    and drew the cut-away front's reflections there), and the rest of the ball not."""
+    from curved_reflections.engine.geometry.band_trace import NO_LIGHT, BandTracer
+
+    ball = bpy.data.objects["MirrorSphere"]
+    ball.curved_reflections.mode = mode
+    bpy.context.view_layer.update()
+    centre, radius = np.array(ball.matrix_world.translation), 0.5 * max(ball.dimensions)
+    matrix = np.array(fig3.camera.matrix_world)
+    fig3.camera.data.clip_start = float(np.dot(centre - matrix[:3, 3], -matrix[:3, 2])) - 0.5 * radius
+    view = _camera_view(fig3)
+    state = live.start(fig3, bpy.context.evaluated_depsgraph_get(), {live.CAMERA_KEY: view}, wait=True)
+    assert "'MirrorSphere': the camera's clip start cuts into this mirror" in state.status
+    drawn, image = _draw(fig3, view)
+    ys, xs = np.mgrid[0:HEIGHT, 0:WIDTH]
+    pixels = np.c_[xs.ravel(), ys.ravel()] + 0.5
+    tracer = BandTracer(state.captured.reflectors, state.captured.meshes, state.reflector_set)
+    hits = tracer.intersect(*view.pixel_rays(pixels))
+    mirror = (hits.hit & (hits.reflector < tracer.n_reflectors)).reshape(HEIGHT, WIDTH)
+    exact = tracer.trace(view, pixels, 1, state.world).reshape(HEIGHT, WIDTH, 4)
+    inside = mirror & np.all(exact == NO_LIGHT, axis=2)
+    assert drawn and inside.sum() > 0.6 * mirror.sum() > 1000
+    black = np.all(image[..., :3] == 0.0, axis=2)
+    assert np.all(black[inside]) and not np.any(black[mirror & ~inside])
 
 
 def test_a_draw_error_becomes_the_status_line(fig3, monkeypatch):

@@ -11,6 +11,7 @@ import pytest
 
 from curved_reflections.blender import demo_scenes, method_plan
 from curved_reflections.blender.frame_pipeline import clip_start_message
+from curved_reflections.engine.geometry.band_trace import NO_LIGHT
 from curved_reflections.tools import reference_render
 
 
@@ -245,6 +246,7 @@ def test_a_view_whose_near_plane_cuts_the_mirror_is_filled_not_traced(fig3, tmp_
     fig3.render.resolution_x, fig3.render.resolution_y = 48, 36
     sealed = render_scene(fig3, bpy.context.evaluated_depsgraph_get())
     assert sealed.stats["n_rays"] == 0 and not sealed.stats.get("traced_pixels")
+    assert np.all(sealed.image[..., :3] == 0.0)  # all of it the ball's inside: no light, as Cycles shows it
     assert sealed.stats["warnings"] == [clip_start_message("MirrorSphere")] and ordinary.stats["warnings"] == []
     assert bpy.ops.curved_reflections.render_image(filepath=str(tmp_path / "sealed.png")) == {'FINISHED'}
     assert "'MirrorSphere': the camera's clip start cuts into this mirror" in capfd.readouterr().out
@@ -254,6 +256,46 @@ def test_a_view_whose_near_plane_cuts_the_mirror_is_filled_not_traced(fig3, tmp_
     assert near.stats["traced_pixels"] == 0 and near.stats["untraced_pixels"] > 0.25 * 48 * 36
     assert bpy.ops.curved_reflections.render_image(filepath=str(tmp_path / "near.png")) == {'FINISHED'}
     assert "mirror pixels without a reflection were filled, not ray traced" in capfd.readouterr().out
+
+
+@pytest.mark.parametrize("mode", ['AUTO', 'RUNTIME'])
+def test_where_the_near_plane_cuts_the_sealed_ball_its_inside_shows_as_traced(fig3, mode):
+    """The scene camera with its clip start half a radius short of the ball's centre: a
+    disc of the ball's front is cut away, and there every view ray starts inside the
+    ball, which holds nothing (sealed). Such a ray bounces inside without end and meets no
+    light: the exact trace from the near plane (``band_trace.BandTracer``) says black
+    there, as Cycles renders it, and the mirror's pixels show what the trace shows, in
+    both modes (before, the iterative search drew the cut-away front's reflections there,
+    the camera the world)."""
+    from curved_reflections.blender.render_image import FrameState, render_scene
+    from curved_reflections.engine.geometry.band_trace import BandTracer
+    from curved_reflections.engine.srgb import linear_to_srgb
+    from curved_reflections.tools import metrics
+
+    ball = bpy.data.objects["MirrorSphere"]
+    ball.curved_reflections.mode = mode
+    bpy.context.view_layer.update()
+    centre, radius = np.array(ball.matrix_world.translation), 0.5 * max(ball.dimensions)
+    matrix = np.array(fig3.camera.matrix_world)
+    fig3.camera.data.clip_start = float(np.dot(centre - matrix[:3, 3], -matrix[:3, 2])) - 0.5 * radius
+    state = FrameState()
+    result = render_scene(fig3, bpy.context.evaluated_depsgraph_get(), state=state)
+    assert result.stats["warnings"] == [clip_start_message("MirrorSphere")]
+    assert result.stats["methods"] == {"MirrorSphere": 'ITERATIVE' if mode == 'AUTO' else 'RUNTIME'}
+    view, (height, width) = result.view, result.image.shape[:2]
+    ys, xs = np.mgrid[0:height, 0:width]
+    pixels = np.c_[xs.ravel(), ys.ravel()] + 0.5
+    tracer = BandTracer(state.captured.reflectors, state.captured.meshes, state.reflector_set)
+    hits = tracer.intersect(*view.pixel_rays(pixels))
+    mirror = (hits.hit & (hits.reflector < tracer.n_reflectors)).reshape(height, width)
+    exact = tracer.trace(view, pixels, fig3.curved_reflections.max_order, state.world).reshape(height, width, 4)
+    inside = mirror & np.all(exact == NO_LIGHT, axis=2)
+    assert mirror.sum() > 500 and inside.sum() > 0.6 * mirror.sum()
+    palette = {**demo_scenes.palette(fig3), "(no light)": (0.0, 0.0, 0.0)}
+    ours = metrics.label_image(linear_to_srgb(result.image[..., :3]), palette)
+    truth = metrics.label_image(linear_to_srgb(exact[..., :3]), palette)
+    assert np.all(result.image[inside][:, :3] == 0.0)
+    assert metrics.share_differing(ours, truth, mirror) <= 0.02
 
 
 def _lift_off_the_floor() -> None:

@@ -166,27 +166,43 @@ def check_view_outside_reflectors(reflector_set: ReflectorSet, view: View) -> No
         raise SceneInputError(name, "the view is inside this reflector; move the camera outside it")
 
 
+#: ``clip_start_inside`` tests this many points squared across the view's near plane (the
+#: centres of a square lattice of cells over the image).
+CLIP_START_SAMPLES = 5
+
+
 def clip_start_inside(reflector_set: ReflectorSet, view: View) -> list:
     """Names of the sealed reflectors (``ReflectorSet.seal_empty_interiors``) that the
-    middle of the view's near clip plane lies inside, the eye being outside: the view's
-    rays start in a mirror that reflects nothing inside, and it shows the world colour
-    there (Render Image and the live view say so)."""
-    centre, _ = view.pixel_rays(np.array([[0.5 * view.width, 0.5 * view.height]]))
-    inside = _enclosing(reflector_set, centre[0], -view.backward)
-    return [] if inside is None or not reflector_set.sealed[inside] else [reflector_set.reflectors[inside].name]
+    view's near clip plane cuts into (one of :data:`CLIP_START_SAMPLES` squared points
+    across it inside one), the eye being outside: the view's rays start there inside a
+    closed mirror that holds nothing, and see no light (the renderer draws those pixels
+    black, as Cycles shows them; Render Image and the live view say so)."""
+    steps = (np.arange(CLIP_START_SAMPLES) + 0.5) / CLIP_START_SAMPLES
+    xs, ys = np.meshgrid(steps * view.width, steps * view.height)
+    origins, _ = view.pixel_rays(np.c_[xs.ravel(), ys.ravel()])
+    inside = np.unique(_enclosing_each(reflector_set, origins, -view.backward))
+    return [reflector_set.reflectors[k].name for k in inside if k >= 0 and reflector_set.sealed[k]]
 
 
 def _enclosing(reflector_set: ReflectorSet, point, forward) -> int | None:
     """The reflector around ``point``, if any: rays in every direction (the six axis
     directions and ``forward``) meet the back of that one reflector first."""
+    inside = int(_enclosing_each(reflector_set, np.asarray(point, dtype=np.float64)[None], forward)[0])
+    return None if inside < 0 else inside
+
+
+def _enclosing_each(reflector_set: ReflectorSet, points, forward) -> np.ndarray:
+    """(P,) the reflector around each of ``points`` (P, 3) as :func:`_enclosing` finds it,
+    -1 where none; their rays traced together."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     directions = np.concatenate([np.eye(3), -np.eye(3), [np.asarray(forward, dtype=np.float64)]])
-    origins = np.broadcast_to(np.asarray(point, dtype=np.float64), directions.shape)
-    hits = reflector_set.intersect(origins, directions)
-    if not hits.hit.all():
-        return None
-    back = np.einsum("ij,ij->i", reflector_set.face_normals[hits.triangle], directions) > 0
-    owners = np.unique(hits.reflector)
-    return int(owners[0]) if back.all() and len(owners) == 1 else None
+    origins = np.repeat(points, len(directions), axis=0)
+    rays = np.tile(directions, (len(points), 1))
+    hits = reflector_set.intersect(origins, rays)
+    back = hits.hit & (np.einsum("ij,ij->i", reflector_set.face_normals[np.maximum(hits.triangle, 0)], rays) > 0)
+    owner = np.where(back, hits.reflector, -1).reshape(len(points), len(directions))
+    one = np.all(back.reshape(owner.shape), axis=1) & np.all(owner == owner[:, :1], axis=1)
+    return np.where(one, owner[:, 0], -1)
 
 
 def _stats(ray_map: RayMap, trees: list, grids: list, seconds: float) -> dict:

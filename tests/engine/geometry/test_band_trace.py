@@ -6,7 +6,7 @@ scene sees."""
 import numpy as np
 
 from curved_reflections.engine import DiffuseMesh, look_at_view
-from curved_reflections.engine.geometry.band_trace import BandTracer
+from curved_reflections.engine.geometry.band_trace import NO_LIGHT, BandTracer
 from curved_reflections.engine.geometry.sphere import icosphere
 
 
@@ -126,3 +126,27 @@ def test_rim_gap_pixels_are_the_strip_between_a_reflection_and_the_silhouette():
     # The same strip with band_pixels needs its radius (and takes the sky's rim with it).
     ring = {tuple(p) for p in band_pixels(labels, drawn, 4).tolist()}
     assert strip <= ring and any(j < 10 for _, j in ring)
+
+
+def test_eye_rays_that_start_inside_a_sealed_mirror_see_no_light():
+    """A view whose near plane cuts into the ball: rays starting inside it meet it from
+    inside. Sealed (nothing inside), they show black at distance 0 (``NO_LIGHT``), as
+    Cycles shows a closed mirror from inside once its bounces run out; the rays that
+    start outside see what they saw. Held open (not sealed), they bounce on."""
+    reflectors, meshes = _scene()
+    tracer = BandTracer(reflectors, meshes)
+    view = look_at_view((0.0, -4.0, 0.0), (0.0, 0.0, 0.0), fov_y_deg=40.0, width=64, height=48, near=3.5)
+    ys, xs = np.mgrid[0:48, 0:64]
+    pixels = np.c_[xs.ravel(), ys.ravel()] + 0.5
+    origins, directions = view.pixel_rays(pixels)
+    radius = np.linalg.norm(origins, axis=1)
+    # The icosphere lies within the unit sphere, its faces down to 0.95 from the centre.
+    starts_inside, starts_outside = radius < 0.95, radius > 1.0
+    assert 100 < starts_inside.sum() < 0.5 * len(pixels)
+    world = (0.05, 0.1, 0.2, 1.0)
+    open_ball = tracer.trace(view, pixels, 2, world)
+    tracer.mirrors.seal_empty_interiors(meshes)
+    sealed = tracer.trace(view, pixels, 2, world)
+    np.testing.assert_array_equal(sealed[starts_inside], np.tile(NO_LIGHT, (starts_inside.sum(), 1)))
+    np.testing.assert_array_equal(sealed[starts_outside], open_ball[starts_outside])
+    assert not np.any(np.all(open_ball[starts_inside] == NO_LIGHT, axis=1))
