@@ -56,6 +56,18 @@ def triangle_areas(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
 
 
+#: Triangles whose areas a validation computes at a time (it stops at the first with area).
+AREA_BLOCK = 1 << 14
+
+
+def _any_area(vertices: np.ndarray, triangles: np.ndarray) -> bool:
+    """Whether some triangle has an area, looked for a block at a time: a million
+    triangles' corners and cross products cost 200 MB at once, and the first block
+    almost always has one."""
+    return any((triangle_areas(vertices, triangles[start:start + AREA_BLOCK]) > 0).any()
+               for start in range(0, len(triangles), AREA_BLOCK))
+
+
 def smooth_pieces(triangles: np.ndarray, n_vertices: int) -> np.ndarray:
     """(M,) the smooth piece of each triangle, numbered 0, 1, ... in order of first triangle.
 
@@ -66,8 +78,11 @@ def smooth_pieces(triangles: np.ndarray, n_vertices: int) -> np.ndarray:
     components by hooking roots to the lowest and pointer jumping (Shiloach and Vishkin;
     whole arrays, a number of passes that grows with the logarithm of a piece's size).
     """
-    triangles = np.asarray(triangles, dtype=np.int64)
-    label = np.arange(n_vertices)
+    # Labels are vertex indices: 32 bits hold them (a million triangles' (T, 3) copies
+    # each pass: 12 MB, not 24).
+    index = np.int32 if n_vertices < 2 ** 31 else np.int64
+    triangles = np.asarray(triangles).astype(index, copy=False)
+    label = np.arange(n_vertices, dtype=index)
     while True:
         # Hook every corner's root to the lowest root of its triangle, then jump each
         # vertex to its new root: whole trees merge in a pass (log-many passes), where
@@ -121,7 +136,7 @@ class Reflector:
                 self.name, f"{int(zero.sum())} vertex normals have zero length "
                 f"(first at vertex {int(np.flatnonzero(zero)[0])})"
             )
-        if not (triangle_areas(vertices, triangles) > 0).any():
+        if not _any_area(vertices, triangles):
             raise SceneInputError(self.name, "all faces have zero area")
         normals = normals / np.maximum(lengths, MIN_NORMAL_LENGTH)[:, None]
         for attr, value in (("vertices", vertices), ("normals", normals), ("triangles", triangles)):

@@ -24,6 +24,8 @@ from typing import Callable
 import numpy as np
 
 MORTON_BITS = 10
+#: Triangles (or slots, points) a build step holds temporaries for at once.
+BLOCK = 1 << 16
 
 
 def _spread_bits(values: np.ndarray) -> np.ndarray:
@@ -38,11 +40,25 @@ def _spread_bits(values: np.ndarray) -> np.ndarray:
 
 def morton_codes(points: np.ndarray) -> np.ndarray:
     """30-bit Morton codes of points, quantised in their own bounding box."""
-    lo, hi = points.min(axis=0), points.max(axis=0)
+    return _morton_codes(lambda start: points[start:start + BLOCK], len(points))
+
+
+def _morton_codes(block, n_points: int) -> np.ndarray:
+    """:func:`morton_codes` of ``n_points`` points made :data:`BLOCK` at a time by
+    ``block(start)``: twice, for their box and then for their codes, so that a million
+    triangles' centroids and temporaries are never held at once."""
+    starts = range(0, n_points, BLOCK)
+    lo = np.min([block(start).min(axis=0) for start in starts], axis=0)
+    hi = np.max([block(start).max(axis=0) for start in starts], axis=0)
     scale = (1 << MORTON_BITS) - 1
-    cells = np.floor((points - lo) / np.maximum(hi - lo, 1e-300) * scale).astype(np.int64)
-    cells = np.clip(cells, 0, scale)
-    return (_spread_bits(cells[:, 0]) << np.uint64(2)) | (_spread_bits(cells[:, 1]) << np.uint64(1)) | _spread_bits(cells[:, 2])
+    extent = np.maximum(hi - lo, 1e-300)
+    codes = np.empty(n_points, dtype=np.uint64)
+    for start in starts:
+        cells = np.floor((block(start) - lo) / extent * scale).astype(np.int64)
+        cells = np.clip(cells, 0, scale)
+        codes[start:start + BLOCK] = ((_spread_bits(cells[:, 0]) << np.uint64(2))
+                                      | (_spread_bits(cells[:, 1]) << np.uint64(1)) | _spread_bits(cells[:, 2]))
+    return codes
 
 
 @dataclass(frozen=True)
@@ -50,72 +66,126 @@ class BVH:
     """Complete binary tree over Morton-sorted triangles.
 
     ``order`` (n_leaves * leaf_size,) maps sorted slots to triangle indices, -1 for
-    padding. Level k has 2**k nodes; ``box_lo[k]``, ``box_hi[k]`` are (2**k, 3) and
-    empty nodes have lo = +inf, hi = -inf, so every box test rejects them.
+    padding. Level k has 2**k nodes; ``box_rows[k]`` (6, 2**k) holds their boxes as six
+    coordinate rows (lo x, y, z, hi x, y, z), so that one gather gives a batch's boxes
+    coordinate by coordinate (:func:`ray_box_test`); empty nodes have NaN bounds:
+    np.maximum and np.minimum carry NaN through, and NaN <= far is False, so every slab
+    test rejects them. ``box_lo[k]``, ``box_hi[k]`` are the same boxes as (2**k, 3) rows,
+    empty nodes with lo = +inf, hi = -inf (made on first use: the exact solver's; a
+    million-triangle mirror's boxes are 25 MB each way).
     ``cone_axis[k]`` (2**k, 3) and ``cone_cos[k]`` (2**k,) bound the vertex normals;
     cone_cos = -1 means "any direction".
     """
 
     order: np.ndarray
     leaf_size: int
-    box_lo: tuple
-    box_hi: tuple
+    box_rows: tuple
     cone_axis: tuple
     cone_cos: tuple
 
     @property
     def depth(self) -> int:
         """Index of the leaf level."""
-        return len(self.box_lo) - 1
+        return len(self.box_rows) - 1
 
     @property
     def nbytes(self) -> int:
-        arrays = [self.order, *self.box_lo, *self.box_hi, *self.cone_axis, *self.cone_cos]
+        arrays = [self.order, *self.box_rows, *self.cone_axis, *self.cone_cos]
         return int(sum(a.nbytes for a in arrays))
 
     @functools.cached_property
-    def box_rows(self) -> list:
-        """Per level, the boxes as six coordinate rows (lo x, y, z, hi x, y, z; (6, 2**k)),
-        so that one gather gives a batch's boxes coordinate by coordinate (:func:`ray_box_test`).
-        Empty nodes get NaN bounds: np.maximum and np.minimum carry NaN through, and
-        NaN <= far is False, so every slab test rejects them."""
-        return [np.where((lo <= hi).all(axis=1), np.concatenate([lo, hi], axis=1).T, np.nan).copy()
-                for lo, hi in zip(self.box_lo, self.box_hi)]
+    def box_lo(self) -> tuple:
+        """Per level, the boxes' low corners (2**k, 3); +inf for an empty node."""
+        return tuple(np.where(np.isnan(rows[:3].T), np.inf, rows[:3].T) for rows in self.box_rows)
+
+    @functools.cached_property
+    def box_hi(self) -> tuple:
+        """Per level, the boxes' high corners (2**k, 3); -inf for an empty node."""
+        return tuple(np.where(np.isnan(rows[3:].T), -np.inf, rows[3:].T) for rows in self.box_rows)
 
 
 def build_bvh(vertices: np.ndarray, triangles: np.ndarray, normals: np.ndarray | None = None,
               leaf_size: int = 4) -> BVH:
-    """Build the BVH of a triangle mesh; ``normals`` (N, 3) unit vertex normals for the cones."""
-    corners = vertices[triangles]  # (M, 3, 3)
+    """Build the BVH of a triangle mesh; ``normals`` (N, 3) unit vertex normals for the cones.
+
+    Streamed over blocks of slots (:data:`BLOCK`): no (M, 3, 3) array of every
+    triangle's corners or corner normals is made (a million-triangle mirror's cost
+    300 MB at once). The boxes above the leaves are the smaller of their children's
+    bounds (exact); each cone sums its node's normals in slot order, as one sum over
+    the node would, so the tree is the same as one built all at once."""
     n_triangles = len(triangles)
     n_leaves = 1 << max(0, int(np.ceil(np.log2(max(1, -(-n_triangles // leaf_size))))))
     n_slots = n_leaves * leaf_size
+    depth = int(np.log2(n_leaves))
 
     order = np.full(n_slots, -1, dtype=np.int64)
-    order[:n_triangles] = np.argsort(morton_codes(corners.mean(axis=1)), kind="stable")
-    filled = order >= 0
-    slot_triangles = np.where(filled, order, 0)
+    order[:n_triangles] = np.argsort(_morton_codes(
+        lambda start: vertices[triangles[start:start + BLOCK]].mean(axis=1), n_triangles), kind="stable")
 
-    slot_lo = np.where(filled[:, None], corners.min(axis=1)[slot_triangles], np.inf)
-    slot_hi = np.where(filled[:, None], corners.max(axis=1)[slot_triangles], -np.inf)
-    if normals is None:
-        slot_normals = np.zeros((n_slots, 3, 3))
-    else:
-        slot_normals = normals[triangles[slot_triangles]]
-        slot_normals[~filled] = 0.0
+    # Blocks of whole nodes from level ``deep`` down; the nodes above span several blocks.
+    block_leaves = min(n_leaves, 1 << max(0, int(np.log2(max(1, BLOCK // leaf_size)))))
+    block_slots = block_leaves * leaf_size
+    deep = depth - int(np.log2(block_leaves))
+    leaf_lo, leaf_hi = np.empty((n_leaves, 3)), np.empty((n_leaves, 3))
+    cone_axis = [np.empty((1 << level, 3)) for level in range(depth + 1)]
+    cone_cos = [np.empty(1 << level) for level in range(depth + 1)]
+    top_sum = [np.zeros((1 << level, 3)) for level in range(deep)]
+    top_min = [np.full(1 << level, np.inf) for level in range(deep)]
 
-    depth = int(np.log2(n_leaves))
-    box_lo, box_hi, cone_axis, cone_cos = [], [], [], []
-    for level in range(depth + 1):
-        nodes = 1 << level
-        lo = slot_lo.reshape(nodes, -1, 3).min(axis=1)
-        hi = slot_hi.reshape(nodes, -1, 3).max(axis=1)
-        axis, cos = _normal_cones(slot_normals.reshape(nodes, -1, 3), filled.reshape(nodes, -1))
-        box_lo.append(lo)
-        box_hi.append(hi)
-        cone_axis.append(axis)
-        cone_cos.append(cos)
-    return BVH(order, leaf_size, tuple(box_lo), tuple(box_hi), tuple(cone_axis), tuple(cone_cos))
+    def block(start: int):
+        """(corner normals (slots, 3, 3), filled (slots,)) of the slots from ``start``;
+        the leaves' boxes written as it goes."""
+        slots = order[start:start + block_slots]
+        filled = slots >= 0
+        tris = triangles[np.where(filled, slots, 0)]
+        corners = vertices[tris]
+        leaves = slice(start // leaf_size, (start + block_slots) // leaf_size)
+        leaf_lo[leaves] = np.where(filled[:, None], corners.min(axis=1), np.inf).reshape(-1, leaf_size, 3).min(axis=1)
+        leaf_hi[leaves] = np.where(filled[:, None], corners.max(axis=1), -np.inf).reshape(-1, leaf_size, 3).max(axis=1)
+        if normals is None:
+            slot_normals = np.zeros((len(slots), 3, 3))
+        else:
+            slot_normals = normals[tris]
+            slot_normals[~filled] = 0.0
+        return slot_normals, filled
+
+    for start in range(0, n_slots, block_slots):
+        slot_normals, filled = block(start)
+        for level in range(deep, depth + 1):
+            nodes = block_leaves >> (depth - level)
+            first = start // (n_slots >> level)
+            axis, cos = _normal_cones(slot_normals.reshape(nodes, -1, 3), filled.reshape(nodes, -1))
+            cone_axis[level][first:first + nodes], cone_cos[level][first:first + nodes] = axis, cos
+        for level in range(deep):  # the node holding this block, its normals summed in slot order
+            node = start // (n_slots >> level)
+            part = slot_normals.reshape(1, -1, 3)
+            if start % (n_slots >> level):
+                part = np.concatenate([top_sum[level][node][None, None], part], axis=1)
+            top_sum[level][node] = part.sum(axis=1)[0]
+    for level in range(deep):
+        length = np.linalg.norm(top_sum[level], axis=1)
+        cone_axis[level][:] = top_sum[level] / np.maximum(length, 1e-300)[:, None]
+    if deep:
+        for start in range(0, n_slots, block_slots):  # again, for the cosines about the axes
+            slot_normals, filled = block(start)
+            present = np.repeat(filled, 3)
+            for level in range(deep):
+                node = start // (n_slots >> level)
+                dots = np.einsum("nsd,nd->ns", slot_normals.reshape(1, -1, 3), cone_axis[level][node][None])
+                top_min[level][node] = min(top_min[level][node], np.where(present, dots[0], np.inf).min())
+        for level in range(deep):
+            length = np.linalg.norm(top_sum[level], axis=1)
+            cos = top_min[level]
+            cone_cos[level][:] = np.where((length < 1e-9) | ~np.isfinite(cos), -1.0, np.clip(cos, -1.0, 1.0))
+
+    box_rows = [None] * (depth + 1)
+    lo, hi = leaf_lo, leaf_hi
+    for level in range(depth, -1, -1):
+        if level < depth:
+            lo = np.minimum(lo[0::2], lo[1::2])
+            hi = np.maximum(hi[0::2], hi[1::2])
+        box_rows[level] = np.where((lo <= hi).all(axis=1), np.concatenate([lo, hi], axis=1).T, np.nan).copy()
+    return BVH(order, leaf_size, tuple(box_rows), tuple(cone_axis), tuple(cone_cos))
 
 
 def _normal_cones(node_normals: np.ndarray, node_filled: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -41,30 +41,72 @@ PAIRS_PER_CHUNK = 1 << 20
 CONVEXITY_BLOCK = 131072
 
 
-def winding(vertices: np.ndarray, triangles: np.ndarray) -> int:
+def weld_labels(vertices: np.ndarray) -> np.ndarray | None:
+    """(N,) for each vertex the lowest index of the vertices at its position (split
+    vertices of a sharp edge or a UV seam share one), or None where no two vertices
+    share a position. A lexicographic sort of the coordinates: ``np.unique(axis=0)``
+    sorts the rows as records, and its inverse costs a (T, 3) copy of the triangles
+    even where nothing is welded (a million-triangle ball: 24 MB)."""
+    vertices = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    order = np.lexsort((vertices[:, 2], vertices[:, 1], vertices[:, 0]))  # stable: lowest index first
+    ordered = vertices[order]
+    starts = np.ones(len(order), dtype=bool)
+    starts[1:] = (ordered[1:] != ordered[:-1]).any(axis=1)
+    del ordered
+    if starts.all():
+        return None
+    first = np.flatnonzero(starts)
+    labels = np.empty(len(order), dtype=np.int64)
+    labels[order] = np.repeat(order[first], np.diff(np.append(first, len(order))))
+    return labels
+
+
+def welded_corners(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """``triangles`` (T, 3) over :func:`weld_labels` (vertices at one position as one):
+    the same array where no two vertices share a position."""
+    labels = weld_labels(vertices)
+    return triangles if labels is None else labels[triangles]
+
+
+def winding(vertices: np.ndarray, triangles: np.ndarray, welded: np.ndarray | None = None) -> int:
     """+1 where ``triangles`` close a solid and wind counter-clockwise seen from outside
     (normals outward, Blender's convention), -1 where they wind the other way (normals
     inward: a flipped mesh or a mirroring transform), 0 where they do not close a solid
     (an open edge, an edge of three or more faces, two neighbours wound against each
-    other, no volume)."""
+    other, no volume). ``welded``: the triangles over welded vertices
+    (:func:`welded_corners`, any labels), where the caller has them."""
     triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
     if len(triangles) < 4:
         return 0
-    _, welded = np.unique(np.asarray(vertices, dtype=np.float64), axis=0, return_inverse=True)
-    corners = welded.reshape(-1)[triangles]
-    if np.any(corners[:, 0] == corners[:, 1]) or np.any(corners[:, 1] == corners[:, 2]) \
-            or np.any(corners[:, 2] == corners[:, 0]):
+    vertices = np.asarray(vertices, dtype=np.float64)
+    corners = welded_corners(vertices, triangles) if welded is None else np.asarray(welded).reshape(-1, 3)
+    columns = [corners[:, k] for k in range(3)]
+    if any(np.any(columns[k] == columns[(k + 1) % 3]) for k in range(3)):
         return 0
-    directed = np.concatenate([corners[:, [0, 1]], corners[:, [1, 2]], corners[:, [2, 0]]])
-    n = int(welded.max()) + 1
-    forward = np.sort(directed[:, 0] * n + directed[:, 1])
-    backward = np.sort(directed[:, 1] * n + directed[:, 0])
+    n = int(corners.max()) + 1
     # Consistently wound and closed: each directed edge once, and its reverse once.
-    if np.any(forward[1:] == forward[:-1]) or not np.array_equal(forward, backward):
+    forward = np.empty(3 * len(corners), dtype=np.int64)
+    for k in range(3):
+        part = forward[k * len(corners):(k + 1) * len(corners)]
+        np.multiply(columns[k], n, out=part)
+        part += columns[(k + 1) % 3]
+    forward.sort()
+    if np.any(forward[1:] == forward[:-1]):
         return 0
-    v = np.asarray(vertices, dtype=np.float64)[triangles]
-    volume = np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])).sum() / 6.0
-    size = np.ptp(np.asarray(vertices, dtype=np.float64), axis=0).max()
+    # No directed edge twice, so every reverse found once means the same set of edges.
+    for k in range(3):
+        for start in range(0, len(corners), CONVEXITY_BLOCK):
+            backward = columns[(k + 1) % 3][start:start + CONVEXITY_BLOCK] * n + columns[k][start:start + CONVEXITY_BLOCK]
+            found = np.minimum(np.searchsorted(forward, backward), len(forward) - 1)
+            if not np.array_equal(forward[found], backward):
+                return 0
+    del forward
+    volume = 0.0
+    for start in range(0, len(triangles), CONVEXITY_BLOCK):
+        v = vertices[triangles[start:start + CONVEXITY_BLOCK]]
+        volume += np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])).sum()
+    volume /= 6.0
+    size = np.ptp(vertices, axis=0).max()
     if not abs(volume) > 1e-9 * size ** 3:
         return 0
     return 1 if volume > 0 else -1
@@ -133,19 +175,24 @@ def is_convex(vertices: np.ndarray, triangles: np.ndarray, centre, tolerance: fl
     cost: the search then runs its occlusion tests)."""
     vertices = np.asarray(vertices, dtype=np.float64)
     triangles = np.asarray(triangles, dtype=np.int64)
-    _, welded = np.unique(vertices, axis=0, return_inverse=True)
-    welded = welded.reshape(-1)[triangles]
-    # One integer per edge: a 1-D unique sorts 3 T keys, where rows as records cost seconds
-    # and a gigabyte on a million-triangle mirror.
-    following = np.roll(welded, -1, axis=1)
-    keys = np.minimum(welded, following) * (int(welded.max()) + 1) + np.maximum(welded, following)
-    del following
-    _, edge, count = np.unique(keys.reshape(-1), return_inverse=True, return_counts=True)
+    welded = welded_corners(vertices, triangles)
+    # One integer per edge, sorted: rows as records cost seconds and a gigabyte on a
+    # million-triangle mirror, and a 1-D unique with its inverse and counts 200 MB.
+    n = int(welded.max()) + 1
+    keys = np.empty(welded.shape, dtype=np.int64)
+    for k in range(3):
+        a, b = welded[:, k], welded[:, (k + 1) % 3]
+        np.multiply(np.minimum(a, b), n, out=keys[:, k])
+        keys[:, k] += np.maximum(a, b)
+    order = np.argsort(keys.reshape(-1), kind="stable")  # the two sides of each edge, side by side
+    ordered = keys.reshape(-1)[order]
     del keys
-    if (count != 2).any():
+    # Every edge of two faces: keys come in equal pairs, each pair unlike the next.
+    if len(ordered) % 2 or not (np.array_equal(ordered[0::2], ordered[1::2])
+                                and np.all(ordered[1:-1:2] != ordered[2::2])):
         return False
-    order = np.argsort(edge.reshape(-1), kind="stable").reshape(-1, 2)  # the two sides of each edge
-    del edge
+    del ordered
+    order = order.reshape(-1, 2)
     scale = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
     total = np.zeros(int(welded.max()) + 1)
     centre = np.asarray(centre, dtype=np.float64)

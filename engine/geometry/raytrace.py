@@ -30,6 +30,8 @@ from .triangle_grid import TriangleGrid, edge_neighbours
 from .vectors import cross, cross_rows, dot_rows
 
 RAY_CHUNK = 1 << 16
+#: Triangles whose corners the constructor holds at a time.
+BUILD_BLOCK = 1 << 16
 #: Relative (to the scene size) distance below which a hit is taken as the ray's own origin.
 SELF_HIT_EPSILON = 1e-9
 #: A closed reflector is sealed (:meth:`ReflectorSet.seal_empty_interiors`) only when at
@@ -105,30 +107,36 @@ class ReflectorSet:
         self.owner = np.concatenate(
             [np.full(len(r.triangles), i, dtype=np.int64) for i, r in enumerate(reflectors)]
         )
-        corners = self.vertices[self.triangles]
-        # v0, e1 and e2 as nine rows: one gather gives a batch's corners coordinate by
-        # coordinate; the (T, 3) arrays are views of them (a million-triangle mirror's
-        # copies cost 70 MB).
-        self.corner_rows = np.concatenate([corners[:, 0], corners[:, 1] - corners[:, 0],
-                                           corners[:, 2] - corners[:, 0]], axis=1).T.copy()
-        del corners
-        self.v0, self.e1, self.e2 = (self.corner_rows[k:k + 3].T for k in (0, 3, 6))
-        face = cross(self.e1, self.e2)
-        self.area2 = np.linalg.norm(face, axis=1)
-        self.face_normals = face / np.maximum(self.area2, 1e-300)[:, None]
-        lo, hi = self.vertices.min(axis=0), self.vertices.max(axis=0)
-        self.scale = float(max(np.linalg.norm(hi - lo), 1e-12))
         # Split vertices (sharp edges, custom normals) share positions: weld them so that
-        # triangles meeting at a split still count as neighbours.
-        _, welded = np.unique(self.vertices, axis=0, return_inverse=True)
-        self.welded_triangles = welded.reshape(-1)[self.triangles]
+        # triangles meeting at a split still count as neighbours (the triangles themselves
+        # where nothing is split). First what needs temporaries, while little is held.
+        self.welded_triangles = closed_surfaces.welded_corners(self.vertices, self.triangles)
         # Smooth pieces never span reflectors: each reflector's vertices are its own.
         self.piece = smooth_pieces(self.triangles, len(self.vertices))
+        # v0, e1 and e2 as nine rows: one gather gives a batch's corners coordinate by
+        # coordinate; the (T, 3) arrays are views of them. Filled a block of triangles at
+        # a time: a million-triangle mirror's (T, 3, 3) corners and their copies cost
+        # 300 MB at once.
+        n_triangles = len(self.triangles)
+        self.corner_rows = np.empty((9, n_triangles))
+        self.face_normals = np.empty((n_triangles, 3))
+        for start in range(0, n_triangles, BUILD_BLOCK):
+            corners = self.vertices[self.triangles[start:start + BUILD_BLOCK]]
+            rows = self.corner_rows[:, start:start + BUILD_BLOCK]
+            rows[0:3] = corners[:, 0].T
+            rows[3:6] = (corners[:, 1] - corners[:, 0]).T
+            rows[6:9] = (corners[:, 2] - corners[:, 0]).T
+            face = cross(rows[3:6].T, rows[6:9].T)
+            self.face_normals[start:start + BUILD_BLOCK] = face / np.maximum(np.linalg.norm(face, axis=1),
+                                                                            1e-300)[:, None]
+        del corners, rows, face
+        self.v0, self.e1, self.e2 = (self.corner_rows[k:k + 3].T for k in (0, 3, 6))
+        lo, hi = self.vertices.min(axis=0), self.vertices.max(axis=0)
+        self.scale = float(max(np.linalg.norm(hi - lo), 1e-12))
         self.bvh = build_bvh(self.vertices, self.triangles, self.normals, leaf_size=leaf_size)
         #: Per reflector, its winding (``closed_surfaces.winding``) where it is a closed
         #: solid that holds no diffuse geometry (:meth:`seal_empty_interiors`), else 0.
         self.sealed = np.zeros(len(self.reflectors), dtype=np.int64)
-        self._windings = None
 
     def seal_empty_interiors(self, meshes) -> None:
         """Seal the closed reflectors whose inside holds no vertex of ``meshes`` (the
@@ -140,11 +148,9 @@ class ReflectorSet:
         inside it: 764 sheets and 58 s for a 320x240 frame, against 1.1 s from the scene
         camera). A reflector with more than :data:`SEAL_TESTED_VERTICES` diffuse vertices
         in its bounding box is left open (not tested). Call again when the meshes change."""
-        if self._windings is None:
-            self._windings = [closed_surfaces.winding(r.vertices, r.triangles) for r in self.reflectors]
         self.sealed[:] = 0
         diffuse = [np.asarray(m.vertices, np.float64).reshape(-1, 3) for m in meshes]
-        for index, (reflector, sense) in enumerate(zip(self.reflectors, self._windings)):
+        for index, (reflector, sense) in enumerate(zip(self.reflectors, self.windings)):
             if sense == 0:
                 continue
             lo, hi = reflector.vertices.min(axis=0), reflector.vertices.max(axis=0)
@@ -196,8 +202,8 @@ class ReflectorSet:
 
     @property
     def nbytes(self) -> int:
-        arrays = (self.vertices, self.normals, self.triangles, self.owner, self.corner_rows,
-                  self.face_normals, self.welded_triangles, self.piece)
+        arrays = (self.vertices, self.normals, self.triangles, self.owner, self.corner_rows, self.face_normals,
+                  self.piece) + (() if self.welded_triangles is self.triangles else (self.welded_triangles,))
         return int(sum(a.nbytes for a in arrays)) + self.bvh.nbytes
 
     def surface(self, triangles: np.ndarray, barycentric: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -344,13 +350,20 @@ class ReflectorSet:
         return TriangleGrid(self.vertices, self.triangles, NEAR_SURFACE * self.scale)
 
     @functools.cached_property
+    def windings(self) -> tuple:
+        """Per reflector, ``closed_surfaces.winding``: +1 or -1 where it closes a solid,
+        else 0 (over the welded triangles this set holds already)."""
+        ends = np.cumsum([0] + [len(r.triangles) for r in self.reflectors])
+        return tuple(closed_surfaces.winding(r.vertices, r.triangles, self.welded_triangles[start:end])
+                     for r, start, end in zip(self.reflectors, ends[:-1], ends[1:]))
+
+    @functools.cached_property
     def closed_sides(self) -> np.ndarray:
         """(T,) int8: +1 where a triangle's winding normal (e1 x e2) points out of the
         solid its reflector closes, -1 where it points in, 0 on a reflector that closes
         none (``closed_surfaces.winding``). An eye on a closed mirror's inner side of a
         face sees that face through the rest of the mirror, or from inside it."""
-        sides = np.array([closed_surfaces.winding(r.vertices, r.triangles) for r in self.reflectors], dtype=np.int8)
-        return sides[self.owner]
+        return np.array(self.windings, dtype=np.int8)[self.owner]
 
     @functools.cached_property
     def edge_neighbours(self) -> np.ndarray:
