@@ -18,7 +18,7 @@ that to discard nodes where no mirror reflection can occur.
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
@@ -71,17 +71,21 @@ class BVH:
     coordinate by coordinate (:func:`ray_box_test`); empty nodes have NaN bounds:
     np.maximum and np.minimum carry NaN through, and NaN <= far is False, so every slab
     test rejects them. ``box_lo[k]``, ``box_hi[k]`` are the same boxes as (2**k, 3) rows,
-    empty nodes with lo = +inf, hi = -inf (made on first use: the exact solver's; a
-    million-triangle mirror's boxes are 25 MB each way).
+    empty nodes with lo = +inf, hi = -inf.
     ``cone_axis[k]`` (2**k, 3) and ``cone_cos[k]`` (2**k,) bound the vertex normals;
     cone_cos = -1 means "any direction".
+
+    The corners and cones are made on first use, from the ``triangles`` and ``normals``
+    the tree was built over (kept by reference): the exact solver's; the ray tracer
+    needs the rows alone (a million-triangle mirror's corners are 25 MB each way, its
+    cones 17 MB).
     """
 
     order: np.ndarray
     leaf_size: int
     box_rows: tuple
-    cone_axis: tuple
-    cone_cos: tuple
+    triangles: np.ndarray = field(default=None, repr=False)
+    normals: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def depth(self) -> int:
@@ -90,7 +94,10 @@ class BVH:
 
     @property
     def nbytes(self) -> int:
-        arrays = [self.order, *self.box_rows, *self.cone_axis, *self.cone_cos]
+        """Bytes of the tree's own arrays, those made on first use included once made."""
+        arrays = [self.order, *self.box_rows, *self.__dict__.get("box_lo", ()), *self.__dict__.get("box_hi", ())]
+        if "_cones" in self.__dict__:
+            arrays += [*self._cones[0], *self._cones[1]]
         return int(sum(a.nbytes for a in arrays))
 
     @functools.cached_property
@@ -103,50 +110,83 @@ class BVH:
         """Per level, the boxes' high corners (2**k, 3); -inf for an empty node."""
         return tuple(np.where(np.isnan(rows[3:].T), -np.inf, rows[3:].T) for rows in self.box_rows)
 
+    @property
+    def cone_axis(self) -> tuple:
+        return self._cones[0]
+
+    @property
+    def cone_cos(self) -> tuple:
+        return self._cones[1]
+
+    @functools.cached_property
+    def _cones(self) -> tuple:
+        return _cones(self.order, self.leaf_size, self.triangles, self.normals)
+
+
+def _blocks(n_slots: int, leaf_size: int) -> tuple[int, int, int]:
+    """(leaves per block, slots per block, ``deep``): the build's blocks of slots, whole
+    nodes of every level from ``deep`` down (the nodes above span several blocks)."""
+    n_leaves = n_slots // leaf_size
+    block_leaves = min(n_leaves, 1 << max(0, int(np.log2(max(1, BLOCK // leaf_size)))))
+    depth = int(np.log2(n_leaves))
+    return block_leaves, block_leaves * leaf_size, depth - int(np.log2(block_leaves))
+
 
 def build_bvh(vertices: np.ndarray, triangles: np.ndarray, normals: np.ndarray | None = None,
               leaf_size: int = 4) -> BVH:
     """Build the BVH of a triangle mesh; ``normals`` (N, 3) unit vertex normals for the cones.
 
     Streamed over blocks of slots (:data:`BLOCK`): no (M, 3, 3) array of every
-    triangle's corners or corner normals is made (a million-triangle mirror's cost
-    300 MB at once). The boxes above the leaves are the smaller of their children's
-    bounds (exact); each cone sums its node's normals in slot order, as one sum over
-    the node would, so the tree is the same as one built all at once."""
+    triangle's corners is made (a million-triangle mirror's cost 300 MB at once with
+    the corner normals). The boxes above the leaves are the smaller of their
+    children's bounds (exact), so the tree is the same as one built all at once."""
     n_triangles = len(triangles)
     n_leaves = 1 << max(0, int(np.ceil(np.log2(max(1, -(-n_triangles // leaf_size))))))
     n_slots = n_leaves * leaf_size
     depth = int(np.log2(n_leaves))
-
     order = np.full(n_slots, -1, dtype=np.int64)
     order[:n_triangles] = np.argsort(_morton_codes(
         lambda start: vertices[triangles[start:start + BLOCK]].mean(axis=1), n_triangles), kind="stable")
-
-    # Blocks of whole nodes from level ``deep`` down; the nodes above span several blocks.
-    block_leaves = min(n_leaves, 1 << max(0, int(np.log2(max(1, BLOCK // leaf_size)))))
-    block_slots = block_leaves * leaf_size
-    deep = depth - int(np.log2(block_leaves))
+    _, block_slots, _ = _blocks(n_slots, leaf_size)
     leaf_lo, leaf_hi = np.empty((n_leaves, 3)), np.empty((n_leaves, 3))
+    for start in range(0, n_slots, block_slots):
+        slots = order[start:start + block_slots]
+        filled = slots >= 0
+        corners = vertices[triangles[np.where(filled, slots, 0)]]
+        leaves = slice(start // leaf_size, (start + block_slots) // leaf_size)
+        leaf_lo[leaves] = np.where(filled[:, None], corners.min(axis=1), np.inf).reshape(-1, leaf_size, 3).min(axis=1)
+        leaf_hi[leaves] = np.where(filled[:, None], corners.max(axis=1), -np.inf).reshape(-1, leaf_size, 3).max(axis=1)
+    box_rows = [None] * (depth + 1)
+    lo, hi = leaf_lo, leaf_hi
+    for level in range(depth, -1, -1):
+        if level < depth:
+            lo = np.minimum(lo[0::2], lo[1::2])
+            hi = np.maximum(hi[0::2], hi[1::2])
+        box_rows[level] = np.where((lo <= hi).all(axis=1), np.concatenate([lo, hi], axis=1).T, np.nan).copy()
+    return BVH(order, leaf_size, tuple(box_rows), triangles, normals)
+
+
+def _cones(order: np.ndarray, leaf_size: int, triangles: np.ndarray, normals: np.ndarray | None) -> tuple:
+    """(cone_axis, cone_cos) per level (:class:`BVH`), streamed over blocks of slots:
+    each cone sums its node's corner normals in slot order, as one sum over the node
+    would (a node spanning several blocks carries its sum from block to block), then
+    takes the smallest cosine to that axis."""
+    n_slots = len(order)
+    depth = int(np.log2(n_slots // leaf_size))
+    block_leaves, block_slots, deep = _blocks(n_slots, leaf_size)
     cone_axis = [np.empty((1 << level, 3)) for level in range(depth + 1)]
     cone_cos = [np.empty(1 << level) for level in range(depth + 1)]
     top_sum = [np.zeros((1 << level, 3)) for level in range(deep)]
     top_min = [np.full(1 << level, np.inf) for level in range(deep)]
 
     def block(start: int):
-        """(corner normals (slots, 3, 3), filled (slots,)) of the slots from ``start``;
-        the leaves' boxes written as it goes."""
+        """(corner normals (slots, 3, 3), filled (slots,)) of the slots from ``start``."""
         slots = order[start:start + block_slots]
         filled = slots >= 0
-        tris = triangles[np.where(filled, slots, 0)]
-        corners = vertices[tris]
-        leaves = slice(start // leaf_size, (start + block_slots) // leaf_size)
-        leaf_lo[leaves] = np.where(filled[:, None], corners.min(axis=1), np.inf).reshape(-1, leaf_size, 3).min(axis=1)
-        leaf_hi[leaves] = np.where(filled[:, None], corners.max(axis=1), -np.inf).reshape(-1, leaf_size, 3).max(axis=1)
         if normals is None:
-            slot_normals = np.zeros((len(slots), 3, 3))
-        else:
-            slot_normals = normals[tris]
-            slot_normals[~filled] = 0.0
+            return np.zeros((len(slots), 3, 3)), filled
+        slot_normals = normals[triangles[np.where(filled, slots, 0)]]
+        slot_normals[~filled] = 0.0
         return slot_normals, filled
 
     for start in range(0, n_slots, block_slots):
@@ -177,15 +217,7 @@ def build_bvh(vertices: np.ndarray, triangles: np.ndarray, normals: np.ndarray |
             length = np.linalg.norm(top_sum[level], axis=1)
             cos = top_min[level]
             cone_cos[level][:] = np.where((length < 1e-9) | ~np.isfinite(cos), -1.0, np.clip(cos, -1.0, 1.0))
-
-    box_rows = [None] * (depth + 1)
-    lo, hi = leaf_lo, leaf_hi
-    for level in range(depth, -1, -1):
-        if level < depth:
-            lo = np.minimum(lo[0::2], lo[1::2])
-            hi = np.maximum(hi[0::2], hi[1::2])
-        box_rows[level] = np.where((lo <= hi).all(axis=1), np.concatenate([lo, hi], axis=1).T, np.nan).copy()
-    return BVH(order, leaf_size, tuple(box_rows), tuple(cone_axis), tuple(cone_cos))
+    return tuple(cone_axis), tuple(cone_cos)
 
 
 def _normal_cones(node_normals: np.ndarray, node_filled: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
