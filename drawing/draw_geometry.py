@@ -81,6 +81,22 @@ def _mesh_attributes(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.asarray(normals, np.float64), np.asarray(uvs, np.float64), lit
 
 
+def _prepass_parts(meshes, attributes, image_of_mesh, reflectors, colors, mirror, f0, fade, sense):
+    """The pre-pass's parts, each (vertices, triangles, colour, label, (normal, lit) and
+    UVs as functions that make them, image index): every diffuse mesh, then every
+    reflector. A mirror's normals and UVs are made as float32 when its part is packed,
+    not as float64 copies of every mirror at once (with the (T, 3) int64 triangles
+    shifted and every vertex joined for a box: 135 MB at once for a million-triangle
+    mirror)."""
+    for mesh, (normal, uv, lit), image in zip(meshes, attributes, image_of_mesh):
+        yield (mesh.vertices, mesh.triangles, mesh.colors, (0.0, 1.0, -1.0, 0.0),
+               lambda normal=normal, lit=lit: np.c_[normal, lit], lambda uv=uv: uv, image)
+    for k, r in enumerate(reflectors):
+        yield (r.vertices, r.triangles, colors[k], (k + 1.0, mirror[k], f0[k], fade[k]),
+               lambda r=r, k=k: np.c_[r.normals.astype(np.float32), np.full(len(r.vertices), sense[k], np.float32)],
+               lambda r=r: np.zeros((len(r.vertices), 2), np.float32), -1)
+
+
 def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=None,
                      edge_fraction: float = subdivision.EDGE_FRACTION, fresnel_f0=None,
                      attenuation_distance=None, sealed=None) -> DrawGeometry:
@@ -121,26 +137,31 @@ def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=Non
             images.append(np.ascontiguousarray(image, dtype=np.float32))
     attributes = [_mesh_attributes(m) for m in meshes]
 
-    parts = [(m.vertices, m.triangles, m.colors, (0.0, 1.0, -1.0, 0.0), np.c_[n, lit], uv, image)
-             for m, (n, uv, lit), image in zip(meshes, attributes, image_of_mesh)]
-    parts += [(r.vertices, r.triangles, colors[k], (k + 1.0, mirror[k], f0[k], fade[k]), np.c_[r.normals, np.full(
-        len(r.vertices), sense[k])], np.zeros((len(r.vertices), 2)), -1) for k, r in enumerate(reflectors)]
-    everything = np.concatenate([p[0] for p in parts]) if parts else np.zeros((1, 3))
-    lo, hi = everything.min(axis=0), everything.max(axis=0)
+    parts = list(_prepass_parts(meshes, attributes, image_of_mesh, reflectors, colors, mirror, f0, fade, sense))
+    if parts:
+        lo = np.min([p[0].min(axis=0) for p in parts], axis=0)
+        hi = np.max([p[0].max(axis=0) for p in parts], axis=0)
+    else:
+        lo = hi = np.zeros(3)
     shift = 0.5 * (lo + hi)
-    positions, vertex_colors, labels, normals, uvs, triangles, tri_image, offset = [], [], [], [], [], [], [], 0
+    positions, vertex_colors, labels, normals, uvs, tri_image, offset = [], [], [], [], [], [], 0
+    all_triangles = np.empty((sum(len(p[1]) for p in parts), 3), np.int32)
+    first = 0
     for vertices, tris, color, label, normal, uv, image in parts:
         positions.append((vertices - shift).astype(np.float32))
         vertex_colors.append(np.broadcast_to(np.asarray(color, np.float32), (len(vertices), 4)))
         labels.append(np.broadcast_to(np.asarray(label, np.float32), (len(vertices), 4)))
-        normals.append(np.asarray(normal, np.float32))
-        uvs.append(np.asarray(uv, np.float32))
-        triangles.append(np.asarray(tris, dtype=np.int64) + offset)
-        tri_image.append(np.full(len(tris), image))
+        normals.append(np.asarray(normal(), np.float32))  # made here: one mirror's at a time
+        uvs.append(np.asarray(uv(), np.float32))
+        block = all_triangles[first:first + len(tris)]
+        block[:] = tris
+        block += offset
+        first += len(tris)
+        tri_image.append(np.full(len(tris), image, np.int32))
         offset += len(vertices)
     prepass_triangles, prepass_ranges = _sorted_by_image(
-        (np.concatenate(triangles) if triangles else np.zeros((0, 3))).astype(np.int32),
-        np.concatenate(tri_image) if tri_image else np.zeros(0, int))
+        all_triangles, np.concatenate(tri_image) if tri_image else np.zeros(0, np.int32))
+    del all_triangles, tri_image
 
     centres, radii = subdivision.reflector_spheres(reflectors)
     vertices, packed, mesh_triangles, mesh_image, mesh_winding, offset = [], [], [], [], [], 0

@@ -213,18 +213,29 @@ class ReflectionRenderer:
                 (image, gpu.types.GPUBatch(type='TRIS', buf=buffer, elem=gpu.types.GPUIndexBuf(
                     type='TRIS', seq=g.prepass_triangles[first:first + count])))
                 for image, first, count in g.prepass_ranges]
-            # The reflectors alone (label id > 0, no image): a viewport's pre-pass.
-            mirrors = g.prepass_triangles[g.prepass_labels[g.prepass_triangles[:, 0], 0] > 0.5]
-            batches["prepass_mirrors"] = [
-                (-1, gpu.types.GPUBatch(type='TRIS', buf=buffer, elem=gpu.types.GPUIndexBuf(type='TRIS', seq=mirrors)))
-            ] if len(mirrors) else []
-            corners = g.prepass_positions[mirrors.reshape(-1)] if len(mirrors) else np.zeros((0, 3))
-            batches["mirror_box"] = box_corners(corners)
+            # The reflectors alone (label id > 0, no image): a viewport's pre-pass, its
+            # index buffer made on first use (:meth:`_mirror_batches`; Render Image never
+            # draws it: a million-triangle mirror's second copy of its triangles).
+            batches["prepass_buffer"] = buffer
+            # Their box: of the vertices their triangles use (not a (3T, 3) gather of corners).
+            used = np.zeros(len(g.prepass_positions), dtype=bool)
+            used[g.prepass_triangles[g.prepass_labels[g.prepass_triangles[:, 0], 0] > 0.5].reshape(-1)] = True
+            batches["mirror_box"] = box_corners(g.prepass_positions[used])
         batches["images"] = [data_texture(image, image.shape[1]) for image in g.images]
         batches["no_image"] = data_texture(np.ones((1, 4)))
         square = np.array([[0, 0], [1, 0], [1, 1], [0, 0], [1, 1], [0, 1]], np.float32)
         batches["screen"] = gpu.types.GPUBatch(type='TRIS', buf=vertex_buffer({"position": (square, 'F32', 'FLOAT')}))
         return batches
+
+    def _mirror_batches(self) -> list:
+        """The pre-pass's reflectors alone, as (image, batch) pairs (made on first use)."""
+        batches, g = self._batches, self.geometry
+        if "prepass_mirrors" not in batches:
+            mirrors = g.prepass_triangles[g.prepass_labels[g.prepass_triangles[:, 0], 0] > 0.5]
+            batches["prepass_mirrors"] = [(-1, gpu.types.GPUBatch(
+                type='TRIS', buf=batches["prepass_buffer"], elem=gpu.types.GPUIndexBuf(type='TRIS', seq=mirrors)))
+            ] if len(mirrors) else []
+        return batches["prepass_mirrors"]
 
     def _image(self, index: int):
         return self._batches["images"][index] if index >= 0 else self._batches["no_image"]
@@ -349,7 +360,7 @@ class ReflectionRenderer:
                     shader.bind()
                     shader.uniform_float("view_projection", frame.world_to_clip)
                     shader.uniform_float("camera", camera_position(view, g.shift))
-                    for image, batch in batches["prepass_mirrors" if mirrors_only else "prepass"]:
+                    for image, batch in self._mirror_batches() if mirrors_only else batches["prepass"]:
                         shader.uniform_int("use_image", int(image >= 0))
                         shader.uniform_sampler("image", self._image(image))
                         batch.draw(shader)

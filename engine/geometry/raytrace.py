@@ -378,8 +378,11 @@ class ReflectorSet:
         entries, where the rings themselves held 13 T and cost seconds to pair up."""
         corner_vertex = self.welded_triangles.reshape(-1)
         order = np.argsort(corner_vertex, kind="stable")
-        start = np.searchsorted(corner_vertex[order], np.arange(len(self.vertices) + 1))
-        return start, order // 3
+        start = np.zeros(len(self.vertices) + 1, dtype=np.int64)
+        np.cumsum(np.bincount(corner_vertex, minlength=len(self.vertices)), out=start[1:])
+        order //= 3
+        # Triangle indices in 32 bits: a million-triangle mirror's fans hold 12 MB, not 24.
+        return start, order.astype(np.int32) if len(self.triangles) < 2 ** 31 else order
 
     def ring(self, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(owner, member): for each of ``triangles`` (K,), every triangle sharing a
