@@ -184,14 +184,18 @@ def is_convex(vertices: np.ndarray, triangles: np.ndarray, centre, tolerance: fl
         a, b = welded[:, k], welded[:, (k + 1) % 3]
         np.multiply(np.minimum(a, b), n, out=keys[:, k])
         keys[:, k] += np.maximum(a, b)
-    order = np.argsort(keys.reshape(-1), kind="stable")  # the two sides of each edge, side by side
-    ordered = keys.reshape(-1)[order]
-    del keys
-    # Every edge of two faces: keys come in equal pairs, each pair unlike the next.
-    if len(ordered) % 2 or not (np.array_equal(ordered[0::2], ordered[1::2])
-                                and np.all(ordered[1:-1:2] != ordered[2::2])):
+    keys = keys.reshape(-1)
+    order = np.argsort(keys, kind="stable")  # the two sides of each edge, side by side
+    if len(order) % 2:
         return False
-    del ordered
+    # Every edge of two faces: keys come in equal pairs, each pair unlike the next
+    # (looked at a block of pairs at a time, each with the next pair's first key).
+    for block in range(0, len(order), 2 * CONVEXITY_BLOCK):
+        ordered = keys[order[block:block + 2 * CONVEXITY_BLOCK + 1]]
+        if not (np.array_equal(ordered[0:-1:2] if len(ordered) % 2 else ordered[0::2], ordered[1::2])
+                and np.all(ordered[1:-1:2] != ordered[2::2])):
+            return False
+    del keys, ordered
     order = order.reshape(-1, 2)
     scale = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
     total = np.zeros(int(welded.max()) + 1)

@@ -27,9 +27,11 @@ from ..errors import SceneInputError
 from ..scene import Reflector, smooth_pieces
 from .segments import expand_ranges
 from .triangle_grid import TriangleGrid, edge_neighbours
-from .vectors import cross, cross_rows, dot_rows
+from .vectors import cross_rows, dot_rows
 
 RAY_CHUNK = 1 << 16
+#: (ray, triangle) candidate pairs tested at a time.
+PAIR_CHUNK = 1 << 17
 #: Triangles whose corners the constructor holds at a time.
 BUILD_BLOCK = 1 << 16
 #: Relative (to the scene size) distance below which a hit is taken as the ray's own origin.
@@ -92,6 +94,33 @@ def _joined(arrays: list, dtype) -> np.ndarray:
     return np.asarray(arrays[0], dtype=dtype) if len(arrays) == 1 else np.concatenate(arrays).astype(dtype, copy=False)
 
 
+class FaceNormals:
+    """The unit geometric normals (e1 x e2, normalised) of a :class:`ReflectorSet`'s
+    triangles, (T, 3) as indexed (``face_normals[triangles]``) or as an array
+    (``np.asarray``), made from its corner rows when asked for: every use takes those
+    of the triangles some rays hit, and a million-triangle mirror's held 25 MB. The
+    same arithmetic as a whole (T, 3) array's, so the same values."""
+
+    def __init__(self, corner_rows: np.ndarray):
+        self._rows = corner_rows
+
+    def __len__(self) -> int:
+        return self._rows.shape[1]
+
+    @property
+    def shape(self) -> tuple:
+        return (len(self), 3)
+
+    def __getitem__(self, index) -> np.ndarray:
+        rows = self._rows[3:9, index]
+        face = np.stack(cross_rows(rows[0:3], rows[3:6]), axis=-1)
+        return face / np.maximum(np.linalg.norm(face, axis=-1), 1e-300)[..., None]
+
+    def __array__(self, dtype=None, copy=None) -> np.ndarray:
+        normals = self[:]
+        return normals if dtype is None else normals.astype(dtype)
+
+
 class ReflectorSet:
     """All reflectors of a scene, concatenated, with one BVH for tracing and solving."""
 
@@ -119,18 +148,15 @@ class ReflectorSet:
         # 300 MB at once.
         n_triangles = len(self.triangles)
         self.corner_rows = np.empty((9, n_triangles))
-        self.face_normals = np.empty((n_triangles, 3))
         for start in range(0, n_triangles, BUILD_BLOCK):
             corners = self.vertices[self.triangles[start:start + BUILD_BLOCK]]
             rows = self.corner_rows[:, start:start + BUILD_BLOCK]
             rows[0:3] = corners[:, 0].T
             rows[3:6] = (corners[:, 1] - corners[:, 0]).T
             rows[6:9] = (corners[:, 2] - corners[:, 0]).T
-            face = cross(rows[3:6].T, rows[6:9].T)
-            self.face_normals[start:start + BUILD_BLOCK] = face / np.maximum(np.linalg.norm(face, axis=1),
-                                                                            1e-300)[:, None]
-        del corners, rows, face
+        del corners, rows
         self.v0, self.e1, self.e2 = (self.corner_rows[k:k + 3].T for k in (0, 3, 6))
+        self.face_normals = FaceNormals(self.corner_rows)
         lo, hi = self.vertices.min(axis=0), self.vertices.max(axis=0)
         self.scale = float(max(np.linalg.norm(hi - lo), 1e-12))
         self.bvh = build_bvh(self.vertices, self.triangles, self.normals, leaf_size=leaf_size)
@@ -202,8 +228,7 @@ class ReflectorSet:
 
     @property
     def nbytes(self) -> int:
-        arrays = (self.vertices, self.normals, self.triangles, self.owner, self.corner_rows, self.face_normals,
-                  self.piece) + (() if self.welded_triangles is self.triangles else (self.welded_triangles,))
+        arrays = (self.vertices, self.normals, self.triangles, self.owner, self.corner_rows, self.piece) + (() if self.welded_triangles is self.triangles else (self.welded_triangles,))
         return int(sum(a.nbytes for a in arrays)) + self.bvh.nbytes
 
     def surface(self, triangles: np.ndarray, barycentric: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -377,12 +402,22 @@ class ReflectorSet:
         A triangle's ring (those sharing a vertex with it) is its corners' fans: 3 T
         entries, where the rings themselves held 13 T and cost seconds to pair up."""
         corner_vertex = self.welded_triangles.reshape(-1)
-        order = np.argsort(corner_vertex, kind="stable")
         start = np.zeros(len(self.vertices) + 1, dtype=np.int64)
         np.cumsum(np.bincount(corner_vertex, minlength=len(self.vertices)), out=start[1:])
-        order //= 3
-        # Triangle indices in 32 bits: a million-triangle mirror's fans hold 12 MB, not 24.
-        return start, order.astype(np.int32) if len(self.triangles) < 2 ** 31 else order
+        if len(corner_vertex) >= 2 ** 32:
+            return start, np.argsort(corner_vertex, kind="stable") // 3
+        # The corners by vertex, then by index (a stable sort by vertex) as one sort, in
+        # place, of (vertex, corner) keys; the triangles in 32 bits: the fans of a
+        # million-triangle mirror hold 12 MB, not 24, and their making 36 MB, not 48.
+        keys = corner_vertex.astype(np.uint64)
+        keys <<= np.uint64(32)
+        for first in range(0, len(keys), BUILD_BLOCK):
+            keys[first:first + BUILD_BLOCK] |= np.arange(first, min(first + BUILD_BLOCK, len(keys)), dtype=np.uint64)
+        keys.sort()
+        fan = np.empty(len(keys), dtype=np.int32)
+        for first in range(0, len(keys), BUILD_BLOCK):
+            fan[first:first + BUILD_BLOCK] = (keys[first:first + BUILD_BLOCK] & np.uint64(0xFFFFFFFF)) // np.uint64(3)
+        return start, fan
 
     def ring(self, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(owner, member): for each of ``triangles`` (K,), every triangle sharing a
@@ -407,13 +442,20 @@ class ReflectorSet:
     def _chunk_hits(self, origins, directions, t_max, sources):
         t_min = np.full(len(origins), SELF_HIT_EPSILON * self.scale)
         test = ray_box_test(self.bvh, origins, directions, t_min, t_max)
-        rays, triangles = descend(self.bvh, np.arange(len(origins)), test)
-        t, u, v, _ = self.hit_triangles(origins[rays], directions[rays], triangles)
-        with np.errstate(invalid="ignore"):
-            keep = (t > t_min[rays]) & (t <= t_max[rays])
-        # Rays from a reflector skip the triangle they start from and its one-ring.
-        keep[keep] &= self._off_source(sources[rays[keep]], triangles[keep])
-        return _nearest_per_ray(rays[keep], triangles[keep], t[keep], u[keep], v[keep])
+        candidates = descend(self.bvh, np.arange(len(origins)), test)
+        hits = []
+        # The candidate pairs a block at a time: their corners and the test's temporaries
+        # are ~150 bytes a pair (rays through a million-triangle mirror's far side: a
+        # million pairs for a chunk); the hits they keep are few.
+        for start in range(0, max(1, len(candidates[0])), PAIR_CHUNK):
+            rays, triangles = (c[start:start + PAIR_CHUNK] for c in candidates)
+            t, u, v, _ = self.hit_triangles(origins[rays], directions[rays], triangles)
+            with np.errstate(invalid="ignore"):
+                keep = (t > t_min[rays]) & (t <= t_max[rays])
+            # Rays from a reflector skip the triangle they start from and its one-ring.
+            keep[keep] &= self._off_source(sources[rays[keep]], triangles[keep])
+            hits.append((rays[keep], triangles[keep], t[keep], u[keep], v[keep]))
+        return _nearest_per_ray(*(hits[0] if len(hits) == 1 else map(np.concatenate, zip(*hits))))
 
     def hit_triangles(self, origins, directions, triangles):
         """Batched Moller-Trumbore of ray i against triangle i.
