@@ -36,11 +36,9 @@ class DrawGeometry:
     """
 
     shift: np.ndarray  # (3,) float64
-    prepass_positions: np.ndarray  # (P, 3) float32, relative to shift
-    prepass_colors: np.ndarray  # (P, 4) float32 linear RGBA
-    prepass_labels: np.ndarray  # (P, 4) float32 (id, reflectivity, Fresnel F0 or -1, attenuation distance)
-    prepass_normals: np.ndarray  # (P, 4) float32 (normal, lit) of diffuse meshes, (normal, sealed) of reflectors
-    prepass_uvs: np.ndarray  # (P, 2) float32
+    #: The pre-pass's parts (:class:`PrepassPart`), diffuse meshes first: its vertex
+    #: arrays (``prepass_positions`` ...) are made from them when asked for.
+    prepass_parts: tuple
     prepass_triangles: np.ndarray  # (Tp, 3) int32
     vertices: np.ndarray  # (V, 3) float64, reflected meshes
     vertex_mesh: np.ndarray  # (V,) int32: the index of each vertex's diffuse mesh in mesh_names
@@ -57,6 +55,85 @@ class DrawGeometry:
     ranges: tuple = ()
     range_windings: tuple = ()
     stats: dict = field(default_factory=dict)
+
+    @property
+    def prepass_positions(self) -> np.ndarray:
+        """(P, 3) float32, relative to ``shift``."""
+        return self._prepass("positions")
+
+    @property
+    def prepass_colors(self) -> np.ndarray:
+        """(P, 4) float32 linear RGBA."""
+        return self._prepass("colors")
+
+    @property
+    def prepass_labels(self) -> np.ndarray:
+        """(P, 4) float32 (id, reflectivity, Fresnel F0 or -1, attenuation distance)."""
+        return self._prepass("labels")
+
+    @property
+    def prepass_normals(self) -> np.ndarray:
+        """(P, 4) float32 (normal, lit) of diffuse meshes, (normal, sealed) of reflectors."""
+        return self._prepass("normals")
+
+    @property
+    def prepass_uvs(self) -> np.ndarray:
+        """(P, 2) float32."""
+        return self._prepass("uvs")
+
+    @property
+    def prepass_mirror_vertices(self) -> int:
+        """The first pre-pass vertex of a reflector (every one after it is one's)."""
+        return sum(part.size for part in self.prepass_parts if part.label[0] < 0.5)
+
+    def prepass_arrays(self) -> dict:
+        """{positions, colors, labels, normals, uvs}: the pre-pass's vertex arrays, made
+        now, not kept: the GPU holds them once uploaded, and for a million-triangle
+        mirror they are 46 MB (constant colours and labels, zero UVs, per vertex)."""
+        return {name: self._prepass(name) for name in ("positions", "colors", "labels", "normals", "uvs")}
+
+    def _prepass(self, name: str) -> np.ndarray:
+        width = {"positions": 3, "colors": 4, "labels": 4, "normals": 4, "uvs": 2}[name]
+        out = np.empty((sum(part.size for part in self.prepass_parts), width), np.float32)
+        first = 0
+        for part in self.prepass_parts:
+            out[first:first + part.size] = part.array(name, self.shift)
+            first += part.size
+        return out
+
+
+@dataclass(frozen=True)
+class PrepassPart:
+    """One diffuse mesh or reflector in the pre-pass: its world ``vertices`` (the
+    capture's, not a copy), its ``color`` (per vertex, or one RGBA), its ``label``,
+    its per-vertex (normal, lit) and UVs as float32 arrays, or None for a reflector:
+    its unit ``mirror_normals`` with ``mirror_sealed`` (``ReflectorSet.sealed``'s
+    sign) as the fourth component, and UVs 0."""
+
+    vertices: np.ndarray
+    color: np.ndarray
+    label: tuple
+    normal_lit: np.ndarray | None = None
+    uvs: np.ndarray | None = None
+    mirror_normals: np.ndarray | None = None
+    mirror_sealed: float = 0.0
+
+    @property
+    def size(self) -> int:
+        return len(self.vertices)
+
+    def array(self, name: str, shift: np.ndarray) -> np.ndarray:
+        """This part's rows of the pre-pass array ``name`` (float32, or broadcast to it)."""
+        if name == "positions":
+            return (self.vertices - shift).astype(np.float32)
+        if name in ("colors", "labels"):
+            value = self.color if name == "colors" else self.label
+            return np.broadcast_to(np.asarray(value, np.float32), (self.size, 4))
+        if name == "normals":
+            if self.normal_lit is not None:
+                return self.normal_lit
+            return np.c_[self.mirror_normals.astype(np.float32), np.full(self.size, self.mirror_sealed, np.float32)]
+        return self.uvs if self.uvs is not None else np.zeros((self.size, 2), np.float32)
 
 
 def _sorted_by_image(triangles: np.ndarray, image: np.ndarray) -> tuple[np.ndarray, tuple]:
@@ -81,20 +158,21 @@ def _mesh_attributes(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.asarray(normals, np.float64), np.asarray(uvs, np.float64), lit
 
 
-def _prepass_parts(meshes, attributes, image_of_mesh, reflectors, colors, mirror, f0, fade, sense):
-    """The pre-pass's parts, each (vertices, triangles, colour, label, (normal, lit) and
-    UVs as functions that make them, image index): every diffuse mesh, then every
-    reflector. A mirror's normals and UVs are made as float32 when its part is packed,
-    not as float64 copies of every mirror at once (with the (T, 3) int64 triangles
-    shifted and every vertex joined for a box: 135 MB at once for a million-triangle
-    mirror)."""
-    for mesh, (normal, uv, lit), image in zip(meshes, attributes, image_of_mesh):
-        yield (mesh.vertices, mesh.triangles, mesh.colors, (0.0, 1.0, -1.0, 0.0),
-               lambda normal=normal, lit=lit: np.c_[normal, lit], lambda uv=uv: uv, image)
-    for k, r in enumerate(reflectors):
-        yield (r.vertices, r.triangles, colors[k], (k + 1.0, mirror[k], f0[k], fade[k]),
-               lambda r=r, k=k: np.c_[r.normals.astype(np.float32), np.full(len(r.vertices), sense[k], np.float32)],
-               lambda r=r: np.zeros((len(r.vertices), 2), np.float32), -1)
+def _prepass_parts(meshes, attributes, image_of_mesh, reflectors, colors, mirror, f0, fade, sense) -> list:
+    """(:class:`PrepassPart`, triangles, image index) of every diffuse mesh, then every
+    reflector. A mirror's part holds references to its arrays: its float32 normals and
+    zero UVs are made when the pre-pass arrays are (once, to upload them), not kept
+    (with its constant colour and label per vertex: 46 MB for a million-triangle
+    mirror, and float64 copies of them, its shifted int64 triangles and a join of every
+    vertex for the box: 135 MB at once)."""
+    parts = [(PrepassPart(mesh.vertices, np.asarray(mesh.colors, np.float32), (0.0, 1.0, -1.0, 0.0),
+                          normal_lit=np.asarray(np.c_[normal, lit], np.float32), uvs=np.asarray(uv, np.float32)),
+              mesh.triangles, image)
+             for mesh, (normal, uv, lit), image in zip(meshes, attributes, image_of_mesh)]
+    parts += [(PrepassPart(r.vertices, colors[k], (k + 1.0, float(mirror[k]), float(f0[k]), float(fade[k])),
+                           mirror_normals=r.normals, mirror_sealed=float(sense[k])), r.triangles, -1)
+              for k, r in enumerate(reflectors)]
+    return parts
 
 
 def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=None,
@@ -137,28 +215,23 @@ def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=Non
             images.append(np.ascontiguousarray(image, dtype=np.float32))
     attributes = [_mesh_attributes(m) for m in meshes]
 
-    parts = list(_prepass_parts(meshes, attributes, image_of_mesh, reflectors, colors, mirror, f0, fade, sense))
+    parts = _prepass_parts(meshes, attributes, image_of_mesh, reflectors, colors, mirror, f0, fade, sense)
     if parts:
-        lo = np.min([p[0].min(axis=0) for p in parts], axis=0)
-        hi = np.max([p[0].max(axis=0) for p in parts], axis=0)
+        lo = np.min([part.vertices.min(axis=0) for part, _, _ in parts], axis=0)
+        hi = np.max([part.vertices.max(axis=0) for part, _, _ in parts], axis=0)
     else:
         lo = hi = np.zeros(3)
     shift = 0.5 * (lo + hi)
-    positions, vertex_colors, labels, normals, uvs, tri_image, offset = [], [], [], [], [], [], 0
-    all_triangles = np.empty((sum(len(p[1]) for p in parts), 3), np.int32)
-    first = 0
-    for vertices, tris, color, label, normal, uv, image in parts:
-        positions.append((vertices - shift).astype(np.float32))
-        vertex_colors.append(np.broadcast_to(np.asarray(color, np.float32), (len(vertices), 4)))
-        labels.append(np.broadcast_to(np.asarray(label, np.float32), (len(vertices), 4)))
-        normals.append(np.asarray(normal(), np.float32))  # made here: one mirror's at a time
-        uvs.append(np.asarray(uv(), np.float32))
+    # Every part's triangles written once into one int32 array, shifted to its vertices.
+    all_triangles = np.empty((sum(len(tris) for _, tris, _ in parts), 3), np.int32)
+    tri_image, first, offset = [], 0, 0
+    for part, tris, image in parts:
         block = all_triangles[first:first + len(tris)]
         block[:] = tris
         block += offset
         first += len(tris)
         tri_image.append(np.full(len(tris), image, np.int32))
-        offset += len(vertices)
+        offset += part.size
     prepass_triangles, prepass_ranges = _sorted_by_image(
         all_triangles, np.concatenate(tri_image) if tri_image else np.zeros(0, np.int32))
     del all_triangles, tri_image
@@ -201,11 +274,7 @@ def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=Non
     ranges = tuple((key // 3 - 1, first, count) for key, first, count in keyed)
     geometry = DrawGeometry(
         shift=shift,
-        prepass_positions=np.concatenate(positions) if positions else np.zeros((0, 3), np.float32),
-        prepass_colors=np.concatenate(vertex_colors) if vertex_colors else np.zeros((0, 4), np.float32),
-        prepass_labels=np.concatenate(labels) if labels else np.zeros((0, 4), np.float32),
-        prepass_normals=np.concatenate(normals) if normals else np.zeros((0, 4), np.float32),
-        prepass_uvs=np.concatenate(uvs) if uvs else np.zeros((0, 2), np.float32),
+        prepass_parts=tuple(part for part, _, _ in parts),
         prepass_triangles=prepass_triangles,
         vertices=vertices,
         vertex_mesh=owners,

@@ -204,11 +204,15 @@ class ReflectionRenderer:
         g = self.geometry
         batches = {}
         if len(g.prepass_triangles):
-            buffer = vertex_buffer({"position": (g.prepass_positions, 'F32', 'FLOAT'),
-                                     "color": (g.prepass_colors, 'F32', 'FLOAT'),
-                                     "label": (g.prepass_labels, 'F32', 'FLOAT'),
-                                     "normal_lit": (g.prepass_normals, 'F32', 'FLOAT'),
-                                     "uv": (g.prepass_uvs, 'F32', 'FLOAT')})
+            # Made for the upload and let go: the GPU keeps the vertex buffer's copy.
+            arrays = g.prepass_arrays()
+            positions = arrays["positions"]
+            buffer = vertex_buffer({"position": (positions, 'F32', 'FLOAT'),
+                                     "color": (arrays.pop("colors"), 'F32', 'FLOAT'),
+                                     "label": (arrays.pop("labels"), 'F32', 'FLOAT'),
+                                     "normal_lit": (arrays.pop("normals"), 'F32', 'FLOAT'),
+                                     "uv": (arrays.pop("uvs"), 'F32', 'FLOAT')})
+            del arrays
             batches["prepass"] = [
                 (image, gpu.types.GPUBatch(type='TRIS', buf=buffer, elem=gpu.types.GPUIndexBuf(
                     type='TRIS', seq=g.prepass_triangles[first:first + count])))
@@ -218,9 +222,9 @@ class ReflectionRenderer:
             # draws it: a million-triangle mirror's second copy of its triangles).
             batches["prepass_buffer"] = buffer
             # Their box: of the vertices their triangles use (not a (3T, 3) gather of corners).
-            used = np.zeros(len(g.prepass_positions), dtype=bool)
-            used[g.prepass_triangles[g.prepass_labels[g.prepass_triangles[:, 0], 0] > 0.5].reshape(-1)] = True
-            batches["mirror_box"] = box_corners(g.prepass_positions[used])
+            used = np.zeros(len(positions), dtype=bool)
+            used[g.prepass_triangles[g.prepass_triangles[:, 0] >= g.prepass_mirror_vertices].reshape(-1)] = True
+            batches["mirror_box"] = box_corners(positions[used])
         batches["images"] = [data_texture(image, image.shape[1]) for image in g.images]
         batches["no_image"] = data_texture(np.ones((1, 4)))
         square = np.array([[0, 0], [1, 0], [1, 1], [0, 0], [1, 1], [0, 1]], np.float32)
@@ -231,7 +235,7 @@ class ReflectionRenderer:
         """The pre-pass's reflectors alone, as (image, batch) pairs (made on first use)."""
         batches, g = self._batches, self.geometry
         if "prepass_mirrors" not in batches:
-            mirrors = g.prepass_triangles[g.prepass_labels[g.prepass_triangles[:, 0], 0] > 0.5]
+            mirrors = g.prepass_triangles[g.prepass_triangles[:, 0] >= g.prepass_mirror_vertices]
             batches["prepass_mirrors"] = [(-1, gpu.types.GPUBatch(
                 type='TRIS', buf=batches["prepass_buffer"], elem=gpu.types.GPUIndexBuf(type='TRIS', seq=mirrors)))
             ] if len(mirrors) else []
