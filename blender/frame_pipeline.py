@@ -20,9 +20,6 @@ meshes alone as edits arrive. Every stage reads one :class:`FrameSettings`
 
 from __future__ import annotations
 
-import ctypes
-import ctypes.util
-import functools
 import hashlib
 import time
 from dataclasses import dataclass, field
@@ -31,6 +28,7 @@ import numpy as np
 
 from ..engine.frame_settings import FrameSettings
 from ..engine.geometry.raytrace import ReflectorSet
+from ..engine.heap import release_freed_memory
 from ..engine.methods.sbc.sbc_build import build_sample_based_camera, clip_start_inside
 from ..engine.scene import scene_bounds
 from ..engine.view import View
@@ -50,29 +48,6 @@ def settings_of(scene, *, live: bool = False, **overrides) -> FrameSettings:
               "polish_camera": not live}
     values.update({name: value for name, value in overrides.items() if value is not None})
     return FrameSettings(**values)
-
-
-@functools.cache
-def _malloc_trim():
-    """glibc's ``malloc_trim``, or None where the C library has none (macOS, Windows, musl)."""
-    try:
-        return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim
-    except (OSError, AttributeError, TypeError):
-        return None
-
-
-def release_freed_memory() -> bool:
-    """Hand the C heap's free pages back to the system (glibc's ``malloc_trim``; nothing
-    where there is none): a frame frees hundreds of megabytes of numpy arrays (a
-    million-triangle mirror's ray-tracing set and renderer arrays), which glibc keeps in
-    its heap between the blocks that live on, and the next frame's arrays then land
-    around them: bench_cliffs' subdivided ball peaked 30 MB higher in its second frame
-    than in its first. Returns whether it ran."""
-    trim = _malloc_trim()
-    if trim is None:
-        return False
-    trim(0)
-    return True
 
 
 def captured_key(captured) -> tuple:
@@ -188,6 +163,7 @@ class FramePipeline:
         else:
             self.reused += 1
         self.key = key
+        release_freed_memory()  # the capture's, the set's and the renderer's temporaries
 
     def camera_bounds(self) -> tuple:
         """The scene box grown by :data:`.render_inputs.BOUNDS_MARGIN` of its diagonal:

@@ -30,6 +30,7 @@ import numpy as np
 from bpy.props import BoolProperty, StringProperty
 
 from ..engine.errors import SceneInputError
+from ..engine.heap import release_freed_memory
 from ..engine.srgb import linear_to_srgb
 from ..engine.methods.sbc.sbc_build import check_view_outside_reflectors
 from ..engine.view import View
@@ -130,6 +131,7 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
             check_view_outside_reflectors(state.reflector_set, view)
         started = time.perf_counter()
         sbc = None if job is None else job.build()
+        release_freed_memory()  # the ray map's and the trees' temporaries
         build_seconds += time.perf_counter() - started
         image = state.renderer.render(view, sbc, state.world, trace_edges=trace_edges, trace_gaps=trace_gaps)
         if not (checking and state.check_methods(scene, view)):

@@ -94,6 +94,7 @@ import numpy as np
 from ..engine.geometry import band_trace, subdivision
 from ..engine.frame_settings import FrameSettings
 from ..engine.geometry.closed_surfaces import ConvexMirrors
+from ..engine.heap import release_freed_memory
 from . import draw_shaders
 from .draw_geometry import prepare_geometry
 from .frame_pass import Frame, PassInputs
@@ -229,6 +230,7 @@ class ReflectionRenderer:
         batches["no_image"] = data_texture(np.ones((1, 4)))
         square = np.array([[0, 0], [1, 0], [1, 1], [0, 0], [1, 1], [0, 1]], np.float32)
         batches["screen"] = gpu.types.GPUBatch(type='TRIS', buf=vertex_buffer({"position": (square, 'F32', 'FLOAT')}))
+        release_freed_memory()  # the pre-pass arrays, now on the GPU
         return batches
 
     def _mirror_batches(self) -> list:
