@@ -96,7 +96,8 @@ def winding(vertices: np.ndarray, triangles: np.ndarray, welded: np.ndarray | No
     # No directed edge twice, so every reverse found once means the same set of edges.
     for k in range(3):
         for start in range(0, len(corners), CONVEXITY_BLOCK):
-            backward = columns[(k + 1) % 3][start:start + CONVEXITY_BLOCK] * n + columns[k][start:start + CONVEXITY_BLOCK]
+            rows = slice(start, start + CONVEXITY_BLOCK)
+            backward = columns[(k + 1) % 3][rows] * n + columns[k][rows]
             found = np.minimum(np.searchsorted(forward, backward), len(forward) - 1)
             if not np.array_equal(forward[found], backward):
                 return 0

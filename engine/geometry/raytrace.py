@@ -228,7 +228,9 @@ class ReflectorSet:
 
     @property
     def nbytes(self) -> int:
-        arrays = (self.vertices, self.normals, self.triangles, self.owner, self.corner_rows, self.piece) + (() if self.welded_triangles is self.triangles else (self.welded_triangles,))
+        arrays = (self.vertices, self.normals, self.triangles, self.owner, self.corner_rows, self.piece)
+        if self.welded_triangles is not self.triangles:
+            arrays += (self.welded_triangles,)
         return int(sum(a.nbytes for a in arrays)) + self.bvh.nbytes
 
     def surface(self, triangles: np.ndarray, barycentric: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
