@@ -65,6 +65,7 @@ import bpy
 import numpy as np
 
 from ..engine.errors import SceneInputError
+from ..engine.heap import release_freed_memory
 from ..engine.methods.morphing.morphing import ViewOutsideGrid
 from ..engine.scene import scene_bounds
 from ..engine.view import View
@@ -277,6 +278,8 @@ def _collect(state: LiveScene) -> bool:
     while len(state.cameras) > MAX_VIEWS:
         oldest = min(state.cameras, key=lambda k: state.cameras[k].last_drawn)
         del state.cameras[oldest]
+    if finished:
+        release_freed_memory()  # the build's ray map and trees, freed on the worker
     return finished
 
 

@@ -28,6 +28,7 @@ from bpy.app.handlers import persistent
 
 from ..engine.baking import bake, bake_cache
 from ..engine.errors import SceneInputError
+from ..engine.heap import release_freed_memory
 from ..engine.methods.morphing.morph_grid import TETRAHEDRAL, MorphSettings
 from ..drawing.methods.morph_source import GPUFaceImages
 from ..drawing.methods.polish_gpu import GPUImagePolish
@@ -371,6 +372,7 @@ class CURVED_REFLECTIONS_OT_bake_morphing(bpy.types.Operator):
         except Exception as error:  # the bake thread's boundary: report, never leave "running" behind
             outcome.append(f"bake failed: {type(error).__name__}: {error}")
         finally:
+            release_freed_memory()  # the bake's node cameras, freed in this process's heap
             carried = _carry_after_bake(state)
             state.update(running=False, message="; ".join(outcome + ([carried] if carried else [])))
         return outcome
