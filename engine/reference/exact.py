@@ -256,7 +256,10 @@ class _ReflectionLaw:
         n = n_raw / n_length * self.orientation[k, None]
         to_point = self.points[k] - x
         point_distance = lengths(to_point)[:, None]
-        d_p = to_point / point_distance
+        # A point on the mirror (an object touching it at a vertex) has no direction from
+        # x: NaN, which no Newton step reduces, so the pair never converges.
+        with np.errstate(invalid="ignore", divide="ignore"):
+            d_p = to_point / point_distance
         d_e = self.view.directions_to_eye(x)
         s = d_e + d_p
         s_length = lengths(s)[:, None]
@@ -269,7 +272,8 @@ class _ReflectionLaw:
         eye_distance = lengths(self.view.eye - x)[:, None] if self.view.is_perspective else None
         jacobian = np.empty((len(k), 2, 2))
         for column, (dx, dn) in enumerate(((e1, dn1), (e2, dn2))):
-            ds = -_across(d_p, dx) / point_distance
+            with np.errstate(invalid="ignore", divide="ignore"):
+                ds = -_across(d_p, dx) / point_distance
             if eye_distance is not None:
                 ds -= _across(d_e, dx) / eye_distance
             dr = _across(h, ds) / s_length - _across(n, dn) / n_length * self.orientation[k, None]

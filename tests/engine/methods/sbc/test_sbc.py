@@ -519,7 +519,7 @@ def teapot_case():
     reflectors = [Reflector("Teapot", teapot.vertices, teapot.triangles, teapot.normals)]
     view = look_at_view([4.5, -3.0, 2.6], [0.3, 0, 0.8], width=320, height=240, fov_y_deg=35)
     bounds = (np.array([-3.0, -3.0, -0.5]), np.array([3.0, 3.0, 3.0]))
-    points = np.random.default_rng(7).uniform(bounds[0], bounds[1], (3000, 3))
+    points = np.random.default_rng(7).uniform(bounds[0], bounds[1], (1500, 3))
     exact = solve_reflections(ReflectorSet(reflectors), view, points)
     return reflectors, view, bounds, points, exact.select(exact.visible), build_sample_based_camera(
         reflectors, view, bounds, downsample=2)
