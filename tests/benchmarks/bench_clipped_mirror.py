@@ -30,11 +30,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_draw  # noqa: E402  (same folder: machine facts with the GPU, command line, report)
+import bench_real_mirrors  # noqa: E402  (same folder: the live view's overlay)
 import bench_sbc  # noqa: E402  (same folder: package import)
 
 DEFAULT_OUT = bench_sbc.REPO_ROOT / "docs" / "benchmarks" / "clipped_mirror.md"
 #: Issue 46's bar: each view's label disagreement with Cycles on the mirror's pixels.
 TARGET = 0.02
+#: The live view is drawn over white: a pixel it leaves undrawn labels as no colour of the palette.
+WHITE = (1.0, 1.0, 1.0, 1.0)
 #: Palette key of black: what a ray starting inside a closed, empty mirror shows.
 NO_LIGHT = "(no light)"
 #: (name, what it is, eye offset from the ball's centre in radii or None for the scene
@@ -87,29 +90,6 @@ def _place(scene, ball, offset, clip: float) -> None:
     bpy.context.view_layer.update()
 
 
-def _live(scene, view):
-    """(H, W, 4) display sRGB: the live view's draw of ``view`` over white (a pixel it
-    leaves undrawn labels as no colour of the palette)."""
-    import gpu
-
-    from curved_reflections.blender import live
-    from curved_reflections.engine.srgb import linear_to_srgb
-
-    offscreen = gpu.types.GPUOffScreen(view.width, view.height, format='RGBA32F')
-    try:
-        with offscreen.bind():
-            framebuffer = gpu.state.active_framebuffer_get()
-            framebuffer.clear(color=(1.0, 1.0, 1.0, 1.0), depth=1.0)
-            live.draw_safely(scene, live.CAMERA_KEY, view)
-            pixels = framebuffer.read_color(0, 0, view.width, view.height, 4, 0, 'FLOAT')
-    finally:
-        offscreen.free()
-    pixels.dimensions = view.width * view.height * 4
-    image = np.array(pixels, dtype=np.float32).reshape(view.height, view.width, 4)
-    image[..., :3] = linear_to_srgb(image[..., :3])
-    return image
-
-
 def measure_view(scene, ball, name: str, folder: Path, samples: int, eevee: bool) -> list:
     """The rows of the view as placed: every renderer's label disagreement with Cycles."""
     import bpy
@@ -155,7 +135,7 @@ def measure_view(scene, ball, name: str, folder: Path, samples: int, eevee: bool
         view = view_from_camera(scene.camera, scene, depsgraph)
         start = time.perf_counter()
         state = live.start(scene, depsgraph, {live.CAMERA_KEY: view}, wait=True)
-        image = _live(scene, view)
+        image = bench_real_mirrors.live_overlay(scene, view, WHITE)
         seconds = time.perf_counter() - start
         write_png(folder / f"{slug}_live_{mode.lower()}.png", image)
         rows.append(row(f"ours, {mode.title()}: live view", image, seconds, "start and first draw"))
@@ -165,7 +145,7 @@ def measure_view(scene, ball, name: str, folder: Path, samples: int, eevee: bool
             start = time.perf_counter()
             traced = tracing.future.result()
             live.process(scene, depsgraph)
-            image = _live(scene, view)
+            image = bench_real_mirrors.live_overlay(scene, view, WHITE)
             seconds = time.perf_counter() - start
             write_png(folder / f"{slug}_live_rested_{mode.lower()}.png", image)
             rows.append(row(f"ours, {mode.title()}: live view at rest", image, seconds,

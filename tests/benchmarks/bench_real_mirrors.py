@@ -133,9 +133,9 @@ def measure(kind: str, width: int, height: int, samples: int, folder: Path, mode
             "seconds_order1": seconds_second}
 
 
-def _overlay(scene, view):
-    """(H, W, 4) display sRGB: the live view's draw of ``view`` over nothing (what the
-    viewport overlays on the mirrors), rows bottom to top."""
+def live_overlay(scene, view, background=(0.0, 0.0, 0.0, 1.0)):
+    """(H, W, 4) display sRGB: the live view's draw of ``view`` over ``background`` (by
+    default nothing: what the viewport overlays on the mirrors), rows bottom to top."""
     import gpu
     import numpy as np
 
@@ -146,7 +146,7 @@ def _overlay(scene, view):
     try:
         with offscreen.bind():
             framebuffer = gpu.state.active_framebuffer_get()
-            framebuffer.clear(color=(0.0, 0.0, 0.0, 1.0), depth=1.0)
+            framebuffer.clear(color=background, depth=1.0)
             live.draw_safely(scene, live.CAMERA_KEY, view)
             pixels = framebuffer.read_color(0, 0, view.width, view.height, 4, 0, 'FLOAT')
     finally:
@@ -171,12 +171,12 @@ def viewport(scene, cycles_image, mask, palette) -> dict:
     view = view_from_camera(scene.camera, scene, depsgraph)
     state = live.start(scene, depsgraph, {live.CAMERA_KEY: view}, wait=True)
     camera = state.cameras[live.CAMERA_KEY]
-    first = _overlay(scene, view)
+    first = live_overlay(scene, view)
     start = time.perf_counter()
     traced = camera.tracing.future.result() if camera.tracing is not None else None
     seconds = time.perf_counter() - start
     live.process(scene, depsgraph)
-    rested = _overlay(scene, view)
+    rested = live_overlay(scene, view)
     live.clear(scene)
     return {"viewport": metrics.label_disagreement(first, cycles_image, mask, palette),
             "viewport_traced": metrics.label_disagreement(rested, cycles_image, mask, palette),

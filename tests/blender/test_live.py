@@ -350,6 +350,17 @@ def test_a_view_whose_clip_start_cuts_into_the_sealed_ball_says_so(fig3):
     assert state.status == "Reflections up to date"
 
 
+def clip_half_a_radius_short_of_the_centre(scene, mode: str) -> None:
+    """sbc_fig3's ball in ``mode``, the scene camera's clip start half a radius short of
+    the ball's centre: a disc of the ball's front is cut away."""
+    ball = bpy.data.objects["MirrorSphere"]
+    ball.curved_reflections.mode = mode
+    bpy.context.view_layer.update()
+    centre, radius = np.array(ball.matrix_world.translation), 0.5 * max(ball.dimensions)
+    matrix = np.array(scene.camera.matrix_world)
+    scene.camera.data.clip_start = float(np.dot(centre - matrix[:3, 3], -matrix[:3, 2])) - 0.5 * radius
+
+
 @pytest.mark.parametrize("mode", ['AUTO', 'RUNTIME'])
 def test_where_the_clip_start_cuts_a_disc_off_the_sealed_ball_its_inside_is_drawn_black(fig3, mode):
     """The scene camera with its clip start half a radius short of the ball's centre: in
@@ -359,12 +370,7 @@ def test_where_the_clip_start_cuts_a_disc_off_the_sealed_ball_its_inside_is_draw
     and drew the cut-away front's reflections there), and the rest of the ball not."""
     from curved_reflections.engine.geometry.band_trace import NO_LIGHT, BandTracer
 
-    ball = bpy.data.objects["MirrorSphere"]
-    ball.curved_reflections.mode = mode
-    bpy.context.view_layer.update()
-    centre, radius = np.array(ball.matrix_world.translation), 0.5 * max(ball.dimensions)
-    matrix = np.array(fig3.camera.matrix_world)
-    fig3.camera.data.clip_start = float(np.dot(centre - matrix[:3, 3], -matrix[:3, 2])) - 0.5 * radius
+    clip_half_a_radius_short_of_the_centre(fig3, mode)
     view = _camera_view(fig3)
     state = live.start(fig3, bpy.context.evaluated_depsgraph_get(), {live.CAMERA_KEY: view}, wait=True)
     assert "'MirrorSphere': the camera's clip start cuts into this mirror" in state.status

@@ -272,12 +272,9 @@ def test_where_the_near_plane_cuts_the_sealed_ball_its_inside_shows_as_traced(fi
     from curved_reflections.engine.srgb import linear_to_srgb
     from curved_reflections.tools import metrics
 
-    ball = bpy.data.objects["MirrorSphere"]
-    ball.curved_reflections.mode = mode
-    bpy.context.view_layer.update()
-    centre, radius = np.array(ball.matrix_world.translation), 0.5 * max(ball.dimensions)
-    matrix = np.array(fig3.camera.matrix_world)
-    fig3.camera.data.clip_start = float(np.dot(centre - matrix[:3, 3], -matrix[:3, 2])) - 0.5 * radius
+    from test_live import clip_half_a_radius_short_of_the_centre
+
+    clip_half_a_radius_short_of_the_centre(fig3, mode)
     state = FrameState()
     result = render_scene(fig3, bpy.context.evaluated_depsgraph_get(), state=state)
     assert result.stats["warnings"] == [clip_start_message("MirrorSphere")]
