@@ -276,7 +276,7 @@ def test_a_nodes_extended_and_grazing_images_are_the_mirrors_reflections(sphere,
     assert rough_grid.mirror is None  # Polish Node Images is off by default
     grid = dataclasses.replace(rough_grid, mirror=M.MirrorOnDemand(sphere, rough_grid.settings), _static={})
     _, nodes, _, _ = grid.locate_view([-2.0, -2.4, 0.3], np.eye(4))
-    points = np.random.default_rng(6).uniform([-2.5, -2.5, -0.5], [2.5, 2.5, 2.8], (1500, 3))
+    points = np.random.default_rng(6).uniform([-2.5, -2.5, -0.5], [2.5, 2.5, 2.8], (500, 3))
     points = points[np.linalg.norm(points - CENTRE, axis=1) > 1.05]
     reference = ReflectorSet([sphere])
     polished_count, off_count, extended_count, charted_count = 0, 0, 0, 0
@@ -301,10 +301,10 @@ def test_a_nodes_extended_and_grazing_images_are_the_mirrors_reflections(sphere,
         assert (regular[moved] < 1e-8).all()
         polished_count += len(extended) + moved.sum()
         extended_count, charted_count = extended_count + len(extended), charted_count + len(charted)
-    assert polished_count > 50 and off_count > 10
+    assert polished_count > 50 and off_count > 10  # 2698 and 803 on these 469 points, 8 nodes
     # Polished, the charts are solved farther out (POLISHED_CHART, not EXTENDED_CHART):
-    # more images, every one on the mirror's reflection (1183 against 1153 charted; 1006
-    # placed from the charts solved as far as unpolished ones).
+    # more images, every one on the mirror's reflection (874 against 803 charted here;
+    # 2518 against 2336 on 1405 points).
     assert extended_count > charted_count
 
 
