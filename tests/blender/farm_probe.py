@@ -48,7 +48,7 @@ def kettle(blend_path):
     bpy.ops.mesh.primitive_cube_add(size=0.8, location=(2.0, -0.8, 0.6))
     bpy.ops.object.camera_add(location=(0.5, -7.0, 2.0), rotation=(1.4, 0.0, 0.0))
     scene.camera = bpy.context.active_object
-    scene.render.resolution_x, scene.render.resolution_y = 96, 72
+    scene.render.resolution_x, scene.render.resolution_y = 64, 48  # the cube's reflection in the ball: a few pixels
     scene.frame_start, scene.frame_end = 1, 2
     bpy.ops.wm.save_as_mainfile(filepath=blend_path)
 
