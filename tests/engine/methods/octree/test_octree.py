@@ -193,7 +193,7 @@ def test_the_papers_trilinear_blend_alone_errs_by_pixels(sphere, sphere_grid):
     linear = OctreeGrid(sphere_grid.reflector_name, 0, sphere_grid.grid, sphere_grid.settings, sphere_grid.node_status,
                         sphere_grid.nodes, sphere_grid.reflector_size, blend="linear")
     views = _views_between_nodes(sphere_grid, 2, 9)
-    points = _points(1500, 10)
+    points = _points(500, 10)  # p95 4.10 px linear against 0.40 px refined, on 618 reflections of 2 views
     exacts = _exact(sphere, views, points)
     linear_errors, _ = _errors(linear, sphere, views, points, exacts)
     surface_errors, _ = _errors(sphere_grid, sphere, views, points, exacts)
@@ -204,7 +204,8 @@ def test_a_held_out_ellipsoid_stays_subpixel():
     """An ellipsoid (not used to choose any constant): the same figures as the sphere."""
     mirror = ellipsoid(CENTRE, (1.2, 0.8, 0.7), 4, "Ellipsoid")
     grid = octree_grid_on_demand(mirror, SETTINGS)
-    errors, coverage = _errors(grid, mirror, _views_between_nodes(grid, 2, 11), _points(1500, 12))
+    # 800 points: 1004 reflections in 2 views, p99 0.71 px, coverage 0.996
+    errors, coverage = _errors(grid, mirror, _views_between_nodes(grid, 2, 11), _points(800, 12))
     assert len(errors) > 500 and np.percentile(errors, 99) <= 1.0 and coverage > 0.75
 
 
