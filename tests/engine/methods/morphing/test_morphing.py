@@ -161,7 +161,7 @@ def test_error_against_exact_solver_inside_a_small_grid(sphere, small_grids):
     grids = small_grids
     for eye in ([2.2, -2.0, 2.4], [-2.0, -2.4, 0.3]):
         view = look_at_view(eye, CENTRE, width=320, height=240)
-        points = rng.uniform([-2.5, -2.5, -0.5], [2.5, 2.5, 2.8], (1500, 3))
+        points = rng.uniform([-2.5, -2.5, -0.5], [2.5, 2.5, 2.8], (600, 3))
         points = points[np.linalg.norm(points - CENTRE, axis=1) > 1.05]
         exact = solve_reflections(reference, view, points)
         exact = exact.select(exact.visible)
@@ -170,7 +170,7 @@ def test_error_against_exact_solver_inside_a_small_grid(sphere, small_grids):
         for blend, grid in grids.items():
             result = grid.project(points, view)
             both = result.valid[0] & np.isfinite(pixel[:, 0])
-            assert both.sum() > 0.6 * len(exact.point)  # measured: 70-85 %
+            assert both.sum() > 0.6 * len(exact.point)  # measured: 89-93 % (600 points a view)
             errors[blend].append(np.linalg.norm(result.pixels[0][both] - pixel[both], axis=1))
     linear, surface = (np.concatenate(errors[b]) for b in ("linear", "surface"))
     print("linear p50/p95", np.percentile(linear, [50, 95]), "surface p50/p95", np.percentile(surface, [50, 95]))
