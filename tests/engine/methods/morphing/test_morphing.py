@@ -318,7 +318,7 @@ def test_polished_blends_land_on_the_exact_reflections_of_a_mirror_that_is_not_a
     box = superellipsoid(CENTRE, (1.2, 0.9, 0.8), 4.0, 4, "Box")
     grid = M.grid_on_demand(box, G.MorphSettings(grid=(4, 4, 4), margin=0.8, face_resolution=48), polish=True)
     view = look_at_view([2.0, -2.3, 1.6], CENTRE, width=320, height=240)
-    points = np.random.default_rng(5).uniform([-2.5, -2.5, -0.5], [2.5, 2.5, 2.8], (2000, 3))
+    points = np.random.default_rng(5).uniform([-2.5, -2.5, -0.5], [2.5, 2.5, 2.8], (1000, 3))
     points = points[np.max(np.abs(points - CENTRE) / [1.2, 0.9, 0.8], axis=1) > 1.1]
     exact = solve_reflections(ReflectorSet([box]), view, points)
     exact = exact.select(exact.visible)
@@ -333,4 +333,4 @@ def test_polished_blends_land_on_the_exact_reflections_of_a_mirror_that_is_not_a
         answered[polish] = int(result.valid[0].sum())
     assert np.percentile(errors[False], 99) > 2.0  # the blend alone
     assert np.percentile(errors[True], 99) < 0.01 and errors[True].max() < 0.05
-    assert answered[True] >= 0.99 * answered[False] and len(errors[True]) > 300
+    assert answered[True] >= 0.99 * answered[False] and len(errors[True]) > 300  # 438 and 438, 437 compared
