@@ -203,7 +203,7 @@ def test_polished_frames_are_the_numpy_engines_and_the_exact_reflections(gpu_rea
     box = superellipsoid((0.0, 0.0, 0.0), (1.2, 0.9, 0.8), 4.0, 4, "Box")
     grid = M.grid_on_demand(box, SETTINGS, polish=True)
     grid.face_images = GPUFaceImages()
-    cloud = _cloud()
+    cloud = _cloud(1500)
     geometry = prepare_geometry([box], [cloud], edge_fraction=None)
     view = _view((0.4, -2.6, 0.5))
     exact = solve_reflections(ReflectorSet([box]), view, geometry.vertices)
@@ -225,4 +225,4 @@ def test_polished_frames_are_the_numpy_engines_and_the_exact_reflections(gpu_rea
         seen = both & np.isfinite(truth[:, 0])
         errors[polish] = np.linalg.norm(view.to_pixels(ours[seen])[0] - truth[seen], axis=1)
     assert np.percentile(errors[False], 99) > 2.0
-    assert np.percentile(errors[True], 99) < 0.01 and len(errors[True]) > 500
+    assert np.percentile(errors[True], 99) < 0.01 and len(errors[True]) > 500  # blend 5.8 px; polished 1.5e-5 px on 765
