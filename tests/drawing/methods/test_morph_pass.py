@@ -38,6 +38,20 @@ def mirror(gpu_ready):
 
 
 @pytest.fixture(scope="module")
+def coarse_mirror(gpu_ready):
+    """The same sphere and grid with 24-pixel cube faces: for the tests of which nodes are
+    projected and kept, where what a node sees does not matter, only that it is built."""
+    from dataclasses import replace
+
+    from curved_reflections.drawing.methods.morph_source import GPUFaceImages
+
+    sphere = icosphere((0.0, 0.0, 0.0), 1.0, 4, name="Mirror")
+    grid = M.grid_on_demand(sphere, replace(SETTINGS, face_resolution=24))
+    grid.face_images = GPUFaceImages()
+    return sphere, grid
+
+
+@pytest.fixture(scope="module")
 def octree_mirror(gpu_ready):
     """The same sphere and grid with ray octrees at the nodes (Martin & Popescu 2004)."""
     from dataclasses import replace
@@ -121,10 +135,11 @@ def _assert_gpu_blend_is_numpy_blend(mirror, view, n_nodes):
     assert compared > 500
 
 
-def test_nodes_are_projected_once_and_kept(mirror):
+def test_nodes_are_projected_once_and_kept(coarse_mirror):
     """A second view in the same tetrahedron, then one in a neighbouring cell whose
     nodes were prefetched, project no node; the budget keeps the nodes in use (a
     tetrahedron's four and the rest of its cube, which the surface fit reads)."""
+    mirror = coarse_mirror  # some 50 nodes built: 24-pixel cube faces, a quarter of the rays
     morph, _ = _pass(mirror, [_cloud(600)])
     first = _view((0.4, -2.3, 0.3))
     morph.blend(first)
