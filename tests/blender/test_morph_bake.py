@@ -18,7 +18,9 @@ from curved_reflections.blender.scene_status import status_of
 def morph_ops(registered, monkeypatch, tmp_path):
     from curved_reflections.blender import morph_bake
 
-    monkeypatch.setattr(morph_bake, "FACE_RESOLUTION", 32)  # a fast bake; the figures are the benchmark's
+    # A fast bake (16 texels, as test_bad_input and test_working_session_files bake); the
+    # figures are the benchmark's.
+    monkeypatch.setattr(morph_bake, "FACE_RESOLUTION", 16)
     monkeypatch.setattr(morph_bake, "cache_root", lambda scene: tmp_path / "morphing")  # no test sees another's
 
     added = [cls for cls in morph_bake.classes if not cls.is_registered]
@@ -249,7 +251,7 @@ def test_a_reshaped_mirror_is_baked_afresh_and_drawn_from_its_new_shape(empty_sc
     from curved_reflections.blender.frame_pipeline import FramePipeline
     from curved_reflections.blender.render_image import render_scene
 
-    # What the cache serves is under test, not the accuracy of this 2x2x2, 32-texel grid:
+    # What the cache serves is under test, not the accuracy of this 2x2x2, 16-texel grid:
     # the accuracy check would pass the mirror on to Runtime mode.
     monkeypatch.setattr(FramePipeline, "check_methods", lambda self, scene, view: False)
 
