@@ -32,7 +32,9 @@ def _measure(reflectors, view, points, **options):
 def ellipsoid_case():
     reflector = ellipsoid(np.array([0.3, 0.2, 1.1]), [1.3, 0.8, 1.0])
     view = look_at_view([4.5, -3.5, 2.8], [0.3, 0.2, 1.0], width=480, height=320, fov_y_deg=38)
-    points = np.random.default_rng(7).uniform(BOUNDS[0], BOUNDS[1], (6000, 3))
+    # 4500 points: 3509 exact images answered, 2946 well inside the footprint (4692 and
+    # 3958 of 6000); the exact solve is most of the time.
+    points = np.random.default_rng(7).uniform(BOUNDS[0], BOUNDS[1], (4500, 3))
     return _measure([reflector], view, points, downsample=2, accuracy_px=1.0), points
 
 
