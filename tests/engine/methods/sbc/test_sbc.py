@@ -672,7 +672,8 @@ def test_second_order_images_at_the_edge_of_their_footprint_are_found_on_the_tru
     the leaf's answer, or the ring's ray passing closest) and follows the whole path."""
     from test_true_rays import _facing_spheres
 
-    reflectors, reflector_set, view, points, exact = _facing_spheres(400, 10)
+    # The scene test_true_rays' tests solve (cached: solved once for the three).
+    reflectors, reflector_set, view, points, exact = _facing_spheres(300, 8)
     lo, hi = reflector_set.vertices.min(axis=0) - 2.0, reflector_set.vertices.max(axis=0) + 2.0
     sbc = build_sample_based_camera(reflector_set, view, (lo, hi), max_order=2, downsample=2)
     coverage, errors, false = {}, [], 0
@@ -692,6 +693,6 @@ def test_second_order_images_at_the_edge_of_their_footprint_are_found_on_the_tru
                 else:
                     false += int(polish)
         coverage[polish] = found.mean()
-    assert coverage[True] >= 0.85 and coverage[True] >= coverage[False] + 0.2, coverage  # measured 0.63 -> 0.89
+    assert coverage[True] >= 0.85 and coverage[True] >= coverage[False] + 0.2, coverage  # measured 0.63 -> 0.99
     assert np.percentile(errors, 99) <= 0.5
     assert false <= 0.01 * len(errors)
