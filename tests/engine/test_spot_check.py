@@ -21,7 +21,7 @@ def case():
     reflector_set = ReflectorSet([mirror])
     view = look_at_view(CENTRE + np.array([2.5, -3.0, 1.2]), CENTRE, fov_y_deg=40.0, width=320, height=240)
     rng = np.random.default_rng(5)
-    directions = rng.normal(size=(3000, 3))
+    directions = rng.normal(size=(1500, 3))  # 1269 answered; 96 checked, 70 exact images sampled
     points = CENTRE + 2.0 * directions / np.linalg.norm(directions, axis=1, keepdims=True)
     exact = solve_reflections(reflector_set, view, points)
     exact = exact.select(exact.visible)
