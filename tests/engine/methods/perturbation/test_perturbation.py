@@ -216,13 +216,13 @@ def _match(projection, pixels_of, histories=None):
     return float(np.mean(covered)), np.array(errors)
 
 
-def _bumpy_scene(amplitude, lobes, eye, seed):
+def _bumpy_scene(amplitude, lobes, eye, seed, count=600):
     """A bumpy sphere mesh (radius 1 at CENTRE, 5 subdivisions) seen from ``eye``: the
-    method with adaptive seeds at 0.5 px, the view, 600 points around it and their
+    method with adaptive seeds at 0.5 px, the view, ``count`` points around it and their
     visible exact reflections as ``_match`` wants them."""
     bumpy = ReflectorSet([bumpy_icosphere(CENTRE, 1.0, 5, amplitude, lobes=lobes)])
     view = _view(eye=eye)
-    points = _points_around(bumpy, 600, np.random.default_rng(seed))
+    points = _points_around(bumpy, count, np.random.default_rng(seed))
     exact = solve_reflections(bumpy, view, points)
     wanted = [(exact.point[s], exact.pixel[s], None) for s in np.flatnonzero(exact.visible)]
     return PerturbationMethod(bumpy, {}, PerturbationSettings(accuracy_px=0.5)), view, points, wanted
@@ -360,11 +360,12 @@ def test_a_bumpy_mirrors_crowded_images_along_its_silhouette_are_found_in_its_ri
 def test_images_the_series_cannot_reach_are_found_by_newton_on_the_mesh(monkeypatch):
     """On a bumpier mirror, folded all over, the Taylor steps from many candidates do not
     converge (dropped as not local, or refused); Newton's method on the mesh from their
-    seeds (``mesh_polish.py``) finds those images exactly: 100 % of the 614 exact
-    images here against 97.2 % without, answers no farther off."""
+    seeds (``mesh_polish.py``) finds those images exactly: 100 % of the 304 exact
+    images here against 96.4 % without (of 614 on 600 points: 97.2 %), answers no
+    farther off."""
     from curved_reflections.engine.methods.perturbation import projector
 
-    method, view, points, wanted = _bumpy_scene(0.045, (5, 4), (2.4, -2.6, 1.5), 43)
+    method, view, points, wanted = _bumpy_scene(0.045, (5, 4), (2.4, -2.6, 1.5), 43, count=300)
     coverage, errors = _match(method.project(view, points), wanted)
     polished = method.stats.polished
     def none_polished(self, view, group, points, point_of, seed_of, answers):
@@ -372,9 +373,9 @@ def test_images_the_series_cannot_reach_are_found_by_newton_on_the_mesh(monkeypa
 
     monkeypatch.setattr(projector.PerturbationMethod, "_polished", none_polished)
     without, _ = _match(method.project(view, points), wanted)
-    assert coverage >= 0.99 and coverage >= without + 0.015, (without, coverage)  # 1.0, 0.972
+    assert coverage >= 0.99 and coverage >= without + 0.015, (without, coverage)  # 1.0, 0.964
     assert np.percentile(errors[errors <= 1.0], 99) <= 0.5
-    assert polished >= 15 and method.stats.polished == 0  # 197 answers found on the mesh
+    assert polished >= 15 and method.stats.polished == 0  # 105 answers found on the mesh
 
 
 def test_seeds_two_cells_from_a_points_candidates_start_newton_too(monkeypatch):
