@@ -91,8 +91,9 @@ def test_valid_entries_are_finite_and_invalid_ones_nan(ellipsoid_case):
 def test_two_reflectors_give_one_group_each_and_both_are_accurate():
     reflectors = [icosphere([0, -1.2, 1], 0.9, 4, name="A"), ellipsoid(np.array([0.2, 1.3, 1.0]), [0.7, 0.9, 1.1], 4, "B")]
     view = look_at_view([5.5, -0.5, 2.4], [0, 0, 1], width=320, height=240, fov_y_deg=45)
-    # 3000 points: over 2000 exact images in each mirror (4379 and 3960 of 6000), p95 as with 6000.
-    points = np.random.default_rng(3).uniform(BOUNDS[0], BOUNDS[1], (3000, 3))
+    # 1200 points: 886 and 797 exact images answered in the mirrors (2187 and 2003 of 3000;
+    # 4379 and 3960 exact of 6000), p95 0.21 and 0.08 px as with 3000.
+    points = np.random.default_rng(3).uniform(BOUNDS[0], BOUNDS[1], (1200, 3))
     sbc, projection, exact = _measure(reflectors, view, points, downsample=2)
     assert projection.groups == [(0,), (1,)]
     for group in (0, 1):
