@@ -179,10 +179,11 @@ def vase_case():
 
 @pytest.fixture(scope="module")
 def vase_points(vase_case):
-    """2500 points in the vase's box, the vase camera's projection of them and their
-    exact visible reflections (solved once for the tests that read them)."""
+    """1500 points in the vase's box, the vase camera's projection of them and their
+    exact visible reflections (solved once for the tests that read them): 928 points
+    seen twice, 115 answers handed to ray lists (1532 and 183 of 2500)."""
     _, reflectors, view, bounds, sbc = vase_case
-    points = np.random.default_rng(4).uniform(bounds[0], bounds[1], (2500, 3))
+    points = np.random.default_rng(4).uniform(bounds[0], bounds[1], (1500, 3))
     exact = solve_reflections(ReflectorSet(reflectors), view, points)
     return points, sbc.project(points), exact.select(exact.visible)
 
