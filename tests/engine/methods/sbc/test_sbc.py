@@ -523,7 +523,9 @@ def teapot_case():
     reflectors = [Reflector("Teapot", teapot.vertices, teapot.triangles, teapot.normals)]
     view = look_at_view([4.5, -3.0, 2.6], [0.3, 0, 0.8], width=320, height=240, fov_y_deg=35)
     bounds = (np.array([-3.0, -3.0, -0.5]), np.array([3.0, 3.0, 3.0]))
-    points = np.random.default_rng(7).uniform(bounds[0], bounds[1], (1500, 3))
+    # 800 points: 1546 exact images, 91 in cells straddling an edge, 656 pairs of trees'
+    # answers to one point (2892, 174 and 1252 of 1500); the exact solve is most of the time.
+    points = np.random.default_rng(7).uniform(bounds[0], bounds[1], (800, 3))
     exact = solve_reflections(ReflectorSet(reflectors), view, points)
     return reflectors, view, bounds, points, exact.select(exact.visible), build_sample_based_camera(
         reflectors, view, bounds, downsample=2)
