@@ -381,12 +381,13 @@ def test_images_the_series_cannot_reach_are_found_by_newton_on_the_mesh(monkeypa
 def test_seeds_two_cells_from_a_points_candidates_start_newton_too(monkeypatch):
     """A bumpier mirror still: the grid seeds in the ring two cells from a point's
     candidates (``projector.POLISH_RING_CELLS``) reach images neither the steps
-    nor the candidates' own seeds do: 99.74 % of the 776 exact images against 99.10 %.
-    Walking four triangles from each start (``mesh_polish.WALK_TRIANGLES`` was 4) found
-    99.23 %: next to the silhouette a pixel spans several foreshortened triangles."""
+    nor the candidates' own seeds do: 99.61 % of the 513 exact images here (400 points)
+    against 98.83 % (on 600 points: 99.74 % of 776 against 99.10 %). Walking four
+    triangles from each start (``mesh_polish.WALK_TRIANGLES`` was 4) found 99.03 %
+    (99.23 %): next to the silhouette a pixel spans several foreshortened triangles."""
     from curved_reflections.engine.methods.perturbation import mesh_polish, projector
 
-    method, view, points, wanted = _bumpy_scene(0.05, (4, 6), (-2.2, -2.5, 2.0), 47)
+    method, view, points, wanted = _bumpy_scene(0.05, (4, 6), (-2.2, -2.5, 2.0), 47, count=400)
     coverage, errors = _match(method.project(view, points), wanted)
     assert len(projector.POLISH_RING_CELLS) == 16
     monkeypatch.setattr(mesh_polish, "WALK_TRIANGLES", 4)
@@ -394,8 +395,8 @@ def test_seeds_two_cells_from_a_points_candidates_start_newton_too(monkeypatch):
     monkeypatch.undo()
     monkeypatch.setattr(projector, "POLISH_RING_CELLS", ())
     without, _ = _match(method.project(view, points), wanted)
-    assert coverage >= without + 0.004, (without, coverage)  # 0.9974, 0.9910
-    assert coverage >= shorter + 0.003, (shorter, coverage)  # 0.9974, 0.9923
+    assert coverage >= without + 0.004, (without, coverage)  # 0.9961, 0.9883: 4 images (bound 2.1)
+    assert coverage >= shorter + 0.003, (shorter, coverage)  # 0.9961, 0.9903: 3 images (bound 1.5)
     assert np.percentile(errors[errors <= 1.0], 99) <= 0.5
 
 
