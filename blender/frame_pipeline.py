@@ -116,14 +116,16 @@ class FramePipeline:
     #: What the last plan has to warn about (a grid that could not be baked).
     plan_warnings: list = field(default_factory=list)
 
-    def plan_reflectors(self, scene, captured, bake_missing: bool = False) -> None:
+    def plan_reflectors(self, scene, captured, bake_missing: bool = False, final_render: bool | None = None) -> None:
         """Load the baked grids the reflectors want (with ``bake_missing``, bake a grid
-        mode's missing one first: Render Image) and plan every reflector's method."""
+        mode's missing one first: Render Image) and plan every reflector's method
+        (``final_render``, default ``bake_missing``: ``PlanInputs.final_render``)."""
         self.plan_warnings = []
         loaded = morph_bake.load_grids(scene, captured.reflectors, bake_missing=bake_missing,
                                        warnings=self.plan_warnings)
         self.plan = method_plan.plan(scene, captured.reflectors, self.settings.accuracy_px,
-                                     grids={grid.reflector_name: (grid, matrix) for grid, matrix in loaded})
+                                     grids={grid.reflector_name: (grid, matrix) for grid, matrix in loaded},
+                                     final_render=bake_missing if final_render is None else final_render)
         self.grids = self.plan.drawn_grids()
 
     def new_renderer(self, scene, captured, properties: dict | None = None, seal: bool = True) -> None:
@@ -193,7 +195,7 @@ class FramePipeline:
         found = accuracy.measure(self.plan, self.reflector_set, self.renderer, view, None)
         if not method_plan.note_measured(scene, found):
             return False
-        self.plan_reflectors(scene, self.captured)
+        self.plan_reflectors(scene, self.captured, final_render=True)
         self.new_renderer(scene, self.captured, seal=False)
         return True
 

@@ -66,6 +66,7 @@ import numpy as np
 
 from ..engine.errors import SceneInputError
 from ..engine.heap import release_freed_memory
+from ..engine.methods.iterative.pieces import searched_methods
 from ..engine.methods.morphing.morphing import ViewOutsideGrid
 from ..engine.scene import scene_bounds
 from ..engine.view import View
@@ -536,7 +537,7 @@ def _reflector_around(state: LiveScene, view: View) -> str | None:
     if not view.is_perspective:
         return None
     eye = view.eye[None]
-    searched = state.plan.engines_of(method_registry.ITERATIVE)
+    searched = searched_methods(state.plan.engines_of(method_registry.ITERATIVE))
     return next((m.name for m in searched if m.reflector_map.inside(eye)[0]), None)
 
 

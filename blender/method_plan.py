@@ -101,16 +101,19 @@ def choose(inputs: PlanInputs, index: int, reflector, mode: str) -> tuple:
     return MethodChoice(reflector.name, RUNTIME, "; ".join(refusals + [fallback])), None
 
 
-def plan(scene, reflectors, accuracy_px: float | None = None, grids: dict | None = None) -> MethodPlan:
+def plan(scene, reflectors, accuracy_px: float | None = None, grids: dict | None = None,
+         final_render: bool = False) -> MethodPlan:
     """Every reflector's method. ``grids``: {reflector name: (grid, object matrix)} of the
-    loaded baked grids (``morph_bake.load_grids``)."""
+    loaded baked grids (``morph_bake.load_grids``); ``final_render``: for Render Image's
+    frames (``PlanInputs.final_render``)."""
     accuracy = float(scene.curved_reflections.accuracy_px if accuracy_px is None else accuracy_px)
     status = status_of(scene)
     result = MethodPlan()
     for index, reflector in enumerate(reflectors):
         mode = mode_of(scene, reflector.name)
         outside = status.outside_accuracy.get(reflector.name, {})
-        choice, engine = choose(PlanInputs(scene, accuracy, grids or {}, outside), index, reflector, mode)
+        inputs = PlanInputs(scene, accuracy, grids or {}, outside, final_render, mode)
+        choice, engine = choose(inputs, index, reflector, mode)
         result.choices.append(choice)
         if engine is not None:
             result.engines.setdefault(choice.method, []).append(engine)
@@ -123,7 +126,7 @@ def grid_kind_wanted(scene, reflector) -> str | None:
     its mode's method's grid, or in Auto the grid of the first method Auto would reach
     (a star-shaped mirror is searched, and wants none)."""
     mode = mode_of(scene, reflector.name)
-    inputs = PlanInputs(scene, float(scene.curved_reflections.accuracy_px), {}, {})
+    inputs = PlanInputs(scene, float(scene.curved_reflections.accuracy_px), {}, {}, mode=mode)
     for method in _candidates(mode):
         if method.grid is not None or mode != AUTO:
             return method.grid

@@ -25,6 +25,7 @@ from typing import Callable
 import numpy as np
 
 from ..engine.methods.iterative import IterativeReflector
+from ..engine.methods.iterative.pieces import IterativePieces, searched_methods
 from ..engine.methods.perturbation import AnalyticSurface, PerturbationReflector
 from ..drawing.methods.iterative_draw import IterativePass
 from ..drawing.methods.morph_pass import MorphPass
@@ -41,13 +42,19 @@ ANALYTIC_TOLERANCE = 0.02
 @dataclass(frozen=True)
 class PlanInputs:
     """What a method's offer may read: the scene (its objects' settings), the Accuracy,
-    the loaded grids ({reflector name: (grid, object matrix)}) and, for Auto, what the
-    live check measured of methods passed over ({method: what was measured})."""
+    the loaded grids ({reflector name: (grid, object matrix)}), for Auto what the live
+    check measured of methods passed over ({method: what was measured}), whether the
+    frame is Render Image's, and the reflector's mode."""
 
     scene: object
     accuracy_px: float
     grids: dict
     outside: dict
+    #: A frame of Render Image (its animation too), not of the live view: the frame may
+    #: take seconds, but the viewport must not stop for them.
+    final_render: bool = False
+    #: The reflector's mode (AUTO or a method's name).
+    mode: str = AUTO
 
 
 @dataclass(frozen=True)
@@ -136,7 +143,20 @@ def pass_factories(engines_by_method: dict) -> list:
 
 
 def _offer_iterative(inputs: PlanInputs, index: int, reflector) -> Offer:
+    """A star-shaped mirror's map, or a closed mirror's pieces (``star_maps.piece_maps``):
+    in Render Image, and in the live view in Iterative mode only (each redraw searches
+    every piece on the drawing thread: seconds on a CPU rasteriser, where Runtime builds
+    its camera in the background)."""
     shape, reflector_map = star_maps.star_map(reflector)
+    if reflector_map is None and (shape.crossings or shape.hidden_share > 0):
+        if not inputs.final_render and inputs.mode != ITERATIVE:
+            return refuse(f"{shape.reason}; searched as pieces in Render Image and in Iterative mode (in the live "
+                          "view every redraw would search each piece)")
+        pieces, maps = star_maps.piece_maps(reflector)
+        if not maps:
+            return refuse(pieces.reason)
+        return Offer(True, f"not star-shaped: {len(maps)} pieces seen from inside it, each searched on the GPU",
+                     IterativePieces.of_maps(index, reflector.name, maps, inputs.accuracy_px, pieces))
     if reflector_map is None:
         return refuse(shape.reason)
     centre = ", ".join(f"{round(float(c), 2) + 0.0:.2f}" for c in shape.centre)  # no "-0.00"
@@ -145,9 +165,10 @@ def _offer_iterative(inputs: PlanInputs, index: int, reflector) -> Offer:
 
 
 def _iterative_pass(engines: list):
-    for engine in engines:  # the other searched mirrors may block its reflected segments
-        engine.occluders = tuple(other.reflector_map for other in engines if other is not engine)
-    return IterativePass.factory(engines)
+    searched = searched_methods(engines)
+    for method in searched:  # the other searched mirrors (and pieces) may block its reflected segments
+        method.occluders = tuple(other.reflector_map for other in searched if other is not method)
+    return IterativePass.factory(searched)
 
 
 def _offer_grid(method: str, label: str):
@@ -186,7 +207,7 @@ def _offer_runtime(inputs: PlanInputs, index: int, reflector) -> Offer:
 def register_builtin() -> None:
     """The four papers' methods, in the order Auto tries them."""
     register(Method(ITERATIVE, "Iterative (GPU)", "Find every vertex's reflection on the GPU each frame (Roger & "
-                    "Holzschuch 2006); star-shaped reflectors only, others use Runtime", 'SHADERFX',
+                    "Holzschuch 2006); star-shaped reflectors, closed ones as pieces seen from inside; open ones use Runtime", 'SHADERFX',
                     _offer_iterative, _iterative_pass, in_auto=True, summary="searched on the GPU every frame"))
     register(Method(RUNTIME, "Runtime", "Rebuild the sample-based camera for every new view (SBC paper IV)",
                     'CAMERA_DATA', _offer_runtime))

@@ -2,8 +2,10 @@
 """Which reflectors are star-shaped, and their cube maps: made once per reflector shape.
 
 The iterative search (Roger & Holzschuch 2006) needs a reflector star-shaped around a
-centre and its cube map (``engine/methods/iterative/star.py``, ``reflector_map.py``). The
-verdict and the map are kept per shape (compared up to a translation with the
+centre and its cube map (``engine/methods/iterative/star.py``, ``reflector_map.py``); a
+closed mirror that is not is searched as pieces seen from inside it, one map each
+(``engine/methods/iterative/pieces.py``, :func:`piece_maps`). The
+verdict and the maps are kept per shape (compared up to a translation with the
 :data:`CACHED_MAPS` kept): a viewport orbit, an animation frame in which the mirror did
 not change, or a mirror moved without turning reuses them (the map moves with its
 centre). The map is baked on the GPU when it is initialised
@@ -21,6 +23,7 @@ import numpy as np
 from ..engine.geometry.raytrace import ReflectorSet
 from ..engine.methods.iterative import StarShape, check_star_shaped
 from ..engine.methods.iterative.reflector_map import bake_reflector_map
+from ..engine.methods.iterative.pieces import StarPieces, map_first_surface, split_into_pieces
 from ..engine.methods.iterative.star import verdict
 from ..drawing.methods.iterative_bake import bake_reflector_map_gpu
 from .gpu_init import gpu_ready
@@ -29,6 +32,8 @@ from .gpu_init import gpu_ready
 FACE_SIZE = 256
 #: Reflector geometries whose verdict and map are kept.
 CACHED_MAPS = 16
+#: Face size of the maps that choose the pieces' centres (one per candidate centre).
+CHOOSE_FACE_SIZE = 64
 
 
 _maps: list = []  # _Entry, most recently used last
@@ -57,6 +62,8 @@ class _Entry:
     origin: np.ndarray  # the first vertex
     shape: StarShape
     reflector_map: object
+    #: (StarPieces, piece maps) once :func:`piece_maps` asked for them.
+    pieces: tuple | None = None
 
     def matches(self, reflector, topology: str, face_size: int) -> bool:
         if (self.topology, self.face_size) != (topology, face_size):
@@ -69,9 +76,22 @@ class _Entry:
     def moved_to(self, reflector):
         """The verdict and map, moved with the reflector's first vertex."""
         shift = reflector.vertices[0] - self.origin
-        rmap = self.reflector_map
-        return (dataclasses.replace(self.shape, centre=self.shape.centre + shift),
-                None if rmap is None else dataclasses.replace(rmap, centre=rmap.centre + shift))
+        return dataclasses.replace(self.shape, centre=self.shape.centre + shift), _moved(self.reflector_map, shift)
+
+    def pieces_moved_to(self, reflector):
+        """The pieces' verdict and maps, moved with the reflector's first vertex."""
+        return _pieces_moved(self.pieces, reflector.vertices[0] - self.origin)
+
+
+def _moved(rmap, shift):
+    """A map moved by ``shift`` (its texels, and a piece's patches, are relative to its centre)."""
+    return None if rmap is None else dataclasses.replace(rmap, centre=rmap.centre + shift)
+
+
+def _pieces_moved(pieces: tuple, shift) -> tuple:
+    """(StarPieces, piece maps) moved by ``shift``."""
+    shape, maps = pieces
+    return dataclasses.replace(shape, centres=shape.centres + shift), [_moved(rmap, shift) for rmap in maps]
 
 
 def _topology(reflector) -> str:
@@ -80,16 +100,25 @@ def _topology(reflector) -> str:
     return digest.hexdigest()
 
 
+def _cached(reflector, face_size: int):
+    """The cached entry of the reflector's shape, made most recently used, or None."""
+    topology = _topology(reflector)
+    for index, entry in enumerate(_maps):
+        if entry.matches(reflector, topology, face_size):
+            _maps.append(_maps.pop(index))
+            return entry
+    return None
+
+
 def star_map(reflector, face_size: int | None = None):
     """(StarShape, ReflectorMap or None) of one reflector, cached by its shape: a mirror
     moved without turning reuses its verdict and its map, moved with it
     (``face_size``: default :data:`FACE_SIZE`)."""
     face_size = FACE_SIZE if face_size is None else int(face_size)
+    entry = _cached(reflector, face_size)
+    if entry is not None:
+        return entry.moved_to(reflector)
     topology = _topology(reflector)
-    for index, entry in enumerate(_maps):
-        if entry.matches(reflector, topology, face_size):
-            _maps.append(_maps.pop(index))
-            return entry.moved_to(reflector)
     shape = check_star_shaped(reflector)
     rmap = None
     if shape.star_shaped:  # the full-resolution rays are checked again (a thin fold, a small hole)
@@ -102,6 +131,23 @@ def star_map(reflector, face_size: int | None = None):
     return shape, rmap
 
 
+def piece_maps(reflector, face_size: int | None = None) -> tuple[StarPieces, list]:
+    """(StarPieces, piece maps, empty where refused) of a closed reflector that is not
+    star-shaped (:func:`star_map` says so first), cached with its verdict: the pieces'
+    centres are chosen from maps baked on the GPU when it is ready (else rays on the
+    CPU), and each piece's map baked as :func:`star_map`'s."""
+    face_size = FACE_SIZE if face_size is None else int(face_size)
+    star_map(reflector, face_size)
+    entry = _cached(reflector, face_size)
+    if entry.pieces is None:
+        choose = None
+        if gpu_ready():
+            choose = map_first_surface(lambda centre: bake_reflector_map_gpu(reflector, centre, CHOOSE_FACE_SIZE))
+        shape, maps = split_into_pieces(reflector, lambda mirror, centre: _bake(mirror, centre, face_size), choose)
+        # Kept where the entry's shape was first captured, as its map is.
+        pieces = _pieces_moved((shape, maps), entry.origin - reflector.vertices[0])
+        _maps[-1] = entry = dataclasses.replace(entry, pieces=pieces)
+    return entry.pieces_moved_to(reflector)
 
 
 def forget() -> None:

@@ -123,6 +123,8 @@ class SpotCheck:
         """Why the check fails an Accuracy, for the panel: the images it left out, else its error."""
         if self.missed > MAX_MISSED_SHARE * self.images:
             return f"{self.missed} of {self.images} exact images{self._of()} not drawn"
+        if self.unconfirmed > 0.05 * self.checked:
+            return f"{self.unconfirmed} of {self.checked} answers more than {MAX_ERROR_PX:.0f} px off or not there"
         return f"p95 {self.percentile(95):.2f} px" if self.confirmed else "no answer confirmed"
 
     def summary(self) -> str:

@@ -31,9 +31,12 @@
  * the viewer, w 0), w_row (the view-projection's last row, for clip w), stop_per_w,
  * n_vertices, positions_width, warm (start from the answer of the last search, still in
  * `result`, where it had one), self_map (the searched reflector's map) and n_maps.
- * `reflector_maps` holds every star-shaped reflector's cube map, one below another;
- * `map_params` two texels per map: (O relative to the shift, largest radius) and (first
- * row, face size, convex, mean radius). */
+ * `reflector_maps` holds every star-shaped reflector's (or piece's) cube map, one below
+ * another; `map_params` three texels per map: (O relative to the shift, largest radius),
+ * (first row, face size, convex, mean radius) and (first patch, patches); `map_patches`
+ * a piece's patches (engine/methods/iterative/pieces.py), three texels a row: (start
+ * direction, normal-cone half-angle), (cone axis, bounding radius), (centre relative to
+ * O, 0). */
 
 /* The map in use (use_map): its centre, radii, rows and size. */
 vec3 centre;
@@ -42,17 +45,22 @@ float mean_radius;
 int map_row;
 int face_size;
 int convex;
+int patch_row;
+int patch_count;
 
 void use_map(int map)
 {
-  vec4 a = texelFetch(map_params, ivec2(2 * map, 0), 0);
-  vec4 b = texelFetch(map_params, ivec2(2 * map + 1, 0), 0);
+  vec4 a = texelFetch(map_params, ivec2(3 * map, 0), 0);
+  vec4 b = texelFetch(map_params, ivec2(3 * map + 1, 0), 0);
+  vec4 c = texelFetch(map_params, ivec2(3 * map + 2, 0), 0);
   centre = a.xyz;
   max_radius = a.w;
   map_row = int(b.x);
   face_size = int(b.y);
   convex = int(b.z);
   mean_radius = b.w;
+  patch_row = int(c.x);
+  patch_count = int(c.y);
 }
 
 vec3 to_eye(vec3 p)
@@ -310,6 +318,32 @@ int newton(vec2 x, inout int steps, out vec3 p)
   return NOT_CONVERGED;
 }
 
+/* The numpy twin's patch_admits: whether patch k of the map in use may hold the vertex's
+ * reflection (the half vector between the directions from the patch to the eye and to
+ * the vertex within its normals' cone, widened by the angles its bounding sphere
+ * subtends from both and PATCH_MARGIN; or the vertex within NEAR_PATCH radii of it).
+ * Sets chart_axis to the patch's start. */
+bool patch_admits(int k)
+{
+  vec4 start = texelFetch(map_patches, ivec2(0, patch_row + k), 0);
+  vec4 cone = texelFetch(map_patches, ivec2(1, patch_row + k), 0);
+  vec3 sphere = texelFetch(map_patches, ivec2(2, patch_row + k), 0).xyz;
+  vec3 to_point = vertex - sphere;
+  float point_distance = max(length(to_point), 1e-30);
+  vec3 toward_eye = camera.xyz;
+  float eye_slack = 0.0;
+  if (camera.w > 0.5) {
+    toward_eye = camera.xyz - centre - sphere;
+    float eye_distance = max(length(toward_eye), 1e-30);
+    eye_slack = asin(min(cone.w / eye_distance, 1.0));
+    toward_eye /= eye_distance;
+  }
+  vec3 half_vector = normalize(to_point / point_distance + toward_eye);
+  float reach = start.w + eye_slack + asin(min(cone.w / point_distance, 1.0)) + PATCH_MARGIN;
+  chart_axis = start.xyz;
+  return dot(half_vector, cone.xyz) >= cos(min(reach, 3.14159265)) || point_distance < NEAR_PATCH * cone.w;
+}
+
 const vec2 starts[5] = vec2[5](vec2(0.0, 0.0), vec2(RESTART_OFFSET, 0.0), vec2(-RESTART_OFFSET, 0.0),
                                vec2(0.0, RESTART_OFFSET), vec2(0.0, -RESTART_OFFSET));
 
@@ -334,7 +368,9 @@ void main()
    * inside the mirror, which is tested only before the first restart. One loop calls
    * newton() once: the compiled shader holds one copy of it, not one per start (a copy
    * per start makes the search far slower on llvmpipe). */
-  int attempts = convex != 0 ? 1 : 5;  /* one reflection at most on a convex mirror */
+  /* A piece of a mirror that is not star-shaped starts from every patch that admits the
+   * vertex instead (patch_admits). */
+  int attempts = patch_count > 0 ? patch_count : (convex != 0 ? 1 : 5);  /* one reflection at most on a convex mirror */
   for (int attempt = resume ? -1 : 0; attempt < attempts; attempt++) {
     vec2 start = vec2(0.0);
     if (attempt < 0) {
@@ -347,9 +383,18 @@ void main()
           status = INSIDE;
           break;
         }
-        chart_axis = sphere_guess(vertex);
+        if (patch_count == 0) {
+          chart_axis = sphere_guess(vertex);
+        }
       }
-      start = starts[attempt];
+      if (patch_count > 0) {
+        if (!patch_admits(attempt)) {
+          continue;
+        }
+      }
+      else {
+        start = starts[attempt];
+      }
     }
     chart_t1 = perpendicular(chart_axis);
     chart_t2 = cross(chart_axis, chart_t1);

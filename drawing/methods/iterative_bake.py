@@ -223,4 +223,4 @@ def bake_reflector_map_gpu(reflector, centre, face_size: int) -> MapBake:
         max_radius=float(radius[hit].max()) if hit.any() else 0.0,
     )
     return MapBake(reflector_map, int(again.sum()), float(cosine[hit].min()) if hit.any() else 0.0,
-                   float(hit.mean()))
+                   float(hit.mean()), np.where(hit, cosine, 0.0).astype(np.float32))

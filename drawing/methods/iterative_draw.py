@@ -38,7 +38,8 @@ def search_defines() -> dict:
             "DERIVATIVE_STEP": f"{s.DERIVATIVE_STEP:.9e}", "TRUST_RADIUS": f"{s.TRUST_RADIUS:.9e}",
             "HALVINGS": s.HALVINGS, "MAX_CHART": f"{s.MAX_CHART:.9e}",
             "RESIDUAL_TOLERANCE": f"{s.RESIDUAL_TOLERANCE:.9e}", "OCCLUSION_SAMPLES": s.OCCLUSION_SAMPLES,
-            "RESTART_OFFSET": f"{s.RESTARTS[1][0]:.9e}", "FLIPPED_CODE": FLIPPED_CODE}
+            "RESTART_OFFSET": f"{s.RESTARTS[1][0]:.9e}", "FLIPPED_CODE": FLIPPED_CODE,
+            "PATCH_MARGIN": f"{s.PATCH_MARGIN:.9e}", "NEAR_PATCH": f"{s.NEAR_PATCH:.9e}"}
 
 
 @cached_shader
@@ -56,6 +57,7 @@ def search_shader():
     info.sampler(0, 'FLOAT_2D', "vertex_positions")
     info.sampler(1, 'FLOAT_2D', "reflector_maps")
     info.sampler(2, 'FLOAT_2D', "map_params")
+    info.sampler(3, 'FLOAT_2D', "map_patches")
     info.image(0, 'RGBA32F', 'FLOAT_2D', "result", qualifiers={'READ', 'WRITE'})
     info.local_group_size(LOCAL_SIZE, 1)
     info.compute_source(glsl_source("iterative_search.glsl", search_defines()))
@@ -63,22 +65,28 @@ def search_shader():
 
 
 class MapAtlas:
-    """Every star-shaped reflector's cube map in one texture, one below another, and two
-    texels of parameters per map (``glsl/iterative_search.glsl``'s ``use_map``): each
-    search reads its own map and the others', which may block its reflected segments."""
+    """Every star-shaped reflector's (and piece's) cube map in one texture, one below
+    another, three texels of parameters per map (``glsl/iterative_search.glsl``'s
+    ``use_map``) and the pieces' patches, three texels a row: each search reads its own
+    map and the others', which may block its reflected segments."""
 
     def __init__(self, methods, shift):
         maps = [m.reflector_map for m in methods]
         width = max(rmap.texels.shape[1] for rmap in maps)
         rows = np.cumsum([0] + [rmap.texels.shape[0] for rmap in maps])
+        patches = [np.zeros((0, 3, 4), np.float32) if rmap.patches is None else rmap.patches for rmap in maps]
+        patch_rows = np.cumsum([0] + [len(p) for p in patches])
         texels = np.zeros((rows[-1], width, 4), np.float32)
-        params = np.zeros((2 * len(maps), 4), np.float32)
+        params = np.zeros((3 * len(maps), 4), np.float32)
         for k, rmap in enumerate(maps):
             texels[rows[k]:rows[k + 1], :rmap.texels.shape[1]] = rmap.texels
-            params[2 * k] = (*(np.asarray(rmap.centre) - shift), rmap.max_radius)
-            params[2 * k + 1] = (rows[k], rmap.face_size, float(bool(rmap.convex)), rmap.mean_radius)
+            params[3 * k] = (*(np.asarray(rmap.centre) - shift), rmap.max_radius)
+            params[3 * k + 1] = (rows[k], rmap.face_size, float(bool(rmap.convex)), rmap.mean_radius)
+            params[3 * k + 2] = (patch_rows[k], len(patches[k]), 0.0, 0.0)
         self.texture = data_texture(texels)
         self.params = data_texture(params, len(params))
+        # One row at least: a texture may not be empty.
+        self.patches = data_texture(np.concatenate(patches + [np.zeros((1, 3, 4), np.float32)]))
 
 
 class IterativePass(FramePass):
@@ -110,7 +118,7 @@ class IterativePass(FramePass):
         """The searched mirrors that are not convex (a fold crowds several images, and
         triangles across it are dropped) or not alone (another mirror's reflection, a
         higher order, begins next to a drawn one)."""
-        return [m.index for m in self.methods if not m.reflector_map.convex or self.n_reflectors > 1]
+        return _unique(m.index for m in self.methods if not m.reflector_map.convex or self.n_reflectors > 1)
 
     @property
     def accuracy_px(self) -> float | None:
@@ -120,7 +128,7 @@ class IterativePass(FramePass):
     @property
     def mirrored_reflectors(self) -> list:
         """The searched mirrors that are convex (``reflector_map.is_convex``)."""
-        return [m.index for m in self.methods if m.reflector_map.convex]
+        return _unique(m.index for m in self.methods if m.reflector_map.convex)
 
     def update(self, frame: Frame) -> None:
         """:meth:`search` (``frame.claimed`` never holds a searched reflector: the
@@ -130,18 +138,12 @@ class IterativePass(FramePass):
     def frame_stats(self) -> dict:
         return {"iterative": self.status_counts()}
 
-    def replace(self, method) -> None:
-        """Use ``method`` for its reflector from now on (a re-baked map; the maps are
-        uploaded again, the meshes are not)."""
-        self.methods = [method if m.index == method.index else m for m in self.methods]
-        self._atlas = None
-
     def _ensure(self) -> None:
         if self._atlas is None:
             self._atlas = MapAtlas(self.methods, self.geometry.shift)
         for method in self.methods:
-            if method.index not in self._results:
-                self._results[method.index] = self.meshes.answer_texture()
+            if _key(method) not in self._results:
+                self._results[_key(method)] = self.meshes.answer_texture()
 
     def search(self, view, warm: bool = False) -> None:
         """This frame's search: one dispatch per reflector, into its result texture.
@@ -171,33 +173,48 @@ class IterativePass(FramePass):
         shader.uniform_sampler("vertex_positions", self.meshes.positions)
         shader.uniform_sampler("reflector_maps", self._atlas.texture)
         shader.uniform_sampler("map_params", self._atlas.params)
+        shader.uniform_sampler("map_patches", self._atlas.patches)
         for k, method in enumerate(self.methods):
             shader.uniform_float("stop_per_w", search_module.STOP_FRACTION * method.accuracy_px * pixel_scale)
             shader.uniform_int("self_map", k)
-            shader.image("result", self._results[method.index])
+            shader.image("result", self._results[_key(method)])
             gpu.compute.dispatch(shader, *self.meshes.work_groups(LOCAL_SIZE))
         self.counts["searches"] += 1
 
     def answers(self) -> list:
-        """(reflector index, answer texture) of the last search, for ``ReflectedMeshes.draw``."""
-        return [(m.index, self._results[m.index]) for m in self.methods if m.index in self._results]
+        """(reflector index, answer texture) of the last search, one per map (a mirror
+        searched as pieces has one per piece), for ``ReflectedMeshes.draw``."""
+        return [(m.index, self._results[_key(m)]) for m in self.methods if _key(m) in self._results]
 
-    def read(self, reflector_index: int) -> search_module.SearchResult:
-        """The last search of one reflector, read back (tests, the status counts)."""
-        positions, code = self.meshes.read(self._results[reflector_index])
+    def read(self, reflector_index: int, piece: int = 0) -> search_module.SearchResult:
+        """The last search of one reflector (or of one of its pieces), read back (tests,
+        the status counts)."""
+        positions, code = self.meshes.read(self._results[(reflector_index, piece)])
         status = (code % 16 - 8).astype(np.int8)
         return search_module.SearchResult(positions, status, (code % FLIPPED_CODE // 16).astype(np.int16),
                                           code >= FLIPPED_CODE)
 
     def status_counts(self) -> dict:
         """{reflector name: {"found", "not_converged", "unanswered"}} of the last search,
-        read back: the vertices the search could not settle are counted, not drawn."""
-        counts = {}
+        read back: the vertices the search could not settle are counted, not drawn.
+        A mirror searched as pieces counts a vertex found where any piece found it, not
+        converged where one did not converge and none found it."""
+        found, stuck = {}, {}
         for method in self.methods:
-            if method.index not in self._results:
+            if _key(method) not in self._results:
                 continue
-            status = self.read(method.index).status
-            counts[method.name] = {"found": int((status == search_module.FOUND).sum()),
-                                   "not_converged": int((status == search_module.NOT_CONVERGED).sum()),
-                                   "unanswered": int((status != search_module.FOUND).sum())}
-        return counts
+            status = self.read(method.index, method.piece).status
+            found[method.name] = found.get(method.name, False) | (status == search_module.FOUND)
+            stuck[method.name] = stuck.get(method.name, False) | (status == search_module.NOT_CONVERGED)
+        return {name: {"found": int(found[name].sum()), "not_converged": int((stuck[name] & ~found[name]).sum()),
+                       "unanswered": int((~found[name]).sum())} for name in found}
+
+
+def _key(method) -> tuple:
+    """A searched map's answer texture: its reflector and piece."""
+    return method.index, method.piece
+
+
+def _unique(indices) -> list:
+    """Reflector indices, each once, in order."""
+    return list(dict.fromkeys(indices))

@@ -66,20 +66,34 @@ def test_a_view_inside_the_searched_reflector_is_reported_and_drawing_resumes_ou
     assert state.level == 'INFO'
 
 
-def test_a_torus_in_iterative_mode_is_drawn_in_runtime_mode_and_the_panel_says_why(fig3):
+def test_a_torus_in_iterative_mode_is_searched_as_pieces_and_in_auto_mode_the_live_view_leaves_it_to_runtime(fig3):
+    """A torus is not star-shaped: Iterative mode searches it as pieces seen from inside
+    (engine/methods/iterative/pieces.py) in the live view; Auto does so only in Render
+    Image (each redraw would search every piece), and the panel says why."""
     torus = _torus(fig3)
+    state = live.start(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
+    choices = {c.reflector: c for c in method_plan.last_choices(fig3)}
+    assert choices["Ring"].method == method_plan.RUNTIME
+    assert choices["Ring"].reason.startswith("'Ring' is not star-shaped")
+    assert "searched as pieces in Render Image and in Iterative mode" in choices["Ring"].reason
+
     torus.curved_reflections.mode = 'ITERATIVE'
     state = live.start(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
     choices = {c.reflector: c for c in method_plan.last_choices(fig3)}
-    assert choices["MirrorSphere"].method == method_plan.ITERATIVE
-    assert choices["Ring"].method == method_plan.RUNTIME
-    assert choices["Ring"].reason.startswith("'Ring' is not star-shaped")
-    assert choices["Ring"].reason.endswith("drawn in Runtime mode")
-    camera = state.cameras[live.CAMERA_KEY]
-    assert camera.sbc is not None  # built for the torus
-    # The camera's sheets of the searched ball are not projected: the search draws them.
+    assert choices["MirrorSphere"].method == choices["Ring"].method == method_plan.ITERATIVE, choices["Ring"].reason
+    assert choices["Ring"].reason.startswith("not star-shaped: ")
+    assert choices["Ring"].reason.endswith("pieces seen from inside it, each searched on the GPU")
+    [pieces] = [e for e in state.plan.engines_of(method_plan.ITERATIVE) if e.name == "Ring"]
+    assert 2 <= len(pieces.pieces) <= 12
     assert live.draw_safely(fig3, live.CAMERA_KEY, _camera_view(fig3))
-    assert 0 in state.renderer.pass_named("iterative").reflector_indices
+    search = state.renderer.pass_named("iterative")
+    ring = pieces.index
+    assert [index for index, _ in search.answers()].count(ring) == len(pieces.pieces)
+    # The camera (Max Order 2: the torus reflects itself) leaves the searched first orders out.
+    camera = state.cameras[live.CAMERA_KEY]
+    assert camera.sbc is None or not {tuple(h) for h in camera.sbc.groups} & {(0,), (ring,)}
+    counts = search.status_counts()["Ring"]
+    assert counts["found"] > 0.2 * (counts["found"] + counts["unanswered"])
 
 
 def test_second_order_in_auto_mode_builds_a_camera_for_the_higher_orders(fig3):

@@ -143,6 +143,33 @@ def test_render_honours_each_reflectors_mode(fig3):
 
 
 
+def test_auto_searches_a_torus_as_pieces_and_draws_what_runtime_draws(fig3):
+    """A closed mirror that is not star-shaped is searched as pieces seen from inside it
+    (engine/methods/iterative/pieces.py) in Render Image's Auto mode: the frame equals
+    Runtime's on nearly all of the torus's pixels."""
+    from curved_reflections.blender.render_image import render_scene
+
+    fig3.render.resolution_x, fig3.render.resolution_y = 200, 150
+    bpy.ops.mesh.primitive_torus_add(major_radius=0.8, minor_radius=0.3, location=(2.2, 2.2, 0.6),
+                                     rotation=(0.6, 0.0, 0.3))
+    bpy.ops.object.shade_smooth()  # a faceted torus is a set of flat mirrors, not searched
+    torus = bpy.context.active_object
+    torus.name = "Ring"
+    torus.curved_reflections.is_reflector = True
+    fig3.curved_reflections.max_order = 1
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    searched = render_scene(fig3, depsgraph)
+    assert searched.stats["methods"] == {"MirrorSphere": "ITERATIVE", "Ring": "ITERATIVE"}, method_plan.last_choices(fig3)
+    [ring] = [c for c in method_plan.last_choices(fig3) if c.reflector == "Ring"]
+    assert ring.reason.startswith("not star-shaped: ") and "pieces seen from inside it" in ring.reason
+    assert searched.seconds["sbc"] < 0.05  # no camera built
+    torus.curved_reflections.mode = 'RUNTIME'
+    camera = render_scene(fig3, depsgraph)
+    assert camera.stats["methods"]["Ring"] == "RUNTIME"
+    differing = np.abs(searched.image[..., :3] - camera.image[..., :3]).max(axis=2) > 0.05
+    assert differing.mean() < 0.003  # 0.1 % measured
+
+
 def test_second_orders_of_searched_mirrors_get_a_camera_without_their_first_orders(empty_scene, registered,
                                                                                   monkeypatch):
     """Two facing balls, both searched, at Max Order 2: the frame's camera is made for

@@ -48,6 +48,11 @@ class ReflectorMap:
     ``convex``: every face of the mesh has the whole mesh behind its plane, so a
     reflection point that faces the eye and the reflected point is visible from both
     (the search skips its occlusion tests). ``min_radius`` and ``max_radius`` bound r.
+
+    ``patches``: for a piece of a mirror that is not star-shaped (``pieces.py``), the
+    starts of its search, (K, 3, 4) float32 rows (start direction, normal-cone
+    half-angle), (normal-cone axis, radius of the patch's bounding sphere), (that
+    sphere's centre relative to O, 0); None for a star-shaped mirror (one guess).
     """
 
     centre: np.ndarray
@@ -56,6 +61,7 @@ class ReflectorMap:
     convex: bool
     min_radius: float
     max_radius: float
+    patches: np.ndarray | None = None
 
     @functools.cached_property
     def mean_radius(self) -> float:
@@ -141,6 +147,11 @@ class MapBake:
     crossings: int
     min_cosine: float
     coverage: float  # share of texels whose ray met the surface
+    #: (6 (S + 2), S + 2) |cosine| between each texel's ray and the face it met (0: none),
+    #: what a piece of a mirror keeps (``pieces.piece_map``).
+    texel_cosine: np.ndarray | None = None
+    #: (6 (S + 2), S + 2) the triangle each texel's ray met first (-1: none).
+    texel_triangle: np.ndarray | None = None
 
 
 def bake_reflector_map(reflector_set: ReflectorSet, centre, face_size: int = DEFAULT_FACE_SIZE) -> MapBake:
@@ -160,6 +171,8 @@ def bake_reflector_map(reflector_set: ReflectorSet, centre, face_size: int = DEF
     cosine = np.abs(dot(hits.face_normal[hit], directions[hit]))
     radius = texels[hit, 0]
     shape = (6 * (face_size + 2), face_size + 2, 4)
+    texel_cosine = np.zeros(len(directions), np.float32)
+    texel_cosine[hit] = cosine
     reflector_map = ReflectorMap(
         centre=centre, face_size=int(face_size), texels=texels.reshape(shape),
         convex=is_convex(reflector_set.vertices, reflector_set.triangles, centre),
@@ -167,4 +180,4 @@ def bake_reflector_map(reflector_set: ReflectorSet, centre, face_size: int = DEF
         max_radius=float(radius.max()) if len(radius) else 0.0,
     )
     return MapBake(reflector_map, int(again.hit.sum()), float(cosine.min()) if len(cosine) else 0.0,
-                   float(hit.mean()))
+                   float(hit.mean()), texel_cosine.reshape(shape[:2]), hits.triangle.reshape(shape[:2]).astype(np.int32))

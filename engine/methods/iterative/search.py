@@ -50,6 +50,7 @@ them to each other.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -77,6 +78,11 @@ HALVINGS = 4
 MAX_CHART = 1.5
 #: Largest sine of the angle between the normal and the half vector at an answer.
 RESIDUAL_TOLERANCE = 1e-3
+#: A piece's patch (``pieces.py``) is searched for a point where the half vector lies
+#: within its normals' cone widened by this (radians) beyond the sphere's own slack ...
+PATCH_MARGIN = 0.05
+#: ... or where the point lies within this many radii of the patch's centre.
+NEAR_PATCH = 1.5
 #: Samples along each segment (P to the eye, P to V) of the occlusion test.
 OCCLUSION_SAMPLES = 16
 
@@ -311,32 +317,76 @@ def search_reflections(rmap: ReflectorMap, view: View, points, accuracy_px: floa
         answer[resumed[verdict == FOUND]] = position[verdict == FOUND]
         flipped[resumed[verdict == FOUND]] = image_flipped[verdict == FOUND]
         pending = np.setdiff1d(pending, resumed[verdict == FOUND])
-    guess = np.zeros((n, 3))
-    guess[pending] = sphere_guess(rmap.centre, camera, perspective, points[pending], rmap.mean_radius)
-    chart = _Chart(rmap, camera, perspective, points, guess)
-    # On a convex mirror a point has one reflection at most: a start that fails has none.
-    for attempt, start in enumerate(RESTARTS[:1] if rmap.convex else RESTARTS):
+    axis = np.zeros((n, 3))
+    if rmap.patches is None:
+        axis[pending] = sphere_guess(rmap.centre, camera, perspective, points[pending], rmap.mean_radius)
+        # On a convex mirror a point has one reflection at most: a start that fails has none.
+        starts = [(pending, start) for start in (RESTARTS[:1] if rmap.convex else RESTARTS)]
+    else:
+        starts = _patch_starts(rmap, camera, perspective, points, pending, axis)
+    for attempt, (rows, start) in enumerate(starts):
         if len(pending) == 0:
             break
-        converged, left, position, normal, half, face, steps, image_flipped = _newton(chart, view, pending, start,
+        rows = np.intersect1d(rows, pending, assume_unique=True)
+        if len(rows) == 0:
+            continue
+        chart = _Chart(rmap, camera, perspective, points, axis)
+        converged, left, position, normal, half, face, steps, image_flipped = _newton(chart, view, rows, start,
                                                                                       accuracy_px)
-        iterations[pending] += steps
+        iterations[rows] += steps
         verdict = np.where(left, NO_SURFACE, NOT_CONVERGED).astype(np.int8)
-        verdict[converged] = _check(rmap, camera, perspective, points[pending[converged]], position[converged],
+        verdict[converged] = _check(rmap, camera, perspective, points[rows[converged]], position[converged],
                                     normal[converged], half[converged], face[converged])
         # A later start keeps its verdict only where it found the answer.
         keep = (verdict == FOUND) | (attempt == 0)
-        status[pending[keep]] = verdict[keep]
-        answer[pending[verdict == FOUND]] = position[verdict == FOUND]
-        flipped[pending[verdict == FOUND]] = image_flipped[verdict == FOUND]
-        pending = pending[verdict != FOUND]
+        status[rows[keep]] = verdict[keep]
+        answer[rows[verdict == FOUND]] = position[verdict == FOUND]
+        flipped[rows[verdict == FOUND]] = image_flipped[verdict == FOUND]
+        pending = np.setdiff1d(pending, rows[verdict == FOUND], assume_unique=True)
     found = np.flatnonzero(status == FOUND)
     for occluder in occluders:
+        found = found[status[found] == FOUND]  # a blocked answer is NaN now
         blocked = found[_segment_blocked(occluder, answer[found], points[found], dense_near_start=False)]
         status[blocked] = OCCLUDED
         answer[blocked] = np.nan
         flipped[blocked] = False
     return SearchResult(answer, status, iterations, flipped)
+
+
+def patch_admits(patch: np.ndarray, camera, perspective: bool, points: np.ndarray) -> np.ndarray:
+    """(K,) bool: the patch (a row of ``ReflectorMap.patches``, its sphere's centre made
+    absolute) may hold the reflection of ``points``: the half vector between the
+    directions from the patch to the eye and to the point lies within the cone of its
+    normals, widened by the angles its bounding sphere subtends from the eye and from
+    the point (the half vector of any of its points differs by at most their sum) and
+    :data:`PATCH_MARGIN`; or the point lies within :data:`NEAR_PATCH` radii of it."""
+    axis, radius, centre = patch[1, :3], float(patch[1, 3]), patch[2, :3]
+    to_point = points - centre
+    point_distance = np.maximum(lengths(to_point), 1e-300)
+    if perspective:
+        to_eye = camera - centre
+        eye_distance = max(float(np.linalg.norm(to_eye)), 1e-300)
+        eye_slack = np.arcsin(min(radius / eye_distance, 1.0))
+        to_eye = to_eye / eye_distance
+    else:
+        to_eye, eye_slack = camera, 0.0
+    half = normalized(to_point / point_distance[:, None] + to_eye)
+    reach = float(patch[0, 3]) + eye_slack + np.arcsin(np.minimum(radius / point_distance, 1.0)) + PATCH_MARGIN
+    return (half @ axis >= np.cos(np.minimum(reach, np.pi))) | (point_distance < NEAR_PATCH * radius)
+
+
+def _patch_starts(rmap: ReflectorMap, camera, perspective: bool, points: np.ndarray, pending: np.ndarray,
+                  axis: np.ndarray) -> Iterator:
+    """The starts on a piece's map, patch after patch (``ReflectorMap.patches``): (the
+    pending points the patch admits, chart offset 0), ``axis`` set to the patch's start
+    direction for each as it comes (a generator: a point found from one patch is not
+    searched from the next)."""
+    for patch in rmap.patches.astype(np.float64):
+        centred = patch.copy()
+        centred[2, :3] += rmap.centre
+        rows = pending[patch_admits(centred, camera, perspective, points[pending])]
+        axis[rows] = patch[0, :3]
+        yield rows, (0.0, 0.0)
 
 
 def _residual_passes(normal: np.ndarray, half: np.ndarray) -> np.ndarray:
@@ -413,6 +463,8 @@ class IterativeReflector:
     accuracy_px: float = 1.0
     #: The other star-shaped reflectors' maps: they may block a reflected segment.
     occluders: tuple = ()
+    #: Which piece of its mirror the map holds (``pieces.py``; 0 for a star-shaped mirror).
+    piece: int = 0
 
     @property
     def groups(self) -> list:
