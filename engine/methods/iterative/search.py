@@ -166,6 +166,12 @@ class _Chart:
         self.t1 = _perpendicular(guess)
         self.t2 = cross(guess, self.t1)
 
+    def aim(self, rows: np.ndarray, axis: np.ndarray) -> None:
+        """Centre the chart of the points ``rows`` on unit directions ``axis``."""
+        self.axis[rows] = axis
+        self.t1[rows] = _perpendicular(self.axis[rows])
+        self.t2[rows] = cross(self.axis[rows], self.t1[rows])
+
     def evaluate(self, rows: np.ndarray, x: np.ndarray):
         """Residual (K, 2), position (K, 3), normal (K, 3), half vector (K, 3) and
         validity (K,) at chart points ``x`` (K, 2) of the points ``rows``."""
@@ -317,20 +323,19 @@ def search_reflections(rmap: ReflectorMap, view: View, points, accuracy_px: floa
         answer[resumed[verdict == FOUND]] = position[verdict == FOUND]
         flipped[resumed[verdict == FOUND]] = image_flipped[verdict == FOUND]
         pending = np.setdiff1d(pending, resumed[verdict == FOUND])
-    axis = np.zeros((n, 3))
+    chart = _Chart(rmap, camera, perspective, points, np.tile((0.0, 0.0, 1.0), (n, 1)))
     if rmap.patches is None:
-        axis[pending] = sphere_guess(rmap.centre, camera, perspective, points[pending], rmap.mean_radius)
+        chart.aim(pending, sphere_guess(rmap.centre, camera, perspective, points[pending], rmap.mean_radius))
         # On a convex mirror a point has one reflection at most: a start that fails has none.
         starts = [(pending, start) for start in (RESTARTS[:1] if rmap.convex else RESTARTS)]
     else:
-        starts = _patch_starts(rmap, camera, perspective, points, pending, axis)
+        starts = _patch_starts(rmap, chart, pending)
     for attempt, (rows, start) in enumerate(starts):
         if len(pending) == 0:
             break
         rows = np.intersect1d(rows, pending, assume_unique=True)
         if len(rows) == 0:
             continue
-        chart = _Chart(rmap, camera, perspective, points, axis)
         converged, left, position, normal, half, face, steps, image_flipped = _newton(chart, view, rows, start,
                                                                                       accuracy_px)
         iterations[rows] += steps
@@ -375,17 +380,16 @@ def patch_admits(patch: np.ndarray, camera, perspective: bool, points: np.ndarra
     return (half @ axis >= np.cos(np.minimum(reach, np.pi))) | (point_distance < NEAR_PATCH * radius)
 
 
-def _patch_starts(rmap: ReflectorMap, camera, perspective: bool, points: np.ndarray, pending: np.ndarray,
-                  axis: np.ndarray) -> Iterator:
+def _patch_starts(rmap: ReflectorMap, chart: _Chart, pending: np.ndarray) -> Iterator:
     """The starts on a piece's map, patch after patch (``ReflectorMap.patches``): (the
-    pending points the patch admits, chart offset 0), ``axis`` set to the patch's start
-    direction for each as it comes (a generator: a point found from one patch is not
-    searched from the next)."""
+    points of ``pending`` the patch admits, chart offset 0), their chart aimed at the
+    patch's start direction as it comes (a generator: the caller leaves out the points
+    an earlier patch found)."""
     for patch in rmap.patches.astype(np.float64):
         centred = patch.copy()
         centred[2, :3] += rmap.centre
-        rows = pending[patch_admits(centred, camera, perspective, points[pending])]
-        axis[rows] = patch[0, :3]
+        rows = pending[patch_admits(centred, chart.camera, chart.perspective, chart.points[pending])]
+        chart.aim(rows, np.broadcast_to(patch[0, :3], (len(rows), 3)))
         yield rows, (0.0, 0.0)
 
 

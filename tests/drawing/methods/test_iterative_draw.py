@@ -265,25 +265,32 @@ def test_a_render_traces_the_searched_mirror_where_nothing_was_drawn_next_to_its
 
 
 
-def test_gpu_search_of_a_mirrors_pieces_agrees_with_the_numpy_twin(gpu_ready):
-    from curved_reflections.engine.methods.iterative.pieces import IterativePieces, split_into_pieces
-    from curved_reflections.engine.methods.iterative.reflector_map import bake_reflector_map
+@pytest.fixture(scope="module")
+def torus_pieces(gpu_ready):
+    """A 48 x 24 torus split into pieces as Blender splits it (``blender/star_maps.py``):
+    centres chosen on 64-texel GPU maps, each piece's map baked on the GPU at 256."""
     from curved_reflections.engine.geometry.raytrace import ReflectorSet
+    from curved_reflections.engine.methods.iterative.pieces import IterativePieces, map_first_surface, split_into_pieces
     from curved_reflections.engine.scene import Reflector
+    from curved_reflections.drawing.methods.iterative_bake import bake_reflector_map_gpu
     from curved_reflections.tools.surfaces import torus
 
     ring = torus((0.0, 0.0, 0.0), 1.0, 0.35, 48, 24)
     reflector = Reflector("Ring", ring.vertices, ring.triangles, ring.normals)
-    mirror = ReflectorSet([reflector])
-    shape, maps = split_into_pieces(reflector, lambda _, centre: bake_reflector_map(mirror, centre, FACE_SIZE))
+    shape, maps = split_into_pieces(reflector, lambda mesh, centre: bake_reflector_map_gpu(mesh, centre, 256),
+                                    map_first_surface(lambda centre: bake_reflector_map_gpu(reflector, centre, 64)))
     assert shape.usable, shape.reason
-    engine = IterativePieces.of_maps(0, "Ring", maps)
+    return reflector, ReflectorSet([reflector]), IterativePieces.of_maps(0, "Ring", maps)
+
+
+def test_gpu_search_of_a_mirrors_pieces_agrees_with_the_numpy_twin(torus_pieces):
+    reflector, _, engine = torus_pieces
     view = look_at_view((0.5, -3.0, 2.5), (0, 0, 0), width=640, height=480)
-    geometry = _geometry(reflector, _cloud(3000, 12))
+    geometry = _geometry(reflector, _cloud(800, 12))
     gpu_pass = IterativePass(geometry, engine.pieces)
     gpu_pass.search(view)
     agree, close = [], []
-    for piece in engine.pieces:
+    for piece in engine.pieces[::3]:  # every piece runs the same shader; the twin is slow
         gpu = gpu_pass.read(0, piece.piece)
         twin = piece.search(view, geometry.vertices)
         agree.append((gpu.status == twin.status).mean())
@@ -295,33 +302,21 @@ def test_gpu_search_of_a_mirrors_pieces_agrees_with_the_numpy_twin(gpu_ready):
     assert min(close) >= 0.99
 
 
-def test_a_torus_searched_as_pieces_finds_the_exact_solvers_reflections(gpu_ready):
-    """Pieces baked as Blender bakes them (GPU maps of 256 texels a side, centres chosen
-    on 64-texel GPU maps): every answer the picture keeps (``spot_check.shown_answers``,
-    the fragment stage's tests) lies on an exact visible reflection but a few whose
-    reflected ray crosses the torus between the occlusion test's samples, and they find
-    99 % of the exact ones."""
-
-    from curved_reflections.engine.geometry.raytrace import ReflectorSet
-    from curved_reflections.engine.methods.iterative.pieces import IterativePieces, map_first_surface, split_into_pieces
+def test_a_torus_searched_as_pieces_finds_the_exact_solvers_reflections(torus_pieces):
+    """Pieces baked as Blender bakes them: every answer the picture keeps
+    (``spot_check.shown_answers``, the fragment stage's tests) lies on an exact visible
+    reflection but a few whose reflected ray crosses the torus between the occlusion
+    test's samples, and they find 99 % of the exact ones."""
     from curved_reflections.engine.reference.exact import solve_reflections
-    from curved_reflections.engine.scene import Reflector
     from curved_reflections.engine.spot_check import shown_answers
     from curved_reflections.drawing.frame_pass import FramePass
-    from curved_reflections.drawing.methods.iterative_bake import bake_reflector_map_gpu
     from curved_reflections.drawing.reflected_meshes import REFLECTION_COSINE
-    from curved_reflections.tools.surfaces import torus
 
-    ring = torus((0.0, 0.0, 0.0), 1.0, 0.35, 48, 24)
-    reflector = Reflector("Ring", ring.vertices, ring.triangles, ring.normals)
-    mirror = ReflectorSet([reflector])
-    shape, maps = split_into_pieces(reflector, lambda mesh, centre: bake_reflector_map_gpu(mesh, centre, 256),
-                                    map_first_surface(lambda centre: bake_reflector_map_gpu(reflector, centre, 64)))
-    assert shape.usable, shape.reason
+    reflector, mirror, engine = torus_pieces
     view = look_at_view((0.5, -3.0, 2.5), (0.0, 0.0, 0.0), width=320, height=240)
     points = np.random.default_rng(1).uniform(-2.5, 2.5, (900, 3))
     points = points[np.hypot(np.hypot(points[:, 0], points[:, 1]) - 1.0, points[:, 2]) > 0.45][:300]
-    answers = IterativePieces.of_maps(0, "Ring", maps).project(view, points).reflector_points
+    answers = engine.project(view, points).reflector_points
     shown = shown_answers(mirror, view, 0, points, answers, REFLECTION_COSINE, FramePass.hidden_fraction)
     exact = solve_reflections(mirror, view, points)
     wanted = np.flatnonzero(exact.visible)

@@ -14,7 +14,7 @@ from curved_reflections.engine.methods.iterative.star import MIN_COSINE
 from curved_reflections.engine.scene import Reflector
 from curved_reflections.tools.surfaces import torus
 
-FACE_SIZE = 48
+FACE_SIZE = 32
 
 
 def _ring(segments=32, rings=16) -> Reflector:
