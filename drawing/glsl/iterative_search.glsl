@@ -34,9 +34,9 @@
  * `reflector_maps` holds every star-shaped reflector's (or piece's) cube map, one below
  * another; `map_params` three texels per map: (O relative to the shift, largest radius),
  * (first row, face size, convex, mean radius) and (first patch, patches); `map_patches`
- * a piece's patches (engine/methods/iterative/pieces.py), three texels a row: (start
- * direction, normal-cone half-angle), (cone axis, bounding radius), (centre relative to
- * O, 0). */
+ * a piece's patches (engine/methods/iterative/pieces.py), three texels a row: (normal-
+ * cone axis, its half-angle), (bounding sphere's centre relative to O, its radius),
+ * (start direction, 0). */
 
 /* The map in use (use_map): its centre, radii, rows and size. */
 vec3 centre;
@@ -320,28 +320,27 @@ int newton(vec2 x, inout int steps, out vec3 p)
 
 /* The numpy twin's patch_admits: whether patch k of the map in use may hold the vertex's
  * reflection (the half vector between the directions from the patch to the eye and to
- * the vertex within its normals' cone, widened by the angles its bounding sphere
- * subtends from both and PATCH_MARGIN; or the vertex within NEAR_PATCH radii of it).
- * Sets chart_axis to the patch's start. */
+ * the vertex within its normals' cone, widened by PATCH_MARGIN and the angles its
+ * bounding sphere subtends from both, bounded without trigonometry; or the vertex within
+ * NEAR_PATCH radii of it). Every patch is tested for every vertex: two fetches, no
+ * transcendental function. */
 bool patch_admits(int k)
 {
-  vec4 start = texelFetch(map_patches, ivec2(0, patch_row + k), 0);
-  vec4 cone = texelFetch(map_patches, ivec2(1, patch_row + k), 0);
-  vec3 sphere = texelFetch(map_patches, ivec2(2, patch_row + k), 0).xyz;
-  vec3 to_point = vertex - sphere;
+  vec4 cone = texelFetch(map_patches, ivec2(0, patch_row + k), 0);
+  vec4 sphere = texelFetch(map_patches, ivec2(1, patch_row + k), 0);
+  vec3 to_point = vertex - sphere.xyz;
   float point_distance = max(length(to_point), 1e-30);
   vec3 toward_eye = camera.xyz;
   float eye_slack = 0.0;
   if (camera.w > 0.5) {
-    toward_eye = camera.xyz - centre - sphere;
+    toward_eye = camera.xyz - centre - sphere.xyz;
     float eye_distance = max(length(toward_eye), 1e-30);
-    eye_slack = asin(min(cone.w / eye_distance, 1.0));
+    eye_slack = sphere.w / eye_distance;
     toward_eye /= eye_distance;
   }
   vec3 half_vector = normalize(to_point / point_distance + toward_eye);
-  float reach = start.w + eye_slack + asin(min(cone.w / point_distance, 1.0)) + PATCH_MARGIN;
-  chart_axis = start.xyz;
-  return dot(half_vector, cone.xyz) >= cos(min(reach, 3.14159265)) || point_distance < NEAR_PATCH * cone.w;
+  float reach = cone.w + PATCH_MARGIN + 1.57079633 * (eye_slack + sphere.w / point_distance);
+  return 1.0 - dot(half_vector, cone.xyz) <= 0.5 * reach * reach || point_distance < NEAR_PATCH * sphere.w;
 }
 
 const vec2 starts[5] = vec2[5](vec2(0.0, 0.0), vec2(RESTART_OFFSET, 0.0), vec2(-RESTART_OFFSET, 0.0),
@@ -369,33 +368,43 @@ void main()
    * newton() once: the compiled shader holds one copy of it, not one per start (a copy
    * per start makes the search far slower on llvmpipe). */
   /* A piece of a mirror that is not star-shaped starts from every patch that admits the
-   * vertex instead (patch_admits). */
+   * vertex instead (patch_admits), found by a scan that runs no Newton step: on llvmpipe a
+   * loop whose body holds newton() costs nearly all of it per pass, lanes or not. */
   int attempts = patch_count > 0 ? patch_count : (convex != 0 ? 1 : 5);  /* one reflection at most on a convex mirror */
-  for (int attempt = resume ? -1 : 0; attempt < attempts; attempt++) {
+  int next = resume ? -1 : 0;
+  bool outside_checked = false;
+  while (next < attempts) {
+    int attempt = next;
     vec2 start = vec2(0.0);
     if (attempt < 0) {
       chart_axis = normalize(last.xyz - centre);
     }
     else {
-      if (attempt == 0) {
+      if (!outside_checked) {
         bool eye_inside = camera.w > 0.5 && inside_surface(camera.xyz - centre);
         if (eye_inside || length(vertex) <= 1e-9 * max(max_radius, 1e-30) || inside_surface(vertex)) {
           status = INSIDE;
           break;
         }
+        outside_checked = true;
         if (patch_count == 0) {
           chart_axis = sphere_guess(vertex);
         }
       }
       if (patch_count > 0) {
-        if (!patch_admits(attempt)) {
-          continue;
+        while (attempt < patch_count && !patch_admits(attempt)) {
+          attempt++;
         }
+        if (attempt >= patch_count) {
+          break;
+        }
+        chart_axis = texelFetch(map_patches, ivec2(2, patch_row + attempt), 0).xyz;
       }
       else {
         start = starts[attempt];
       }
     }
+    next = attempt + 1;
     chart_t1 = perpendicular(chart_axis);
     chart_t2 = cross(chart_axis, chart_t1);
     vec3 answer;

@@ -261,9 +261,9 @@ def piece_patches(rmap: ReflectorMap, earlier: tuple = (), size: float = 1.0, ce
     radius = np.zeros(len(used))
     np.maximum.at(radius, cell, lengths(position - centre[cell]))
     patches = np.zeros((len(used), 3, 4), np.float32)
-    patches[:, 0, :3], patches[:, 0, 3] = start, half_angle
-    patches[:, 1, :3], patches[:, 1, 3] = axis, radius
-    patches[:, 2, :3] = centre
+    patches[:, 0, :3], patches[:, 0, 3] = axis, half_angle
+    patches[:, 1, :3], patches[:, 1, 3] = centre, radius
+    patches[:, 2, :3] = start
     return patches
 
 

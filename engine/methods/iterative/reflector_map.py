@@ -50,9 +50,9 @@ class ReflectorMap:
     (the search skips its occlusion tests). ``min_radius`` and ``max_radius`` bound r.
 
     ``patches``: for a piece of a mirror that is not star-shaped (``pieces.py``), the
-    starts of its search, (K, 3, 4) float32 rows (start direction, normal-cone
-    half-angle), (normal-cone axis, radius of the patch's bounding sphere), (that
-    sphere's centre relative to O, 0); None for a star-shaped mirror (one guess).
+    starts of its search, (K, 3, 4) float32 rows (normal-cone axis, its half-angle),
+    (centre of the patch's bounding sphere relative to O, its radius), (start direction,
+    0); None for a star-shaped mirror (one guess).
     """
 
     centre: np.ndarray

@@ -362,22 +362,23 @@ def patch_admits(patch: np.ndarray, camera, perspective: bool, points: np.ndarra
     """(K,) bool: the patch (a row of ``ReflectorMap.patches``, its sphere's centre made
     absolute) may hold the reflection of ``points``: the half vector between the
     directions from the patch to the eye and to the point lies within the cone of its
-    normals, widened by the angles its bounding sphere subtends from the eye and from
-    the point (the half vector of any of its points differs by at most their sum) and
-    :data:`PATCH_MARGIN`; or the point lies within :data:`NEAR_PATCH` radii of it."""
-    axis, radius, centre = patch[1, :3], float(patch[1, 3]), patch[2, :3]
+    normals, widened by :data:`PATCH_MARGIN` and by the angles its bounding sphere of
+    radius r subtends from the eye and from the point (the half vector of any of its
+    points differs by at most their sum); or the point lies within :data:`NEAR_PATCH`
+    radii of it. With no trigonometry, as the GPU tests every patch for every vertex:
+    asin(r / d) <= pi r / (2 d), and 1 - cos x <= x^2 / 2, so the test only admits more."""
+    axis, cone, centre, radius = patch[0, :3], float(patch[0, 3]), patch[1, :3], float(patch[1, 3])
     to_point = points - centre
     point_distance = np.maximum(lengths(to_point), 1e-300)
     if perspective:
         to_eye = camera - centre
         eye_distance = max(float(np.linalg.norm(to_eye)), 1e-300)
-        eye_slack = np.arcsin(min(radius / eye_distance, 1.0))
-        to_eye = to_eye / eye_distance
+        eye_slack, to_eye = radius / eye_distance, to_eye / eye_distance
     else:
         to_eye, eye_slack = camera, 0.0
     half = normalized(to_point / point_distance[:, None] + to_eye)
-    reach = float(patch[0, 3]) + eye_slack + np.arcsin(np.minimum(radius / point_distance, 1.0)) + PATCH_MARGIN
-    return (half @ axis >= np.cos(np.minimum(reach, np.pi))) | (point_distance < NEAR_PATCH * radius)
+    reach = cone + PATCH_MARGIN + 0.5 * np.pi * (eye_slack + radius / point_distance)
+    return (1.0 - half @ axis <= 0.5 * reach * reach) | (point_distance < NEAR_PATCH * radius)
 
 
 def _patch_starts(rmap: ReflectorMap, chart: _Chart, pending: np.ndarray) -> Iterator:
@@ -387,9 +388,9 @@ def _patch_starts(rmap: ReflectorMap, chart: _Chart, pending: np.ndarray) -> Ite
     an earlier patch found)."""
     for patch in rmap.patches.astype(np.float64):
         centred = patch.copy()
-        centred[2, :3] += rmap.centre
+        centred[1, :3] += rmap.centre
         rows = pending[patch_admits(centred, chart.camera, chart.perspective, chart.points[pending])]
-        chart.aim(rows, np.broadcast_to(patch[0, :3], (len(rows), 3)))
+        chart.aim(rows, np.broadcast_to(patch[2, :3], (len(rows), 3)))
         yield rows, (0.0, 0.0)
 
 

@@ -46,7 +46,7 @@ def test_a_torus_is_covered_by_a_few_pieces_seen_from_inside(ring_pieces):
     centroids = reflector.vertices[reflector.triangles].mean(axis=1)
     reached = np.zeros(len(centroids), dtype=bool)
     for rmap in maps:
-        centres = rmap.centre + rmap.patches[:, 2, :3]
+        centres = rmap.centre + rmap.patches[:, 1, :3]
         distance = np.linalg.norm(centroids[:, None] - centres[None], axis=2)
         reached |= (distance <= 1.05 * rmap.patches[None, :, 1, 3]).any(axis=1)
     # (The spheres bound texels PATCH_STRIDE apart: a centroid between two patches may fall
