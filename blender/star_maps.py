@@ -25,7 +25,7 @@ from ..engine.methods.iterative import StarShape, check_star_shaped
 from ..engine.methods.iterative.reflector_map import bake_reflector_map
 from ..engine.methods.iterative.pieces import StarPieces, map_first_surface, split_into_pieces
 from ..engine.methods.iterative.star import verdict
-from ..drawing.methods.iterative_bake import bake_reflector_map_gpu
+from ..drawing.methods.iterative_bake import GPUMapBaker, bake_reflector_map_gpu
 from .gpu_init import gpu_ready
 
 #: Cube-map face size of the iterative search's reflector maps (texels along a side).
@@ -140,10 +140,12 @@ def piece_maps(reflector, face_size: int | None = None) -> tuple[StarPieces, lis
     star_map(reflector, face_size)
     entry = _cached(reflector, face_size)
     if entry.pieces is None:
-        choose = None
-        if gpu_ready():
-            choose = map_first_surface(lambda centre: bake_reflector_map_gpu(reflector, centre, CHOOSE_FACE_SIZE))
-        shape, maps = split_into_pieces(reflector, lambda mirror, centre: _bake(mirror, centre, face_size), choose)
+        if gpu_ready():  # one upload of the mirror for every candidate's and piece's map
+            baker = GPUMapBaker(reflector)
+            choose = map_first_surface(lambda centre: baker.bake(centre, CHOOSE_FACE_SIZE))
+            shape, maps = split_into_pieces(reflector, lambda _, centre: baker.bake(centre, face_size), choose)
+        else:
+            shape, maps = split_into_pieces(reflector, lambda mirror, centre: _bake(mirror, centre, face_size))
         # Kept where the entry's shape was first captured, as its map is.
         pieces = _pieces_moved((shape, maps), entry.origin - reflector.vertices[0])
         _maps[-1] = entry = dataclasses.replace(entry, pieces=pieces)

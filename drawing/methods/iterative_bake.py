@@ -59,12 +59,13 @@ _VERTEX = """
  * distance w = sign p[axis] along the axis, k = 1 + 2 / S; the near plane at w = near. */
 void main()
 {
-  vec3 q = axis == 0 ? position.yzx : (axis == 1 ? position.zxy : position.xyz);
+  vec3 relative = position - offset;
+  vec3 q = axis == 0 ? relative.yzx : (axis == 1 ? relative.zxy : relative.xyz);
   float w = axis_sign * q.z;
   gl_Position = vec4(q.x * inverse_extent, q.y * inverse_extent, w - 2.0 * near, w);
-  position_interp = position;
+  position_interp = relative;
   normal_interp = normal;
-  plane_interp = plane;
+  plane_interp = vec4(plane.xyz, plane.w - dot(plane.xyz, offset));
 }
 """
 
@@ -108,6 +109,7 @@ def _bake_shader():
     info.push_constant('FLOAT', "near")
     info.push_constant('FLOAT', "inverse_far")
     info.push_constant('FLOAT', "grazing")
+    info.push_constant('VEC3', "offset")
     info.vertex_in(0, 'VEC3', "position")
     info.vertex_in(1, 'VEC3', "normal")
     info.vertex_in(2, 'VEC4', "plane")
@@ -134,12 +136,12 @@ def _face_normals(vertices, triangles) -> np.ndarray:
     return face / np.maximum(np.linalg.norm(face, axis=1), 1e-300)[:, None]
 
 
-def _triangle_batch(vertices, triangles, normals, centre, face_normals):
-    """An un-indexed TRIS batch: positions relative to O, vertex normals, and each
-    triangle's plane (geometric normal, offset from O) on its three corners."""
+def _triangle_batch(vertices, triangles, normals, origin, face_normals):
+    """An un-indexed TRIS batch: positions relative to ``origin``, vertex normals, and
+    each triangle's plane (geometric normal, offset from ``origin``) on its three corners."""
     corners = triangles.reshape(-1)
-    relative = vertices[corners] - centre
-    offsets = np.einsum("tk,tk->t", face_normals, vertices[triangles[:, 0]] - centre)
+    relative = vertices[corners] - origin
+    offsets = np.einsum("tk,tk->t", face_normals, vertices[triangles[:, 0]] - origin)
     plane = np.repeat(np.c_[face_normals, offsets], 3, axis=0)
     buffer = vertex_buffer({
         "position": (relative.astype(np.float32), 'F32', 'FLOAT'),
@@ -152,7 +154,7 @@ def _triangle_batch(vertices, triangles, normals, centre, face_normals):
 def _draw_faces(framebuffer, shader, batch, uniforms, depth_test: str, clear_depth: float) -> None:
     """Clear the atlas target and draw the six face cameras into their rows; the
     viewport, depth and blend state are restored afterwards."""
-    size, near, inverse_far = uniforms
+    size, near, inverse_far, offset = uniforms
     side = size + 2
     saved = (gpu.state.viewport_get(), gpu.state.depth_test_get(), gpu.state.depth_mask_get(),
              gpu.state.blend_get())
@@ -171,6 +173,7 @@ def _draw_faces(framebuffer, shader, batch, uniforms, depth_test: str, clear_dep
             shader.uniform_float("near", near)
             shader.uniform_float("inverse_far", inverse_far)
             shader.uniform_float("grazing", GRAZING_COSINE)
+            shader.uniform_float("offset", offset)
             for face in range(6):
                 gpu.state.viewport_set(0, face * side, side, side)
                 gpu.state.scissor_set(0, face * side, side, side)
@@ -186,41 +189,60 @@ def _draw_faces(framebuffer, shader, batch, uniforms, depth_test: str, clear_dep
             gpu.state.blend_set(saved[3])
 
 
+class GPUMapBaker:
+    """One reflector's triangles on the GPU, relative to its bounding box's centre, for
+    maps around any number of centres (a candidate centre, a piece's) with one upload:
+    each bake moves the face cameras by a push constant (the centre's offset from the
+    box's, small beside the reflector, so float32 keeps the positions as relative
+    ones would)."""
+
+    def __init__(self, reflector):
+        self.vertices, self.triangles, normals = _mesh_arrays(reflector)
+        lo, hi = self.vertices.min(axis=0), self.vertices.max(axis=0)
+        self.origin = 0.5 * (lo + hi)
+        self.scale = float(max(np.linalg.norm(hi - lo), 1e-12))
+        self.batch = _triangle_batch(self.vertices, self.triangles, normals, self.origin,
+                                     _face_normals(self.vertices, self.triangles))
+
+    def bake(self, centre, face_size: int) -> MapBake:
+        """The ``MapBake`` of ``bake_reflector_map(ReflectorSet([reflector]), centre, face_size)``,
+        rasterised (the GPU must be ready: ``blender.gpu_init.ensure_gpu``)."""
+        size = int(face_size)
+        side = size + 2
+        centre = np.asarray(centre, dtype=np.float64)
+        offsets = self.vertices - centre
+        far = 2.0 * float(np.sqrt(np.max(np.einsum("vk,vk->v", offsets, offsets)))) + self.scale
+        shader = _bake_shader()
+        map_target = gpu.types.GPUTexture((side, 6 * side), format='RGBA32F')
+        cosine_target = gpu.types.GPUTexture((side, 6 * side), format='RGBA32F')
+        depth_target = gpu.types.GPUTexture((side, 6 * side), format='DEPTH_COMPONENT32F')
+        framebuffer = gpu.types.GPUFrameBuffer(depth_slot=depth_target, color_slots=(map_target, cosine_target))
+        try:
+            uniforms = (size, NEAR_FRACTION * self.scale, 1.0 / far, tuple(float(c) for c in centre - self.origin))
+            _draw_faces(framebuffer, shader, self.batch, uniforms, 'LESS', 1.0)
+            texels = read_texture(map_target, side, 6 * side).copy()
+            cosine = read_texture(cosine_target, side, 6 * side)[..., 0].copy()
+            _draw_faces(framebuffer, shader, self.batch, uniforms, 'GREATER', 0.0)
+            last = read_texture(map_target, side, 6 * side)[..., 0].copy()
+        finally:
+            # No explicit free for textures and framebuffers: dropping the references releases them.
+            del framebuffer, map_target, cosine_target, depth_target
+
+        radius = texels[..., 0]
+        hit = radius > 0
+        again = hit & (last.astype(np.float64) - radius > CROSSING_TOLERANCE * self.scale)
+        reflector_map = ReflectorMap(
+            centre=centre, face_size=size, texels=texels,
+            convex=is_convex(self.vertices, self.triangles, centre),
+            min_radius=float(radius[hit].min()) if hit.any() else 0.0,
+            max_radius=float(radius[hit].max()) if hit.any() else 0.0,
+        )
+        return MapBake(reflector_map, int(again.sum()), float(cosine[hit].min()) if hit.any() else 0.0,
+                       float(hit.mean()), np.where(hit, cosine, 0.0).astype(np.float32))
+
+
 def bake_reflector_map_gpu(reflector, centre, face_size: int) -> MapBake:
     """The ``MapBake`` of ``bake_reflector_map(ReflectorSet([reflector]), centre, face_size)``,
-    rasterised on the GPU (which must be ready: ``blender.gpu_init.ensure_gpu``)."""
-    size = int(face_size)
-    side = size + 2
-    centre = np.asarray(centre, dtype=np.float64)
-    vertices, triangles, normals = _mesh_arrays(reflector)
-    scale = float(max(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)), 1e-12))
-    far = 2.0 * float(np.sqrt(np.max(np.einsum("vk,vk->v", vertices - centre, vertices - centre)))) + scale
-
-    shader = _bake_shader()
-    batch = _triangle_batch(vertices, triangles, normals, centre, _face_normals(vertices, triangles))
-    map_target = gpu.types.GPUTexture((side, 6 * side), format='RGBA32F')
-    cosine_target = gpu.types.GPUTexture((side, 6 * side), format='RGBA32F')
-    depth_target = gpu.types.GPUTexture((side, 6 * side), format='DEPTH_COMPONENT32F')
-    framebuffer = gpu.types.GPUFrameBuffer(depth_slot=depth_target, color_slots=(map_target, cosine_target))
-    try:
-        uniforms = (size, NEAR_FRACTION * scale, 1.0 / far)
-        _draw_faces(framebuffer, shader, batch, uniforms, 'LESS', 1.0)
-        texels = read_texture(map_target, side, 6 * side).copy()
-        cosine = read_texture(cosine_target, side, 6 * side)[..., 0].copy()
-        _draw_faces(framebuffer, shader, batch, uniforms, 'GREATER', 0.0)
-        last = read_texture(map_target, side, 6 * side)[..., 0].copy()
-    finally:
-        # No explicit free for textures and framebuffers: dropping the references releases them.
-        del framebuffer, map_target, cosine_target, depth_target, batch
-
-    radius = texels[..., 0]
-    hit = radius > 0
-    again = hit & (last.astype(np.float64) - radius > CROSSING_TOLERANCE * scale)
-    reflector_map = ReflectorMap(
-        centre=centre, face_size=size, texels=texels,
-        convex=is_convex(vertices, triangles, centre),
-        min_radius=float(radius[hit].min()) if hit.any() else 0.0,
-        max_radius=float(radius[hit].max()) if hit.any() else 0.0,
-    )
-    return MapBake(reflector_map, int(again.sum()), float(cosine[hit].min()) if hit.any() else 0.0,
-                   float(hit.mean()), np.where(hit, cosine, 0.0).astype(np.float32))
+    rasterised on the GPU (which must be ready: ``blender.gpu_init.ensure_gpu``); for
+    several centres of one reflector, one :class:`GPUMapBaker`."""
+    return GPUMapBaker(reflector).bake(centre, face_size)

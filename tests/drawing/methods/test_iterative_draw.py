@@ -272,13 +272,14 @@ def torus_pieces(gpu_ready):
     from curved_reflections.engine.geometry.raytrace import ReflectorSet
     from curved_reflections.engine.methods.iterative.pieces import IterativePieces, map_first_surface, split_into_pieces
     from curved_reflections.engine.scene import Reflector
-    from curved_reflections.drawing.methods.iterative_bake import bake_reflector_map_gpu
+    from curved_reflections.drawing.methods.iterative_bake import GPUMapBaker
     from curved_reflections.tools.surfaces import torus
 
     ring = torus((0.0, 0.0, 0.0), 1.0, 0.35, 48, 24)
     reflector = Reflector("Ring", ring.vertices, ring.triangles, ring.normals)
-    shape, maps = split_into_pieces(reflector, lambda mesh, centre: bake_reflector_map_gpu(mesh, centre, 256),
-                                    map_first_surface(lambda centre: bake_reflector_map_gpu(reflector, centre, 64)))
+    baker = GPUMapBaker(reflector)
+    shape, maps = split_into_pieces(reflector, lambda _, centre: baker.bake(centre, 256),
+                                    map_first_surface(lambda centre: baker.bake(centre, 64)))
     assert shape.usable, shape.reason
     return reflector, ReflectorSet([reflector]), IterativePieces.of_maps(0, "Ring", maps)
 
