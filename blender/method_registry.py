@@ -25,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from ..engine.methods.iterative import IterativeReflector
-from ..engine.methods.iterative.pieces import IterativePieces, searched_methods
+from ..engine.methods.iterative.pieces import IterativePieces, open_refusal, searched_methods
 from ..engine.methods.perturbation import AnalyticSurface, PerturbationReflector
 from ..drawing.methods.iterative_draw import IterativePass
 from ..drawing.methods.morph_pass import MorphPass
@@ -149,6 +149,8 @@ def _offer_iterative(inputs: PlanInputs, index: int, reflector) -> Offer:
     its camera in the background)."""
     shape, reflector_map = star_maps.star_map(reflector)
     if reflector_map is None and (shape.crossings or shape.hidden_share > 0):
+        if not star_maps.closed_surface(reflector):
+            return refuse(open_refusal(reflector.name))
         if not inputs.final_render and inputs.mode != ITERATIVE:
             return refuse(f"{shape.reason}; searched as pieces in Render Image and in Iterative mode (in the live "
                           "view every redraw would search each piece)")
@@ -207,7 +209,8 @@ def _offer_runtime(inputs: PlanInputs, index: int, reflector) -> Offer:
 def register_builtin() -> None:
     """The four papers' methods, in the order Auto tries them."""
     register(Method(ITERATIVE, "Iterative (GPU)", "Find every vertex's reflection on the GPU each frame (Roger & "
-                    "Holzschuch 2006); star-shaped reflectors, closed ones as pieces seen from inside; open ones use Runtime", 'SHADERFX',
+                    "Holzschuch 2006); star-shaped reflectors, closed ones as pieces seen from inside; open ones "
+                    "use Runtime", 'SHADERFX',
                     _offer_iterative, _iterative_pass, in_auto=True, summary="searched on the GPU every frame"))
     register(Method(RUNTIME, "Runtime", "Rebuild the sample-based camera for every new view (SBC paper IV)",
                     'CAMERA_DATA', _offer_runtime))

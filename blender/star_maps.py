@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..engine.geometry.closed_surfaces import winding
 from ..engine.geometry.raytrace import ReflectorSet
 from ..engine.methods.iterative import StarShape, check_star_shaped
 from ..engine.methods.iterative.reflector_map import bake_reflector_map
@@ -64,6 +65,8 @@ class _Entry:
     reflector_map: object
     #: (StarPieces, piece maps) once :func:`piece_maps` asked for them.
     pieces: tuple | None = None
+    #: Whether the mesh closes a solid, once :func:`closed_surface` asked.
+    closed: bool | None = None
 
     def matches(self, reflector, topology: str, face_size: int) -> bool:
         if (self.topology, self.face_size) != (topology, face_size):
@@ -129,6 +132,17 @@ def star_map(reflector, face_size: int | None = None):
                         reflector.vertices[0].copy(), shape, rmap))
     del _maps[:-CACHED_MAPS]
     return shape, rmap
+
+
+def closed_surface(reflector, face_size: int | None = None) -> bool:
+    """Whether the reflector closes a solid (``closed_surfaces.winding``), cached with its
+    verdict: only a closed mirror is split into pieces."""
+    face_size = FACE_SIZE if face_size is None else int(face_size)
+    star_map(reflector, face_size)
+    entry = _cached(reflector, face_size)
+    if entry.closed is None:
+        _maps[-1] = entry = dataclasses.replace(entry, closed=winding(reflector.vertices, reflector.triangles) != 0)
+    return entry.closed
 
 
 def piece_maps(reflector, face_size: int | None = None) -> tuple[StarPieces, list]:

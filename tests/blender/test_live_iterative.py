@@ -157,6 +157,9 @@ def test_star_shaped_check_of_blender_primitives(fig3):
     for name in ("Suzanne", "Ring"):
         assert chosen[name].method == method_plan.RUNTIME
         assert chosen[name].reason.startswith(f"{name!r} is not star-shaped")
+    # Suzanne is open (no pieces seen from inside); the torus is closed (pieces in Render Image).
+    assert "not a closed surface" in chosen["Suzanne"].reason
+    assert "searched as pieces in Render Image" in chosen["Ring"].reason
 
 
 def test_a_new_capture_of_the_reflectors_makes_older_cameras_stale(fig3):

@@ -150,8 +150,8 @@ def test_auto_searches_a_torus_as_pieces_and_draws_what_runtime_draws(fig3):
     from curved_reflections.blender.render_image import render_scene
 
     fig3.render.resolution_x, fig3.render.resolution_y = 128, 96
-    bpy.ops.mesh.primitive_torus_add(major_radius=0.8, minor_radius=0.3, location=(2.2, 2.2, 0.6),
-                                     rotation=(0.6, 0.0, 0.3))
+    bpy.ops.mesh.primitive_torus_add(major_radius=0.8, minor_radius=0.3, major_segments=32, minor_segments=12,
+                                     location=(2.2, 2.2, 0.6), rotation=(0.6, 0.0, 0.3))
     bpy.ops.object.shade_smooth()  # a faceted torus is a set of flat mirrors, not searched
     torus = bpy.context.active_object
     torus.name = "Ring"

@@ -29,8 +29,9 @@ drawn): Newton starts from every patch of the surface the piece adds to the earl
 ones whose normals can reflect the point toward the eye (:func:`piece_patches`,
 :func:`piece_map`; ``search.patch_admits``), and runs on the piece's whole map. The
 reflected meshes' law-of-reflection and hidden-point tests keep each image on the pixels
-where the mirror really shows it, so pieces may overlap. A point seen twice within one
-piece (a fold inside it) is found once.
+where the mirror really shows it, so pieces may overlap. A piece finds one image of a
+point; where it holds two (a fold), the other piece that starts there
+(:data:`STARTS_PER_POINT`) may find the second.
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ from ...geometry.closed_surfaces import winding
 from ...geometry.raytrace import ReflectorSet
 from ...geometry.vectors import dot, lengths, normalized
 from ...projection import Projection
-from ...scene import Reflector, triangle_areas
+from ...scene import Reflector
 from ...view import View
 from .reflector_map import MapBake, ReflectorMap, texel_directions
 from .search import IterativeReflector
@@ -137,6 +138,11 @@ def ray_first_surface(reflector_set: ReflectorSet) -> Callable:
     return first_surface
 
 
+def open_refusal(name: str) -> str:
+    """Why a mirror that is not star-shaped and not closed is not split into pieces."""
+    return f"{name!r} is not star-shaped and not a closed surface, so it cannot be split into pieces seen from inside"
+
+
 def map_first_surface(bake: Callable) -> Callable:
     """``first_surface`` as :func:`ray_first_surface`, read from a map baked around the
     centre (``bake(centre) -> MapBake``, e.g. on the GPU: one draw instead of a ray per
@@ -165,10 +171,8 @@ def choose_centres(reflector: Reflector, reflector_set: ReflectorSet | None = No
     ``first_surface``: as :func:`ray_first_surface` (the default), e.g. from GPU maps."""
     reflector_set = reflector_set or ReflectorSet([reflector])
     turn = winding(reflector.vertices, reflector.triangles)
-    none = np.zeros((0, 3))
     if turn == 0:
-        return StarPieces(reflector.name, none, 1.0, f"{reflector.name!r} is not star-shaped and not a closed "
-                          "surface, so it cannot be split into pieces seen from inside")
+        return StarPieces(reflector.name, np.zeros((0, 3)), 1.0, open_refusal(reflector.name))
     centroids, normals, areas = _outward_faces(reflector, turn)
     rng = np.random.default_rng(seed)
     candidates = interior_centres(reflector_set, centroids, normals, CANDIDATE_CENTRES, rng)

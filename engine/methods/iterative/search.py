@@ -20,7 +20,9 @@ direction d from O, and the search runs in two dimensions:
    at most :data:`TRUST_RADIUS` and halved until |F| falls), and where a start fails on
    a non-convex mirror, start again from four points around the guess
    (:data:`RESTARTS`; a convex mirror has one reflection of a point at most, so there a
-   failed start means none). On a bumpy sphere the secant triangle cycles between the
+   failed start means none). A piece of a mirror that is not star-shaped (:mod:`.pieces`)
+   starts instead from each of its patches whose normal cone can hold the point's
+   reflection (:func:`patch_admits`), until one finds it. On a bumpy sphere the secant triangle cycles between the
    roots of neighbouring bumps and misses many of the exact solver's reflections; Newton
    from one start misses fewer, and with the restarts few.
 3. **Stop** (3.2, the geometric bound): when a step moves P by less than
