@@ -203,6 +203,14 @@ class GPUMapBaker:
         self.scale = float(max(np.linalg.norm(hi - lo), 1e-12))
         self.batch = _triangle_batch(self.vertices, self.triangles, normals, self.origin,
                                      _face_normals(self.vertices, self.triangles))
+        self._convex = None
+
+    def _is_convex(self, centre) -> bool:
+        """``is_convex`` around the first centre baked (every centre baked lies inside the
+        body, where the answer is the same; it sorts every edge, too slow per map)."""
+        if self._convex is None:
+            self._convex = is_convex(self.vertices, self.triangles, centre)
+        return self._convex
 
     def bake(self, centre, face_size: int) -> MapBake:
         """The ``MapBake`` of ``bake_reflector_map(ReflectorSet([reflector]), centre, face_size)``,
@@ -233,7 +241,7 @@ class GPUMapBaker:
         again = hit & (last.astype(np.float64) - radius > CROSSING_TOLERANCE * self.scale)
         reflector_map = ReflectorMap(
             centre=centre, face_size=size, texels=texels,
-            convex=is_convex(self.vertices, self.triangles, centre),
+            convex=self._is_convex(centre),
             min_radius=float(radius[hit].min()) if hit.any() else 0.0,
             max_radius=float(radius[hit].max()) if hit.any() else 0.0,
         )
