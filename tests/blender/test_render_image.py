@@ -149,7 +149,7 @@ def test_auto_searches_a_torus_as_pieces_and_draws_what_runtime_draws(fig3):
     Runtime's on nearly all of the torus's pixels."""
     from curved_reflections.blender.render_image import render_scene
 
-    fig3.render.resolution_x, fig3.render.resolution_y = 128, 96
+    fig3.render.resolution_x, fig3.render.resolution_y = 96, 72
     bpy.ops.mesh.primitive_torus_add(major_radius=0.8, minor_radius=0.3, major_segments=32, minor_segments=12,
                                      location=(2.2, 2.2, 0.6), rotation=(0.6, 0.0, 0.3))
     bpy.ops.object.shade_smooth()  # a faceted torus is a set of flat mirrors, not searched
@@ -167,7 +167,7 @@ def test_auto_searches_a_torus_as_pieces_and_draws_what_runtime_draws(fig3):
     camera = render_scene(fig3, depsgraph)
     assert camera.stats["methods"]["Ring"] == "RUNTIME"
     differing = np.abs(searched.image[..., :3] - camera.image[..., :3]).max(axis=2) > 0.05
-    assert differing.mean() < 0.003  # 0.1 % measured
+    assert differing.mean() < 0.003  # 0.07 % measured
 
 
 def test_second_orders_of_searched_mirrors_get_a_camera_without_their_first_orders(empty_scene, registered,
