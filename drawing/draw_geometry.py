@@ -37,7 +37,7 @@ class DrawGeometry:
 
     shift: np.ndarray  # (3,) float64
     #: The pre-pass's parts (:class:`PrepassPart`), diffuse meshes first: its vertex
-    #: arrays (``prepass_positions`` ...) are made from them when asked for.
+    #: arrays are made from them when asked for (:meth:`prepass_arrays`).
     prepass_parts: tuple
     prepass_triangles: np.ndarray  # (Tp, 3) int32
     vertices: np.ndarray  # (V, 3) float64, reflected meshes
@@ -57,34 +57,11 @@ class DrawGeometry:
     stats: dict = field(default_factory=dict)
 
     @property
-    def prepass_positions(self) -> np.ndarray:
-        """(P, 3) float32, relative to ``shift``."""
-        return self._prepass("positions")
-
-    @property
-    def prepass_colors(self) -> np.ndarray:
-        """(P, 4) float32 linear RGBA."""
-        return self._prepass("colors")
-
-    @property
-    def prepass_labels(self) -> np.ndarray:
-        """(P, 4) float32 (id, reflectivity, Fresnel F0 or -1, attenuation distance)."""
-        return self._prepass("labels")
-
-    @property
-    def prepass_normals(self) -> np.ndarray:
-        """(P, 4) float32 (normal, lit) of diffuse meshes, (normal, sealed) of reflectors."""
-        return self._prepass("normals")
-
-    @property
-    def prepass_uvs(self) -> np.ndarray:
-        """(P, 2) float32."""
-        return self._prepass("uvs")
-
-    @property
-    def prepass_mirror_vertices(self) -> int:
-        """The first pre-pass vertex of a reflector (every one after it is one's)."""
-        return sum(part.size for part in self.prepass_parts if part.label[0] < 0.5)
+    def prepass_mirror_triangles(self) -> np.ndarray:
+        """The pre-pass triangles of the reflectors (their parts come after every diffuse
+        mesh's, so their vertices are the last ones)."""
+        first = sum(part.size for part in self.prepass_parts if part.label[0] < 0.5)
+        return self.prepass_triangles[self.prepass_triangles[:, 0] >= first]
 
     def prepass_arrays(self) -> dict:
         """{positions, colors, labels, normals, uvs}: the pre-pass's vertex arrays, made

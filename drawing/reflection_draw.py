@@ -224,7 +224,7 @@ class ReflectionRenderer:
             batches["prepass_buffer"] = buffer
             # Their box: of the vertices their triangles use (not a (3T, 3) gather of corners).
             used = np.zeros(len(positions), dtype=bool)
-            used[g.prepass_triangles[g.prepass_triangles[:, 0] >= g.prepass_mirror_vertices].reshape(-1)] = True
+            used[g.prepass_mirror_triangles.reshape(-1)] = True
             batches["mirror_box"] = box_corners(positions[used])
         batches["images"] = [data_texture(image, image.shape[1]) for image in g.images]
         batches["no_image"] = data_texture(np.ones((1, 4)))
@@ -237,7 +237,7 @@ class ReflectionRenderer:
         """The pre-pass's reflectors alone, as (image, batch) pairs (made on first use)."""
         batches, g = self._batches, self.geometry
         if "prepass_mirrors" not in batches:
-            mirrors = g.prepass_triangles[g.prepass_triangles[:, 0] >= g.prepass_mirror_vertices]
+            mirrors = g.prepass_mirror_triangles
             batches["prepass_mirrors"] = [(-1, gpu.types.GPUBatch(
                 type='TRIS', buf=batches["prepass_buffer"], elem=gpu.types.GPUIndexBuf(type='TRIS', seq=mirrors)))
             ] if len(mirrors) else []

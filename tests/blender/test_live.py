@@ -143,7 +143,7 @@ def test_redraws_without_changes_run_no_projection(fig3):
     assert (state.counts["draws"], state.counts["projections"]) == (4, 1)
     assert state.renderer.counts == {"projections": 1, "frames": 4}
     assert state.stats["projection_ms"] > 0
-    labels = state.renderer.geometry.prepass_labels
+    labels = state.renderer.geometry.prepass_arrays()["labels"]
     on_mirror = labels[:, 0] == 1.0
     np.testing.assert_allclose(labels[on_mirror][:, 2:], [[0.2, 3.0]] * int(on_mirror.sum()), atol=1e-6)
 
