@@ -103,43 +103,39 @@ def _topology(reflector) -> str:
     return digest.hexdigest()
 
 
-def _cached(reflector, face_size: int):
-    """The cached entry of the reflector's shape, made most recently used, or None."""
+def _entry(reflector, face_size: int | None) -> _Entry:
+    """The cache entry of the reflector's shape, made most recently used: found, or made
+    (the star-shape verdict, and where star-shaped the full-resolution map, whose rays
+    are checked again: a thin fold, a small hole)."""
+    face_size = FACE_SIZE if face_size is None else int(face_size)
     topology = _topology(reflector)
     for index, entry in enumerate(_maps):
         if entry.matches(reflector, topology, face_size):
             _maps.append(_maps.pop(index))
             return entry
-    return None
-
-
-def star_map(reflector, face_size: int | None = None):
-    """(StarShape, ReflectorMap or None) of one reflector, cached by its shape: a mirror
-    moved without turning reuses its verdict and its map, moved with it
-    (``face_size``: default :data:`FACE_SIZE`)."""
-    face_size = FACE_SIZE if face_size is None else int(face_size)
-    entry = _cached(reflector, face_size)
-    if entry is not None:
-        return entry.moved_to(reflector)
-    topology = _topology(reflector)
     shape = check_star_shaped(reflector)
     rmap = None
-    if shape.star_shaped:  # the full-resolution rays are checked again (a thin fold, a small hole)
+    if shape.star_shaped:
         bake = _bake(reflector, shape.centre, face_size)
         shape = verdict(reflector.name, shape.centre, bake, shape.hidden_share)
         rmap = bake.reflector_map if shape.star_shaped else None
     _maps.append(_Entry(topology, face_size, reflector.vertices - reflector.vertices[0], reflector.normals.copy(),
                         reflector.vertices[0].copy(), shape, rmap))
     del _maps[:-CACHED_MAPS]
-    return shape, rmap
+    return _maps[-1]
+
+
+def star_map(reflector, face_size: int | None = None):
+    """(StarShape, ReflectorMap or None) of one reflector, cached by its shape: a mirror
+    moved without turning reuses its verdict and its map, moved with it
+    (``face_size``: default :data:`FACE_SIZE`)."""
+    return _entry(reflector, face_size).moved_to(reflector)
 
 
 def closed_surface(reflector, face_size: int | None = None) -> bool:
     """Whether the reflector closes a solid (``closed_surfaces.winding``), cached with its
     verdict: only a closed mirror is split into pieces."""
-    face_size = FACE_SIZE if face_size is None else int(face_size)
-    star_map(reflector, face_size)
-    entry = _cached(reflector, face_size)
+    entry = _entry(reflector, face_size)
     if entry.closed is None:
         _maps[-1] = entry = dataclasses.replace(entry, closed=winding(reflector.vertices, reflector.triangles) != 0)
     return entry.closed
@@ -150,10 +146,9 @@ def piece_maps(reflector, face_size: int | None = None) -> tuple[StarPieces, lis
     star-shaped (:func:`star_map` says so first), cached with its verdict: the pieces'
     centres are chosen from maps baked on the GPU when it is ready (else rays on the
     CPU), and each piece's map baked as :func:`star_map`'s."""
-    face_size = FACE_SIZE if face_size is None else int(face_size)
-    star_map(reflector, face_size)
-    entry = _cached(reflector, face_size)
+    entry = _entry(reflector, face_size)
     if entry.pieces is None:
+        face_size = entry.face_size
         if gpu_ready():  # one upload of the mirror for every candidate's and piece's map
             baker = GPUMapBaker(reflector)
             choose = map_first_surface(lambda centre: baker.bake(centre, CHOOSE_FACE_SIZE))

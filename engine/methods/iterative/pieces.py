@@ -37,12 +37,11 @@ point; where it holds two (a fold), the other piece that starts there
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
-from ...geometry.closed_surfaces import winding
 from ...geometry.raytrace import ReflectorSet
 from ...geometry.vectors import dot, lengths, normalized
 from ...projection import Projection
@@ -170,7 +169,7 @@ def choose_centres(reflector: Reflector, reflector_set: ReflectorSet | None = No
     centre seeing most of the area not yet seen first), or the reason there are none.
     ``first_surface``: as :func:`ray_first_surface` (the default), e.g. from GPU maps."""
     reflector_set = reflector_set or ReflectorSet([reflector])
-    turn = winding(reflector.vertices, reflector.triangles)
+    turn = reflector_set.windings[0]
     if turn == 0:
         return StarPieces(reflector.name, np.zeros((0, 3)), 1.0, open_refusal(reflector.name))
     centroids, normals, areas = _outward_faces(reflector, turn)
@@ -323,7 +322,7 @@ class IterativePieces:
     index: int
     name: str
     pieces: list  # IterativeReflector per piece, each with the others' maps as occluders
-    shape: StarPieces = field(default=None)
+    shape: StarPieces | None = None
 
     @classmethod
     def of_maps(cls, index: int, name: str, maps: list, accuracy_px: float = 1.0, shape=None) -> "IterativePieces":
