@@ -35,10 +35,10 @@ belongs to one view; V: projection runs per draw on the GPU):
   sheets out. A view outside a reflector's grid draws it in runtime mode, and the panel
   says so. Work a pass does off the drawing thread (morphing nodes around the eye) runs
   on a worker between redraws (``FramePass.prefetch``).
-- **traced pixels** (worker thread, once a camera's own view is drawn): the mirror pixels
-  of the cells where the camera marks its projection unreliable are ray traced
-  (``drawing/traced_pixels.py``) and drawn over its reflections in that view only:
-  a crumpled mirror shows a point many times, and the camera places some images only.
+- **traced pixels** (worker thread, :mod:`.live_traces`): once a camera's own view is
+  drawn, the mirror pixels of the cells where it marks its projection unreliable; once
+  any view rests, the band Render Image traces (reflections' edges, mirrors'
+  silhouettes). They are ray traced and drawn over the reflections of that view only.
 - **draw** (``SpaceView3D`` POST_VIEW handler, every redraw): the reflections of the
   region's view over the reflectors (``reflectors_only``), with the last camera built
   for that region: the cached reflected triangles placed by the current view's
@@ -71,12 +71,10 @@ from ..engine.methods.morphing.morphing import ViewOutsideGrid
 from ..engine.scene import scene_bounds
 from ..engine.view import View
 from ..drawing.methods.sbc_gpu import SBCTextures
-from ..drawing.reflection_draw import MAX_TRACED_FRACTION
-from ..drawing.traced_pixels import trace_doubtful
-from . import live_check, live_status, live_workers, method_plan, method_registry, morph_bake
+from . import live_check, live_status, live_traces, live_workers, method_plan, method_registry, morph_bake
 from .capture import capture_scene, view_from_camera
 from .frame_pipeline import settings_of
-from .live_state import CameraBuild, LiveScene, Preparing, Tracing, ViewCamera
+from .live_state import CameraBuild, LiveScene, Preparing, ViewCamera
 from .scene_status import status_of
 
 #: Seconds after the last view change before its camera is rebuilt.
@@ -385,10 +383,12 @@ def process(scene, depsgraph, wait: bool = False, now: float | None = None) -> b
         state.preparing = None
         state.report('ERROR', f"Preparing the reflectors failed: {type(error).__name__}: {error}")
     passes = () if state.renderer is None else state.renderer.passes
-    traced, tracing = _traces_landed(state)
+    traced, tracing = live_traces.traces_landed(state)
     if _collect(state) or any(frame_pass.prefetched for frame_pass in passes) or traced:
         tag_redraw()
     checking, landed = live_check.check_when_settled(state, scene, now, wait)
+    if live_traces.want_band_when_settled(state, now):
+        landed = tracing = True  # the next draw picks the band's pixels
     if landed:
         tag_redraw()
     if checking and not wait:
@@ -462,53 +462,21 @@ def _projection_source(state: LiveScene, camera: ViewCamera | None):
     return camera.source
 
 
-def _traced(state: LiveScene, camera: ViewCamera | None, view: View):
-    """The pixels of ``camera``'s unreliable cells, traced, when ``view`` is the camera's
-    own and they are ready for this renderer (its meshes); else None, and unless they
-    are being traced, they start on the worker (``traced_pixels.trace_doubtful``): a
-    crumpled mirror's reflections come out exact once the view rests."""
-    if camera is None or camera.sbc is None or not view.same_as(camera.view):
-        return None
-    if camera.tracing is None or camera.tracing.renderer is not state.renderer:
-        renderer, sbc, max_order, world = state.renderer, camera.sbc, camera.settings.max_order, state.world
-        # The renderer's tracer is made on the worker too (a tree of the diffuse meshes).
-        future = live_workers.tracer().submit(
-            lambda: trace_doubtful(renderer.band_tracer, sbc, max_order, world, MAX_TRACED_FRACTION))
-        camera.tracing = Tracing(renderer, future)
-        ensure_timer()  # it redraws once they land (_traces_landed)
-    future = camera.tracing.future
-    if not future.done():
-        return None
-    try:
-        return future.result()
-    except Exception as error:  # noqa: BLE001 - the camera's own answers keep drawing
-        camera.tracing = Tracing(state.renderer, Future(), redrawn=True)
-        camera.tracing.future.set_result(None)
-        state.report('WARNING', f"Tracing the reflections failed: {type(error).__name__}: {error}")
-        return None
-
-
-def _traces_landed(state: LiveScene) -> tuple[bool, bool]:
-    """(whether some camera's traced pixels landed since the last call: redraw, whether
-    some are still being traced: keep polling)."""
-    landed = pending = False
-    for camera in state.cameras.values():
-        if camera.tracing is not None and not camera.tracing.redrawn:
-            if camera.tracing.future.done():
-                camera.tracing.redrawn = landed = True
-            else:
-                pending = True
-    return landed, pending
-
-
 def _draw_with(state: LiveScene, view: View, camera: ViewCamera | None) -> bool:
     """One draw of ``view`` with ``camera``'s projection (``None``: the per-frame passes
     alone); then the morphing nodes around the eye are prefetched."""
     start = time.perf_counter()
     projections = state.renderer.counts["projections"]  # a projection made or adopted now counts
     sbc = None if camera is None else camera.sbc
-    state.renderer.draw(view, _projection_source(state, camera), state.world, reflectors_only=True, camera=sbc,
-                        accuracy_px=state.settings.accuracy_px, traced=_traced(state, camera, view))
+    source = _projection_source(state, camera)
+    camera_traced, tracing = live_traces.camera_traced(state, camera, view)
+    band = live_traces.band_traced(state, view, sbc)
+    resting = live_traces.resting(state, view, sbc)
+    targets = state.renderer.draw(view, source, state.world, reflectors_only=True, camera=sbc,
+                                  accuracy_px=state.settings.accuracy_px, exact=resting,
+                                  traced=camera_traced if band is None else band)
+    if live_traces.start_band(state, view, targets, sbc, source) or tracing:
+        ensure_timer()  # it redraws once they land
     if state.last_view is None or not state.last_view[0].same_as(view) or state.last_view[2] is not sbc:
         state.last_view = (view, time.monotonic(), sbc, False)
         ensure_timer()  # the timer checks it once it settles

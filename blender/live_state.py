@@ -40,7 +40,7 @@ class ViewCamera:
     #: the GPU): made on the worker with the camera, adopted on the first draw.
     projected: tuple | None = None
     #: The pixels of the camera's unreliable cells, traced on a worker once the camera's
-    #: own view is drawn (``live._traced``).
+    #: own view is drawn (``live_traces.camera_traced``).
     tracing: Tracing | None = None
 
     def first_orders_drawn(self, per_frame_reflectors) -> bool:
@@ -103,6 +103,8 @@ class LiveScene(FramePipeline):
     last_view: tuple | None = None
     #: (the check of the last view running on a worker, the renderer it measures).
     checking: tuple | None = None
+    #: The band of the last resting view, traced (``live_traces.BandTrace``).
+    band: object = None
 
     def report(self, level: str, message: str) -> None:
         self.level, self.status = level, message

@@ -55,8 +55,9 @@ class Frame:
     """What every pass of one frame consumes (made by ``ReflectionRenderer.draw_passes``).
 
     ``view``: the view drawn; ``warm``: a viewport frame, which may start from the last
-    frame's answers and snaps its reflected vertices within ``accuracy_px``; a render is
-    cold, so that its image depends on its view alone and is placed exactly.
+    frame's answers and, with ``snap``, snaps its reflected vertices within its Accuracy
+    (the camera's ``accuracy_px``, each pass's own); a render is cold, so that its image
+    depends on its view alone and is placed exactly, and so is a resting viewport's.
     ``source``: the projection source of a sample-based camera (``None``: no camera this
     frame) and ``camera`` the camera itself when known. ``targets``
     (``frame_targets.FrameTargets``) hold the pre-pass; ``world_to_clip`` places world
@@ -71,6 +72,7 @@ class Frame:
     images: object
     warm: bool = False
     accuracy_px: float | None = None
+    snap: bool = True
     source: object = None
     camera: object = None
     claimed: frozenset = frozenset()
@@ -159,7 +161,7 @@ class FramePass:
         a warm frame's vertices snap to a grid within the pass's Accuracy
         (``reflected_meshes.SNAP_SHARE``); a render places them exactly, and tests the law
         of reflection at :attr:`rendered_reflection_cosine`."""
-        view, accuracy = frame.view, self.accuracy_px if frame.warm else None
+        view, accuracy = frame.view, self.accuracy_px if frame.warm and frame.snap else None
         return {"inverse_diameter": 1.0 / self.geometry.diameter, "order_range": FIRST_ORDER_RANGE,
                 "camera": camera_position(view, self.geometry.shift), "hidden_fraction": self.hidden_fraction,
                 "reflection_cosine": self.reflection_cosine if frame.warm else self.rendered_reflection_cosine,

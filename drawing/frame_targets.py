@@ -31,6 +31,9 @@ class FrameTargets:
         zero = np.zeros(4, np.float32)
         self.no_trace = gpu.types.GPUTexture((1, 1), format='RGBA32F', data=gpu.types.Buffer('FLOAT', 4, zero))
         self.traced = None  # RGBA32F of the traced band of the last frame, or None
+        #: (x, y, width, height): the pixels the last frame cleared and drew (an overlay's
+        #: scissor); None: all of them. The rest hold an older frame's values.
+        self.box = None
         self._output = None
 
     def fits(self, width: int, height: int) -> bool:
@@ -43,3 +46,12 @@ class FrameTargets:
             texture = gpu.types.GPUTexture((self.width, self.height), format='RGBA32F')
             self._output = (texture, gpu.types.GPUFrameBuffer(color_slots=(texture,)))
         return self._output
+
+    def outside_box(self) -> np.ndarray:
+        """(height, width) bool: the pixels the last frame left alone (:attr:`box`)."""
+        outside = np.zeros((self.height, self.width), dtype=bool)
+        if self.box is not None:
+            x, y, width, height = self.box
+            outside[:] = True
+            outside[y:y + height, x:x + width] = False
+        return outside

@@ -274,7 +274,7 @@ class ReflectionRenderer:
 
     def draw(self, view, textures, world_color=(0.0, 0.0, 0.0, 1.0), reflectors_only: bool = False,
              fill_radius: int | None = None, camera=None, accuracy_px: float | None = None,
-             traced=None) -> FrameTargets:
+             traced=None, exact: bool = False) -> FrameTargets:
         """Pre-pass and reflections of ``view`` into the frame targets
         (:meth:`draw_passes`), then the composite into the framebuffer bound by the
         caller (:meth:`composite`). What a viewport draw handler calls, with the
@@ -288,7 +288,8 @@ class ReflectionRenderer:
         composite's cheap fill of the band along a footprint's edge (``None``: the
         camera's down-sampling), where :meth:`render` traces instead; ``traced``
         (:class:`.traced_pixels.TracedPixels`) are drawn over the reflections where
-        they were traced for this very view.
+        they were traced for this very view. ``exact``: nothing snaps (a resting view's
+        draw, placed as a render places it).
 
         ``reflectors_only`` (the viewport overlay): the pre-pass draws the reflectors
         alone, and the composite is depth-tested against the bound framebuffer's depth,
@@ -302,7 +303,7 @@ class ReflectionRenderer:
         # The composite reads the targets up to fill_radius beyond its rectangle.
         scissor = pixel_box(rect, targets.width, targets.height, fill_radius + 1) if reflectors_only else None
         targets = self.draw_passes(view, textures, camera, warm=True, mirrors_only=reflectors_only,
-                                   accuracy_px=accuracy_px, scissor=scissor)
+                                   accuracy_px=accuracy_px, scissor=scissor, snap=not exact)
         targets.traced = traced.texture() if traced is not None and traced.view.same_as(view) else None
         x, y, width, height = gpu.state.viewport_get()
         # A viewport of the view's size is drawn into where it is; otherwise from (0, 0).
@@ -322,7 +323,7 @@ class ReflectionRenderer:
 
     def draw_passes(self, view, textures, camera=None, warm: bool = False,
                     mirrors_only: bool = False, accuracy_px: float | None = None,
-                    scissor: tuple | None = None) -> FrameTargets:
+                    scissor: tuple | None = None, snap: bool = True) -> FrameTargets:
         """The pre-pass and every pass's reflections of ``view`` into its frame targets.
 
         One :class:`.frame_pass.Frame` goes to every pass in order. The camera's pass
@@ -332,9 +333,9 @@ class ReflectionRenderer:
         other than the camera's (the viewport moved, a new camera is being built) draws
         their first reflector points where ``view`` sees them. The per-frame passes
         answer for ``view`` itself; ``warm`` starts each vertex from its last answer and
-        snaps the passes' reflected vertices to a grid within their Accuracy (the
-        viewport's :meth:`draw` does; a render does not, so that its image depends on its
-        view alone and is placed exactly).
+        snaps the passes' reflected vertices to a grid within their Accuracy unless not
+        ``snap`` (the viewport's :meth:`draw` does; a render does not, so that its image
+        depends on its view alone and is placed exactly).
         ``mirrors_only``: the pre-pass draws the reflectors alone, not the diffuse meshes
         (a viewport overlay, whose composite the scene's own depth hides where something
         stands in front of a mirror); their pixels then keep the reflectors' labels
@@ -351,7 +352,8 @@ class ReflectionRenderer:
         batches, g = self._batches, self.geometry
         targets = self.targets(view.width, view.height)
         width, height = targets.width, targets.height
-        frame = Frame(view, targets, view_projection(view, g.shift), self._image, warm, accuracy_px, textures, camera)
+        frame = Frame(view, targets, view_projection(view, g.shift), self._image, warm, accuracy_px, snap,
+                      textures, camera)
         with saved_state():
             gpu.state.blend_set('NONE')
             gpu.state.face_culling_set('NONE')  # mirrors are two-sided; reflections flip winding
@@ -383,7 +385,7 @@ class ReflectionRenderer:
                 for frame_pass in self.passes:
                     frame_pass.draw(frame)
         self.counts["frames"] += 1
-        targets.traced = None
+        targets.traced, targets.box = None, scissor
         return targets
 
     def answered(self) -> dict:
@@ -448,10 +450,27 @@ class ReflectionRenderer:
 
     def trace_band(self, view, targets: FrameTargets, max_order: int, world_color, radius: int,
                    edges_of_drawn: bool = False, ray_map=None, camera=None, holes_of=()) -> int:
-        """Trace the reflector pixels along each footprint's edge that got no reflection
-        (:mod:`..engine.geometry.band_trace`): reads the pre-pass ids and the reflection coverage back,
-        traces those pixels on the CPU and uploads their colours for the composite. With
-        the camera's ``ray_map``, also those between ray-map cells of different histories
+        """Trace the pixels :meth:`band_selection` picks on the CPU and upload their
+        colours for the composite (``targets.traced``; it stays None where the selection
+        is not a band). Returns how many pixels were traced."""
+        selection = self.band_selection(view, targets, max_order, radius, edges_of_drawn, ray_map, camera, holes_of)
+        if selection is None:
+            targets.traced = None
+            return 0
+        pixels, surface = selection
+        rgba = traced_rgba(self.band_tracer, view, pixels, max_order, _rgba(world_color), surface)
+        targets.traced = traced_texture(targets.width, targets.height, pixels, rgba)
+        return int(len(pixels))
+
+    def band_selection(self, view, targets: FrameTargets, max_order: int, radius: int, edges_of_drawn: bool = False,
+                       ray_map=None, camera=None, holes_of=()) -> tuple | None:
+        """The reflector pixels of the last frame drawn into ``targets`` that are traced
+        (:mod:`..engine.geometry.band_trace`), and where the pre-pass saw the mirror on
+        each: ((K, 2) int x, y, (K, 3) world points), or None. Reads the pre-pass ids and
+        the reflection coverage back (GPU, main thread); the tracing itself is numpy.
+
+        The band along each footprint's edge that got no reflection. With the camera's
+        ``ray_map``, also the pixels between ray-map cells of different histories
         (:func:`band_trace.history_boundary`: the edge of a second-order reflection inside
         a footprint). With the ``camera`` itself, also every pixel in cells where its
         projection is unreliable (:func:`band_trace.unreliable_cells`), drawn ones only
@@ -459,12 +478,12 @@ class ReflectionRenderer:
         reflector indices (drawn from morphing grids) every pixel of which without a
         drawn reflection is traced: where the blend has no answer, but also where the
         mirror shows the world, so it costs many rays.
-        More than :data:`MAX_TRACED_FRACTION` of the image is not a band: then nothing is
-        traced (``stats["untraced_pixels"]``, and ``targets.traced`` stays None: the
-        composite fills), except for ``holes_of``, which the caller asked for.
-        Returns how many pixels were traced."""
+        More than :data:`MAX_TRACED_FRACTION` of the image is not a band: then None
+        (``stats["untraced_pixels"]``: the composite fills), except for ``holes_of``,
+        which the caller asked for. Pixels outside the frame's box (an overlay's
+        scissor, :attr:`FrameTargets.box`) hold an older frame and are never picked."""
         size = (targets.width, targets.height)
-        labels = read_texture(targets.prepass_labels, *size)[..., 0]
+        labels = np.where(targets.outside_box(), 0.0, read_texture(targets.prepass_labels, *size)[..., 0])
         searched = _showing(labels, self._reflectors_of(lambda p: p.searched_reflectors))
         drawn = read_texture(targets.reflection_colors, *size)[..., 3] > 0.5
         # The searched reflectors' pixels are traced by their own rule, below.
@@ -506,14 +525,11 @@ class ReflectionRenderer:
             # Not a band but most of the mirror (the near plane cutting it, the eye on it):
             # tracing it would cost many frames' time; the composite fills it instead.
             self.stats["untraced_pixels"] = int(len(pixels))
-            targets.traced = None
-            return 0
+            return None
         if len(pixels) + len(doubtful) <= MAX_TRACED_FRACTION * targets.width * targets.height:
             pixels = np.concatenate([pixels, doubtful])  # distinct: band pixels have no reflection
         surface = view.window_points(pixels + 0.5, read_depth(targets.prepass, *size)[pixels[:, 1], pixels[:, 0]])
-        rgba = traced_rgba(self.band_tracer, view, pixels, max_order, _rgba(world_color), surface)
-        targets.traced = traced_texture(*size, pixels, rgba)
-        return int(len(pixels))
+        return pixels, surface
 
     def render(self, view, camera=None, world_color=(0.0, 0.0, 0.0, 1.0), trace: bool = True,
                fill_radius: int | None = None, trace_edges: bool = False, trace_gaps: bool = False,

@@ -30,8 +30,25 @@ void main()
   /* A reflector point farther from the eye than the mirror surface the pre-pass saw at
    * this pixel is hidden by the mirror itself (a bump, a handle before the body): the
    * per-frame methods answer a vertex without tracing the eye's ray, so the image of a
-   * point reflected behind the front surface would be drawn on it. */
-  if (eye_depth(mirror_point_interp, camera) > label.w + hidden_tolerance) {
+   * point reflected behind the front surface would be drawn on it. Where the live view
+   * snapped the vertices (`snap_grid`), a fragment lies up to 0.7 of a cell from where its
+   * point projects, and beside a silhouette the mirror's depth changes by much of its size
+   * within that: the surface is then read at the four pixels around the point's own
+   * projection too, the farthest of them of this mirror (a ball's front is convex seen
+   * from the eye: none of them nearer than the surface at the point). */
+  float surface_depth = label.w;
+  if (snap_grid.x > 0.0) {
+    vec4 clip = view_projection * vec4(mirror_point_interp, 1.0);
+    ivec2 size = textureSize(prepass_labels, 0);
+    ivec2 corner = ivec2(floor((clip.xy / clip.w * 0.5 + 0.5) * vec2(size) - 0.5));
+    for (int i = 0; i < 4; i++) {
+      vec4 around = texelFetch(prepass_labels, clamp(corner + ivec2(i & 1, i >> 1), ivec2(0), size - 1), 0);
+      if (abs(around.x - reflector_interp) <= 0.5) {
+        surface_depth = max(surface_depth, around.w);
+      }
+    }
+  }
+  if (eye_depth(mirror_point_interp, camera) > surface_depth + hidden_tolerance) {
     discard;
   }
 #endif

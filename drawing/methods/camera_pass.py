@@ -85,7 +85,7 @@ class CameraPass(FramePass):
             return
         view, targets = frame.view, frame.targets
         size = (float(targets.width), float(targets.height))
-        snap = SNAP_SHARE * frame.accuracy_px if frame.warm and frame.accuracy_px else 0.0
+        snap = SNAP_SHARE * frame.accuracy_px if frame.warm and frame.snap and frame.accuracy_px else 0.0
         shader = draw_shaders.shader("reflected")
         shader.bind()
         shader.uniform_float("view_projection", frame.world_to_clip)

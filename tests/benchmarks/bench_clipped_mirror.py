@@ -134,22 +134,15 @@ def measure_view(scene, ball, name: str, folder: Path, samples: int, eevee: bool
         rows.append(row(f"ours, {mode.title()}: Render Image", rr.read_png(path), seconds, methods))
         view = view_from_camera(scene.camera, scene, depsgraph)
         start = time.perf_counter()
-        state = live.start(scene, depsgraph, {live.CAMERA_KEY: view}, wait=True)
+        live.start(scene, depsgraph, {live.CAMERA_KEY: view}, wait=True)
         image = bench_real_mirrors.live_overlay(scene, view, WHITE)
         seconds = time.perf_counter() - start
         write_png(folder / f"{slug}_live_{mode.lower()}.png", image)
         rows.append(row(f"ours, {mode.title()}: live view", image, seconds, "start and first draw"))
-        camera = state.cameras.get(live.CAMERA_KEY)
-        tracing = None if camera is None else camera.tracing
-        if tracing is not None:  # the camera's doubtful cells traced on the worker once the view rests
-            start = time.perf_counter()
-            traced = tracing.future.result()
-            live.process(scene, depsgraph)
-            image = bench_real_mirrors.live_overlay(scene, view, WHITE)
-            seconds = time.perf_counter() - start
-            write_png(folder / f"{slug}_live_rested_{mode.lower()}.png", image)
-            rows.append(row(f"ours, {mode.title()}: live view at rest", image, seconds,
-                            f"{0 if traced is None else len(traced.pixels):,} px traced on the worker"))
+        image, seconds, traced = bench_real_mirrors.live_rested(scene, view, WHITE)
+        write_png(folder / f"{slug}_live_rested_{mode.lower()}.png", image)
+        rows.append(row(f"ours, {mode.title()}: live view at rest", image, seconds,
+                        f"{traced:,} px traced on the worker"))
         live.clear(scene)
     ball.curved_reflections.mode = 'AUTO'
     return rows
@@ -179,7 +172,7 @@ def report(result: dict, command: str) -> str:
         f"whose label differs from Cycles' (`tools/metrics.py`; the palette is the scene's colours plus black, "
         f"*{NO_LIGHT}*). Black: the share of the ball's pixels that show black. Ours: Render Image "
         "(`render_image.render_scene`, the second frame, timed) and the live view (`live.start`, then its draw "
-        "of the view over nothing, timed together; *at rest*: drawn again once its worker traced the camera's doubtful cells, `traced_pixels.trace_doubtful`, timed from the first draw), in Auto mode (the iterative search draws the ball) and in "
+        "of the view over nothing, timed together; *at rest*: drawn again once its worker traced the camera's doubtful cells and the resting view's band, `live_traces`, timed from the first draw), in Auto mode (the iterative search draws the ball) and in "
         f"Runtime mode (a sample-based camera). Target: <= {100 * TARGET:g} % on each view.",
         "",
         "| view | where the camera is | mirror px | Cycles black |",

@@ -157,10 +157,30 @@ def live_overlay(scene, view, background=(0.0, 0.0, 0.0, 1.0)):
     return image
 
 
+def live_rested(scene, view, background=(0.0, 0.0, 0.0, 1.0)) -> tuple:
+    """(image, seconds, traced px): the live view's draw of ``view`` (as
+    :func:`live_overlay`) once it has rested: its camera's doubtful cells traced, then
+    the resting view's band (``live_traces``), each on the worker; timed from here."""
+    import bpy
+
+    from curved_reflections.blender import accuracy, live, live_traces
+
+    state = live.state_of(scene)
+    start = time.perf_counter()
+    for _ in range(2):  # the camera's own trace lands, then the band is asked for and picked
+        live_traces.wait_for_traces(state)
+        live.process(scene, bpy.context.evaluated_depsgraph_get(), now=time.monotonic() + accuracy.SETTLE_SECONDS)
+        live_overlay(scene, view, background)
+    traced = live_traces.wait_for_traces(state)
+    live.process(scene, bpy.context.evaluated_depsgraph_get())
+    image = live_overlay(scene, view, background)
+    return image, time.perf_counter() - start, traced
+
+
 def viewport(scene, cycles_image, mask, palette) -> dict:
     """The live view of the scene camera (a Bake): label disagreement with Cycles of its
-    first draw (the camera's answers) and of the draw after the worker traced the
-    camera's unreliable cells (``traced_pixels.trace_doubtful``), and that trace's time."""
+    first draw (the camera's answers) and once it has rested (:func:`live_rested`), and
+    that wait's time."""
     import bpy
 
     from curved_reflections.tools import metrics
@@ -169,18 +189,13 @@ def viewport(scene, cycles_image, mask, palette) -> dict:
 
     depsgraph = bpy.context.evaluated_depsgraph_get()
     view = view_from_camera(scene.camera, scene, depsgraph)
-    state = live.start(scene, depsgraph, {live.CAMERA_KEY: view}, wait=True)
-    camera = state.cameras[live.CAMERA_KEY]
+    live.start(scene, depsgraph, {live.CAMERA_KEY: view}, wait=True)
     first = live_overlay(scene, view)
-    start = time.perf_counter()
-    traced = camera.tracing.future.result() if camera.tracing is not None else None
-    seconds = time.perf_counter() - start
-    live.process(scene, depsgraph)
-    rested = live_overlay(scene, view)
+    rested, seconds, traced = live_rested(scene, view)
     live.clear(scene)
     return {"viewport": metrics.label_disagreement(first, cycles_image, mask, palette),
             "viewport_traced": metrics.label_disagreement(rested, cycles_image, mask, palette),
-            "viewport_trace_seconds": seconds, "viewport_traced_px": 0 if traced is None else len(traced.pixels)}
+            "viewport_trace_seconds": seconds, "viewport_traced_px": traced}
 
 
 def _strip(folder: Path, kinds, path: Path) -> Path:

@@ -9,10 +9,12 @@ session step is the picture of the same final state built afresh: the live view 
 by a state started anew, or a Render Image of the state saved and opened anew.
 """
 
+import time
+
 import bpy
 import numpy as np
 
-from curved_reflections.blender import live
+from curved_reflections.blender import accuracy, live, live_traces
 from curved_reflections.blender.capture import view_from_camera
 from curved_reflections.blender.render_image import render_scene
 
@@ -69,19 +71,26 @@ def draw(scene=None, key=live.CAMERA_KEY, view=None):
 
 
 def settle(scene=None, key=live.CAMERA_KEY, view=None):
-    """Draw, let the live view build what the draw asked for (in this thread) and trace
-    what its camera doubts (on the worker), draw again: the picture the viewport shows
-    once it has caught up."""
+    """Draw, let the live view build what the draw asked for (in this thread), trace what
+    its camera doubts and, once the view rests, its band (on the worker), draw again: the
+    picture the viewport shows once it has caught up."""
     scene = scene or bpy.context.scene
     draw(scene, key, view)
-    live.process(scene, bpy.context.evaluated_depsgraph_get(), wait=True)
-    draw(scene, key, view)
-    state = live.state_of(scene)
-    for camera in ([] if state is None else state.cameras.values()):
-        if camera.tracing is not None:
-            camera.tracing.future.result(timeout=60)
-    live.process(scene, bpy.context.evaluated_depsgraph_get(), wait=True)
+    _catch_up(scene)
+    for _ in range(2):  # the camera's view drawn (its trace starts), then the band asked for
+        draw(scene, key, view)
+        _catch_up(scene)
     return draw(scene, key, view)
+
+
+def _catch_up(scene):
+    """What the live view's timer does once the view has rested, with the worker's
+    traces waited for."""
+    state = live.state_of(scene)
+    if state is not None:
+        live_traces.wait_for_traces(state)
+    live.process(scene, bpy.context.evaluated_depsgraph_get(), wait=True,
+                 now=time.monotonic() + accuracy.SETTLE_SECONDS)
 
 
 def fresh(scene=None, key=live.CAMERA_KEY, view=None):

@@ -268,3 +268,40 @@ def test_auto_passes_over_a_method_measured_outside_the_accuracy_until_refresh(f
     monkeypatch.undo()
     live.refresh(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
     assert method_plan.last_choices(fig3)[0].method == method_plan.ITERATIVE
+
+
+def test_a_resting_view_is_drawn_as_render_image_draws_it(fig3):
+    """Once the view has rested (``accuracy.SETTLE_SECONDS``), its next draw places the
+    searched reflections exactly (a moving view's are snapped within the Accuracy) and
+    picks the pixels Render Image traces (the ball's rim), which are traced on the
+    worker and drawn over that view once they land: the resting viewport shows Render
+    Image's picture. Another view is drawn snapped, without them."""
+    import time
+
+    from curved_reflections.blender import accuracy, live_traces
+    from curved_reflections.drawing.gpu_data import read_texture
+
+    assert bpy.ops.curved_reflections.start_live() == {'FINISHED'}
+    state = live.state_of(fig3)
+    view, depsgraph = _camera_view(fig3), bpy.context.evaluated_depsgraph_get()
+    _, moving = _draw(fig3, view)
+    live.process(fig3, depsgraph, now=time.monotonic() + accuracy.SETTLE_SECONDS)
+    assert state.band is not None and state.band.future is None  # asked for: the next draw picks it
+    _draw(fig3, view)
+    traced = state.band.future.result(timeout=60)
+    assert 30 < len(traced.pixels) < 0.2 * WIDTH * HEIGHT
+    live.process(fig3, depsgraph)
+    _, rested = _draw(fig3, view)
+    rendered = state.renderer.render(view, None, state.world)
+    # The ball's pixels as the render's pre-pass saw them (not those the cube hides).
+    mirror = read_texture(state.renderer.targets(WIDTH, HEIGHT).prepass_labels, WIDTH, HEIGHT)[..., 0] == 1.0
+    assert mirror.sum() > 1000
+
+    def differing(image) -> float:
+        return float((np.abs(image[..., :3] - rendered[..., :3]).max(axis=2) > 0.05)[mirror].mean())
+
+    assert differing(rested) < 0.01 < differing(moving)
+    moved = look_at_view(np.array(view.eye) + (0.3, 0.0, 0.0), (0.0, 0.0, 0.9), fov_y_deg=30.0, width=WIDTH,
+                         height=HEIGHT)
+    _draw(fig3, moved)
+    assert not live_traces.resting(state, moved, None) and live_traces.band_traced(state, moved, None) is None

@@ -265,6 +265,42 @@ def test_a_render_traces_the_searched_mirror_where_nothing_was_drawn_next_to_its
 
 
 
+def test_snapped_reflections_beside_a_silhouette_are_not_taken_for_hidden_ones(gpu_ready):
+    """The live view snaps reflected vertices within the Accuracy
+    (``reflected_meshes.SNAP_SHARE``). Beside the ball's silhouette the mirror's depth
+    changes by much of its size within a pixel, so a fragment a fraction of a pixel from
+    where its point projects must not be taken for a point the mirror hides (the
+    hidden-point test reads the surface around the point's own pixel as well). A
+    finely split floor seen reflected down to the ball's rim: every pixel the exact draw
+    fills, but those on the edge of what it fills, the snapped draw fills too (without
+    that reading, 156 such pixels were left to the world's colour in cracks)."""
+    from curved_reflections.drawing.gpu_data import read_texture
+    from curved_reflections.drawing.reflection_draw import ReflectionRenderer
+
+    reflector = icosphere((0.0, 0.0, 1.0), 1.0, 4)
+    n = 121
+    u, v = np.meshgrid(np.linspace(-6.0, 6.0, n), np.linspace(-6.0, 6.0, n))
+    index = np.arange(n * n).reshape(n, n)
+    quads = np.stack([index[:-1, :-1], index[:-1, 1:], index[1:, 1:], index[1:, :-1]], axis=-1).reshape(-1, 4)
+    floor = DiffuseMesh("floor", np.c_[u.ravel(), v.ravel(), np.full(u.size, -0.05)],
+                        np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]]), np.ones((n * n, 4)))
+    shape, bake = prepare_iterative(reflector, 64)
+    method = IterativeReflector(0, reflector.name, bake.reflector_map, 1.0)
+    renderer = ReflectionRenderer([reflector], [floor], edge_fraction=None, passes=[IterativePass.factory([method])])
+    view = look_at_view((0.0, -6.0, 1.6), (0.0, 0.0, 0.9), fov_y_deg=30.0, width=160, height=120)
+
+    def drawn(snap: bool) -> np.ndarray:
+        targets = renderer.draw_passes(view, None, warm=True, snap=snap)
+        return read_texture(targets.reflection_colors, view.width, view.height)[..., 3] > 0.5
+
+    exact, snapped = drawn(False), drawn(True)
+    padded = np.pad(exact, 1)
+    inner = exact & np.all([padded[1 + i:view.height + 1 + i, 1 + j:view.width + 1 + j]
+                            for i in (-1, 0, 1) for j in (-1, 0, 1)], axis=0)
+    assert inner.sum() > 1000
+    assert (inner & ~snapped).sum() == 0
+
+
 @pytest.fixture(scope="module")
 def torus_pieces(gpu_ready):
     """A 48 x 24 torus split into pieces as Blender splits it (``blender/star_maps.py``):
