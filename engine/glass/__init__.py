@@ -1,0 +1,13 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Glass: refraction at the interfaces of glass solids and sheets (issue 47).
+
+``snell`` holds the optics of one interface (Snell's law, total internal reflection,
+dielectric Fresnel); ``paths`` follows rays through a scene's glass, interface after
+interface. The exact reference solver of refracted images is
+``engine/reference/exact_refraction.py``.
+"""
+
+from .paths import GlassPaths, GlassSet, Glass
+from .snell import fresnel_dielectric, fresnel_schlick, refract
+
+__all__ = ["Glass", "GlassPaths", "GlassSet", "fresnel_dielectric", "fresnel_schlick", "refract"]

@@ -1,0 +1,129 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Rays followed through a scene's glass, interface after interface.
+
+Every glass object of a scene is traced together through one
+:class:`~..geometry.raytrace.ReflectorSet` (the mirrors' surface model: flat
+triangles, interpolated normals, two-sided). A ray starts in air; each time it meets a
+glass surface it crosses into the other medium and bends (``snell.refract``), or, past
+the critical angle, is reflected and stays where it is (total internal reflection). A
+closed solid is entered and left, so it refracts twice; an open sheet (a water surface)
+is crossed once and the ray goes on in its medium. The media are tracked by which glass
+a ray is in, one at a time: a ray meeting one glass while inside another (glass in
+glass, or two solids that overlap) crosses from the first's index into the second's and
+is marked ``nested``, for the panel to say so.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import SceneInputError
+from ..geometry.raytrace import ReflectorSet
+from ..scene import Reflector
+from .snell import refract
+
+#: Interfaces a path may cross before it is given up as trapped (total internal
+#: reflections bouncing inside a solid count too).
+MAX_INTERFACES = 8
+#: A new segment starts this share of the glass's size (``ReflectorSet.scale``) along its direction from the
+#: interface, so that it does not meet the surface it leaves.
+LEAVE_FRACTION = 1e-9
+
+
+@dataclass(frozen=True)
+class Glass:
+    """A glass object: its surface, as a mirror's (``scene.Reflector``), and its index of
+    refraction (vacuum 1; window glass about 1.5, water 1.33)."""
+
+    surface: Reflector
+    ior: float
+
+    def __post_init__(self):
+        ior = float(self.ior)
+        if not np.isfinite(ior) or ior <= 0.0:
+            raise SceneInputError(self.surface.name, f"has an index of refraction of {self.ior}: it must be above 0")
+
+    @property
+    def name(self) -> str:
+        return self.surface.name
+
+
+@dataclass(frozen=True)
+class GlassPaths:
+    """R rays followed through the glass: where each last segment starts and goes, and
+    the path behind it."""
+
+    origin: np.ndarray  # (R, 3) start of the last segment (the eye's origin where no glass was met)
+    direction: np.ndarray  # (R, 3) unit direction of the last segment
+    medium: np.ndarray  # (R,) glass the last segment runs in, -1 for air
+    history: np.ndarray  # (R, MAX_INTERFACES) glass met at each interface, -1 past the last
+    total_reflections: np.ndarray  # (R,) interfaces at which the ray was reflected, not refracted
+    first_position: np.ndarray  # (R, 3) the first glass point met (NaN where none)
+    first_normal: np.ndarray  # (R, 3) its interpolated normal, facing the ray's origin
+    first_triangle: np.ndarray  # (R,) its triangle in ``GlassSet.surfaces``, -1 where none
+    trapped: np.ndarray  # (R,) still meeting glass after MAX_INTERFACES interfaces
+    nested: np.ndarray  # (R,) met one glass while inside another
+
+    @property
+    def interfaces(self) -> np.ndarray:
+        """(R,) how many interfaces each ray crossed or was reflected at."""
+        return (self.history >= 0).sum(axis=1)
+
+    @property
+    def through_glass(self) -> np.ndarray:
+        """(R,) rays that met glass and came out of it into a medium they go on in."""
+        return (self.first_triangle >= 0) & ~self.trapped
+
+
+class GlassSet:
+    """Every glass object of a scene, traced together."""
+
+    def __init__(self, glasses: list[Glass]):
+        if not glasses:
+            raise SceneInputError("scene", "has no glass: mark at least one object as a refractor")
+        self.glasses = list(glasses)
+        self.surfaces = ReflectorSet([glass.surface for glass in self.glasses])
+        self.iors = np.array([float(glass.ior) for glass in self.glasses])
+        self._leave = LEAVE_FRACTION * self.surfaces.scale
+
+    def trace(self, origins, directions, max_interfaces: int = MAX_INTERFACES) -> GlassPaths:
+        """Follow rays (``origins``, unit ``directions``, in air) through the glass."""
+        origin = np.array(origins, dtype=np.float64, copy=True)
+        direction = np.array(directions, dtype=np.float64, copy=True)
+        n = len(origin)
+        medium = np.full(n, -1, dtype=np.int64)
+        history = np.full((n, max_interfaces), -1, dtype=np.int64)
+        total = np.zeros(n, dtype=np.int64)
+        nested = np.zeros(n, dtype=bool)
+        first_position = np.full((n, 3), np.nan)
+        first_normal = np.full((n, 3), np.nan)
+        first_triangle = np.full(n, -1, dtype=np.int64)
+        active = np.arange(n)
+        for step in range(max_interfaces):
+            hits = self.surfaces.intersect(origin[active], direction[active])
+            active, hit = active[hits.hit], np.flatnonzero(hits.hit)
+            if len(active) == 0:
+                break
+            glass = hits.reflector[hit]
+            if step == 0:
+                first_position[active] = hits.position[hit]
+                first_normal[active] = hits.normal[hit]
+                first_triangle[active] = hits.triangle[hit]
+            inside = medium[active]
+            nested[active] |= (inside >= 0) & (inside != glass)
+            leaving = inside == glass
+            n_from = np.where(inside >= 0, self.iors[np.maximum(inside, 0)], 1.0)
+            n_to = np.where(leaving, 1.0, self.iors[glass])
+            bent, reflected = refract(direction[active], hits.normal[hit], n_from / n_to)
+            history[active, step] = glass
+            total[active] += reflected
+            medium[active] = np.where(reflected, inside, np.where(leaving, -1, glass))
+            direction[active] = bent
+            origin[active] = hits.position[hit] + self._leave * bent
+        trapped = np.zeros(n, dtype=bool)
+        if len(active):
+            trapped[active] = self.surfaces.intersect(origin[active], direction[active]).hit
+        return GlassPaths(origin, direction, medium, history, total, first_position, first_normal, first_triangle,
+                          trapped, nested)
