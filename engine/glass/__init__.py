@@ -3,7 +3,8 @@
 
 ``snell`` holds the optics of one interface (Snell's law, total internal reflection,
 dielectric Fresnel); ``paths`` follows rays through a scene's glass, interface after
-interface. The exact reference solver of refracted images is
+interface; ``glass_camera`` builds sample-based cameras on the refracted rays (SBC
+paper VII). The exact reference solver of refracted images is
 ``engine/reference/exact_refraction.py``.
 """
 

@@ -182,11 +182,14 @@ def reflect_primary_hits(reflector_set, view, bounds, downsample, max_order, hit
         first_point, first_depth = first_point[more], first_depth[more]
         history = np.concatenate([history[more], nxt.reflector[more, None]], axis=1)
         pieces = np.concatenate([pieces[more], reflector_set.piece[nxt.triangle[more], None]], axis=1)
-    return _assemble(view, downsample, columns, rows, cells, rays)
+    return assemble_ray_map(view, downsample, columns, rows, cells, rays)
 
 
-def _assemble(view, downsample, columns, rows, cells, rays) -> RayMap:
-    """Concatenate the rays of every order; number the histories, lower orders first."""
+def assemble_ray_map(view, downsample, columns, rows, cells, rays) -> RayMap:
+    """Concatenate the rays of every order; number the histories, lower orders first.
+    ``rays``: per order, (ray-map cell indices, order, (R, order) histories, first points,
+    first depths, tails, directions, head distances, tail triangles, blocked,
+    (R, order) surface histories); the refracted ray map (``engine/glass``) ends here too."""
     histories, group = _number_histories([r[2] for r in rays])
     surfaces, surface = _number_histories([r[10] for r in rays])
 

@@ -69,3 +69,26 @@ def test_through_a_glass_ball_every_image_lies_on_its_traced_path_and_a_finer_gr
     assert (found.count_per_point(len(points)) > 0).sum() >= 15
     finer = solve_refractions(glass, view, points, stride=1.0)
     assert np.array_equal(finer.count_per_point(len(points)), found.count_per_point(len(points)))
+
+
+def test_a_sample_based_camera_on_refracted_rays_places_the_exact_images():
+    """The SBC paper's refraction (section VII, Fig. 20b): a camera built on the ray map
+    of refracted rays (one ray per 2 x 2 pixels) projects points behind a glass ball
+    within half a pixel of where the exact solver finds them (measured: p99 0.16 px);
+    it answers 94 % of the exact images (the rest lie between its sheets and in the
+    last cells of the ball's footprint, which a render traces)."""
+    from curved_reflections.engine.glass.glass_camera import build_glass_camera
+
+    glass = GlassSet([Glass(icosphere((0.0, 0.0, 0.0), 1.0, 4, "Ball"), N)])
+    view = look_at_view((0.3, -0.2, 5.0), (0.0, 0.0, 0.0), fov_y_deg=30.0, width=160, height=160)
+    rng = np.random.default_rng(11)
+    points = np.c_[rng.uniform(-1.5, 1.5, (400, 2)), rng.uniform(-4.0, -2.0, 400)]
+    exact = solve_refractions(glass, view, points)
+    assert len(exact.point) == 400  # one image each: every point is seen through the ball
+    camera = build_glass_camera(glass, view, ((-5, -5, -5), (5, 5, 6)), downsample=2, accuracy_px=1.0)
+    assert all(history == (0,) for history in camera.histories)
+    found = camera.project(points)
+    distance = np.linalg.norm(found.pixels[:, exact.point] - exact.pixel[None], axis=2)
+    error = np.where(found.valid[:, exact.point], distance, np.inf).min(axis=0)
+    answered = np.isfinite(error)
+    assert answered.mean() > 0.9 and np.percentile(error[answered], 99) < 0.5
