@@ -21,10 +21,12 @@ import numpy as np
 from mathutils import Matrix
 
 from ..engine.errors import SceneInputError
+from ..engine.glass import Glass
 from ..engine.srgb import srgb_to_linear
 from ..engine.scene import DiffuseMesh, Reflector, vertex_normals
 from ..engine.view import View
 from .material_color import MaterialColor, material_color
+from .material_ior import glass_ior
 
 #: Object types with a surface that Blender converts to a mesh.
 SURFACE_TYPES = frozenset({'MESH', 'CURVE', 'SURFACE', 'FONT', 'META'})
@@ -40,6 +42,9 @@ class CapturedScene:
 
     reflectors: tuple[Reflector, ...]
     meshes: tuple[DiffuseMesh, ...]
+    #: The glass objects (``engine.glass.Glass``); each is among ``meshes`` too, as the
+    #: solid object the mirrors reflect.
+    glass: tuple = ()
 
     @property
     def reflector_triangles(self) -> int:
@@ -51,16 +56,17 @@ class CapturedScene:
 
 
 def capture_scene(depsgraph, *, require_reflector: bool = True, reflectors_as_before=None) -> CapturedScene:
-    """Reflectors (objects marked ``is_reflector``) and every other visible surface.
+    """Reflectors (objects marked ``is_reflector``), glass (``is_refractor``, with its
+    index of refraction, ``material_ior.glass_ior``) and every other visible surface.
 
     Only what the depsgraph shows is captured: hidden objects are not in it. With
-    ``require_reflector``, a scene without a visible reflector is an error.
+    ``require_reflector``, a scene without a visible reflector or glass is an error.
     ``reflectors_as_before``: an earlier capture's reflectors, known unchanged (only
     diffuse objects were edited): each one not instanced is taken from there by name
     instead of read again (a million-triangle mirror took a second to read).
     """
     before = {r.name: r for r in reflectors_as_before or ()}
-    reflectors, meshes = [], []
+    reflectors, meshes, glass = [], [], []
     names = _UniqueNames()
     for instance in depsgraph.object_instances:
         if not instance.show_self or _own_geometry(instance):
@@ -69,12 +75,15 @@ def capture_scene(depsgraph, *, require_reflector: bool = True, reflectors_as_be
         # Settings are read from the original: setting a property from Python does not
         # tag the depsgraph, so the evaluated copy can hold a stale value.
         is_reflector = obj.original.curved_reflections.is_reflector
+        is_refractor = obj.original.curved_reflections.is_refractor
         name = names.claim(_instance_name(instance))
+        if is_reflector and is_refractor:
+            raise SceneInputError(name, "is marked both as a reflector and as glass; untick one of them")
         if obj.type not in SURFACE_TYPES:
-            if is_reflector:
+            if is_reflector or is_refractor:
                 raise SceneInputError(
-                    name, f"is marked as a reflector but is {_a(obj.type.lower())} object, "
-                    "which has no surface"
+                    name, f"is marked as {'a reflector' if is_reflector else 'glass'} but is "
+                    f"{_a(obj.type.lower())} object, which has no surface"
                 )
             continue
         if is_reflector and name in before and not instance.is_instance:
@@ -85,14 +94,17 @@ def capture_scene(depsgraph, *, require_reflector: bool = True, reflectors_as_be
         with _triangulated(obj) as mesh:
             if is_reflector:
                 reflectors.append(_reflector(name, mesh, matrix))
-            elif (diffuse := _diffuse_mesh(name, obj, mesh, matrix)) is not None:
+                continue
+            if is_refractor:
+                glass.append(Glass(_reflector(name, mesh, matrix), glass_ior(obj.original)))
+            if (diffuse := _diffuse_mesh(name, obj, mesh, matrix)) is not None:
                 meshes.append(diffuse)
-    if require_reflector and not reflectors:
+    if require_reflector and not reflectors and not glass:
         raise SceneInputError(
-            depsgraph.scene.name, "has no visible object marked as a reflector "
-            "(tick Reflector in the sidebar's Reflections tab)"
+            depsgraph.scene.name, "has no visible object marked as a reflector or as glass "
+            "(tick Reflector or Glass in the sidebar's Reflections tab)"
         )
-    return CapturedScene(tuple(reflectors), tuple(meshes))
+    return CapturedScene(tuple(reflectors), tuple(meshes), tuple(glass))
 
 
 def view_from_camera(camera_object, scene, depsgraph) -> View:

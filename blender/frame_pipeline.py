@@ -35,6 +35,7 @@ from ..engine.view import View
 from ..drawing.reflection_draw import ReflectionRenderer
 from . import accuracy, method_plan, morph_bake
 from .capture import capture_scene
+from .glass_layer import glass_layer
 from .render_inputs import BOUNDS_MARGIN, reflector_properties, world_color
 
 
@@ -115,6 +116,8 @@ class FramePipeline:
     reused: int = 0
     #: What the last plan has to warn about (a grid that could not be baked).
     plan_warnings: list = field(default_factory=list)
+    #: The capture's glass and its renderer (``glass_layer.GlassLayer``), None without glass.
+    glass: object = None
 
     def plan_reflectors(self, scene, captured, bake_missing: bool = False, final_render: bool | None = None) -> None:
         """Load the baked grids the reflectors want (with ``bake_missing``, bake a grid
@@ -155,6 +158,11 @@ class FramePipeline:
         modes = tuple(method_plan.mode_of(scene, r.name) for r in captured.reflectors)
         key = captured_key(captured) + (modes, settings, looks)
         self.settings = settings
+        self.glass = glass_layer(self.glass, captured, key[:2])
+        if not captured.reflectors:  # glass alone: its layer is the frame
+            self.captured, self.renderer, self.reflector_set, self.key = captured, None, None, key
+            self.world = world_color(scene)
+            return
         if self.reflector_set is None or key[0] != self.key[0]:
             self.reflector_set = ReflectorSet(list(captured.reflectors))
         if self.renderer is None or key[0] != self.key[0] or key[2:4] != self.key[2:4]:

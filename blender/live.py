@@ -125,6 +125,9 @@ def _capture(state: LiveScene, scene, depsgraph, reflectors: bool, wait: bool = 
         remesh = False
         captured = capture_scene(depsgraph)
     scene_bounds(captured.reflectors, captured.meshes)  # bad input raises here, before any work
+    if not captured.reflectors:  # glass alone
+        raise SceneInputError(scene.name, "has glass but no reflector: the viewport draws mirrors' reflections, "
+                              "and glass in Render Image only")
     if remesh:
         state.counts["remeshes"] += 1
         _renew_renderer(state, scene, captured, seal=True)

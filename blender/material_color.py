@@ -35,7 +35,7 @@ def material_color(material) -> MaterialColor | None:
     if material is None:
         return None
     display = tuple(material.diffuse_color)
-    shader = _surface_shader(material)
+    shader = surface_shader(material)
     if shader is not None:
         if shader.bl_idname == 'ShaderNodeEmission':
             if _scalar(shader.inputs["Strength"]) > 0:
@@ -56,7 +56,7 @@ def material_color(material) -> MaterialColor | None:
     return MaterialColor(display)
 
 
-def _surface_shader(material):
+def surface_shader(material):
     """The shader node feeding the active material output's Surface, or ``None``."""
     # Blender 5.0 always uses nodes and deprecates ``use_nodes``; 4.x may not use them.
     if bpy.app.version < (5, 0, 0) and not material.use_nodes:

@@ -21,6 +21,7 @@ import bpy
 
 from . import accuracy, live, method_plan, method_registry, morph_bake
 from .capture import SURFACE_TYPES
+from .material_ior import glass_ior
 
 _STATUS_ICONS = {'INFO': 'INFO', 'WARNING': 'ERROR', 'ERROR': 'CANCEL'}
 
@@ -165,6 +166,36 @@ class VIEW3D_PT_curved_reflections_mirror(_SubPanel, bpy.types.Panel):
         exponent.prop(settings, "analytic_exponent")
 
 
+class VIEW3D_PT_curved_reflections_glass(_SubPanel, bpy.types.Panel):
+    """The active object as glass: its index of refraction and what draws it"""
+
+    bl_label = "Glass"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw_header(self, context):
+        obj = _surface_object(context)
+        if obj is not None:
+            self.layout.prop(obj.curved_reflections, "is_refractor", text="")
+
+    def draw(self, context):
+        layout = self.layout
+        _split_property(layout)
+        obj = _surface_object(context)
+        if obj is None:
+            layout.label(text="No active object with a surface", icon='INFO')
+            return
+        settings = obj.curved_reflections
+        column = layout.column()
+        column.active = settings.is_refractor
+        column.prop(settings, "ior")
+        if settings.ior <= 0.0:
+            column.label(text=f"From the material: {glass_ior(obj):.3f}", icon='MATERIAL')
+        if settings.is_refractor:
+            _wrapped(layout, "Drawn refracted in Render Image (a sample-based camera on the refracted rays); the "
+                             "viewport shows it as a solid object, and mirrors show it so. Its own reflection is "
+                             "left out.", 'INFO')
+
+
 class VIEW3D_PT_curved_reflections_reflectors(_SubPanel, bpy.types.Panel):
     """The scene's reflectors: the method drawing each, why, and its accuracy measured in the view"""
 
@@ -276,6 +307,7 @@ class VIEW3D_PT_curved_reflections_statistics(_SubPanel, bpy.types.Panel):
 classes = (
     VIEW3D_PT_curved_reflections,
     VIEW3D_PT_curved_reflections_mirror,
+    VIEW3D_PT_curved_reflections_glass,
     VIEW3D_PT_curved_reflections_reflectors,
     VIEW3D_PT_curved_reflections_quality,
     VIEW3D_PT_curved_reflections_grids,

@@ -30,6 +30,20 @@ class CurvedReflectionsObjectSettings(bpy.types.PropertyGroup):
         default=False,
         update=_reflector_toggled,
     )
+    is_refractor: BoolProperty(
+        name="Glass",
+        description="Treat this object as glass: objects behind it are drawn refracted through it (Render Image; "
+                    "the viewport shows it as a solid object)",
+        default=False,
+        update=_reflector_toggled,
+    )
+    ior: FloatProperty(
+        name="IOR",
+        description="Index of refraction of the glass (0: from its material: a Glass BSDF's IOR, or a Principled "
+                    "BSDF's when its Transmission Weight is at least 0.5; else 1.5)",
+        default=0.0, min=0.0, soft_max=3.0, precision=3,
+        update=_reflector_toggled,
+    )
     reflectivity: FloatProperty(
         name="Reflectivity",
         description="Share of the reflected image in the mirror's colour (1 = perfect mirror)",

@@ -36,6 +36,7 @@ from ..engine.methods.sbc.sbc_build import check_view_outside_reflectors
 from ..engine.view import View
 from .capture import view_from_camera
 from .frame_pipeline import FramePipeline, settings_of
+from .glass_layer import over
 from .gpu_init import ensure_gpu
 from .live_workers import prefetcher
 from .properties import BLEND_RELATIVE
@@ -121,11 +122,37 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
     state.update(scene, depsgraph, settings)
     planned_at = time.perf_counter()
     if animating:
-        _prefetch(state.renderer, view, state.last_eye)
+        if state.renderer is not None:
+            _prefetch(state.renderer, view, state.last_eye)
         state.last_eye = view.eye if view.is_perspective else None
+    image, sbc, build_seconds, stats = None, None, 0.0, {"methods": {}, "warnings": []}
+    if state.renderer is not None:  # else a scene of glass alone
+        image, sbc, build_seconds = _mirrors_frame(scene, state, view, animating, trace_edges, trace_gaps)
+        stats = {**(sbc.stats if sbc is not None else {}), **state.renderer.stats,
+                 "methods": {c.reflector: c.method for c in state.plan.choices}, "warnings": state.warnings(view)}
+    if state.glass is not None:
+        started = time.perf_counter()
+        glass_image, in_front, glass_stats = state.glass.render(view, state.world, settings)
+        image = over(image, glass_image, in_front)
+        stats["glass"] = {"pixels": int(in_front.sum()), "seconds": time.perf_counter() - started,
+                          "leaves": glass_stats.get("n_leaves", 0)}
+    end = time.perf_counter()
+    state.frames += 1
+    seconds = {"capture": state.capture_seconds, "plan": planned_at - start - state.capture_seconds,
+               "sbc": build_seconds,
+               "draw": end - planned_at - build_seconds, "total": end - start,
+               "trace": sbc.stats.get("trace_seconds", float("nan")) if sbc is not None else 0.0}
+    return ReflectionRender(image, view, seconds, stats, sbc)
+
+
+def _mirrors_frame(scene, state: FrameState, view: View, animating: bool, trace_edges: bool, trace_gaps: bool):
+    """The mirrors' frame of ``view``: (image, the sample-based camera or None, seconds
+    spent building it). The methods drawn per frame are checked in the frame (every
+    :data:`CHECK_EVERY_FRAMES` frames of an animation), and the frame drawn again with the
+    next method where one fails (each method once at most)."""
     checking = not animating or state.frames % CHECK_EVERY_FRAMES == 0
     build_seconds = 0.0
-    while True:  # once, or again after a method was passed over (each method once at most)
+    while True:
         job = state.camera_job(view)
         if job is None or job.first_order_left_out:
             check_view_outside_reflectors(state.reflector_set, view)
@@ -135,16 +162,7 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
         build_seconds += time.perf_counter() - started
         image = state.renderer.render(view, sbc, state.world, trace_edges=trace_edges, trace_gaps=trace_gaps)
         if not (checking and state.check_methods(scene, view)):
-            break
-    end = time.perf_counter()
-    state.frames += 1
-    seconds = {"capture": state.capture_seconds, "plan": planned_at - start - state.capture_seconds,
-               "sbc": build_seconds,
-               "draw": end - planned_at - build_seconds, "total": end - start,
-               "trace": sbc.stats.get("trace_seconds", float("nan")) if sbc is not None else 0.0}
-    stats = {**(sbc.stats if sbc is not None else {}), **state.renderer.stats,
-             "methods": {c.reflector: c.method for c in state.plan.choices}, "warnings": state.warnings(view)}
-    return ReflectionRender(image, view, seconds, stats, sbc)
+            return image, sbc, build_seconds
 
 
 def _prefetch(renderer, view, last_eye) -> None:
@@ -281,6 +299,9 @@ class CURVED_REFLECTIONS_OT_render_image(bpy.types.Operator):
                               f"drawing {seconds['draw']:.2f} s)")
         for message in result.stats["warnings"]:
             self.report({'WARNING'}, message)
+        if "glass" in result.stats:
+            self.report({'INFO'}, f"Glass refracted on {result.stats['glass']['pixels']:,} pixels (left out: its "
+                                  "own reflection, mirrors seen through it, the band along its outline)")
         untraced = result.stats.get("untraced_pixels", 0)
         if untraced:
             self.report({'WARNING'}, f"{untraced} mirror pixels without a reflection were filled, not ray traced "

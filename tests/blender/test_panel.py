@@ -18,11 +18,12 @@ from curved_reflections.blender import demo_scenes, live, method_plan, method_re
 
 MAIN = panel.VIEW3D_PT_curved_reflections
 MIRROR = panel.VIEW3D_PT_curved_reflections_mirror
+GLASS = panel.VIEW3D_PT_curved_reflections_glass
 REFLECTORS = panel.VIEW3D_PT_curved_reflections_reflectors
 QUALITY = panel.VIEW3D_PT_curved_reflections_quality
 GRIDS = panel.VIEW3D_PT_curved_reflections_grids
 STATISTICS = panel.VIEW3D_PT_curved_reflections_statistics
-SUB_PANELS = (MIRROR, REFLECTORS, QUALITY, GRIDS, STATISTICS)
+SUB_PANELS = (MIRROR, GLASS, REFLECTORS, QUALITY, GRIDS, STATISTICS)
 LIVE_BUTTONS = ("curved_reflections.start_live", "curved_reflections.refresh", "curved_reflections.clear")
 
 
@@ -108,10 +109,10 @@ def test_sub_panels_hang_under_the_main_panel_in_the_reflections_tab(registered)
         assert cls.__doc__ and "\n" not in cls.__doc__.strip()  # the one-line tooltip
     for cls in SUB_PANELS:
         assert cls.bl_parent_id == MAIN.bl_rna.identifier == "VIEW3D_PT_curved_reflections"
-    assert [cls.bl_label for cls in panel.classes] == ["Curved Reflections", "Mirror", "Reflectors", "Quality",
-                                                       "Morphing Grids", "Statistics"]
+    assert [cls.bl_label for cls in panel.classes] == ["Curved Reflections", "Mirror", "Glass", "Reflectors",
+                                                       "Quality", "Morphing Grids", "Statistics"]
     closed = {cls.bl_label for cls in panel.classes if 'DEFAULT_CLOSED' in getattr(cls, "bl_options", set())}
-    assert closed == {"Morphing Grids", "Statistics"}
+    assert closed == {"Glass", "Morphing Grids", "Statistics"}
     # The package registers every sub-panel after its parent (Blender needs the parent first).
     order = [cls.__name__ for cls in blender._classes()]
     for cls in SUB_PANELS:
@@ -182,6 +183,23 @@ def test_the_mirror_panel_greys_what_the_object_and_its_mode_leave_unused(empty_
     assert _header(MIRROR, empty_scene, camera)["props"] == []
     assert _draw(MIRROR, empty_scene, camera)["labels"] == [(f"{camera.name}: a camera object cannot be a mirror",
                                                              'INFO')]
+
+
+def test_the_glass_panel_shows_the_index_of_refraction_in_use_and_what_draws_the_glass(empty_scene, registered):
+    bpy.ops.mesh.primitive_uv_sphere_add()
+    ball = bpy.context.active_object
+    assert _header(GLASS, empty_scene, ball)["props"] == ["is_refractor"]
+    log = _draw(GLASS, empty_scene, ball)
+    assert log["split"] and log["props"] == ["ior"] and log["greyed"] == ["ior"]  # not glass: greyed
+    assert _texts(log) == ["From the material: 1.500"]
+    ball.curved_reflections.is_refractor = True
+    ball.curved_reflections.ior = 1.33
+    log = _draw(GLASS, empty_scene, ball)
+    assert not log["greyed"] and _texts(log)[0].startswith("Drawn refracted in Render Image")
+    assert " ".join(_texts(log)).endswith("Its own reflection is left out.")
+    bpy.ops.object.camera_add()
+    assert _draw(GLASS, empty_scene, bpy.context.active_object)["labels"] == [("No active object with a surface",
+                                                                                'INFO')]
 
 
 def test_panels_on_a_baked_scene_show_methods_stats_and_status(empty_scene, registered, gpu_ready):

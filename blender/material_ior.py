@@ -1,0 +1,46 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The index of refraction of a glass object: its own setting, else its material's.
+
+A glass object (``obj.curved_reflections.is_refractor``) bends rays by its index of
+refraction (``engine/glass``). The panel's *IOR* overrides; at 0 it comes from the
+material Cycles renders: a Glass or Refraction BSDF's IOR, or a Principled BSDF's when
+its Transmission Weight is at least :data:`MIN_TRANSMISSION` (it is then mostly glass);
+else window glass's :data:`DEFAULT_IOR`.
+"""
+
+from __future__ import annotations
+
+from .material_color import surface_shader
+
+#: Window glass; what a glass object whose material says nothing refracts with.
+DEFAULT_IOR = 1.5
+#: A Principled BSDF counts as glass from this Transmission Weight.
+MIN_TRANSMISSION = 0.5
+#: Shader nodes whose IOR input is the glass's.
+REFRACTING_SHADERS = frozenset({'ShaderNodeBsdfGlass', 'ShaderNodeBsdfRefraction'})
+
+
+def material_ior(material) -> float | None:
+    """The IOR ``material``'s surface shader refracts with, or ``None`` if it is no glass."""
+    shader = None if material is None else surface_shader(material)
+    if shader is None:
+        return None
+    if shader.bl_idname in REFRACTING_SHADERS:
+        return float(shader.inputs["IOR"].default_value)
+    if (shader.bl_idname == 'ShaderNodeBsdfPrincipled'
+            and float(shader.inputs["Transmission Weight"].default_value) >= MIN_TRANSMISSION):
+        return float(shader.inputs["IOR"].default_value)
+    return None
+
+
+def glass_ior(obj) -> float:
+    """The IOR a glass object refracts with: its own *IOR* when above 0, else its first
+    glass material's, else :data:`DEFAULT_IOR`."""
+    own = float(obj.curved_reflections.ior)
+    if own > 0.0:
+        return own
+    for slot in obj.material_slots:
+        ior = material_ior(slot.material)
+        if ior is not None:
+            return ior
+    return DEFAULT_IOR
