@@ -15,6 +15,8 @@ Scenes:
 - ``two_spheres``: two mirror spheres 0.18 apart, for second-order reflections.
 - ``vase``: Chen & Arvo 2000, §IV: the cubic vase of mixed convexity, with objects near
   its neck and base.
+- ``glass``: a glass ball and a thick lens (Glass BSDF, IOR 1.45) among columns, a cube
+  close behind the ball (issue 47).
 """
 
 from __future__ import annotations
@@ -51,7 +53,10 @@ SCENES = (
     ("two_spheres", "Two Spheres", "Two mirror spheres close together (second-order reflections)"),
     ("vase", "Chen-Arvo Vase", "The cubic vase of Chen & Arvo 2000 with objects near it"),
     ("bumpy_ball", "Bumpy Ball", "A bumpy mirror ball (star-shaped, not convex) among columns, a cube close by"),
+    ("glass", "Glass", "A glass ball and a thick lens among columns, a cube close behind the ball (Render Image)"),
 )
+#: The demo glass's index of refraction (a Glass BSDF's, as Cycles renders it).
+GLASS_IOR = 1.45
 
 
 # --- scene set-up -------------------------------------------------------------------
@@ -129,6 +134,20 @@ def _reflector(scene, name: str, shape: shapes.Shape, location=(0, 0, 0), rotati
     obj = _mesh_object(scene, name, shape, _mirror_material(), location, rotation_z)
     obj.curved_reflections.is_reflector = True
     obj.color = (1.0, 1.0, 1.0, 1.0)
+    return obj
+
+
+def _glass(scene, name: str, shape: shapes.Shape, location=(0, 0, 0)):
+    material = bpy.data.materials.new(f"CR Glass {name}")
+    nodes = material.node_tree.nodes
+    nodes.clear()
+    shader = nodes.new("ShaderNodeBsdfGlass")
+    shader.inputs["IOR"].default_value = GLASS_IOR
+    shader.inputs["Roughness"].default_value = 0.0
+    output = nodes.new("ShaderNodeOutputMaterial")
+    material.node_tree.links.new(shader.outputs["BSDF"], output.inputs["Surface"])
+    obj = _mesh_object(scene, name, shape, material, location)
+    obj.curved_reflections.is_refractor = True
     return obj
 
 
@@ -236,12 +255,32 @@ def build_bumpy_ball(scene):
     _camera(scene, (1.2, -6.2, 2.4), (0.0, 0.0, 1.0), 45.0)
 
 
+def build_glass(scene):
+    """A glass ball and a thick lens (a sphere squashed to 0.4 along the view) on a
+    checker floor, columns behind them, a cube 0.1 (5 % of the ball) behind the ball."""
+    colours = iter(DIFFUSE_COLOURS)
+    _checker_floor(scene)
+    _glass(scene, "GlassBall", shapes.sphere(1.0, 64, 32), (-1.1, 0.0, 1.0))
+    ball = shapes.sphere(0.9, 64, 32)
+    squash = np.array([1.0, 0.4, 1.0])
+    normals = ball.normals / squash
+    lens = shapes.Shape(ball.vertices * squash, normals / np.linalg.norm(normals, axis=1, keepdims=True),
+                        ball.tris, ball.quads)
+    _glass(scene, "GlassLens", lens, (1.3, 0.0, 1.1))
+    _diffuse(scene, "Cube", shapes.box((0.5, 0.5, 0.5)), next(colours), (-1.1, 1.35, 0.9), 0.4)
+    for k, (x, y) in enumerate(((-2.2, 2.2), (-0.2, 2.6), (1.0, 1.6), (1.8, 2.8), (2.9, 1.2))):
+        _diffuse(scene, f"Column{k + 1}", shapes.cylinder(0.18, 2.6, 24), next(colours), (x, y, 0.0))
+    _diffuse(scene, "Panel", shapes.box((6.0, 0.08, 2.5)), next(colours), (0.0, 4.5, 1.25))
+    _camera(scene, (0.1, -6.5, 1.7), (0.1, 0.0, 1.0), 40.0)
+
+
 BUILDERS = {
     "sbc_fig3": build_sbc_fig3,
     "teapot": build_teapot,
     "two_spheres": build_two_spheres,
     "vase": build_vase,
     "bumpy_ball": build_bumpy_ball,
+    "glass": build_glass,
 }
 
 
@@ -276,7 +315,7 @@ def palette(scene) -> dict[str, tuple[float, float, float]]:
     """Label palette read from the materials: diffuse object name -> linear RGB, plus the world.
 
     The world's colour is under :data:`WORLD_KEY`, first. Objects whose material is not
-    an emission shader (reflectors, anything else) are left out.
+    an emission shader (reflectors, glass, anything else) are left out.
     """
     result = {}
     if scene.world is not None and scene.world.node_tree is not None:
@@ -284,7 +323,7 @@ def palette(scene) -> dict[str, tuple[float, float, float]]:
         if node is not None:
             result[WORLD_KEY] = tuple(node.inputs["Color"].default_value[:3])
     for obj in scene.objects:
-        if obj.type != "MESH" or obj.curved_reflections.is_reflector:
+        if obj.type != "MESH" or obj.curved_reflections.is_reflector or obj.curved_reflections.is_refractor:
             continue
         colour = _emission_colour(obj.active_material)
         if colour is not None:

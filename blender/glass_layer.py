@@ -1,19 +1,22 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Render Image's glass: what lies behind a glass object, drawn refracted through it.
+"""Render Image's glass: what lies behind a glass object, refracted, and what it reflects.
 
-The glass objects (``capture.CapturedScene.glass``) get a renderer of their own, the
-reflected-mesh renderer with the glass as its "mirrors" and every other surface as its
-meshes: a sample-based camera on the view's refracted rays (``engine/glass/glass_camera``,
-SBC paper VII, Fig. 20b) places each mesh vertex on the glass where the eye sees it
-through, the pre-pass keeps it to the pixels where that glass is in front, and the
-reflected-mesh pass draws it there. Those pixels replace the frame's (where the mirrors'
-renderer drew the glass as a solid object); a scene of glass alone is that renderer's
-frame.
+Each pixel where a glass object is in front (the pre-pass of a renderer holding the
+glass as its "mirrors" and every other surface as meshes) is ray traced exactly: its eye
+ray is followed through the glass (``engine/glass/paths.py``: Snell's law at every
+interface, total internal reflection), and the ray that comes out is met with the scene,
+mirrors included (``band_trace.BandTracer.trace_rays``: a mirror seen through glass shows
+its reflections, to the scene's Max Order). At the first interface the exact dielectric
+Fresnel reflectance mixes in the ray reflected off the glass (``snell.fresnel_dielectric``;
+the internal reflections at later interfaces are not followed), as Cycles' Glass BSDF
+shows it. Those pixels replace the frame's (where the mirrors' renderer drew the glass as
+a solid object); a scene of glass alone is that renderer's frame.
 
-Left out for now, and said so in the panel: the live view (it shows glass as a solid
-object), the glass's own reflection (Fresnel), mirrors seen through glass (drawn as grey
-objects, without their reflections), glass in mirrors (a solid object), and the band
-along the glass's silhouette, which the composite fills instead of tracing.
+This is the reference picture, traced per pixel on the CPU (a second or so at 480x320);
+the sample-based cameras on refracted rays (``engine/glass/glass_camera.py``) are
+measured against the exact solver for the GPU path. Left out for now, and said so in the
+panel: the live view (it shows glass as a solid object), and glass seen in mirrors (a
+solid object there).
 """
 
 from __future__ import annotations
@@ -25,42 +28,60 @@ import numpy as np
 from ..drawing.gpu_data import read_texture
 from ..drawing.reflection_draw import ReflectionRenderer
 from ..engine.errors import SceneInputError
-from ..engine.frame_settings import FrameSettings
-from ..engine.glass import GlassSet
-from ..engine.glass.glass_camera import build_glass_camera
+from ..engine.geometry.band_trace import BandTracer
+from ..engine.geometry.raytrace import reflect
+from ..engine.glass import GlassSet, fresnel_dielectric
 from ..engine.methods.sbc.sbc_build import check_view_outside_reflectors
-from ..engine.scene import DiffuseMesh, scene_bounds
+from ..engine.scene import DiffuseMesh
 from ..engine.view import View
-from .render_inputs import BOUNDS_MARGIN
-
-#: The colour of a mirror seen through glass (its reflections are left out there).
-MIRROR_GREY = (0.5, 0.5, 0.5, 1.0)
 
 
 @dataclass
 class GlassLayer:
-    """One capture's glass, with its renderer (made again when the capture changes)."""
+    """One capture's glass: its set, the renderer whose pre-pass finds where it is in
+    front, and the tracer of everything else (made again when the capture changes)."""
 
     key: tuple
     glass: GlassSet
     renderer: ReflectionRenderer
-    bounds: tuple
+    tracer: BandTracer
 
-    def render(self, view: View, world, settings: FrameSettings) -> tuple[np.ndarray, np.ndarray, dict]:
-        """(image (H, W, 4) linear RGBA rows bottom to top, (H, W) bool the pixels where
-        a glass object is in front, the camera's stats) of ``view``."""
+    def render(self, view: View, world, max_order: int) -> tuple[np.ndarray, np.ndarray]:
+        """((H, W, 4) linear RGBA rows bottom to top, (H, W) bool where a glass object is
+        in front) of ``view``; the image holds the traced colours there, the renderer's
+        frame (the scene without the glass) elsewhere."""
         try:
             check_view_outside_reflectors(self.glass.surfaces, view)
         except SceneInputError as error:
             raise SceneInputError(error.object_name, "the view is inside this glass object; move the camera outside "
                                   "it (the inside of glass is not drawn)") from None
-        lo, hi = self.bounds
-        margin = BOUNDS_MARGIN * float(np.linalg.norm(hi - lo))
-        camera = build_glass_camera(self.glass, view, (lo - margin, hi + margin), settings.downsample,
-                                    settings.accuracy_px)
-        image = self.renderer.render(view, camera, world, trace=False)
+        image = self.renderer.render(view, None, world, trace=False)
         labels = read_texture(self.renderer.targets(view.width, view.height).prepass_labels, view.width, view.height)
-        return image, labels[..., 0] >= 0.5, camera.stats
+        in_front = labels[..., 0] >= 0.5
+        rows, columns = np.nonzero(in_front)
+        colors = self.trace(view, np.stack([columns, rows], axis=1) + 0.5, world, max_order)
+        image[rows, columns, :3] = colors
+        image[rows, columns, 3] = 1.0
+        return image, in_front
+
+    def trace(self, view: View, pixels: np.ndarray, world, max_order: int) -> np.ndarray:
+        """(K, 3) linear RGB of the glass seen through ``pixels`` (K, 2): the refracted
+        path's colour and, by the Fresnel reflectance at the first interface, the
+        reflected ray's (see the module)."""
+        origins, directions = view.pixel_rays(pixels)
+        paths = self.glass.trace(origins, directions)
+        world = np.asarray(world, dtype=np.float64)[:4]
+        refracted = self.tracer.trace_rays(paths.origin, paths.direction, max_order, world)[:, :3]
+        met = np.flatnonzero(paths.first_triangle >= 0)
+        if len(met) == 0:
+            return refracted
+        normal = paths.first_normal[met]
+        cos_i = -np.einsum("ij,ij->i", directions[met], normal)
+        share = fresnel_dielectric(cos_i, 1.0 / self.glass.iors[paths.history[met, 0]])
+        reflected = self.tracer.trace_rays(paths.first_position[met] + 1e-9 * self.glass.surfaces.scale * normal,
+                                           reflect(directions[met], normal), max_order, world)[:, :3]
+        refracted[met] = share[:, None] * reflected + (1.0 - share[:, None]) * refracted[met]
+        return refracted
 
 
 def glass_layer(previous: GlassLayer | None, captured, key: tuple) -> GlassLayer | None:
@@ -73,19 +94,21 @@ def glass_layer(previous: GlassLayer | None, captured, key: tuple) -> GlassLayer
         return previous
     names = {glass.name for glass in captured.glass}
     meshes = [mesh for mesh in captured.meshes if mesh.name not in names]
-    meshes += [DiffuseMesh(mirror.name, mirror.vertices, mirror.triangles,
-                           np.tile(np.array(MIRROR_GREY, np.float32), (len(mirror.vertices), 1)),
-                           normals=mirror.normals) for mirror in captured.reflectors]
     surfaces = [glass.surface for glass in captured.glass]
     count = len(surfaces)
-    renderer = ReflectionRenderer(surfaces, meshes, reflector_colors=np.ones((count, 4), np.float32),
-                                  reflectivity=np.ones(count, np.float32),
+    # Drawn as meshes only to fill the pre-pass: mirrors in front of glass hide it.
+    renderer = ReflectionRenderer(surfaces, meshes + [_solid(mirror) for mirror in captured.reflectors],
+                                  reflector_colors=np.ones((count, 4), np.float32),
+                                  reflectivity=np.zeros(count, np.float32),
                                   fresnel_f0=np.full(count, np.nan, np.float32),
-                                  attenuation_distance=np.zeros(count, np.float32),
-                                  # Seen through glass an image is not mirrored, and the
-                                  # law of reflection does not hold.
-                                  cull=False, law_of_reflection=False)
-    return GlassLayer(key, GlassSet(list(captured.glass)), renderer, scene_bounds(surfaces, meshes))
+                                  attenuation_distance=np.zeros(count, np.float32))
+    return GlassLayer(key, GlassSet(list(captured.glass)), renderer, BandTracer(captured.reflectors, meshes))
+
+
+def _solid(mirror) -> DiffuseMesh:
+    """A mirror as a grey solid mesh (what the glass's pre-pass needs of it: its depth)."""
+    return DiffuseMesh(mirror.name, mirror.vertices, mirror.triangles,
+                       np.full((len(mirror.vertices), 4), 0.5, np.float32), normals=mirror.normals)
 
 
 def over(image: np.ndarray | None, glass_image: np.ndarray, in_front: np.ndarray) -> np.ndarray:

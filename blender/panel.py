@@ -191,9 +191,8 @@ class VIEW3D_PT_curved_reflections_glass(_SubPanel, bpy.types.Panel):
         if settings.ior <= 0.0:
             column.label(text=f"From the material: {glass_ior(obj):.3f}", icon='MATERIAL')
         if settings.is_refractor:
-            _wrapped(layout, "Drawn refracted in Render Image (a sample-based camera on the refracted rays); the "
-                             "viewport shows it as a solid object, and mirrors show it so. Its own reflection is "
-                             "left out.", 'INFO')
+            _wrapped(layout, "Render Image ray traces it (refraction, total internal reflection, Fresnel); the "
+                             "viewport shows it as a solid object, and mirrors reflect it so.", 'INFO')
 
 
 class VIEW3D_PT_curved_reflections_reflectors(_SubPanel, bpy.types.Panel):

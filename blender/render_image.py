@@ -132,10 +132,9 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
                  "methods": {c.reflector: c.method for c in state.plan.choices}, "warnings": state.warnings(view)}
     if state.glass is not None:
         started = time.perf_counter()
-        glass_image, in_front, glass_stats = state.glass.render(view, state.world, settings)
+        glass_image, in_front = state.glass.render(view, state.world, settings.max_order)
         image = over(image, glass_image, in_front)
-        stats["glass"] = {"pixels": int(in_front.sum()), "seconds": time.perf_counter() - started,
-                          "leaves": glass_stats.get("n_leaves", 0)}
+        stats["glass"] = {"pixels": int(in_front.sum()), "seconds": time.perf_counter() - started}
     end = time.perf_counter()
     state.frames += 1
     seconds = {"capture": state.capture_seconds, "plan": planned_at - start - state.capture_seconds,
@@ -300,8 +299,8 @@ class CURVED_REFLECTIONS_OT_render_image(bpy.types.Operator):
         for message in result.stats["warnings"]:
             self.report({'WARNING'}, message)
         if "glass" in result.stats:
-            self.report({'INFO'}, f"Glass refracted on {result.stats['glass']['pixels']:,} pixels (left out: its "
-                                  "own reflection, mirrors seen through it, the band along its outline)")
+            self.report({'INFO'}, f"Glass ray traced on {result.stats['glass']['pixels']:,} pixels in "
+                                  f"{result.stats['glass']['seconds']:.2f} s")
         untraced = result.stats.get("untraced_pixels", 0)
         if untraced:
             self.report({'WARNING'}, f"{untraced} mirror pixels without a reflection were filled, not ray traced "

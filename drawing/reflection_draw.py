@@ -172,8 +172,7 @@ class ReflectionRenderer:
     def __init__(self, reflectors, meshes, reflector_colors=None, reflectivity=None,
                  edge_fraction: float | None = subdivision.EDGE_FRACTION, *, fresnel_f0=None,
                  attenuation_distance=None, mixed_subdivisions: int = MIXED_SUBDIVISIONS, cull: bool = True,
-                 passes=(), settings: FrameSettings = PLAIN_SETTINGS, reflector_set=None,
-                 law_of_reflection: bool = True):
+                 passes=(), settings: FrameSettings = PLAIN_SETTINGS, reflector_set=None):
         self.geometry = prepare_geometry(reflectors, meshes, reflector_colors, reflectivity, edge_fraction,
                                          fresnel_f0, attenuation_distance,
                                          None if reflector_set is None else reflector_set.sealed)
@@ -190,7 +189,7 @@ class ReflectionRenderer:
         maker = CameraTriangleMaker(self.geometry, functools.partial(_drawn_by, per_frame), self.counts,
                                     mixed_subdivisions, cull, settings.polish_camera, convex)
         #: The sample-based camera's pass: its reflected triangles, made once per camera.
-        self.camera_pass = CameraPass(maker, len(reflectors), law_of_reflection)
+        self.camera_pass = CameraPass(maker, len(reflectors))
         #: Every pass (:class:`.frame_pass.FramePass`), in drawing order: the camera's,
         #: then those the factories ``passes`` made (``MethodPlan.pass_factories``).
         self.passes = (self.camera_pass,) + per_frame

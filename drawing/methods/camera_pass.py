@@ -40,11 +40,8 @@ class CameraPass(FramePass):
 
     name = "camera"
 
-    def __init__(self, maker: CameraTriangleMaker, n_reflectors: int, law_of_reflection: bool = True):
+    def __init__(self, maker: CameraTriangleMaker, n_reflectors: int):
         self.maker = maker
-        #: The fragment stage's law-of-reflection test; off (-1: nothing fails it) for
-        #: refracted images, where the eye's ray does not reflect toward the point.
-        self.reflection_cosine = REFLECTION_COSINE if law_of_reflection else -1.0
         self.geometry = maker.geometry
         self.n_reflectors = int(n_reflectors)
         #: The triangles drawn last (kept after the frame: a second render of the same
@@ -97,7 +94,7 @@ class CameraPass(FramePass):
         shader.uniform_int("use_camera_pixel", int(view.same_as(current.camera_view)))
         shader.uniform_float("camera", camera_position(view, self.geometry.shift))
         shader.uniform_float("order_range", current.order_range)
-        shader.uniform_float("reflection_cosine", self.reflection_cosine)
+        shader.uniform_float("reflection_cosine", REFLECTION_COSINE)
         shader.uniform_sampler("prepass_labels", targets.prepass_labels)
         shader.uniform_sampler("prepass_normals", targets.prepass_normals)
         for image, first, count in current.runs:

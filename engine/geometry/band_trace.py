@@ -133,13 +133,27 @@ class BandTracer:
         without end and meet no light, as Cycles shows it once its bounces run out.
         """
         pixels = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
-        out = np.tile(np.asarray(world_color, dtype=np.float64)[:4], (len(pixels), 1))
-        out[:, 3] = np.inf
         if len(pixels) == 0:
-            return out
+            return self._follow(np.zeros((0, 3)), np.zeros((0, 3)), None, max_order, world_color)
         origins, directions = view.pixel_rays(pixels)
-        alive = np.arange(len(pixels))
-        hits = self._first_hits(origins, directions, on_mirrors, surface_points)
+        return self._follow(origins, directions, self._first_hits(origins, directions, on_mirrors, surface_points),
+                            max_order, world_color)
+
+    def trace_rays(self, origins, directions, max_order: int, world_color) -> np.ndarray:
+        """As :meth:`trace`, for rays starting anywhere (those leaving glass,
+        ``engine/glass``): (K, 4) linear RGB and the distance to the diffuse point after
+        the first mirror (0 where no mirror was met, inf where the world shows)."""
+        origins, directions = np.asarray(origins, dtype=np.float64), np.asarray(directions, dtype=np.float64)
+        hits = self.intersect(origins, directions) if len(origins) else None
+        return self._follow(origins, directions, hits, max_order, world_color)
+
+    def _follow(self, origins, directions, hits, max_order: int, world_color) -> np.ndarray:
+        """The paths of rays from their first ``hits`` on (see :meth:`trace`)."""
+        out = np.tile(np.asarray(world_color, dtype=np.float64)[:4], (len(origins), 1))
+        out[:, 3] = np.inf
+        if len(origins) == 0:
+            return out
+        alive = np.arange(len(origins))
         for order in range(max_order + 1):
             hit = hits.hit
             owner = np.where(hit, hits.reflector, -1)
@@ -150,7 +164,8 @@ class BandTracer:
                 out[alive[diffuse], 3] = hits.t[diffuse] if order > 0 else 0.0
             mirror = hit & (owner >= 0) & (owner < self.n_reflectors)
             inside = np.zeros_like(mirror)
-            inside[mirror] = self.mirrors.from_inside(directions[mirror], hits.triangle[mirror])
+            if mirror.any():
+                inside[mirror] = self.mirrors.from_inside(directions[mirror], hits.triangle[mirror])
             out[alive[inside]] = NO_LIGHT
             mirror &= ~inside
             if order == max_order:

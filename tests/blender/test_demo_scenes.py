@@ -50,7 +50,11 @@ def test_scene_has_camera_marked_mirrors_and_resolution(build, kind):
     assert (scene.render.resolution_x, scene.render.resolution_y) == (80, 60)
     assert scene.view_settings.view_transform == "Standard"
     mirrors = demo_scenes.reflectors(scene)
-    assert mirrors
+    glass = [o for o in scene.objects if o.curved_reflections.is_refractor]
+    assert mirrors or glass
+    for obj in glass:
+        shader = next(n for n in obj.active_material.node_tree.nodes if n.type == "BSDF_GLASS")
+        assert shader.inputs["IOR"].default_value == pytest.approx(demo_scenes.GLASS_IOR)
     for obj in mirrors:
         assert len(obj.data.polygons) > 0
         assert obj.data.has_custom_normals
@@ -64,7 +68,8 @@ def test_scene_has_camera_marked_mirrors_and_resolution(build, kind):
 def test_every_diffuse_object_has_a_distinct_flat_emission_colour(build, kind):
     scene = build(kind)
     palette = demo_scenes.palette(scene)
-    diffuse = [o for o in scene.objects if o.type == "MESH" and not o.curved_reflections.is_reflector]
+    diffuse = [o for o in scene.objects if o.type == "MESH" and not o.curved_reflections.is_reflector
+               and not o.curved_reflections.is_refractor]
     assert sorted(palette) == sorted([demo_scenes.WORLD_KEY] + [o.name for o in diffuse])
     display = linear_to_srgb(np.array(list(palette.values())))
     gaps = np.linalg.norm(display[:, None] - display[None, :], axis=2) + 10 * np.eye(len(display))

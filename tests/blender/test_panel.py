@@ -195,8 +195,8 @@ def test_the_glass_panel_shows_the_index_of_refraction_in_use_and_what_draws_the
     ball.curved_reflections.is_refractor = True
     ball.curved_reflections.ior = 1.33
     log = _draw(GLASS, empty_scene, ball)
-    assert not log["greyed"] and _texts(log)[0].startswith("Drawn refracted in Render Image")
-    assert " ".join(_texts(log)).endswith("Its own reflection is left out.")
+    assert not log["greyed"] and _texts(log)[0].startswith("Render Image ray traces it")
+    assert " ".join(_texts(log)).endswith("mirrors reflect it so.")
     bpy.ops.object.camera_add()
     assert _draw(GLASS, empty_scene, bpy.context.active_object)["labels"] == [("No active object with a surface",
                                                                                 'INFO')]

@@ -150,3 +150,21 @@ def test_eye_rays_that_start_inside_a_sealed_mirror_see_no_light():
     np.testing.assert_array_equal(sealed[starts_inside], np.tile(NO_LIGHT, (starts_inside.sum(), 1)))
     np.testing.assert_array_equal(sealed[starts_outside], open_ball[starts_outside])
     assert not np.any(np.all(open_ball[starts_inside] == NO_LIGHT, axis=1))
+
+
+def test_rays_from_anywhere_see_what_pixel_rays_see_and_glass_rays_end_on_the_scene():
+    """``trace_rays`` follows given rays as ``trace`` follows pixels' (the same colours
+    for the same rays), also with no mirror at all: what a ray leaving glass meets."""
+    reflectors, meshes = _scene()
+    tracer = BandTracer(reflectors, meshes)
+    view = look_at_view((0.5, -4.0, 1.5), (0.0, 0.0, 0.0), fov_y_deg=40.0, width=64, height=48)
+    ys, xs = np.mgrid[0:48:3, 0:64:3]
+    pixels = np.c_[xs.ravel(), ys.ravel()] + 0.5
+    world = (0.05, 0.1, 0.2, 1.0)
+    from_pixels = tracer.trace(view, pixels, 2, world)
+    np.testing.assert_allclose(tracer.trace_rays(*view.pixel_rays(pixels), 2, world), from_pixels)
+    alone = BandTracer([], meshes).trace_rays(*view.pixel_rays(pixels), 2, world)
+    on_ball = tracer.intersect(*view.pixel_rays(pixels), mirrors_only=True).hit
+    assert 20 < on_ball.sum() < len(pixels)
+    np.testing.assert_allclose(alone[~on_ball], from_pixels[~on_ball])  # the same meshes and world
+    assert (alone[on_ball] != from_pixels[on_ball]).any(axis=1).mean() > 0.5  # behind the ball, not in it
