@@ -13,7 +13,7 @@ shows it. Those pixels replace the frame's (where the mirrors' renderer drew the
 a solid object); a scene of glass alone is that renderer's frame.
 
 This is the reference picture, traced per pixel on the CPU (a second or so at 480x320);
-the sample-based cameras on refracted rays (``engine/glass/glass_camera.py``) are
+the sample-based cameras on refracted rays (``tools/glass_camera.py``) are
 measured against the exact solver for the GPU path. Left out for now, and said so in the
 panel: the live view (it shows glass as a solid object), and glass seen in mirrors (a
 solid object there).

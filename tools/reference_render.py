@@ -105,8 +105,9 @@ def render(scene, name: str, path, warm_up: bool = False, frames: int = 1) -> Re
     return RenderResult(name, read_png(path), seconds, path, first)
 
 
-def configure_cycles(scene, samples: int = 16, bounces: int = 8):
-    """Cycles on the CPU: exact mirrors, point-sampled pixels, no denoising."""
+def configure_cycles(scene, samples: int = 16, bounces: int = 8, transmission_bounces: int = 0):
+    """Cycles on the CPU: exact mirrors, point-sampled pixels, no denoising;
+    ``transmission_bounces`` for glass (none by default: scenes of mirrors)."""
     scene.render.engine = "CYCLES"
     cycles = scene.cycles
     cycles.device = "CPU"
@@ -118,16 +119,19 @@ def configure_cycles(scene, samples: int = 16, bounces: int = 8):
     cycles.glossy_bounces = bounces
     cycles.transparent_max_bounces = bounces
     cycles.diffuse_bounces = 0
-    cycles.transmission_bounces = 0
+    cycles.transmission_bounces = transmission_bounces
     cycles.volume_bounces = 0
     cycles.sample_clamp_direct = cycles.sample_clamp_indirect = 0.0
 
 
-def render_cycles(scene, path, samples: int = 16, bounces: int = 8, frames: int = 1) -> RenderResult:
-    """Ground truth: Cycles CPU with ``bounces`` glossy bounces (>= 2 for two mirrors)."""
-    configure_cycles(scene, samples, bounces)
+def render_cycles(scene, path, samples: int = 16, bounces: int = 8, frames: int = 1,
+                  transmission_bounces: int = 0) -> RenderResult:
+    """Ground truth: Cycles CPU with ``bounces`` glossy bounces (>= 2 for two mirrors)
+    and ``transmission_bounces`` (glass)."""
+    configure_cycles(scene, samples, bounces, transmission_bounces)
     result = render(scene, "cycles", path, frames=frames)
-    result.notes = f"{samples} samples, {bounces} glossy bounces, filter {FILTER_WIDTH_PX} px"
+    result.notes = (f"{samples} samples, {bounces} glossy and {transmission_bounces} transmission bounces, "
+                    f"filter {FILTER_WIDTH_PX} px")
     return result
 
 

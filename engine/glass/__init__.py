@@ -3,9 +3,9 @@
 
 ``snell`` holds the optics of one interface (Snell's law, total internal reflection,
 dielectric Fresnel); ``paths`` follows rays through a scene's glass, interface after
-interface; ``glass_camera`` builds sample-based cameras on the refracted rays (SBC
-paper VII). The exact reference solver of refracted images is
-``engine/reference/exact_refraction.py``.
+interface. Not shipped: the exact reference solver of refracted images
+(``tools/exact_refraction.py``) and sample-based cameras on refracted rays
+(``tools/glass_camera.py``, SBC paper VII).
 """
 
 from .paths import GlassPaths, GlassSet, Glass

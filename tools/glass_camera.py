@@ -19,17 +19,21 @@ one ray of the map:
 ``sbc_build.build_from_ray_map`` builds the BSP trees of pinhole leaves on that map, and
 the camera projects points as a mirror's does. Nothing is polished on true rays (the
 reflection's polish follows reflected paths), and no mixed or fold cells are traced.
+
+Not shipped yet: Render Image ray traces glass per pixel (``blender/glass_layer.py``);
+these cameras are measured against the exact solver (``tools/exact_refraction.py``) for
+the GPU path that will draw glass live.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..methods.sbc.raymap import RayMap, assemble_ray_map, box_exit_distance
-from ..methods.sbc.sbc import SampleBasedCamera
-from ..methods.sbc.sbc_build import build_from_ray_map
-from ..view import View
-from .paths import GlassSet
+from ..engine.glass.paths import GlassSet
+from ..engine.methods.sbc.raymap import RayMap, assemble_ray_map, box_exit_distance
+from ..engine.methods.sbc.sbc import SampleBasedCamera
+from ..engine.methods.sbc.sbc_build import build_from_ray_map
+from ..engine.view import View
 
 
 def trace_refraction_map(glass: GlassSet, view: View, bounds, downsample: int = 2) -> RayMap:

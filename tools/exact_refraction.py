@@ -30,9 +30,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..glass.paths import GlassSet
-from ..view import View
-from .exact import first_of_duplicates
+from ..engine.glass.paths import GlassSet
+from ..engine.reference.exact import first_of_duplicates
+from ..engine.view import View
 
 #: Gauss-Newton iterations at most.
 ITERATIONS = 16

@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""The exact reference solver of refracted images (engine/reference/exact_refraction.py)
+"""The exact reference solver of refracted images (tools/exact_refraction.py)
 against a slab's closed form and a glass ball's symmetry."""
 
 import sys
@@ -9,10 +9,10 @@ import numpy as np
 
 from curved_reflections.engine.geometry.sphere import icosphere
 from curved_reflections.engine.glass import Glass, GlassSet
-from curved_reflections.engine.reference.exact_refraction import solve_refractions
+from curved_reflections.tools.exact_refraction import solve_refractions
 from curved_reflections.engine.view import look_at_view
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "glass"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "engine" / "glass"))
 from test_paths import flat_box  # noqa: E402
 
 N = 1.5
@@ -77,7 +77,7 @@ def test_a_sample_based_camera_on_refracted_rays_places_the_exact_images():
     within half a pixel of where the exact solver finds them (measured: p99 0.16 px);
     it answers 94 % of the exact images (the rest lie between its sheets and in the
     last cells of the ball's footprint, which a render traces)."""
-    from curved_reflections.engine.glass.glass_camera import build_glass_camera
+    from curved_reflections.tools.glass_camera import build_glass_camera
 
     glass = GlassSet([Glass(icosphere((0.0, 0.0, 0.0), 1.0, 4, "Ball"), N)])
     view = look_at_view((0.3, -0.2, 5.0), (0.0, 0.0, 0.0), fov_y_deg=30.0, width=160, height=160)
