@@ -26,7 +26,7 @@ from ..engine.srgb import srgb_to_linear
 from ..engine.scene import DiffuseMesh, Reflector, vertex_normals
 from ..engine.view import View
 from .material_color import MaterialColor, material_color
-from .material_ior import glass_ior
+from .material_ior import glass_ior, glass_reflects
 
 #: Object types with a surface that Blender converts to a mesh.
 SURFACE_TYPES = frozenset({'MESH', 'CURVE', 'SURFACE', 'FONT', 'META'})
@@ -96,7 +96,8 @@ def capture_scene(depsgraph, *, require_reflector: bool = True, reflectors_as_be
                 reflectors.append(_reflector(name, mesh, matrix))
                 continue
             if is_refractor:
-                glass.append(Glass(_reflector(name, mesh, matrix), glass_ior(obj.original)))
+                glass.append(Glass(_reflector(name, mesh, matrix), glass_ior(obj.original),
+                                   glass_reflects(obj.original)))
             if (diffuse := _diffuse_mesh(name, obj, mesh, matrix)) is not None:
                 meshes.append(diffuse)
     if require_reflector and not reflectors and not glass:

@@ -9,7 +9,7 @@ mirrors included (``band_trace.BandTracer.trace_rays``: a mirror seen through gl
 its reflections, to the scene's Max Order). At the first interface the exact dielectric
 Fresnel reflectance mixes in the ray reflected off the glass (``snell.fresnel_dielectric``;
 the internal reflections at later interfaces are not followed), as Cycles' Glass BSDF
-shows it. Those pixels replace the frame's (where the mirrors' renderer drew the glass as
+shows it; glass of a Refraction BSDF reflects nothing. Those pixels replace the frame's (where the mirrors' renderer drew the glass as
 a solid object); a scene of glass alone is that renderer's frame.
 
 This is the reference picture, traced per pixel on the CPU (a second or so at 480x320);
@@ -72,7 +72,7 @@ class GlassLayer:
         paths = self.glass.trace(origins, directions)
         world = np.asarray(world, dtype=np.float64)[:4]
         refracted = self.tracer.trace_rays(paths.origin, paths.direction, max_order, world)[:, :3]
-        met = np.flatnonzero(paths.first_triangle >= 0)
+        met = np.flatnonzero((paths.first_triangle >= 0) & self.glass.reflects[np.maximum(paths.history[:, 0], 0)])
         if len(met) == 0:
             return refracted
         normal = paths.first_normal[met]
@@ -89,7 +89,7 @@ def glass_layer(previous: GlassLayer | None, captured, key: tuple) -> GlassLayer
     (the capture's, ``frame_pipeline.captured_key``, and the glasses' indices) holds."""
     if not captured.glass:
         return None
-    key = key + tuple((glass.name, glass.ior) for glass in captured.glass)
+    key = key + tuple((glass.name, glass.ior, glass.reflects) for glass in captured.glass)
     if previous is not None and previous.key == key:
         return previous
     names = {glass.name for glass in captured.glass}

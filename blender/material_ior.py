@@ -33,6 +33,16 @@ def material_ior(material) -> float | None:
     return None
 
 
+def glass_reflects(obj) -> bool:
+    """Whether a glass object's surface reflects as well as refracts: not when its first
+    glass material is a Refraction BSDF (Cycles' refraction without reflection)."""
+    for slot in obj.material_slots:
+        shader = None if slot.material is None else surface_shader(slot.material)
+        if shader is not None and material_ior(slot.material) is not None:
+            return shader.bl_idname != 'ShaderNodeBsdfRefraction'
+    return True
+
+
 def glass_ior(obj) -> float:
     """The IOR a glass object refracts with: its own *IOR* when above 0, else its first
     glass material's, else :data:`DEFAULT_IOR`."""

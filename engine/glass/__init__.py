@@ -9,6 +9,6 @@ interface. Not shipped: the exact reference solver of refracted images
 """
 
 from .paths import GlassPaths, GlassSet, Glass
-from .snell import fresnel_dielectric, fresnel_schlick, refract
+from .snell import fresnel_dielectric, refract
 
-__all__ = ["Glass", "GlassPaths", "GlassSet", "fresnel_dielectric", "fresnel_schlick", "refract"]
+__all__ = ["Glass", "GlassPaths", "GlassSet", "fresnel_dielectric", "refract"]

@@ -34,11 +34,13 @@ LEAVE_FRACTION = 1e-9
 
 @dataclass(frozen=True)
 class Glass:
-    """A glass object: its surface, as a mirror's (``scene.Reflector``), and its index of
-    refraction (vacuum 1; window glass about 1.5, water 1.33)."""
+    """A glass object: its surface, as a mirror's (``scene.Reflector``), its index of
+    refraction (vacuum 1; window glass about 1.5, water 1.33), and whether its surface
+    also reflects, by the Fresnel reflectance (a Glass BSDF; a Refraction BSDF does not)."""
 
     surface: Reflector
     ior: float
+    reflects: bool = True
 
     def __post_init__(self):
         ior = float(self.ior)
@@ -86,6 +88,7 @@ class GlassSet:
         self.glasses = list(glasses)
         self.surfaces = ReflectorSet([glass.surface for glass in self.glasses])
         self.iors = np.array([float(glass.ior) for glass in self.glasses])
+        self.reflects = np.array([bool(glass.reflects) for glass in self.glasses])
         self._leave = LEAVE_FRACTION * self.surfaces.scale
 
     def trace(self, origins, directions, max_interfaces: int = MAX_INTERFACES) -> GlassPaths:

@@ -46,14 +46,3 @@ def fresnel_dielectric(cos_i, eta) -> np.ndarray:
         r_p = (cos_i - eta * cos_t) / (cos_i + eta * cos_t)
     return np.where(sin2_t >= 1.0, 1.0, 0.5 * (r_s * r_s + r_p * r_p))
 
-
-def fresnel_schlick(cos_i, eta) -> np.ndarray:
-    """Schlick's approximation of :func:`fresnel_dielectric`: R0 + (1 - R0)(1 - cos)^5
-    with R0 = ((1 - eta) / (1 + eta))^2, the cosine taken on the denser side (inside
-    glass, the refracted angle's), and 1 under total internal reflection."""
-    cos_i = np.clip(np.abs(np.asarray(cos_i, dtype=np.float64)), 0.0, 1.0)
-    eta = np.asarray(eta, dtype=np.float64)
-    r0 = ((1.0 - eta) / (1.0 + eta)) ** 2
-    sin2_t = eta * eta * (1.0 - cos_i * cos_i)
-    cos = np.where(eta > 1.0, np.sqrt(np.maximum(0.0, 1.0 - sin2_t)), cos_i)
-    return np.where(sin2_t >= 1.0, 1.0, r0 + (1.0 - r0) * (1.0 - cos) ** 5)

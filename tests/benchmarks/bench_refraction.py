@@ -36,8 +36,9 @@ GLASSES = (("ball", "a glass ball of radius 1, the cube 0.1 behind it"),
            ("box", "a glass box of 1.5 in the ball's place, flat faces, the cube 0.1 behind it"))
 
 
-def _stage(kind: str, width: int, height: int):
-    """The glass demo with only the glass ``kind``: (scene, glass object)."""
+def _stage(kind: str, width: int, height: int, bsdf: str = "ShaderNodeBsdfGlass"):
+    """The glass demo with only the glass ``kind``, its material's shader ``bsdf`` (the
+    demo's Glass BSDF, or a Refraction BSDF of the same IOR): (scene, glass object)."""
     import bpy
 
     from curved_reflections.blender import demo_scenes
@@ -58,11 +59,23 @@ def _stage(kind: str, width: int, height: int):
         keep.name = "GlassBox"
         keep.data.materials.append(material)
         keep.curved_reflections.is_refractor = True
+    nodes = keep.active_material.node_tree.nodes
+    if bsdf != "ShaderNodeBsdfGlass":
+        old = next(n for n in nodes if n.bl_idname == "ShaderNodeBsdfGlass")
+        shader = nodes.new(bsdf)
+        shader.inputs["IOR"].default_value = old.inputs["IOR"].default_value
+        output = next(n for n in nodes if n.bl_idname == "ShaderNodeOutputMaterial")
+        keep.active_material.node_tree.links.new(shader.outputs[0], output.inputs["Surface"])
+        nodes.remove(old)
     bpy.context.view_layer.update()
     return scene, keep
 
 
-def measure_glass(kind: str, width: int, height: int, samples: int, eevee: bool, folder: Path) -> list:
+#: (name, shader node): the glass's material in a measure.
+BSDFS = (("Glass BSDF", "ShaderNodeBsdfGlass"), ("Refraction BSDF", "ShaderNodeBsdfRefraction"))
+
+
+def measure_glass(kind: str, bsdf: str, width: int, height: int, samples: int, eevee: bool, folder: Path) -> list:
     import bpy
 
     from curved_reflections.blender import demo_scenes
@@ -72,13 +85,14 @@ def measure_glass(kind: str, width: int, height: int, samples: int, eevee: bool,
 
     import animation_runs
 
-    scene, glass = _stage(kind, width, height)
+    scene, glass = _stage(kind, width, height, dict(BSDFS)[bsdf])
+    slug = f"{kind}{'' if bsdf == BSDFS[0][0] else '_refraction'}"
     palette = demo_scenes.palette(scene)
-    mask, _ = rr.render_mask(scene, folder / f"{kind}_mask.png", [glass])
-    cycles = rr.render_cycles(scene, folder / f"{kind}_cycles.png", samples=samples, transmission_bounces=8)
+    mask, _ = rr.render_mask(scene, folder / f"{slug}_mask.png", [glass])
+    cycles = rr.render_cycles(scene, folder / f"{slug}_cycles.png", samples=samples, transmission_bounces=8)
     truth = metrics.label_image(cycles.image, palette, max_distance=0.25)
     workbench = animation_runs.workbench_seconds(scene, folder, 1)
-    base = {"glass": kind, "glass_px": int(mask.sum()), "cycles_seconds": cycles.seconds, "workbench": workbench}
+    base = {"glass": kind, "bsdf": bsdf, "glass_px": int(mask.sum()), "cycles_seconds": cycles.seconds, "workbench": workbench}
 
     def row(renderer: str, image, seconds: float) -> dict:
         labels = metrics.label_image(image, palette, max_distance=0.25)
@@ -90,21 +104,22 @@ def measure_glass(kind: str, width: int, height: int, samples: int, eevee: bool,
         for material in bpy.data.materials:
             if hasattr(material, "use_raytrace_refraction"):
                 material.use_raytrace_refraction = True
-        result = rr.render_eevee(scene, "eevee_raytrace", folder / f"{kind}_eevee.png", [glass])
+        result = rr.render_eevee(scene, "eevee_raytrace", folder / f"{slug}_eevee.png", [glass])
         rows.append(row("EEVEE (screen-space ray tracing)", result.image, result.seconds))
     depsgraph = bpy.context.evaluated_depsgraph_get()
     render_scene(scene, depsgraph)  # caches filled
     start = time.perf_counter()
     ours = render_scene(scene, depsgraph)
     seconds = time.perf_counter() - start
-    path = write_png(folder / f"{kind}_ours.png", ours.display)
+    path = write_png(folder / f"{slug}_ours.png", ours.display)
     rows.append(row("ours: Render Image", rr.read_png(path), seconds))
     return rows
 
 
 def measure(width: int, height: int, samples: int, eevee: bool, folder: Path) -> dict:
     folder.mkdir(parents=True, exist_ok=True)
-    rows = [r for kind, _ in GLASSES for r in measure_glass(kind, width, height, samples, eevee, folder)]
+    rows = [r for kind, _ in GLASSES for bsdf, _ in BSDFS
+            for r in measure_glass(kind, bsdf, width, height, samples, eevee and bsdf == BSDFS[0][0], folder)]
     return {"width": width, "height": height, "samples": samples, "rows": rows}
 
 
@@ -129,25 +144,32 @@ def report(result: dict, command: str, picture: str) -> str:
              f"Generated {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC by `{command}` on "
              f"{bench_draw._machine()}.", "",
              f"The glass demo at {result['width']}x{result['height']} with one glass object at a time; Cycles "
-             f"({result['samples']} samples, Glass BSDF, 8 glossy and 8 transmission bounces) is the reference. "
+             f"({result['samples']} samples, 8 glossy and 8 transmission bounces) is the reference, the glass a "
+             "Glass BSDF (refraction and reflection, mixed by Fresnel) or a Refraction BSDF (refraction alone: "
+             "where things appear through the glass). "
              "Label disagreement: the share of the glass's pixels (Workbench's mask) whose label differs from "
              "Cycles' (`tools/metrics.py`). Ours: Render Image, which ray traces the glass's pixels on the CPU "
              "(refraction at every interface, total internal reflection, Fresnel at the first), the second frame "
-             f"timed, and its time over a Workbench frame of the same scene. Target: <= {100 * TARGET:g} %.", "",
+             f"timed, and its time over a Workbench frame of the same scene. Target: <= {100 * TARGET:g} %. On "
+             "Glass BSDF the label is fragile: the sky's reflection (3.4 % head on) adds about 0.2 of blue in "
+             "display units to every glass pixel, which moves the orange panel's colour halfway to the salmon "
+             "tiles', and both renderers' tints differ by a few hundredths there (Cycles also follows the "
+             "internal reflections).", "",
              "| glass | what | glass px |", "|---|---|---:|"]
     for kind, what in GLASSES:
         r = next(r for r in result["rows"] if r["glass"] == kind)
         lines.append(f"| {kind} | {what} | {r['glass_px']:,} |")
-    lines += ["", "| glass | renderer | label disagreement | s | x Workbench | Cycles s |",
-              "|---|---|---:|---:|---:|---:|"]
+    lines += ["", "| glass | material | renderer | label disagreement | s | x Workbench | Cycles s |",
+              "|---|---|---|---:|---:|---:|---:|"]
     for r in result["rows"]:
-        lines.append(f"| {r['glass']} | {r['renderer']} | **{100 * r['disagreement']:.1f} %** | {r['seconds']:.2f} | "
-                     f"{r['seconds'] / r['workbench']:.0f}x | {r['cycles_seconds']:.1f} |")
+        lines.append(f"| {r['glass']} | {r['bsdf']} | {r['renderer']} | **{100 * r['disagreement']:.1f} %** | "
+                     f"{r['seconds']:.2f} | {r['seconds'] / r['workbench']:.0f}x | {r['cycles_seconds']:.1f} |")
     lines += ["", f"![Cycles (left), ours (middle), EEVEE (right); top to bottom: ball, lens, box]({picture})", ""]
     for r in result["rows"]:
         if r["renderer"].startswith("ours"):
             met = "met" if r["disagreement"] <= TARGET else "not met"
-            lines.append(f"- {r['glass']}: **{100 * r['disagreement']:.1f} %** (target <= {100 * TARGET:g} %: {met}); "
+            lines.append(f"- {r['glass']}, {r['bsdf']}: **{100 * r['disagreement']:.1f} %** (target <= "
+                         f"{100 * TARGET:g} %: {met}); "
                          f"{r['seconds'] / r['workbench']:.0f}x a Workbench frame (target 2x convex, 3x any: "
                          "not met: the glass is ray traced in numpy).")
     lines.append("")

@@ -25,8 +25,8 @@ def _material(kind: str, ior: float, transmission: float = 1.0):
     material = bpy.data.materials.new(f"{kind} glass")
     nodes = material.node_tree.nodes
     output = next(n for n in nodes if n.bl_idname == 'ShaderNodeOutputMaterial')
-    if kind == "Glass":
-        shader = nodes.new("ShaderNodeBsdfGlass")
+    if kind in ("Glass", "Refraction"):
+        shader = nodes.new(f"ShaderNodeBsdf{kind}")
     else:
         shader = next(n for n in nodes if n.bl_idname == 'ShaderNodeBsdfPrincipled')
         shader.inputs["Transmission Weight"].default_value = transmission
@@ -72,13 +72,17 @@ def test_a_glass_objects_index_of_refraction_comes_from_its_material_unless_set(
     glass = _ball("A", _material("Glass", 1.33))
     principled = _ball("B", _material("Principled", 1.6), location=(3.0, 0.0, 1.0))
     solid = _ball("C", _material("Principled", 1.6, transmission=0.2), location=(6.0, 0.0, 1.0))
-    assert (glass_ior(glass), glass_ior(principled), glass_ior(solid)) == pytest.approx((1.33, 1.6, DEFAULT_IOR))
+    refraction = _ball("D", _material("Refraction", 1.2), location=(9.0, 0.0, 1.0))
+    assert (glass_ior(glass), glass_ior(principled), glass_ior(solid), glass_ior(refraction)) == pytest.approx(
+        (1.33, 1.6, DEFAULT_IOR, 1.2))
     glass.curved_reflections.ior = 2.4
     assert glass_ior(glass) == pytest.approx(2.4)
     bpy.context.view_layer.update()
     captured = capture_scene(bpy.context.evaluated_depsgraph_get())
-    assert [(g.name, round(g.ior, 3)) for g in captured.glass] == [("A", 2.4), ("B", 1.6), ("C", 1.5)]
-    assert not captured.reflectors and {m.name for m in captured.meshes} == {"A", "B", "C"}
+    # A Refraction BSDF refracts without reflecting, as in Cycles.
+    assert [(g.name, round(g.ior, 3), g.reflects) for g in captured.glass] == [
+        ("A", 2.4, True), ("B", 1.6, True), ("C", 1.5, True), ("D", 1.2, False)]
+    assert not captured.reflectors and {m.name for m in captured.meshes} == {"A", "B", "C", "D"}
     glass.curved_reflections.is_reflector = True
     with pytest.raises(SceneInputError, match="'A': is marked both as a reflector and as glass"):
         capture_scene(bpy.context.evaluated_depsgraph_get())

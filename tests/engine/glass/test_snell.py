@@ -3,7 +3,7 @@
 
 import numpy as np
 
-from curved_reflections.engine.glass import fresnel_dielectric, fresnel_schlick, refract
+from curved_reflections.engine.glass import fresnel_dielectric, refract
 
 UP = np.array([[0.0, 0.0, 1.0]])
 
@@ -43,13 +43,11 @@ def test_leaving_glass_past_the_critical_angle_is_total_internal_reflection():
 def test_fresnel_reflectance_at_normal_incidence_and_brewsters_angle():
     """((n - 1) / (n + 1))^2 = 0.04 head on for glass from either side; at Brewster's
     angle atan(1.5) the p-polarised part vanishes, so unpolarised reflectance is half the
-    s part, 0.0739; Schlick agrees head on and rises to 1 at grazing incidence."""
+    s part; at grazing incidence all is reflected."""
     assert np.isclose(fresnel_dielectric(1.0, 1.0 / 1.5), 0.04)
     assert np.isclose(fresnel_dielectric(1.0, 1.5), 0.04)
     brewster = np.arctan(1.5)
     cos_i, cos_t = np.cos(brewster), np.cos(np.arcsin(np.sin(brewster) / 1.5))
     r_s = ((cos_i - 1.5 * cos_t) / (cos_i + 1.5 * cos_t)) ** 2
     assert np.isclose(fresnel_dielectric(cos_i, 1.0 / 1.5), 0.5 * r_s)
-    assert np.isclose(fresnel_schlick(1.0, 1.0 / 1.5), 0.04) and np.isclose(fresnel_schlick(0.0, 1.0 / 1.5), 1.0)
-    cosines = np.linspace(0.05, 1.0, 20)
-    assert np.all(np.abs(fresnel_schlick(cosines, 1.0 / 1.5) - fresnel_dielectric(cosines, 1.0 / 1.5)) < 0.05)
+    assert np.isclose(fresnel_dielectric(0.0, 1.0 / 1.5), 1.0)
