@@ -100,17 +100,23 @@ def _mirror_material():
     return material
 
 
+def _shader_material(name: str, node_type: str, inputs: dict):
+    """A material of one shader node, its ``inputs`` set, feeding the output's Surface."""
+    material = bpy.data.materials.new(name)
+    nodes = material.node_tree.nodes
+    nodes.clear()
+    shader = nodes.new(node_type)
+    for socket, value in inputs.items():
+        shader.inputs[socket].default_value = value
+    output = nodes.new("ShaderNodeOutputMaterial")
+    material.node_tree.links.new(shader.outputs[0], output.inputs["Surface"])
+    return material
+
+
 def _emission_material(name: str, display_colour):
     """Emission-only material: the pixel shows exactly this colour, unlit."""
     linear = (*srgb_to_linear(display_colour), 1.0)
-    material = bpy.data.materials.new(f"CR {name}")
-    nodes = material.node_tree.nodes
-    nodes.clear()
-    emission = nodes.new("ShaderNodeEmission")
-    emission.inputs["Color"].default_value = linear
-    emission.inputs["Strength"].default_value = 1.0
-    output = nodes.new("ShaderNodeOutputMaterial")
-    material.node_tree.links.new(emission.outputs["Emission"], output.inputs["Surface"])
+    material = _shader_material(f"CR {name}", "ShaderNodeEmission", {"Color": linear, "Strength": 1.0})
     material.diffuse_color = linear
     return material
 
@@ -138,14 +144,7 @@ def _reflector(scene, name: str, shape: shapes.Shape, location=(0, 0, 0), rotati
 
 
 def _glass(scene, name: str, shape: shapes.Shape, location=(0, 0, 0)):
-    material = bpy.data.materials.new(f"CR Glass {name}")
-    nodes = material.node_tree.nodes
-    nodes.clear()
-    shader = nodes.new("ShaderNodeBsdfGlass")
-    shader.inputs["IOR"].default_value = GLASS_IOR
-    shader.inputs["Roughness"].default_value = 0.0
-    output = nodes.new("ShaderNodeOutputMaterial")
-    material.node_tree.links.new(shader.outputs["BSDF"], output.inputs["Surface"])
+    material = _shader_material(f"CR Glass {name}", "ShaderNodeBsdfGlass", {"IOR": GLASS_IOR, "Roughness": 0.0})
     obj = _mesh_object(scene, name, shape, material, location)
     obj.curved_reflections.is_refractor = True
     return obj

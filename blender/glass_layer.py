@@ -6,10 +6,11 @@ glass as its "mirrors" and every other surface as meshes) is ray traced exactly:
 ray is followed through the glass (``engine/glass/paths.py``: Snell's law at every
 interface, total internal reflection), and the ray that comes out is met with the scene,
 mirrors included (``band_trace.BandTracer.trace_rays``: a mirror seen through glass shows
-its reflections, to the scene's Max Order). At the first interface the exact dielectric
-Fresnel reflectance mixes in the ray reflected off the glass (``snell.fresnel_dielectric``;
-the internal reflections at later interfaces are not followed), as Cycles' Glass BSDF
-shows it; glass of a Refraction BSDF reflects nothing. Those pixels replace the frame's (where the mirrors' renderer drew the glass as
+its reflections, to the scene's Max Order). The exact dielectric Fresnel reflectance
+(``snell.fresnel_dielectric``) mixes in the ray reflected off the glass at the first
+interface and the one reflected back inside at the last (followed out once), as Cycles'
+Glass BSDF shows them; glass of a Refraction BSDF reflects nothing (and where it should
+reflect totally, shows black, as Cycles does). Those pixels replace the frame's (where the mirrors' renderer drew the glass as
 a solid object); a scene of glass alone is that renderer's frame.
 
 This is the reference picture, traced per pixel on the CPU (a second or so at 480x320);
@@ -66,22 +67,48 @@ class GlassLayer:
 
     def trace(self, view: View, pixels: np.ndarray, world, max_order: int) -> np.ndarray:
         """(K, 3) linear RGB of the glass seen through ``pixels`` (K, 2): the refracted
-        path's colour and, by the Fresnel reflectance at the first interface, the
-        reflected ray's (see the module)."""
+        path's colour with, by the Fresnel reflectance, the ray reflected at the first
+        interface and the one reflected back inside at the last (see the module)."""
         origins, directions = view.pixel_rays(pixels)
-        paths = self.glass.trace(origins, directions)
         world = np.asarray(world, dtype=np.float64)[:4]
-        refracted = self.tracer.trace_rays(paths.origin, paths.direction, max_order, world)[:, :3]
+        paths = self.glass.trace(origins, directions)
+        color = self._leaving(paths, world, max_order)
         met = np.flatnonzero((paths.first_triangle >= 0) & self.glass.reflects[np.maximum(paths.history[:, 0], 0)])
-        if len(met) == 0:
-            return refracted
-        normal = paths.first_normal[met]
-        cos_i = -np.einsum("ij,ij->i", directions[met], normal)
-        share = fresnel_dielectric(cos_i, 1.0 / self.glass.iors[paths.history[met, 0]])
-        reflected = self.tracer.trace_rays(paths.first_position[met] + 1e-9 * self.glass.surfaces.scale * normal,
-                                           reflect(directions[met], normal), max_order, world)[:, :3]
-        refracted[met] = share[:, None] * reflected + (1.0 - share[:, None]) * refracted[met]
-        return refracted
+        if len(met):
+            normal = paths.first_normal[met]
+            share = fresnel_dielectric(-np.einsum("ij,ij->i", directions[met], normal),
+                                       1.0 / self.glass.iors[paths.history[met, 0]])
+            mirrored = reflect(directions[met], normal)
+            reflected = self.tracer.trace_rays(paths.first_position[met] + self._nudge * mirrored, mirrored,
+                                               max_order, world)[:, :3]
+            color[met] = share[:, None] * reflected + (1.0 - share[:, None]) * color[met]
+        return color
+
+    @property
+    def _nudge(self) -> float:
+        """How far a reflected ray starts off the glass, so as not to meet it again."""
+        return 1e-9 * self.glass.surfaces.scale
+
+    def _leaving(self, paths, world, max_order: int) -> np.ndarray:
+        """(K, 3) what the rays of ``paths`` show once they leave the glass, with the ray
+        reflected back inside at their last interface mixed in by its Fresnel
+        reflectance (followed until it leaves in turn, once)."""
+        color = self.tracer.trace_rays(paths.origin, paths.direction, max_order, world)[:, :3]
+        # A glass that does not reflect (a Refraction BSDF) cannot reflect totally either:
+        # that light is lost, as Cycles renders it.
+        lost = (paths.total_reflections > 0) & ~self.glass.reflects[np.maximum(paths.history[:, 0], 0)]
+        color[lost | paths.trapped] = 0.0
+        out = np.flatnonzero((paths.exit_glass >= 0) & ~paths.trapped
+                             & self.glass.reflects[np.maximum(paths.exit_glass, 0)])
+        if len(out):
+            incoming, normal, glass = paths.exit_incoming[out], paths.exit_normal[out], paths.exit_glass[out]
+            share = fresnel_dielectric(-np.einsum("ij,ij->i", incoming, normal), self.glass.iors[glass])
+            inside = reflect(incoming, normal)
+            again = self.glass.trace(paths.exit_position[out] + self._nudge * inside, inside, media=glass)
+            back = self.tracer.trace_rays(again.origin, again.direction, max_order, world)[:, :3]
+            back[again.trapped | (again.exit_glass < 0)] = 0.0
+            color[out] = share[:, None] * back + (1.0 - share[:, None]) * color[out]
+        return color
 
 
 def glass_layer(previous: GlassLayer | None, captured, key: tuple) -> GlassLayer | None:

@@ -45,6 +45,13 @@ def _surface_object(context):
     return obj if obj is not None and obj.type in SURFACE_TYPES else None
 
 
+def _object_toggle(layout, context, name: str) -> None:
+    """A sub-panel header's checkbox: the active object's setting ``name``, where it has a surface."""
+    obj = _surface_object(context)
+    if obj is not None:
+        layout.prop(obj.curved_reflections, name, text="")
+
+
 def _split_property(layout):
     """Names in a left column, fields in a right one, as Blender's property panels."""
     layout.use_property_split = True
@@ -129,9 +136,7 @@ class VIEW3D_PT_curved_reflections_mirror(_SubPanel, bpy.types.Panel):
     bl_label = "Mirror"
 
     def draw_header(self, context):
-        obj = _surface_object(context)
-        if obj is not None:
-            self.layout.prop(obj.curved_reflections, "is_reflector", text="")
+        _object_toggle(self.layout, context, "is_reflector")
 
     def draw(self, context):
         layout = self.layout
@@ -173,9 +178,7 @@ class VIEW3D_PT_curved_reflections_glass(_SubPanel, bpy.types.Panel):
     bl_options = {'DEFAULT_CLOSED'}
 
     def draw_header(self, context):
-        obj = _surface_object(context)
-        if obj is not None:
-            self.layout.prop(obj.curved_reflections, "is_refractor", text="")
+        _object_toggle(self.layout, context, "is_refractor")
 
     def draw(self, context):
         layout = self.layout

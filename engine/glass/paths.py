@@ -67,6 +67,13 @@ class GlassPaths:
     first_triangle: np.ndarray  # (R,) its triangle in ``GlassSet.surfaces``, -1 where none
     trapped: np.ndarray  # (R,) still meeting glass after MAX_INTERFACES interfaces
     nested: np.ndarray  # (R,) met one glass while inside another
+    #: The last crossing out of glass into air: the glass left (-1: none), where, the
+    #: direction the ray came in with and the normal facing it (for the Fresnel
+    #: reflectance there, and the ray reflected back inside).
+    exit_glass: np.ndarray  # (R,)
+    exit_position: np.ndarray  # (R, 3)
+    exit_incoming: np.ndarray  # (R, 3)
+    exit_normal: np.ndarray  # (R, 3)
 
     @property
     def interfaces(self) -> np.ndarray:
@@ -91,12 +98,15 @@ class GlassSet:
         self.reflects = np.array([bool(glass.reflects) for glass in self.glasses])
         self._leave = LEAVE_FRACTION * self.surfaces.scale
 
-    def trace(self, origins, directions, max_interfaces: int = MAX_INTERFACES) -> GlassPaths:
-        """Follow rays (``origins``, unit ``directions``, in air) through the glass."""
+    def trace(self, origins, directions, max_interfaces: int = MAX_INTERFACES, media=None) -> GlassPaths:
+        """Follow rays (``origins``, unit ``directions``) through the glass; ``media``
+        (R,): the glass each starts in (-1, the default: air)."""
         origin = np.array(origins, dtype=np.float64, copy=True)
         direction = np.array(directions, dtype=np.float64, copy=True)
         n = len(origin)
-        medium = np.full(n, -1, dtype=np.int64)
+        medium = np.full(n, -1, dtype=np.int64) if media is None else np.array(media, dtype=np.int64)
+        exit_glass = np.full(n, -1, dtype=np.int64)
+        exit_position, exit_incoming, exit_normal = (np.full((n, 3), np.nan) for _ in range(3))
         history = np.full((n, max_interfaces), -1, dtype=np.int64)
         total = np.zeros(n, dtype=np.int64)
         nested = np.zeros(n, dtype=bool)
@@ -122,6 +132,11 @@ class GlassSet:
             bent, reflected = refract(direction[active], hits.normal[hit], n_from / n_to)
             history[active, step] = glass
             total[active] += reflected
+            out = np.flatnonzero(leaving & ~reflected)
+            exit_glass[active[out]] = glass[out]
+            exit_position[active[out]] = hits.position[hit[out]]
+            exit_incoming[active[out]] = direction[active[out]]
+            exit_normal[active[out]] = hits.normal[hit[out]]
             medium[active] = np.where(reflected, inside, np.where(leaving, -1, glass))
             direction[active] = bent
             origin[active] = hits.position[hit] + self._leave * bent
@@ -129,4 +144,4 @@ class GlassSet:
         if len(active):
             trapped[active] = self.surfaces.intersect(origin[active], direction[active]).hit
         return GlassPaths(origin, direction, medium, history, total, first_position, first_normal, first_triangle,
-                          trapped, nested)
+                          trapped, nested, exit_glass, exit_position, exit_incoming, exit_normal)

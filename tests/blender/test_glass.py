@@ -144,8 +144,9 @@ def test_render_image_draws_what_lies_behind_glass_where_exactly_traced_rays_see
 
 
 def test_the_glass_reflects_the_world_by_the_fresnel_reflectance(empty_scene, registered, gpu_ready):
-    """Head on, glass of index 1.45 reflects ((n - 1) / (n + 1))^2 = 3.4 %: the ball's
-    centre shows 96.6 % of the panel behind it and 3.4 % of the lavender world."""
+    """Head on, glass of index 1.45 reflects ((n - 1) / (n + 1))^2 = 3.4 % at each
+    surface: the ball's centre shows the lavender world reflected off its front, and of
+    the light inside, the panel behind it and the world reflected back off its back."""
     from curved_reflections.engine.srgb import srgb_to_linear
 
     scene = _glass_scene()
@@ -156,7 +157,10 @@ def test_the_glass_reflects_the_world_by_the_fresnel_reflectance(empty_scene, re
     [panel] = _traced_labels(captured, result.view, np.array([[x, y]]))
     behind = np.array(srgb_to_linear(list(COLOURS.values())[panel]))
     r0 = ((1.45 - 1.0) / (1.45 + 1.0)) ** 2
-    assert np.allclose(result.image[y, x, :3], r0 * world + (1.0 - r0) * behind, atol=2e-3)
+    # Reflected at the front (r0 of the world), and of what goes in, reflected back at the
+    # back (r0 again: it leaves through the front toward the world).
+    assert np.allclose(result.image[y, x, :3], r0 * world + (1.0 - r0) * ((1.0 - r0) * behind + r0 * world),
+                       atol=2e-3)
 
 
 def test_a_scene_of_glass_alone_renders_and_a_camera_inside_glass_is_named(empty_scene, registered, gpu_ready):
@@ -177,3 +181,22 @@ def test_the_live_view_of_glass_alone_says_render_image_draws_it(empty_scene, re
         bpy.ops.curved_reflections.start_live()
     assert "has glass but no reflector: the viewport draws mirrors' reflections, and glass in Render Image only" \
         in capfd.readouterr().out
+
+
+def test_where_glass_must_reflect_totally_a_refraction_bsdf_shows_black(empty_scene, registered, gpu_ready):
+    """A glass box seen at an angle: rays entering its top meet a side past the critical
+    angle. Glass (a Glass BSDF) reflects them on; a Refraction BSDF cannot, so Cycles
+    shows those pixels black, and so does Render Image."""
+    scene = _glass_scene()
+    bpy.data.objects.remove(bpy.data.objects["Ball"])
+    demo_scenes._camera(scene, (2.5, -5.0, 3.5), (0.0, 0.0, 1.0), 50.0)
+    for kind, black in (("Glass", False), ("Refraction", True)):
+        bpy.ops.mesh.primitive_cube_add(size=1.6, location=(0.0, 0.0, 1.0))
+        box = bpy.context.active_object
+        box.data.materials.append(_material(kind, 1.5))
+        box.curved_reflections.is_refractor = True
+        bpy.context.view_layer.update()
+        result = render_scene(scene, bpy.context.evaluated_depsgraph_get())
+        dark = (result.image[..., :3].max(axis=2) < 1e-6).sum()
+        assert (dark > 50) == black, (kind, dark)
+        bpy.data.objects.remove(box)
