@@ -8,6 +8,7 @@ that the drawing they share the cores with keeps its pace.
 
 from __future__ import annotations
 
+import collections
 import os
 import sys
 import threading
@@ -25,6 +26,60 @@ BACKGROUND_NICENESS = 10
 
 #: The running threads by name (each made on first use).
 _executors: dict = {}
+#: What finished jobs were called with (their function, closures and arguments), kept
+#: for the main thread to let go of (:func:`release_finished`).
+_finished: collections.deque = collections.deque()
+_finished_lock = threading.Lock()
+
+
+class _Job:
+    """A submitted call that, once run, hands its function and arguments to
+    :data:`_finished` instead of dropping them on the worker thread.
+
+    A job's closure or arguments may hold the last reference to GPU objects (a replaced
+    renderer's frame targets and batches, a grid's textures): freed on a worker, which
+    has no GPU context, Blender only queues their GL names as orphans, and nothing in the
+    live view activates a context that deletes them, so each one's storage stayed in
+    Mesa for the rest of the session (the soak's growth, docs/benchmarks/soak.md)."""
+
+    __slots__ = ("call",)
+
+    def __init__(self, fn, args, kwargs):
+        self.call = (fn, args, kwargs)
+
+    def __call__(self):
+        call, self.call = self.call, None
+        fn, args, kwargs = call
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            fn = args = kwargs = None
+            with _finished_lock:  # this thread lets go while the queue still holds them
+                _finished.append(call)
+                call = None
+
+
+class _Executor(ThreadPoolExecutor):
+    """A thread pool whose jobs' callables and arguments die on the main thread: the
+    live view submits from there only, and each submission first lets go of what the
+    finished jobs were called with (:func:`release_finished`)."""
+
+    def submit(self, fn, /, *args, **kwargs):
+        release_finished()
+        job = _Job(fn, args, kwargs)
+        future = super().submit(job)
+        # Cancelled (on the main thread, which runs this then), it is never run: let go here.
+        future.add_done_callback(lambda done: setattr(job, "call", None) if done.cancelled() else None)
+        return future
+
+
+def release_finished() -> None:
+    """Drop what finished jobs were called with, on the calling (main) thread: the GPU
+    objects only they still held are freed with a GPU context (see :class:`_Job`)."""
+    with _finished_lock:
+        released = list(_finished)
+        _finished.clear()
+    del released  # here, outside the lock
 
 
 def build_camera(job: CameraJob, maker):
@@ -60,7 +115,7 @@ def _lower_priority() -> None:
 
 def _executor(name: str) -> ThreadPoolExecutor:
     if name not in _executors:
-        _executors[name] = ThreadPoolExecutor(1, name, initializer=_lower_priority)
+        _executors[name] = _Executor(1, name, initializer=_lower_priority)
     return _executors[name]
 
 
@@ -92,3 +147,4 @@ def shutdown() -> None:
     for executor in _executors.values():
         executor.shutdown(wait=False, cancel_futures=True)
     _executors.clear()
+    release_finished()
