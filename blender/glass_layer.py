@@ -113,7 +113,8 @@ class GlassLayer:
 
 def glass_layer(previous: GlassLayer | None, captured, key: tuple) -> GlassLayer | None:
     """The glass of ``captured`` (``None`` without any): ``previous`` while its ``key``
-    (the capture's, ``frame_pipeline.captured_key``, and the glasses' indices) holds."""
+    holds (the capture's, ``frame_pipeline.captured_key``, with each glass's name, index
+    of refraction and whether it reflects)."""
     if not captured.glass:
         return None
     key = key + tuple((glass.name, glass.ior, glass.reflects) for glass in captured.glass)
