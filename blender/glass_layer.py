@@ -46,6 +46,9 @@ class GlassLayer:
     glass: GlassSet
     renderer: ReflectionRenderer
     tracer: BandTracer
+    #: Names of the glass objects the last frame's rays met inside another glass (glass
+    #: in glass, or overlapping): a ray leaving the inner one is taken to leave into air.
+    nested: tuple = ()
 
     def render(self, view: View, world, max_order: int) -> tuple[np.ndarray, np.ndarray]:
         """((H, W, 4) linear RGBA rows bottom to top, (H, W) bool where a glass object is
@@ -72,6 +75,7 @@ class GlassLayer:
         origins, directions = view.pixel_rays(pixels)
         world = np.asarray(world, dtype=np.float64)[:4]
         paths = self.glass.trace(origins, directions)
+        self.nested = tuple(self.glass.glasses[k].name for k in np.unique(paths.history[paths.nested, 0]))
         color = self._leaving(paths, world, max_order)
         met = np.flatnonzero((paths.first_triangle >= 0) & self.glass.reflects[np.maximum(paths.history[:, 0], 0)])
         if len(met):

@@ -135,6 +135,9 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
         glass_image, in_front = state.glass.render(view, state.world, settings.max_order)
         image = over(image, glass_image, in_front)
         stats["glass"] = {"pixels": int(in_front.sum()), "seconds": time.perf_counter() - started}
+        if state.glass.nested:
+            stats["warnings"].append(f"Glass inside other glass (seen through {', '.join(state.glass.nested)}): a ray "
+                                     "leaving the inner glass is drawn as if it left into air")
     end = time.perf_counter()
     state.frames += 1
     seconds = {"capture": state.capture_seconds, "plan": planned_at - start - state.capture_seconds,

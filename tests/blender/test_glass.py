@@ -200,3 +200,14 @@ def test_where_glass_must_reflect_totally_a_refraction_bsdf_shows_black(empty_sc
         dark = (result.image[..., :3].max(axis=2) < 1e-6).sum()
         assert (dark > 50) == black, (kind, dark)
         bpy.data.objects.remove(box)
+
+
+def test_glass_inside_glass_is_drawn_with_a_warning_naming_the_outer_glass(empty_scene, registered, gpu_ready):
+    """A ray leaving the inner glass is taken to leave into air (the media are tracked
+    one at a time): the render says so instead of passing it off as exact."""
+    scene = _glass_scene()
+    _ball("Bubble", _material("Glass", 1.33), radius=0.4)
+    bpy.context.view_layer.update()
+    result = render_scene(scene, bpy.context.evaluated_depsgraph_get())
+    assert result.stats["warnings"] == ["Glass inside other glass (seen through Ball): a ray leaving the inner glass "
+                                        "is drawn as if it left into air"]
