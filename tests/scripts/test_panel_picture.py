@@ -26,8 +26,10 @@ def test_panel_picture_is_written(tmp_path, gpu_ready):
     size = re.search(r"wrote .*panel\.png \((\d+)x(\d+)\)", run.stdout)
     assert size and out.stat().st_size > 5000
     panels = dict(re.findall(r"^panel (.+): ((?:open|closed), \d+ rows)$", run.stdout, re.MULTILINE))
-    assert list(panels) == ["Curved Reflections", "Mirror", "Reflectors", "Quality", "Morphing Grids", "Statistics"]
-    assert panels["Morphing Grids"] == panels["Statistics"] == "closed, 0 rows"  # closed: the header alone
+    assert list(panels) == ["Curved Reflections", "Mirror", "Glass", "Reflectors", "Quality", "Morphing Grids",
+                            "Statistics"]
+    # Closed: the header alone.
+    assert panels["Glass"] == panels["Morphing Grids"] == panels["Statistics"] == "closed, 0 rows"
     # Both mirrors measured in the view, by the method that drew them, with answers confirmed.
     checks = dict(re.findall(r"^checked (\w+): In this view \((\w+)\): p95 [\d.]+ px", run.stdout, re.MULTILINE))
     assert checks == {"MirrorSphere": "Iterative", "Ring": "Runtime"}, run.stdout[-3000:]
