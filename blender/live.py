@@ -474,7 +474,8 @@ def _draw_with(state: LiveScene, view: View, camera: ViewCamera | None) -> bool:
     source = _projection_source(state, camera)
     camera_traced, tracing = live_traces.camera_traced(state, camera, view)
     band = live_traces.band_traced(state, view, sbc)
-    resting = live_traces.resting(state, view, sbc)
+    # A camera's own view rests (it is built once the view stops): drawn exactly too.
+    resting = live_traces.resting(state, view, sbc) or (camera is not None and view.same_as(camera.view))
     targets = state.renderer.draw(view, source, state.world, reflectors_only=True, camera=sbc,
                                   accuracy_px=state.settings.accuracy_px, exact=resting,
                                   traced=camera_traced if band is None else band)
