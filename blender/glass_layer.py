@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..drawing.gpu_data import read_texture
+from ..drawing.gpu_data import read_depth, read_texture
 from ..drawing.reflection_draw import ReflectionRenderer
 from ..engine.errors import SceneInputError
 from ..engine.geometry.band_trace import BandTracer
@@ -63,18 +63,21 @@ class GlassLayer:
         labels = read_texture(self.renderer.targets(view.width, view.height).prepass_labels, view.width, view.height)
         in_front = labels[..., 0] >= 0.5
         rows, columns = np.nonzero(in_front)
-        colors = self.trace(view, np.stack([columns, rows], axis=1) + 0.5, world, max_order)
+        depth = read_depth(self.renderer.targets(view.width, view.height).prepass, view.width, view.height)
+        pixels = np.stack([columns, rows], axis=1) + 0.5
+        colors = self.trace(view, pixels, world, max_order, view.window_points(pixels, depth[rows, columns]))
         image[rows, columns, :3] = colors
         image[rows, columns, 3] = 1.0
         return image, in_front
 
-    def trace(self, view: View, pixels: np.ndarray, world, max_order: int) -> np.ndarray:
+    def trace(self, view: View, pixels: np.ndarray, world, max_order: int, surface=None) -> np.ndarray:
         """(K, 3) linear RGB of the glass seen through ``pixels`` (K, 2): the refracted
         path's colour with, by the Fresnel reflectance, the ray reflected at the first
-        interface and the one reflected back inside at the last (see the module)."""
+        interface and the one reflected back inside at the last (see the module).
+        ``surface`` (K, 3): where the pre-pass saw the glass on each (``GlassSet.trace``)."""
         origins, directions = view.pixel_rays(pixels)
         world = np.asarray(world, dtype=np.float64)[:4]
-        paths = self.glass.trace(origins, directions)
+        paths = self.glass.trace(origins, directions, near_surface=surface)
         self.nested = tuple(self.glass.glasses[k].name for k in np.unique(paths.history[paths.nested, 0]))
         color = self._leaving(paths, world, max_order)
         met = np.flatnonzero((paths.first_triangle >= 0) & self.glass.reflects[np.maximum(paths.history[:, 0], 0)])
