@@ -85,3 +85,19 @@ def test_glass_in_glass_is_marked_and_a_bad_index_names_the_object():
     assert list(paths.nested) == [True, False] and list(paths.interfaces) == [4, 2]
     with pytest.raises(SceneInputError, match="Lens.*index of refraction of 0.0"):
         Glass(icosphere((0.0, 0.0, 0.0), 1.0, 1, "Lens"), 0.0)
+
+
+def test_rays_started_near_where_they_meet_the_glass_follow_the_same_paths():
+    """Given roughly where each ray meets the glass first (a pre-pass's float depth; some
+    unknown), the paths are those found by the BVH alone."""
+    glass = GlassSet([Glass(icosphere((0.0, 0.0, 0.0), 1.0, 4, "Ball"), 1.5)])
+    rng = np.random.default_rng(5)
+    origins = np.c_[rng.uniform(-0.9, 0.9, (200, 2)), np.full(200, 4.0)]
+    directions = np.tile([0.0, 0.0, -1.0], (200, 1))
+    alone = glass.trace(origins, directions)
+    near = alone.first_position + rng.normal(scale=1e-4, size=(200, 3))
+    near[::7] = np.nan
+    guided = glass.trace(origins, directions, near_surface=near)
+    assert alone.through_glass.all()
+    np.testing.assert_allclose(guided.origin, alone.origin)
+    np.testing.assert_allclose(guided.direction, alone.direction)
