@@ -98,6 +98,6 @@ def test_rays_started_near_where_they_meet_the_glass_follow_the_same_paths():
     near = alone.first_position + rng.normal(scale=1e-4, size=(200, 3))
     near[::7] = np.nan
     guided = glass.trace(origins, directions, near_surface=near)
-    assert alone.through_glass.all()
+    assert 100 < alone.through_glass.sum() < 200  # some miss the ball: no glass to start near
     np.testing.assert_allclose(guided.origin, alone.origin)
     np.testing.assert_allclose(guided.direction, alone.direction)
