@@ -85,9 +85,10 @@ def start_band(state: LiveScene, view: View, targets, camera, source) -> bool:
         band.future.set_result(None)
         return False
     pixels, surface = selection
-    tracer, world = renderer.band_tracer, state.world
+    world = state.world
+    # The renderer's tracer (a tree of the diffuse meshes) is made on the worker too.
     band.future = live_workers.tracer().submit(
-        lambda: TracedPixels(view, pixels, traced_rgba(tracer, view, pixels, max_order, world, surface)))
+        lambda: TracedPixels(view, pixels, traced_rgba(renderer.band_tracer, view, pixels, max_order, world, surface)))
     return True
 
 
