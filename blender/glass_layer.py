@@ -10,10 +10,11 @@ its reflections, to the scene's Max Order). The exact dielectric Fresnel reflect
 (``snell.fresnel_dielectric``) mixes in the ray reflected off the glass at the first
 interface and the one reflected back inside at the last (followed out once), as Cycles'
 Glass BSDF shows them; glass of a Refraction BSDF reflects nothing (and where it should
-reflect totally, shows black, as Cycles does). Those pixels replace the frame's (where the mirrors' renderer drew the glass as
-a solid object); a scene of glass alone is that renderer's frame.
+reflect totally, shows black, as Cycles does). Those pixels replace the frame's (where
+the mirrors' renderer drew the glass as a solid object); a scene of glass alone is that
+renderer's frame.
 
-This is the reference picture, traced per pixel on the CPU (a second or so at 480x320);
+This is the reference picture, traced per pixel on the CPU (seconds at 480x320);
 the sample-based cameras on refracted rays (``tools/glass_camera.py``) are
 measured against the exact solver for the GPU path. Left out for now, and said so in the
 panel: the live view (it shows glass as a solid object), and glass seen in mirrors (a

@@ -21,6 +21,7 @@ Two kinds, both on the live view's tracing thread (``live_workers.tracer``):
 
 from __future__ import annotations
 
+import weakref
 from concurrent.futures import Future
 from dataclasses import dataclass
 
@@ -37,7 +38,9 @@ class BandTrace:
     next draw of that view, traced on the worker (``future`` -> TracedPixels or None)."""
 
     view: View
-    renderer: object  # the renderer it is traced for (its meshes and passes)
+    #: The renderer it is traced for (its meshes and passes), weakly: a replaced
+    #: renderer's GPU textures must not outlive it here.
+    renderer: weakref.ref
     camera: object  # the sample-based camera the view was drawn with (None: none)
     future: Future | None = None  # None until a draw has picked the pixels
     redrawn: bool = False  # whether its landing asked for a redraw
@@ -52,7 +55,7 @@ def want_band_when_settled(state: LiveScene, now: float) -> bool:
     view, since, camera = state.last_view[:3]
     if now - since < accuracy.SETTLE_SECONDS or resting(state, view, camera):
         return False
-    state.band = BandTrace(view, state.renderer, camera)
+    state.band = BandTrace(view, weakref.ref(state.renderer), camera)
     return True
 
 
@@ -62,7 +65,7 @@ def resting(state: LiveScene, view: View, camera) -> bool:
     exactly, as Render Image places them, not snapped within the Accuracy (the speed
     of a moving view: ``reflected_meshes.SNAP_SHARE``)."""
     band = state.band
-    return (band is not None and band.renderer is state.renderer and band.camera is camera
+    return (band is not None and band.renderer() is state.renderer and band.camera is camera
             and band.view.same_as(view))
 
 
@@ -85,10 +88,11 @@ def start_band(state: LiveScene, view: View, targets, camera, source) -> bool:
         band.future.set_result(None)
         return False
     pixels, surface = selection
-    world = state.world
-    # The renderer's tracer (a tree of the diffuse meshes) is made on the worker too.
+    world, source = state.world, renderer.tracer_source
+    # The renderer's tracer (a tree of the diffuse meshes) is made on the worker too; the
+    # job holds nothing of the GPU (see ``band_trace.TracerSource``).
     band.future = live_workers.tracer().submit(
-        lambda: TracedPixels(view, pixels, traced_rgba(renderer.band_tracer, view, pixels, max_order, world, surface)))
+        lambda: TracedPixels(view, pixels, traced_rgba(source.get(), view, pixels, max_order, world, surface)))
     return True
 
 
@@ -101,11 +105,12 @@ def camera_traced(state: LiveScene, camera: ViewCamera | None, view: View):
         return None, False
     started = False
     if camera.tracing is None or camera.tracing.renderer is not state.renderer:
-        renderer, sbc, max_order, world = state.renderer, camera.sbc, camera.settings.max_order, state.world
-        # The renderer's tracer is made on the worker too (a tree of the diffuse meshes).
+        source, sbc = state.renderer.tracer_source, camera.sbc
+        max_order, world = camera.settings.max_order, state.world
+        # The renderer's tracer (a tree of the diffuse meshes) is made on the worker too.
         future = live_workers.tracer().submit(
-            lambda: trace_doubtful(renderer.band_tracer, sbc, max_order, world, MAX_TRACED_FRACTION))
-        camera.tracing, started = Tracing(renderer, future), True
+            lambda: trace_doubtful(source.get(), sbc, max_order, world, MAX_TRACED_FRACTION))
+        camera.tracing, started = Tracing(state.renderer, future), True
     future = camera.tracing.future
     if not future.done():
         return None, started

@@ -198,7 +198,8 @@ class ReflectionRenderer:
         self._reflector_set = reflector_set
         self._batches = None
         self._targets = None
-        self._tracer = None
+        #: The reflectors and meshes ray traced together, made on first use.
+        self.tracer_source = band_trace.TracerSource(reflectors, meshes, reflector_set)
 
     def _make_batches(self) -> dict:
         """Vertex buffers of the pre-pass and of the full-screen triangle, and the images."""
@@ -264,9 +265,7 @@ class ReflectionRenderer:
     @property
     def band_tracer(self) -> band_trace.BandTracer:
         """The reflectors and meshes ray traced together (made on first use)."""
-        if self._tracer is None:
-            self._tracer = band_trace.BandTracer(self._reflectors, self._meshes, self._reflector_set)
-        return self._tracer
+        return self.tracer_source.get()
 
     def invalidate(self) -> None:
         """Forget the cameras' reflected triangles: the next draw projects again."""

@@ -22,6 +22,7 @@ its area.
 from __future__ import annotations
 
 import dataclasses
+import threading
 
 import numpy as np
 
@@ -223,6 +224,23 @@ class BandTracer:
             albedo[rows] *= sample_image(np.asarray(image, dtype=np.float64), uv)[:, :3]
         lit = np.array([0.0 if m.emissive else 1.0 for m in self.meshes])[mesh]
         return shade(albedo, lit, normals, to_eye)
+
+
+class TracerSource:
+    """A :class:`BandTracer` made on first use, from numpy alone: a worker thread may
+    make and use it while holding nothing of the GPU (a renderer's textures freed on a
+    thread without a GPU context stay in the driver's heap)."""
+
+    def __init__(self, reflectors, meshes, mirrors: ReflectorSet | None = None):
+        self._arguments = (list(reflectors), list(meshes), mirrors)
+        self._tracer = None
+        self._lock = threading.Lock()
+
+    def get(self) -> BandTracer:
+        with self._lock:  # the drawing thread and a worker may both ask first
+            if self._tracer is None:
+                self._tracer = BandTracer(*self._arguments)
+            return self._tracer
 
 
 def history_boundary(ray_map, width: int, height: int, max_order: int) -> np.ndarray:
