@@ -14,7 +14,7 @@ import bpy
 import pytest
 
 from curved_reflections import blender
-from curved_reflections.blender import demo_scenes, live, method_plan, method_registry, morph_bake, panel, scene_status
+from curved_reflections.blender import demo_scenes, live, method_plan, method_registry, panel, scene_status
 
 MAIN = panel.VIEW3D_PT_curved_reflections
 MIRROR = panel.VIEW3D_PT_curved_reflections_mirror
