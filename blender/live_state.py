@@ -4,6 +4,7 @@ view, and a capture whose reflectors are being made ready on the worker."""
 
 from __future__ import annotations
 
+import weakref
 from concurrent.futures import Future
 from dataclasses import dataclass, field
 
@@ -17,7 +18,9 @@ from .scene_status import SceneStatus
 class Tracing:
     """A camera's traced pixels (``traced_pixels.TracedPixels`` or None) on their way."""
 
-    renderer: object  # the renderer they are traced for (its meshes)
+    #: The renderer they are traced for (its meshes), weakly: a camera outlives a mesh
+    #: edit's renderer, whose GPU textures must not outlive it here.
+    renderer: weakref.ref
     future: Future
     redrawn: bool = False  # whether their landing asked for a redraw
 

@@ -104,20 +104,20 @@ def camera_traced(state: LiveScene, camera: ViewCamera | None, view: View):
     if camera is None or camera.sbc is None or not view.same_as(camera.view):
         return None, False
     started = False
-    if camera.tracing is None or camera.tracing.renderer is not state.renderer:
+    if camera.tracing is None or camera.tracing.renderer() is not state.renderer:
         source, sbc = state.renderer.tracer_source, camera.sbc
         max_order, world = camera.settings.max_order, state.world
         # The renderer's tracer (a tree of the diffuse meshes) is made on the worker too.
         future = live_workers.tracer().submit(
             lambda: trace_doubtful(source.get(), sbc, max_order, world, MAX_TRACED_FRACTION))
-        camera.tracing, started = Tracing(state.renderer, future), True
+        camera.tracing, started = Tracing(weakref.ref(state.renderer), future), True
     future = camera.tracing.future
     if not future.done():
         return None, started
     try:
         return future.result(), started
     except Exception as error:  # noqa: BLE001 - the camera's own answers keep drawing
-        camera.tracing = Tracing(state.renderer, Future(), redrawn=True)
+        camera.tracing = Tracing(weakref.ref(state.renderer), Future(), redrawn=True)
         camera.tracing.future.set_result(None)
         state.report('WARNING', f"Tracing the reflections failed: {type(error).__name__}: {error}")
         return None, started
