@@ -20,27 +20,11 @@ MIN_TRANSMISSION = 0.5
 REFRACTING_SHADERS = frozenset({'ShaderNodeBsdfGlass', 'ShaderNodeBsdfRefraction'})
 
 
-def material_ior(material) -> float | None:
-    """The IOR ``material``'s surface shader refracts with, or ``None`` if it is no glass."""
-    shader = None if material is None else surface_shader(material)
-    if shader is None:
-        return None
-    if shader.bl_idname in REFRACTING_SHADERS:
-        return float(shader.inputs["IOR"].default_value)
-    if (shader.bl_idname == 'ShaderNodeBsdfPrincipled'
-            and float(shader.inputs["Transmission Weight"].default_value) >= MIN_TRANSMISSION):
-        return float(shader.inputs["IOR"].default_value)
-    return None
-
-
 def glass_reflects(obj) -> bool:
     """Whether a glass object's surface reflects as well as refracts: not when its first
     glass material is a Refraction BSDF (Cycles' refraction without reflection)."""
-    for slot in obj.material_slots:
-        shader = None if slot.material is None else surface_shader(slot.material)
-        if shader is not None and material_ior(slot.material) is not None:
-            return shader.bl_idname != 'ShaderNodeBsdfRefraction'
-    return True
+    shader = _first_glass_shader(obj)
+    return shader is None or shader.bl_idname != 'ShaderNodeBsdfRefraction'
 
 
 def glass_ior(obj) -> float:
@@ -49,8 +33,25 @@ def glass_ior(obj) -> float:
     own = float(obj.curved_reflections.ior)
     if own > 0.0:
         return own
-    for slot in obj.material_slots:
-        ior = material_ior(slot.material)
-        if ior is not None:
-            return ior
-    return DEFAULT_IOR
+    shader = _first_glass_shader(obj)
+    return DEFAULT_IOR if shader is None else float(shader.inputs["IOR"].default_value)
+
+
+def _glass_shader(material):
+    """``material``'s surface shader when it is glass (a refracting BSDF, or a Principled
+    BSDF transmitting at least :data:`MIN_TRANSMISSION`), else ``None``."""
+    shader = None if material is None else surface_shader(material)
+    if shader is None:
+        return None
+    if shader.bl_idname in REFRACTING_SHADERS:
+        return shader
+    if (shader.bl_idname == 'ShaderNodeBsdfPrincipled'
+            and float(shader.inputs["Transmission Weight"].default_value) >= MIN_TRANSMISSION):
+        return shader
+    return None
+
+
+def _first_glass_shader(obj):
+    """The glass shader of the object's first glass material, or ``None``."""
+    return next((shader for shader in map(_glass_shader, (slot.material for slot in obj.material_slots))
+                 if shader is not None), None)
