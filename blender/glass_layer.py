@@ -81,7 +81,7 @@ class GlassLayer:
         paths = self.glass.trace(origins, directions, near_surface=surface)
         self.nested = tuple(self.glass.glasses[k].name for k in np.unique(paths.history[paths.nested, 0]))
         color = self._leaving(paths, world, max_order)
-        met = np.flatnonzero((paths.first_triangle >= 0) & self.glass.reflects[np.maximum(paths.history[:, 0], 0)])
+        met = np.flatnonzero(self.glass.reflecting(paths.history[:, 0]))
         if len(met):
             normal = paths.first_normal[met]
             share = fresnel_dielectric(-np.einsum("ij,ij->i", directions[met], normal),
@@ -104,10 +104,9 @@ class GlassLayer:
         color = self.tracer.trace_rays(paths.origin, paths.direction, max_order, world)[:, :3]
         # A glass that does not reflect (a Refraction BSDF) cannot reflect totally either:
         # that light is lost, as Cycles renders it.
-        lost = (paths.total_reflections > 0) & ~self.glass.reflects[np.maximum(paths.history[:, 0], 0)]
+        lost = (paths.total_reflections > 0) & ~self.glass.reflecting(paths.history[:, 0])
         color[lost | paths.trapped] = 0.0
-        out = np.flatnonzero((paths.exit_glass >= 0) & ~paths.trapped
-                             & self.glass.reflects[np.maximum(paths.exit_glass, 0)])
+        out = np.flatnonzero(self.glass.reflecting(paths.exit_glass) & ~paths.trapped)
         if len(out):
             incoming, normal, glass = paths.exit_incoming[out], paths.exit_normal[out], paths.exit_glass[out]
             share = fresnel_dielectric(-np.einsum("ij,ij->i", incoming, normal), self.glass.iors[glass])

@@ -98,6 +98,11 @@ class GlassSet:
         self.reflects = np.array([bool(glass.reflects) for glass in self.glasses])
         self._leave = LEAVE_FRACTION * self.surfaces.scale
 
+    def reflecting(self, glass: np.ndarray) -> np.ndarray:
+        """(R,) bool: the glass of each index (-1: none) reflects as well as refracts."""
+        glass = np.asarray(glass)
+        return (glass >= 0) & self.reflects[np.maximum(glass, 0)]
+
     def trace(self, origins, directions, max_interfaces: int = MAX_INTERFACES, media=None,
               near_surface=None) -> GlassPaths:
         """Follow rays (``origins``, unit ``directions``) through the glass; ``media``
