@@ -73,8 +73,8 @@ MAX_UNCOVERED = 1e-2
 #: a 256 face: ten times less.
 JUMP_SHARE = 0.3
 #: Patches along each cube face's side (``piece_patches``): where the search starts.
-#: Finer patches have narrower normal cones but cost a test each per point; 6 x 6 and
-#: 8 x 8 found no more of a torus's exact images than 4 x 4.
+#: Finer patches have narrower normal cones but cost a test each per point, and on a
+#: torus find no more of its exact images.
 PATCH_CELLS = 4
 #: Each part of the surface is a start in this many pieces at most (where that many
 #: hold it): a piece finds one image of a point, so where it holds two (a torus's folds)
@@ -275,8 +275,9 @@ def uncovered_share(reflector: Reflector, maps: list) -> float:
     along the centroid's direction within :data:`HELD_TOLERANCE` of the distance)."""
     centroids, _, areas = _outward_faces(reflector, 1)
     held = np.zeros(len(centroids), dtype=bool)
+    tolerance = HELD_TOLERANCE * _size(reflector)
     for rmap in maps:
-        held |= _holds(rmap, centroids, HELD_TOLERANCE * _size(reflector))
+        held |= _holds(rmap, centroids, tolerance)
     return float(areas[~held].sum() / areas.sum())
 
 
@@ -299,9 +300,9 @@ def split_into_pieces(reflector: Reflector, bake: Callable, first_surface: Calla
     pieces = choose_centres(reflector, first_surface=first_surface)
     if not pieces.usable:
         return pieces, []
-    maps = []
+    maps, size = [], _size(reflector)
     for centre in pieces.centres:
-        maps.append(piece_map(bake(reflector, centre), tuple(maps), _size(reflector)))
+        maps.append(piece_map(bake(reflector, centre), tuple(maps), size))
     # A piece whose surface the earlier ones hold adds no start: it is not searched.
     kept = [k for k, rmap in enumerate(maps) if len(rmap.patches)]
     maps, centres = [maps[k] for k in kept], pieces.centres[kept]

@@ -22,9 +22,9 @@ direction d from O, and the search runs in two dimensions:
    (:data:`RESTARTS`; a convex mirror has one reflection of a point at most, so there a
    failed start means none). A piece of a mirror that is not star-shaped (:mod:`.pieces`)
    starts instead from each of its patches whose normal cone can hold the point's
-   reflection (:func:`patch_admits`), until one finds it. On a bumpy sphere the secant triangle cycles between the
-   roots of neighbouring bumps and misses many of the exact solver's reflections; Newton
-   from one start misses fewer, and with the restarts few.
+   reflection (:func:`patch_admits`), until one finds it. On a bumpy sphere the secant
+   triangle cycles between the roots of neighbouring bumps and misses many of the exact
+   solver's reflections; Newton from one start misses fewer, and with the restarts few.
 3. **Stop** (3.2, the geometric bound): when a step moves P by less than
    :data:`STOP_FRACTION` of the accuracy in pixels, measured in the view at P; Newton
    steps shrink quadratically, so the answer is then far closer than the step. Or one
