@@ -134,11 +134,9 @@ class BandTracer:
         without end and meet no light, as Cycles shows it once its bounces run out.
         """
         pixels = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
-        if len(pixels) == 0:
-            return self._follow(np.zeros((0, 3)), np.zeros((0, 3)), None, max_order, world_color)
         origins, directions = view.pixel_rays(pixels)
-        return self._follow(origins, directions, self._first_hits(origins, directions, on_mirrors, surface_points),
-                            max_order, world_color)
+        hits = self._first_hits(origins, directions, on_mirrors, surface_points) if len(pixels) else None
+        return self._follow(origins, directions, hits, max_order, world_color)
 
     def trace_rays(self, origins, directions, max_order: int, world_color) -> np.ndarray:
         """As :meth:`trace`, for rays starting anywhere (those leaving glass,
