@@ -193,12 +193,10 @@ class ReflectionRenderer:
         #: Every pass (:class:`.frame_pass.FramePass`), in drawing order: the camera's,
         #: then those the factories ``passes`` made (``MethodPlan.pass_factories``).
         self.passes = (self.camera_pass,) + per_frame
-        self._reflectors, self._meshes = list(reflectors), list(meshes)
-        #: The mirrors' ray-tracing set when the caller has one (its band tracer shares it).
-        self._reflector_set = reflector_set
         self._batches = None
         self._targets = None
-        #: The reflectors and meshes ray traced together, made on first use.
+        #: The reflectors and meshes ray traced together, made on first use (with the
+        #: mirrors' ray-tracing set when the caller has one: the tracer shares it).
         self.tracer_source = band_trace.TracerSource(reflectors, meshes, reflector_set)
 
     def _make_batches(self) -> dict:
