@@ -3,10 +3,10 @@
 
 The ellipsoid, the superellipsoid and the torus carry their exact normals, so the methods
 are measured on more than spheres (the torus is not star-shaped: the iterative search must
-refuse it). The sphere is the one reflector whose reflections are known independently of
-any tessellation (:func:`sphere_reflection`), so it checks the exact solver. They start
-from the extension's own geodesic sphere (``engine/geometry/sphere.py``). Used by the tests
-and benchmarks only, not shipped.
+refuse it); the flat-faced box is glass's slab and block. The sphere is the one reflector
+whose reflections are known independently of any tessellation (:func:`sphere_reflection`),
+so it checks the exact solver. They start from the extension's own geodesic sphere
+(``engine/geometry/sphere.py``). Used by the tests and benchmarks only, not shipped.
 """
 
 from __future__ import annotations
@@ -60,6 +60,28 @@ def torus(center, major: float, minor: float, segments: int, rings: int, name: s
     triangles = np.concatenate([np.stack([a, b, d], axis=-1).reshape(-1, 3),
                                 np.stack([a, d, c], axis=-1).reshape(-1, 3)])
     return Reflector(name, np.asarray(center, dtype=np.float64) + centre_line + minor * normals, triangles, normals)
+
+
+def flat_box(name: str, low, high) -> Reflector:
+    """A closed box from ``low`` to ``high`` with flat faces (each face its own vertices)."""
+    low, high = np.asarray(low, np.float64), np.asarray(high, np.float64)
+    vertices, normals, triangles = [], [], []
+    for axis in range(3):
+        for side in (0, 1):
+            normal = np.zeros(3)
+            normal[axis] = 1.0 if side else -1.0
+            u, v = (axis + 1) % 3, (axis + 2) % 3
+            base = len(vertices)
+            for a, b in ((0, 0), (1, 0), (1, 1), (0, 1)):
+                corner = low.copy()
+                corner[axis] = high[axis] if side else low[axis]
+                corner[u] = high[u] if a else low[u]
+                corner[v] = high[v] if b else low[v]
+                vertices.append(corner)
+                normals.append(normal)
+            quad = [(base, base + 1, base + 2), (base, base + 2, base + 3)]
+            triangles += quad if side else [t[::-1] for t in quad]  # counter-clockwise seen from outside
+    return Reflector(name, np.array(vertices), np.array(triangles), np.array(normals))
 
 
 def sphere_reflection(center, radius: float, eye, points: np.ndarray, iterations: int = 64):

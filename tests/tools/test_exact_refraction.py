@@ -2,18 +2,13 @@
 """The exact reference solver of refracted images (tools/exact_refraction.py)
 against a slab's closed form and a glass ball's symmetry."""
 
-import sys
-from pathlib import Path
-
 import numpy as np
 
 from curved_reflections.engine.geometry.sphere import icosphere
 from curved_reflections.engine.glass import Glass, GlassSet
 from curved_reflections.tools.exact_refraction import solve_refractions
 from curved_reflections.engine.view import look_at_view
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "engine" / "glass"))
-from test_paths import flat_box  # noqa: E402
+from curved_reflections.tools.surfaces import flat_box
 
 N = 1.5
 

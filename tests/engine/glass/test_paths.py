@@ -5,32 +5,10 @@ shift, a ball lens's focal length, total internal reflection inside a block."""
 import numpy as np
 import pytest
 
-from curved_reflections.engine import Reflector
 from curved_reflections.engine.errors import SceneInputError
 from curved_reflections.engine.geometry.sphere import icosphere
 from curved_reflections.engine.glass import Glass, GlassSet
-
-
-def flat_box(name: str, low, high) -> Reflector:
-    """A closed box from ``low`` to ``high`` with flat faces (each face its own vertices)."""
-    low, high = np.asarray(low, np.float64), np.asarray(high, np.float64)
-    vertices, normals, triangles = [], [], []
-    for axis in range(3):
-        for side in (0, 1):
-            normal = np.zeros(3)
-            normal[axis] = 1.0 if side else -1.0
-            u, v = (axis + 1) % 3, (axis + 2) % 3
-            base = len(vertices)
-            for a, b in ((0, 0), (1, 0), (1, 1), (0, 1)):
-                corner = low.copy()
-                corner[axis] = high[axis] if side else low[axis]
-                corner[u] = high[u] if a else low[u]
-                corner[v] = high[v] if b else low[v]
-                vertices.append(corner)
-                normals.append(normal)
-            quad = [(base, base + 1, base + 2), (base, base + 2, base + 3)]
-            triangles += quad if side else [t[::-1] for t in quad]  # counter-clockwise seen from outside
-    return Reflector(name, np.array(vertices), np.array(triangles), np.array(normals))
+from curved_reflections.tools.surfaces import flat_box
 
 
 def test_a_slab_shifts_a_ray_sideways_by_the_closed_form_and_keeps_its_direction():
