@@ -60,8 +60,22 @@ def search_shader():
     info.sampler(3, 'FLOAT_2D', "map_patches")
     info.image(0, 'RGBA32F', 'FLOAT_2D', "result", qualifiers={'READ', 'WRITE'})
     info.local_group_size(LOCAL_SIZE, 1)
-    info.compute_source(glsl_source("iterative_search.glsl", search_defines()))
+    info.compute_source(glsl_source("iterative_search.glsl", search_defines(), glsl_source("reflector_map.glsl")))
     return gpu.shader.create_from_info(info)
+
+
+def view_uniforms(shader, view, shift) -> float:
+    """Set a bound search shader's ``camera`` (the eye relative to ``shift``, w 1; or the
+    direction toward the viewer, w 0) and ``w_row`` (the last row of the view-projection,
+    for clip w); returns the size of a pixel at clip w 1 (its ``stop_per_w`` per pixel)."""
+    world_to_clip = np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix)
+    translate = np.eye(4)
+    translate[:3, 3] = shift
+    w_row = (world_to_clip @ translate)[3]
+    camera = (*(view.eye - shift), 1.0) if view.is_perspective else (*view.backward, 0.0)
+    shader.uniform_float("camera", tuple(float(c) for c in camera))
+    shader.uniform_float("w_row", tuple(float(c) for c in w_row))
+    return 2.0 / (float(view.projection_matrix[0][0]) * view.width)
 
 
 class MapAtlas:
@@ -82,7 +96,7 @@ class MapAtlas:
             texels[rows[k]:rows[k + 1], :rmap.texels.shape[1]] = rmap.texels
             params[3 * k] = (*(np.asarray(rmap.centre) - shift), rmap.max_radius)
             params[3 * k + 1] = (rows[k], rmap.face_size, float(bool(rmap.convex)), rmap.mean_radius)
-            params[3 * k + 2] = (patch_rows[k], len(patches[k]), 0.0, 0.0)
+            params[3 * k + 2] = (patch_rows[k], len(patches[k]), rmap.min_radius, 0.0)
         self.texture = data_texture(texels)
         self.params = data_texture(params, len(params))
         # One row at least: a texture may not be empty.
@@ -152,20 +166,9 @@ class IterativePass(FramePass):
         if self.n_vertices == 0 or not self.methods:
             return
         self._ensure()
-        shift = self.geometry.shift
-        world_to_clip = np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix)
-        translate = np.eye(4)
-        translate[:3, 3] = shift
-        w_row = (world_to_clip @ translate)[3]
-        pixel_scale = 2.0 / (float(view.projection_matrix[0][0]) * view.width)
-        if view.is_perspective:
-            camera = (*(view.eye - shift), 1.0)
-        else:
-            camera = (*view.backward, 0.0)
         shader = search_shader()
         shader.bind()
-        shader.uniform_float("camera", tuple(float(c) for c in camera))
-        shader.uniform_float("w_row", tuple(float(c) for c in w_row))
+        pixel_scale = view_uniforms(shader, view, self.geometry.shift)
         shader.uniform_int("n_vertices", self.n_vertices)
         shader.uniform_int("positions_width", self.meshes.width)
         shader.uniform_int("warm", int(bool(warm)))
