@@ -58,10 +58,12 @@ UNANSWERED_CELLS = 64
 
 
 @cached_shader
-def reflected_shader(law_test: bool = True, hidden_test: bool = True):
+def reflected_shader(law_test: bool = True, hidden_test: bool = True, refracted: bool = False):
     """The reflected meshes' shader, built on first use (fragment stage shared with the
     sample-based camera's reflected meshes), with or without the fragment stage's
-    law-of-reflection and hidden-point tests (:func:`fragment_tests`)."""
+    law-of-reflection and hidden-point tests (:func:`fragment_tests`); ``refracted``:
+    the vertices are seen through glass, along the ray leaving it at the point the
+    ``exit_points`` texture holds per vertex (``methods/refraction_draw.py``)."""
     interface = reflected_interface("curved_reflections_iterative_interface", searched=True)
     info = gpu.types.GPUShaderCreateInfo()
     # In this order 120 bytes, within the 128 Vulkan guarantees (Blender counts 128).
@@ -80,14 +82,17 @@ def reflected_shader(law_test: bool = True, hidden_test: bool = True):
     info.sampler(2, 'FLOAT_2D', "prepass_labels")
     info.sampler(3, 'FLOAT_2D', "image")
     info.sampler(4, 'FLOAT_2D', "prepass_normals")
+    if refracted:
+        info.sampler(5, 'FLOAT_2D', "exit_points")
     info.vertex_in(0, 'INT', "vertex_index")
     info.vertex_in(1, 'VEC4', "color")
     info.vertex_in(2, 'VEC4', "normal_lit")
     info.vertex_in(3, 'VEC2', "uv")
     info.vertex_out(interface)
     info.fragment_out(0, 'VEC4', "color_out")
-    info.vertex_source(shading_source() + glsl_source("iterative_mesh_vert.glsl", {
-        "FOUND_CODE": FOUND_CODE, "FLIPPED_CODE": FLIPPED_CODE, "UNANSWERED_CELLS": f"{UNANSWERED_CELLS:.1f}"}))
+    info.vertex_source("#define EXIT_POINTS\n" * refracted + shading_source() + glsl_source(
+        "iterative_mesh_vert.glsl", {"FOUND_CODE": FOUND_CODE, "FLIPPED_CODE": FLIPPED_CODE,
+                                     "UNANSWERED_CELLS": f"{UNANSWERED_CELLS:.1f}"}))
     defines = f"#define SEARCHED\n#define VALID_THRESHOLD {VALID_THRESHOLD}\n"
     defines += "#define LAW_TEST\n" * law_test + "#define HIDDEN_TEST\n" * hidden_test
     info.fragment_source(reflected_fragment_source(defines))
@@ -168,6 +173,7 @@ class ReflectedMeshes:
 
     def draw(self, view_projection, targets, setup: dict, image_of, answers) -> None:
         """The reflected meshes of each (reflector index, answer texture) of ``answers``
+        (or (glass index, entry texture, exit texture) of a refracting pass)
         into the bound framebuffer (depth test on), placed by ``view_projection`` (a
         ``mathutils.Matrix`` relative to the shift), against the pre-pass of ``targets``
         (``frame_targets.FrameTargets``); ``image_of(k)`` is the texture of
@@ -193,9 +199,10 @@ class ReflectedMeshes:
             return
         mirrored = setup.get("mirrored", frozenset())
         windings = self.geometry.range_windings or (0,) * len(self.geometry.ranges)
-        for reflector_index, texture in answers:
+        for reflector_index, texture, *exit_points in answers:
             law_test, hidden_test = fragment_tests(reflector_index, setup)
-            shader = reflected_shader(law_test, hidden_test)
+            law_test &= not exit_points  # refracted: the law of reflection does not hold
+            shader = reflected_shader(law_test, hidden_test, bool(exit_points))
             shader.bind()
             shader.uniform_float("view_projection", view_projection)
             shader.uniform_int("result_width", self.width)
@@ -205,6 +212,8 @@ class ReflectedMeshes:
             shader.uniform_sampler("prepass_labels", targets.prepass_labels)
             shader.uniform_float("snap_grid", snap_grid(setup["view_size"], setup.get("snap_px", 0.0)))
             shader.uniform_sampler("search_result", texture)
+            if exit_points:
+                shader.uniform_sampler("exit_points", exit_points[0])
             shader.uniform_float("reflector_id", float(reflector_index + 1))
             if law_test or hidden_test:
                 shader.uniform_float("camera", setup["camera"])
@@ -224,8 +233,14 @@ class ReflectedMeshes:
     def read(self, texture) -> tuple[np.ndarray, np.ndarray]:
         """An answer texture read back: (N, 3) world points (NaN where no answer) and the
         (N,) int64 codes."""
-        texels = read_texture(texture, self.width, self.height).reshape(-1, 4)[:self.n_vertices]
-        texels = texels.astype(np.float64)
+        texels = self._texels(texture)
         code = texels[:, 3].astype(np.int64)
         found = code % 16 == FOUND_CODE
         return np.where(found[:, None], texels[:, :3] + self.geometry.shift, np.nan), code
+
+    def read_points(self, texture) -> np.ndarray:
+        """(N, 3) world points of a texture of one point per vertex, read back."""
+        return self._texels(texture)[:, :3] + self.geometry.shift
+
+    def _texels(self, texture) -> np.ndarray:
+        return read_texture(texture, self.width, self.height).reshape(-1, 4)[:self.n_vertices].astype(np.float64)

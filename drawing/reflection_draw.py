@@ -166,16 +166,18 @@ class ReflectionRenderer:
     search, the baked grids, perturbation, any registered method), each called once with
     the renderer's :class:`.frame_pass.PassInputs`; a camera's sheets of the first-order
     reflections they draw in its view are not projected, and where they draw every
-    reflector the renderer draws with no camera at all.
+    reflector the renderer draws with no camera at all. ``transmits`` (R,) bool: the
+    reflector is glass, its drawn image the refracted one, weighed by 1 minus its
+    Fresnel term (``draw_geometry.prepare_geometry``).
     """
 
     def __init__(self, reflectors, meshes, reflector_colors=None, reflectivity=None,
                  edge_fraction: float | None = subdivision.EDGE_FRACTION, *, fresnel_f0=None,
                  attenuation_distance=None, mixed_subdivisions: int = MIXED_SUBDIVISIONS, cull: bool = True,
-                 passes=(), settings: FrameSettings = PLAIN_SETTINGS, reflector_set=None):
+                 passes=(), settings: FrameSettings = PLAIN_SETTINGS, reflector_set=None, transmits=None):
         self.geometry = prepare_geometry(reflectors, meshes, reflector_colors, reflectivity, edge_fraction,
                                          fresnel_f0, attenuation_distance,
-                                         None if reflector_set is None else reflector_set.sealed)
+                                         None if reflector_set is None else reflector_set.sealed, transmits)
         self.settings = settings
         #: The diffuse meshes on the GPU, placed by the per-frame passes' answers.
         self.meshes = ReflectedMeshes(self.geometry)
@@ -391,7 +393,7 @@ class ReflectionRenderer:
         baked grids, perturbation), one row per image slot, read back from the GPU: what
         the live view's accuracy check (``engine/spot_check.py``) measures."""
         found: dict = {}
-        for index, texture in self._answers():
+        for index, texture, *_ in self._answers():
             found.setdefault(index, []).append(self.meshes.read(texture)[0])
         return {index: np.stack(slots) for index, slots in found.items()}
 

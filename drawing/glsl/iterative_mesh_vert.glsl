@@ -36,6 +36,12 @@ void main()
   bool valid = int(found.w) % 16 == FOUND_CODE && clip.w > 0.0;
   bool flipped = int(found.w) >= FLIPPED_CODE;
   vec3 to_mirror = p - vertex;
+#ifdef EXIT_POINTS
+  /* Seen through glass (refraction_search.glsl): along the ray leaving it at the exit
+   * point; two vertices on one pixel share the path inside, so the distance from the exit
+   * orders them as the distance from P would. */
+  to_mirror = texelFetch(exit_points, texel, 0).xyz - vertex;
+#endif
   float distance = length(to_mirror);
   color_interp = color;
   normal_interp = normal_lit.xyz;

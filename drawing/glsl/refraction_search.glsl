@@ -1,0 +1,391 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later */
+/* Where each diffuse vertex appears through a convex glass solid, compute stage
+ * (drawing/methods/refraction_draw.py), every frame.
+ *
+ * The iterative search of Roger & Holzschuch (2006, section 3.3) carried over to a
+ * refracted path, as Chen & Arvo (2000, section VI) carry path perturbation over: the
+ * unknown is the entry point A on the glass's cube map (reflector_map.glsl), two chart
+ * coordinates around a first guess. From A the eye's ray is refracted in (Snell's law
+ * with the map's interpolated normal), followed to where it leaves the surface (B,
+ * `exit_point`), and refracted out; the residual is the angle between that ray and the
+ * direction from B to the vertex, driven to zero by damped Newton with a finite-difference
+ * Jacobian, as iterative_search.glsl does for the half vector:
+ *   1. first guess: the same path on the sphere of the map's mean radius, in the plane
+ *      of the eye, the centre and the vertex, where a whole path has a closed form; the
+ *      entry angle is sampled across the sphere's visible cap and bisected where the
+ *      path's signed miss changes sign (`sphere_guess`); warm, last frame's answer first;
+ *   2. damped Newton on the true map (trust radius, line search);
+ *   3. stop when a step moves A by less than `stop_per_w` times the view's clip w at A;
+ *   4. checks: the residual vanishes, A faces the eye, neither interface reflects
+ *      totally, no other glass lies on the way in or out.
+ * A closed convex solid is entered and left once: nothing of it lies between the eye and
+ * A, or between B and the vertex, once A faces the eye and the ray leaves toward the
+ * vertex. Everything runs relative to the map's centre O.
+ * Output texels: `result` (A relative to the renderer's shift, (status + 8) + 16 * steps
+ * + FLIPPED_CODE where the vertex lies beyond the caustic of the rays leaving the glass,
+ * as iterative_search.glsl's flipped_image); `exit_result` (B relative to the shift, 0). */
+
+#define FOUND 1
+#define NOT_CONVERGED 0
+#define NO_SURFACE -1
+#define FACES_AWAY -2
+#define OCCLUDED -3
+#define INSIDE -4
+#define TOTAL_REFLECTION -5
+
+/* Unit direction of the eye's ray arriving at p. */
+vec3 eye_ray(vec3 p)
+{
+  return camera.w > 0.5 ? normalize(p - (camera.xyz - centre)) : -camera.xyz;
+}
+
+/* Where the ray from `a` (on the surface) along unit `t` (into the solid) leaves it: the
+ * exit B and its outward normal. Plane steps (the ray met with the tangent plane where
+ * the map's surface lies along the current estimate's direction; exact in one step on a
+ * flat face), from the chord of the sphere through `a`; bisection on the sign of
+ * |x| - r(x / |x|) within the bounding sphere where they fail to settle. */
+bool exit_point(vec3 a, vec3 t, out vec3 b, out vec3 n)
+{
+  float along = dot(a, t);
+  float far = -along + sqrt(max(along * along - (dot(a, a) - max_radius * max_radius), 0.0));
+  if (far <= 0.0) {
+    return false;
+  }
+  float tolerance = EXIT_TOLERANCE * max_radius;
+  float s = clamp(-2.0 * along, 0.0, far);
+  float radius;
+  for (int k = 0; k < EXIT_STEPS; k++) {
+    vec3 x = a + s * t;
+    float distance = max(length(x), 1e-30);
+    if (!map_surface(x / distance, radius, n)) {
+      return false;
+    }
+    float rate = dot(t, n);
+    if (rate <= 1e-4) {
+      break;
+    }
+    float next = clamp(s + dot((radius - distance) * (x / distance), n) / rate, 0.0, far);
+    if (abs(next - s) < tolerance) {
+      b = a + next * t;
+      return map_surface(normalize(b), radius, n);
+    }
+    s = next;
+  }
+  float lo = EXIT_START * far;
+  float hi = far;
+  for (int k = 0; k < EXIT_BISECTIONS; k++) {
+    float mid = 0.5 * (lo + hi);
+    vec3 x = a + mid * t;
+    float distance = max(length(x), 1e-30);
+    bool valid = map_surface(x / distance, radius, n);
+    if (valid && distance < radius) {
+      lo = mid;
+    }
+    else {
+      hi = mid;
+    }
+  }
+  b = a + hi * t;
+  return map_surface(normalize(b), radius, n) && dot(t, n) > 0.0;
+}
+
+/* The chart around the guess, the residual's fixed axes and the vertex (relative to O). */
+vec3 chart_axis;
+vec3 chart_t1;
+vec3 chart_t2;
+vec3 residual_e1;
+vec3 residual_e2;
+vec3 vertex;
+
+/* The refracted path entering at chart point x: entry a, exit b, the ray o leaving b;
+ * f, the leaving ray's offset from the direction toward the vertex on the residual's
+ * axes. Returns FOUND when the path exists, or why not. */
+int evaluate(vec2 x, out vec2 f, out vec3 a, out vec3 b, out vec3 o)
+{
+  vec3 d = normalize(chart_axis + x.x * chart_t1 + x.y * chart_t2);
+  float radius;
+  vec3 n;
+  f = vec2(0.0);
+  b = vec3(0.0);
+  o = vec3(0.0);
+  if (!map_surface(d, radius, n)) {
+    a = vec3(0.0);
+    return NO_SURFACE;
+  }
+  a = radius * d;
+  vec3 incoming = eye_ray(a);
+  if (dot(incoming, n) >= 0.0) {
+    return FACES_AWAY;
+  }
+  vec3 inside = refract(incoming, n, 1.0 / eta);
+  vec3 exit_normal;
+  if (dot(inside, inside) == 0.0) {
+    return TOTAL_REFLECTION;
+  }
+  if (!exit_point(a, inside, b, exit_normal)) {
+    return NO_SURFACE;
+  }
+  o = refract(inside, -exit_normal, eta);
+  if (dot(o, o) == 0.0) {
+    return TOTAL_REFLECTION;
+  }
+  vec3 offset = o - normalize(vertex - b);
+  f = vec2(dot(offset, residual_e1), dot(offset, residual_e2));
+  return FOUND;
+}
+
+/* The signed miss of the path entering along direction `d` from O (the eye's ray
+ * refracted there, followed to its exit on the map, refracted out): the side of the
+ * leaving ray on which the vertex lies, across `side`; `ahead`: the path exists and
+ * leaves toward the vertex. */
+float path_miss(vec3 d, vec3 side, out bool ahead)
+{
+  vec2 f;
+  vec3 a, b, o;
+  chart_axis = d;
+  chart_t1 = perpendicular(d);
+  chart_t2 = cross(d, chart_t1);
+  ahead = evaluate(vec2(0.0), f, a, b, o) == FOUND && dot(o, vertex - b) > 0.0;
+  return dot(cross(o, vertex - b), side);
+}
+
+/* Up to MAX_STARTS first guesses (unit directions from O, in `guesses`): entry
+ * directions in the plane of the eye, O and the vertex (where a sphere's whole path
+ * lies), sampled across the part of the map the eye may see, where the path's signed
+ * miss across that plane changes sign with the vertex ahead, bisected; or, with none,
+ * the sample that misses least. */
+vec3 guesses[MAX_STARTS];
+
+int plane_guesses()
+{
+  vec3 toward_eye = camera.w > 0.5 ? camera.xyz - centre : camera.xyz;
+  float eye_distance = length(toward_eye);
+  toward_eye /= max(eye_distance, 1e-30);
+  vec3 across = vertex - dot(vertex, toward_eye) * toward_eye;
+  across = length(across) > 1e-9 * length(vertex) ? normalize(across) : perpendicular(toward_eye);
+  vec3 side = cross(toward_eye, across);
+  /* Up to where the eye's rays graze the sphere of the smallest radius. */
+  float cap = camera.w > 0.5 ? acos(clamp(min_radius / max(eye_distance, 1e-30), 0.0, 1.0)) : 1.5707963;
+  int count = 0;
+  float best = 1e30;
+  float best_phi = 0.0;
+  bool previous_ahead = false;
+  float previous_miss = 0.0;
+  float previous_phi = -cap;
+  for (int k = 0; k <= GUESS_SAMPLES && count < MAX_STARTS; k++) {
+    float phi = -cap + 2.0 * cap * float(k) / float(GUESS_SAMPLES);
+    bool ahead;
+    float miss = path_miss(cos(phi) * toward_eye + sin(phi) * across, side, ahead);
+    if (ahead && abs(miss) < best) {
+      best = abs(miss);
+      best_phi = phi;
+    }
+    if (k > 0 && ahead && previous_ahead && (miss < 0.0) != (previous_miss < 0.0)) {
+      float lo = previous_phi;
+      float hi = phi;
+      bool lo_negative = previous_miss < 0.0;
+      for (int j = 0; j < GUESS_BISECTIONS; j++) {
+        float mid = 0.5 * (lo + hi);
+        bool mid_ahead;
+        if ((path_miss(cos(mid) * toward_eye + sin(mid) * across, side, mid_ahead) < 0.0) == lo_negative) {
+          lo = mid;
+        }
+        else {
+          hi = mid;
+        }
+      }
+      float root = 0.5 * (lo + hi);
+      guesses[count] = cos(root) * toward_eye + sin(root) * across;
+      count++;
+    }
+    previous_ahead = ahead;
+    previous_miss = miss;
+    previous_phi = phi;
+  }
+  if (count == 0 && best < 1e30) {
+    guesses[0] = cos(best_phi) * toward_eye + sin(best_phi) * across;
+    count = 1;
+  }
+  return count;
+}
+
+/* The Newton step -J^-1 f for the Jacobian's columns ju, jv (zero where J is singular). */
+vec2 newton_step(vec2 ju, vec2 jv, vec2 f)
+{
+  float det = ju.x * jv.y - jv.x * ju.y;
+  return abs(det) > 1e-30 ? -vec2(jv.y * f.x - jv.x * f.y, ju.x * f.y - ju.y * f.x) / det : vec2(0.0);
+}
+
+/* Whether the last converged answer of newton() is a flipped image: the bundle of the
+ * eye's rays around the path, oriented as it enters at A (det [A_u, A_v, i] for the
+ * incoming direction i), arrives at the vertex turned over (det [Q_u, Q_v, o] for
+ * Q = B + s o, as iterative_search.glsl's flipped_image), its sine (the determinant
+ * over the lengths of its two columns) below -FLIP_SINE. Refraction keeps the bundle on
+ * one side of each interface, so only a caustic changes the sign: half a turn past a
+ * lens's focus keeps it (an image turned round, not mirrored), the space between two
+ * focal lines (astigmatism, a fold) changes it. Near a focus both columns are short and
+ * their finite differences noisy: the margin keeps that noise from marking a vertex. */
+bool flipped;
+
+bool flipped_image(vec3 a, vec3 au, vec3 av, vec3 b, vec3 o, vec3 bu, vec3 ou, vec3 bv, vec3 ov)
+{
+  float s = length(vertex - b);
+  float at_entry = dot(cross(au - a, av - a), eye_ray(a));
+  vec3 qu = bu - b + s * (ou - o);
+  vec3 qv = bv - b + s * (ov - o);
+  float sine = dot(cross(qu, qv), o) / max(length(qu) * length(qv), 1e-30);
+  return (at_entry < 0.0 ? -sine : sine) < -FLIP_SINE;
+}
+
+/* Damped Newton from chart point x; the verdict on the converged path (a in `a`, b in
+ * `b`): FOUND, or NOT_CONVERGED, or why the path does not exist. */
+int newton(vec2 x, inout int steps, out vec3 a, out vec3 b)
+{
+  vec2 f;
+  vec3 o;
+  int status = evaluate(x, f, a, b, o);
+  if (status != FOUND) {
+    return status;
+  }
+  for (int step = 0; step < MAX_ITERATIONS; step++) {
+    vec2 fu, fv, ft;
+    vec3 au, av, bu, bv, ou, ov, at, bt, ot;
+    int su = evaluate(x + vec2(DERIVATIVE_STEP, 0.0), fu, au, bu, ou);
+    int sv = evaluate(x + vec2(0.0, DERIVATIVE_STEP), fv, av, bv, ov);
+    if (su != FOUND || sv != FOUND) {
+      /* The path ends within a derivative step (the rim, total reflection): step back. */
+      su = evaluate(x - vec2(DERIVATIVE_STEP, 0.0), fu, au, bu, ou);
+      sv = evaluate(x - vec2(0.0, DERIVATIVE_STEP), fv, av, bv, ov);
+      if (su != FOUND || sv != FOUND) {
+        return su != FOUND ? su : sv;
+      }
+      fu = 2.0 * f - fu;
+      fv = 2.0 * f - fv;
+      au = 2.0 * a - au;
+      av = 2.0 * a - av;
+      bu = 2.0 * b - bu;
+      bv = 2.0 * b - bv;
+      ou = 2.0 * o - ou;
+      ov = 2.0 * o - ov;
+    }
+    vec2 ju = (fu - f) / DERIVATIVE_STEP;
+    vec2 jv = (fv - f) / DERIVATIVE_STEP;
+    vec2 delta = newton_step(ju, jv, f);
+    float reach = length(delta);
+    if (reach > TRUST_RADIUS) {
+      delta *= TRUST_RADIUS / reach;
+    }
+    /* Line search: scales 1, 1/2, ... until |F| falls; the last one is taken regardless. */
+    float current = length(f);
+    float scale = 1.0;
+    vec3 previous = a;
+    vec3 previous_b = b;
+    vec3 previous_o = o;
+    int st = FOUND;
+    for (int k = 0; k <= HALVINGS; k++) {
+      st = evaluate(x + scale * delta, ft, at, bt, ot);
+      if (st == FOUND && length(ft) < current || k == HALVINGS) {
+        break;
+      }
+      scale *= 0.5;
+    }
+    x += scale * delta;
+    steps += 1;
+    if (st != FOUND) {
+      return st;
+    }
+    if (length(x) > MAX_CHART) {
+      return NO_SURFACE;
+    }
+    f = ft;
+    a = at;
+    b = bt;
+    if (length(a - previous) < pixel_tolerance(a)) {
+      flipped = flipped_image(previous, au, av, previous_b, previous_o, bu, ou, bv, ov);  /* where sampled */
+      o = ot;
+      return length(f) < RESIDUAL_TOLERANCE ? FOUND : NOT_CONVERGED;
+    }
+    o = ot;
+  }
+  return NOT_CONVERGED;
+}
+
+void main()
+{
+  ivec2 texel = ivec2(gl_GlobalInvocationID.xy);
+  int index = texel.y * positions_width + texel.x;
+  if (texel.x >= positions_width || index >= n_vertices) {
+    return;
+  }
+  use_map(self_map);
+  vertex = texelFetch(vertex_positions, texel, 0).xyz - centre;
+  vec4 last = imageLoad(result, texel);
+  bool resume = warm != 0 && int(last.w) % 16 == FOUND + 8;
+  int status = NO_SURFACE;
+  int steps = 0;
+  bool image_flipped = false;
+  vec3 a = vec3(0.0);
+  vec3 b = vec3(0.0);
+  bool eye_inside = camera.w > 0.5 && inside_surface(camera.xyz - centre);
+  vec3 toward_eye = camera.w > 0.5 ? normalize(camera.xyz - centre) : camera.xyz;
+  if (eye_inside || length(vertex) <= 1e-9 * max(max_radius, 1e-30) || inside_surface(vertex)) {
+    status = INSIDE;
+  }
+  else if (dot(vertex, toward_eye) > max_radius) {
+    /* Before the plane that bounds the glass toward the eye: a path turned back that far
+     * enters along the rim at grazing incidence, where the glass reflects nearly all the
+     * light (and Render Image traces its band); not searched. */
+    status = NO_SURFACE;
+  }
+  else {
+    residual_e1 = perpendicular(normalize(vertex));
+    residual_e2 = cross(normalize(vertex), residual_e1);
+    /* One loop calls newton() once, as in iterative_search.glsl: llvmpipe compiles one
+     * copy of it, not one per start. Attempt -1: last frame's answer; the guesses are
+     * made only when it fails. */
+    int starts = 1;
+    for (int attempt = resume ? -1 : 0; attempt < starts; attempt++) {
+      if (attempt == 0) {
+        starts = plane_guesses();
+        if (starts == 0) {
+          break;
+        }
+      }
+      chart_axis = attempt < 0 ? normalize(last.xyz - centre) : guesses[attempt];
+      chart_t1 = perpendicular(chart_axis);
+      chart_t2 = cross(chart_axis, chart_t1);
+      vec3 entry, leave;
+      flipped = false;
+      int verdict = newton(vec2(0.0), steps, entry, leave);
+      if (attempt <= 0 || verdict == FOUND) {
+        status = verdict;
+        a = entry;
+        b = leave;
+        image_flipped = flipped;
+      }
+      if (verdict == FOUND) {
+        break;
+      }
+    }
+  }
+  /* Other glass on the way in or out: there the vertex is seen through more than this
+   * glass, which this path does not follow. */
+  vec3 entry = a + centre;
+  vec3 leave = b + centre;
+  vec3 target = vertex + centre;
+  vec3 eye = camera.xyz;
+  for (int map = 0; map < n_maps && status == FOUND; map++) {
+    if (map != self_map) {
+      use_map(map);
+      vec3 out_ray = target - leave;
+      vec3 in_ray = camera.w > 0.5 ? entry - eye : -1e3 * max_radius * camera.xyz;
+      if (segment_blocked(leave - centre, normalize(out_ray), length(out_ray), false) ||
+          segment_blocked(entry - in_ray - centre, normalize(in_ray), length(in_ray), false)) {
+        status = OCCLUDED;
+      }
+    }
+  }
+  bool flip = status == FOUND && image_flipped;
+  imageStore(result, texel, vec4(entry, float(status + 8) + 16.0 * float(steps) + (flip ? float(FLIPPED_CODE) : 0.0)));
+  imageStore(exit_result, texel, vec4(leave, 0.0));
+}
