@@ -20,12 +20,6 @@
  * (status + 8) + 16 * steps + FLIPPED_CODE * flipped), status as the numpy twin's
  * (FOUND = 1), flipped: the image lies beyond the caustic (flipped_image). */
 
-#define FOUND 1
-#define NOT_CONVERGED 0
-#define NO_SURFACE -1
-#define FACES_AWAY -2
-#define OCCLUDED -3
-#define INSIDE -4
 
 /* Push constants: camera (eye relative to the shift, w 1; or the unit direction toward
  * the viewer, w 0), w_row (the view-projection's last row, for clip w), stop_per_w,
@@ -120,13 +114,6 @@ bool flipped;
 bool residual_passes(vec3 n, vec3 h)
 {
   return length(cross(n, h)) / max(length(h), 1e-30) < RESIDUAL_TOLERANCE;
-}
-
-/* The Newton step -J^-1 f for the Jacobian's columns ju, jv (zero where J is singular). */
-vec2 newton_step(vec2 ju, vec2 jv, vec2 f)
-{
-  float det = ju.x * jv.y - jv.x * ju.y;
-  return abs(det) > 1e-30 ? -vec2(jv.y * f.x - jv.x * f.y, ju.x * f.y - ju.y * f.x) / det : vec2(0.0);
 }
 
 int check(vec3 p, vec3 n, vec3 h, vec3 face)
@@ -246,9 +233,8 @@ const vec2 starts[5] = vec2[5](vec2(0.0, 0.0), vec2(RESTART_OFFSET, 0.0), vec2(-
 
 void main()
 {
-  ivec2 texel = ivec2(gl_GlobalInvocationID.xy);
-  int index = texel.y * positions_width + texel.x;
-  if (texel.x >= positions_width || index >= n_vertices) {
+  ivec2 texel;
+  if (!vertex_texel(texel)) {
     return;
   }
   use_map(self_map);

@@ -4,7 +4,7 @@
  *
  * The iterative search of Roger & Holzschuch (2006, section 3.3) carried over to a
  * refracted path, as Chen & Arvo (2000, section VI) carry path perturbation over: the
- * unknown is the entry point A on the glass's cube map (reflector_map.glsl), two chart
+ * unknown is the entry point A on the glass's cube map (map_search.glsl), two chart
  * coordinates around a first guess. From A the eye's ray is refracted in (Snell's law
  * with the map's interpolated normal), followed to where it leaves the surface (B,
  * `exit_point`), and refracted out; the residual is the angle between that ray and the
@@ -25,12 +25,6 @@
  * + FLIPPED_CODE where the vertex lies beyond the caustic of the rays leaving the glass,
  * as iterative_search.glsl's flipped_image); `exit_result` (B relative to the shift, 0). */
 
-#define FOUND 1
-#define NOT_CONVERGED 0
-#define NO_SURFACE -1
-#define FACES_AWAY -2
-#define OCCLUDED -3
-#define INSIDE -4
 #define TOTAL_REFLECTION -5
 
 /* Unit direction of the eye's ray arriving at p. */
@@ -209,13 +203,6 @@ int plane_guesses()
   return count;
 }
 
-/* The Newton step -J^-1 f for the Jacobian's columns ju, jv (zero where J is singular). */
-vec2 newton_step(vec2 ju, vec2 jv, vec2 f)
-{
-  float det = ju.x * jv.y - jv.x * ju.y;
-  return abs(det) > 1e-30 ? -vec2(jv.y * f.x - jv.x * f.y, ju.x * f.y - ju.y * f.x) / det : vec2(0.0);
-}
-
 /* Whether the last converged answer of newton() is a flipped image: the bundle of the
  * eye's rays around the path, oriented as it enters at A (det [A_u, A_v, i] for the
  * incoming direction i), arrives at the vertex turned over (det [Q_u, Q_v, o] for
@@ -312,9 +299,8 @@ int newton(vec2 x, inout int steps, out vec3 a, out vec3 b)
 
 void main()
 {
-  ivec2 texel = ivec2(gl_GlobalInvocationID.xy);
-  int index = texel.y * positions_width + texel.x;
-  if (texel.x >= positions_width || index >= n_vertices) {
+  ivec2 texel;
+  if (!vertex_texel(texel)) {
     return;
   }
   use_map(self_map);

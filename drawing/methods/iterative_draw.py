@@ -42,25 +42,30 @@ def search_defines() -> dict:
             "PATCH_MARGIN": f"{s.PATCH_MARGIN:.9e}", "NEAR_PATCH": f"{s.NEAR_PATCH:.9e}"}
 
 
-@cached_shader
-def search_shader():
-    """The compute shader of the search, built on first use."""
+def map_search_info(extra_floats=(), extra_samplers=()) -> "gpu.types.GPUShaderCreateInfo":
+    """What a per-vertex search on the cube maps (``glsl/map_search.glsl``) declares:
+    the view's push constants (:func:`view_uniforms`), the vertices, the maps and their
+    parameters, a read-write ``result`` image, one invocation per vertex texel; then the
+    float push constants ``extra_floats`` and samplers ``extra_samplers`` of the search."""
     info = gpu.types.GPUShaderCreateInfo()
     info.push_constant('VEC4', "camera")
     info.push_constant('VEC4', "w_row")
-    info.push_constant('FLOAT', "stop_per_w")
-    info.push_constant('INT', "n_vertices")
-    info.push_constant('INT', "positions_width")
-    info.push_constant('INT', "warm")
-    info.push_constant('INT', "self_map")
-    info.push_constant('INT', "n_maps")
-    info.sampler(0, 'FLOAT_2D', "vertex_positions")
-    info.sampler(1, 'FLOAT_2D', "reflector_maps")
-    info.sampler(2, 'FLOAT_2D', "map_params")
-    info.sampler(3, 'FLOAT_2D', "map_patches")
+    for name in ("stop_per_w",) + tuple(extra_floats):
+        info.push_constant('FLOAT', name)
+    for name in ("n_vertices", "positions_width", "warm", "self_map", "n_maps"):
+        info.push_constant('INT', name)
+    for slot, name in enumerate(("vertex_positions", "reflector_maps", "map_params") + tuple(extra_samplers)):
+        info.sampler(slot, 'FLOAT_2D', name)
     info.image(0, 'RGBA32F', 'FLOAT_2D', "result", qualifiers={'READ', 'WRITE'})
     info.local_group_size(LOCAL_SIZE, 1)
-    info.compute_source(glsl_source("iterative_search.glsl", search_defines(), glsl_source("reflector_map.glsl")))
+    return info
+
+
+@cached_shader
+def search_shader():
+    """The compute shader of the search, built on first use."""
+    info = map_search_info(extra_samplers=("map_patches",))
+    info.compute_source(glsl_source("iterative_search.glsl", search_defines(), glsl_source("map_search.glsl")))
     return gpu.shader.create_from_info(info)
 
 

@@ -25,7 +25,7 @@ from ..frame_pass import Frame, FramePass, PassInputs
 from ..reflected_meshes import FLIPPED_CODE, ReflectedMeshes
 from ..shader_cache import cached_shader
 from ..shader_sources import glsl_source
-from .iterative_draw import LOCAL_SIZE, MapAtlas, view_uniforms
+from .iterative_draw import LOCAL_SIZE, MapAtlas, map_search_info, view_uniforms
 
 #: The search's status codes that are not the mirror search's (the rest are shared).
 TOTAL_REFLECTION = -5
@@ -34,24 +34,10 @@ TOTAL_REFLECTION = -5
 @cached_shader
 def refraction_shader():
     """The compute shader of the refraction search, built on first use."""
-    info = gpu.types.GPUShaderCreateInfo()
-    info.push_constant('VEC4', "camera")
-    info.push_constant('VEC4', "w_row")
-    info.push_constant('FLOAT', "stop_per_w")
-    info.push_constant('FLOAT', "eta")
-    info.push_constant('INT', "n_vertices")
-    info.push_constant('INT', "positions_width")
-    info.push_constant('INT', "warm")
-    info.push_constant('INT', "self_map")
-    info.push_constant('INT', "n_maps")
-    info.sampler(0, 'FLOAT_2D', "vertex_positions")
-    info.sampler(1, 'FLOAT_2D', "reflector_maps")
-    info.sampler(2, 'FLOAT_2D', "map_params")
-    info.image(0, 'RGBA32F', 'FLOAT_2D', "result", qualifiers={'READ', 'WRITE'})
+    info = map_search_info(extra_floats=("eta",))
     info.image(1, 'RGBA32F', 'FLOAT_2D', "exit_result", qualifiers={'WRITE'})
-    info.local_group_size(LOCAL_SIZE, 1)
     defines = {**search_module.search_defines(), "FLIPPED_CODE": FLIPPED_CODE}
-    info.compute_source(glsl_source("refraction_search.glsl", defines, glsl_source("reflector_map.glsl")))
+    info.compute_source(glsl_source("refraction_search.glsl", defines, glsl_source("map_search.glsl")))
     return gpu.shader.create_from_info(info)
 
 

@@ -1,9 +1,32 @@
 /* SPDX-License-Identifier: GPL-3.0-or-later */
-/* A star-shaped surface's cube map of radius and normal around its centre, read by the
- * per-vertex searches on the GPU (iterative_search.glsl, refraction_search.glsl); layout
- * in engine/methods/iterative/reflector_map.py. Expects the samplers `map_params` and
- * `reflector_maps`, the push constants `camera`, `w_row` and `stop_per_w`, and the
- * define OCCLUSION_SAMPLES. */
+/* What the per-vertex searches on a star-shaped surface's cube map share
+ * (iterative_search.glsl, refraction_search.glsl): their status codes, the invocation's
+ * vertex, the map's reading (layout in engine/methods/iterative/reflector_map.py) and the
+ * Newton step in a chart of it. Expects the samplers `map_params`, `reflector_maps` and
+ * `vertex_positions`, the push constants `camera`, `w_row`, `stop_per_w`, `n_vertices`
+ * and `positions_width`, and the define OCCLUSION_SAMPLES. */
+
+#define FOUND 1
+#define NOT_CONVERGED 0
+#define NO_SURFACE -1
+#define FACES_AWAY -2
+#define OCCLUDED -3
+#define INSIDE -4
+
+/* The texel of this invocation's vertex (one per diffuse vertex, rows of
+ * `positions_width`); false past the last vertex. */
+bool vertex_texel(out ivec2 texel)
+{
+  texel = ivec2(gl_GlobalInvocationID.xy);
+  return texel.x < positions_width && texel.y * positions_width + texel.x < n_vertices;
+}
+
+/* The Newton step -J^-1 f for the Jacobian's columns ju, jv (zero where J is singular). */
+vec2 newton_step(vec2 ju, vec2 jv, vec2 f)
+{
+  float det = ju.x * jv.y - jv.x * ju.y;
+  return abs(det) > 1e-30 ? -vec2(jv.y * f.x - jv.x * f.y, ju.x * f.y - ju.y * f.x) / det : vec2(0.0);
+}
 
 /* The map in use (use_map): its centre, radii, rows and size. */
 vec3 centre;
