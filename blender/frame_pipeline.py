@@ -23,6 +23,7 @@ from __future__ import annotations
 import hashlib
 import time
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
@@ -118,6 +119,9 @@ class FramePipeline:
     plan_warnings: list = field(default_factory=list)
     #: The capture's glass and its renderer (``glass_layer.GlassLayer``), None without glass.
     glass: object = None
+    #: Whether the refraction search draws glass that reflects too (the live view's
+    #: picture); Render Image traces that glass per pixel, Fresnel and all.
+    DRAWS_REFLECTING_GLASS: ClassVar[bool] = False
 
     def plan_reflectors(self, scene, captured, bake_missing: bool = False, final_render: bool | None = None) -> None:
         """Load the baked grids the reflectors want (with ``bake_missing``, bake a grid
@@ -142,6 +146,17 @@ class FramePipeline:
         self.captured = captured
         self.world = world_color(scene)
         self.bounds = scene_bounds(captured.reflectors, captured.meshes)
+        self.glass = glass_layer(self.glass, captured, captured_key(captured), self.world, self.settings.accuracy_px,
+                                 self.DRAWS_REFLECTING_GLASS)
+
+    def glass_alone(self, scene, captured, key: tuple | None = None) -> None:
+        """A capture of glass and no mirror: no renderer of mirrors, the glass's layer
+        alone draws the frame (``key``: ``captured_key(captured)``, when known)."""
+        self.captured, self.renderer, self.reflector_set = captured, None, None
+        self.world = world_color(scene)
+        self.bounds = scene_bounds(captured.reflectors, captured.meshes)
+        self.glass = glass_layer(self.glass, captured, captured_key(captured) if key is None else key, self.world,
+                                 self.settings.accuracy_px, self.DRAWS_REFLECTING_GLASS)
 
     def update(self, scene, depsgraph, settings: FrameSettings) -> None:
         """Render Image's frame: capture the scene and make again only what changed since
@@ -158,10 +173,9 @@ class FramePipeline:
         modes = tuple(method_plan.mode_of(scene, r.name) for r in captured.reflectors)
         key = captured_key(captured) + (modes, settings, looks)
         self.settings = settings
-        self.glass = glass_layer(self.glass, captured, key[:2])
         if not captured.reflectors:  # glass alone: its layer is the frame
-            self.captured, self.renderer, self.reflector_set, self.key = captured, None, None, key
-            self.world = world_color(scene)
+            self.glass_alone(scene, captured, key[:2])
+            self.key = key
             return
         if self.reflector_set is None or key[0] != self.key[0]:
             self.reflector_set = ReflectorSet(list(captured.reflectors))

@@ -1,41 +1,49 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Render Image's glass: what lies behind a glass object, refracted, and what it reflects.
+"""Glass: what lies behind a glass object, refracted, and what it reflects.
 
-Each pixel where a glass object is in front (the pre-pass of a renderer holding the
-glass as its "mirrors" and every other surface as meshes) is ray traced exactly: its eye
-ray is followed through the glass (``engine/glass/paths.py``: Snell's law at every
-interface, total internal reflection), and the ray that comes out is met with the scene,
-mirrors included (``band_trace.BandTracer.trace_rays``: a mirror seen through glass shows
-its reflections, to the scene's Max Order). The exact dielectric Fresnel reflectance
+The layer's renderer holds the glass as its "mirrors" and every other surface as meshes.
+Through convex glass the refraction search draws every diffuse vertex where it appears
+(``drawing/methods/refraction_draw.py``), every frame: the live view's picture, weighed by
+1 minus the glass's Fresnel term over the world colour (what the glass reflects).
+
+Render Image ray traces each pixel where a glass object is in front: its eye ray is
+followed through the glass (``engine/glass/paths.py``: Snell's law at every interface,
+total internal reflection), and the ray that comes out is met with the scene, mirrors
+included (``band_trace.BandTracer.trace_rays``: a mirror seen through glass shows its
+reflections, to the scene's Max Order). The exact dielectric Fresnel reflectance
 (``snell.fresnel_dielectric``) mixes in the ray reflected off the glass at the first
 interface and the one reflected back inside at the last (followed out once), as Cycles'
-Glass BSDF shows them; glass of a Refraction BSDF reflects nothing (and where it should
-reflect totally, shows black, as Cycles does). Those pixels replace the frame's (where
-the mirrors' renderer drew the glass as a solid object); a scene of glass alone is that
-renderer's frame.
-
-This is the reference picture, traced per pixel on the CPU (seconds at 480x320);
-the sample-based cameras on refracted rays (``tools/glass_camera.py``) are
-measured against the exact solver for the GPU path. Left out for now, and said so in the
-panel: the live view (it shows glass as a solid object), and glass seen in mirrors (a
-solid object there).
+Glass BSDF shows them. Glass of a Refraction BSDF reflects nothing (and where it should
+reflect totally, shows black, as Cycles does): there the search's drawn pixels are kept
+and only those near the edges of its images traced. Those pixels replace the frame's
+(where the mirrors' renderer drew the glass as a solid object); a scene of glass alone
+is the layer's frame. Mirrors reflect glass as a solid object, and the panel says so.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..drawing.gpu_data import read_depth, read_texture
+from ..drawing.methods.refraction_draw import RefractionPass
 from ..drawing.reflection_draw import ReflectionRenderer
 from ..engine.errors import SceneInputError
+from ..engine.geometry import band_trace
 from ..engine.geometry.band_trace import BandTracer
 from ..engine.geometry.raytrace import reflect
 from ..engine.glass import GlassSet, fresnel_dielectric
+from ..engine.glass.refraction_search import refracted_glass
 from ..engine.methods.sbc.sbc_build import check_view_outside_reflectors
 from ..engine.scene import DiffuseMesh
 from ..engine.view import View
+from . import star_maps
+
+#: Drawn pixels this close (px) to a pixel of the same glass without a refracted image are
+#: traced too: a reflected triangle with an unanswered corner is dropped whole, so the
+#: image's edge may lie a pixel short of or past the true one.
+HOLE_MARGIN_PX = 2
 
 
 @dataclass
@@ -50,6 +58,10 @@ class GlassLayer:
     #: Names of the glass objects the last frame's rays met inside another glass (glass
     #: in glass, or overlapping): a ray leaving the inner one is taken to leave into air.
     nested: tuple = ()
+    #: {name: reason} of the glass the refraction search cannot draw (open, not convex...).
+    unsearched: dict = field(default_factory=dict)
+    #: How many of the last frame's glass pixels were ray traced (the rest were drawn).
+    traced: int = 0
 
     def render(self, view: View, world, max_order: int) -> tuple[np.ndarray, np.ndarray]:
         """((H, W, 4) linear RGBA rows bottom to top, (H, W) bool where a glass object is
@@ -61,15 +73,31 @@ class GlassLayer:
             raise SceneInputError(error.object_name, "the view is inside this glass object; move the camera outside "
                                   "it (the inside of glass is not drawn)") from None
         image = self.renderer.render(view, None, world, trace=False)
-        labels = read_texture(self.renderer.targets(view.width, view.height).prepass_labels, view.width, view.height)
+        targets = self.renderer.targets(view.width, view.height)
+        labels = read_texture(targets.prepass_labels, view.width, view.height)
         in_front = labels[..., 0] >= 0.5
-        rows, columns = np.nonzero(in_front)
-        depth = read_depth(self.renderer.targets(view.width, view.height).prepass, view.width, view.height)
+        rows, columns = np.nonzero(in_front & ~self._drawn_exactly(targets, labels[..., 0]))
+        self.traced = int(len(rows))
+        depth = read_depth(targets.prepass, view.width, view.height)
         pixels = np.stack([columns, rows], axis=1) + 0.5
         colors = self.trace(view, pixels, world, max_order, view.window_points(pixels, depth[rows, columns]))
         image[rows, columns, :3] = colors
         image[rows, columns, 3] = 1.0
         return image, in_front
+
+    def _drawn_exactly(self, targets, labels: np.ndarray) -> np.ndarray:
+        """(H, W) bool: the pixels whose drawn refraction is the whole picture, and which
+        are not traced: drawn by the refraction search, on glass that does not reflect
+        (a Refraction BSDF), away from any pixel of that glass left without an image (where
+        the search's images end, its triangles reach partly past them)."""
+        plain = [index for index, glass in enumerate(self.glass.glasses)
+                 if not glass.reflects and glass.name not in self.unsearched]
+        if not plain:
+            return np.zeros(labels.shape, dtype=bool)
+        size = labels.shape[::-1]
+        drawn = read_texture(targets.reflection_colors, *size)[..., 3] > 0.5
+        on_plain = np.isin(np.rint(labels).astype(np.int64) - 1, plain)
+        return drawn & on_plain & ~band_trace.drawn_near_gaps(np.where(on_plain, labels, 0.0), drawn, HOLE_MARGIN_PX)
 
     def trace(self, view: View, pixels: np.ndarray, world, max_order: int, surface=None) -> np.ndarray:
         """(K, 3) linear RGB of the glass seen through ``pixels`` (K, 2): the refracted
@@ -118,26 +146,52 @@ class GlassLayer:
         return color
 
 
-def glass_layer(previous: GlassLayer | None, captured, key: tuple) -> GlassLayer | None:
+def glass_layer(previous: GlassLayer | None, captured, key: tuple, world=(0.0, 0.0, 0.0, 1.0),
+                accuracy_px: float = 1.0, reflecting_drawn: bool = True) -> GlassLayer | None:
     """The glass of ``captured`` (``None`` without any): ``previous`` while its ``key``
     holds (the capture's, ``frame_pipeline.captured_key``, with each glass's name, index
-    of refraction and whether it reflects)."""
+    of refraction and whether it reflects, the ``world`` colour and the Accuracy).
+
+    Its renderer holds the glass as its reflectors and every other surface as meshes, and
+    draws, through each convex glass solid, the refraction search's images
+    (``drawing/methods/refraction_draw.py``), weighed by 1 minus the glass's Fresnel
+    term (Schlick's, from its IOR) over the world colour, which stands for what the glass
+    reflects: the live view's picture of glass. Without ``reflecting_drawn`` (Render
+    Image, which traces glass that reflects) only glass that does not reflect is searched."""
     if not captured.glass:
         return None
-    key = key + tuple((glass.name, glass.ior, glass.reflects) for glass in captured.glass)
+    world = tuple(float(c) for c in world)[:3]
+    key = key + tuple((glass.name, glass.ior, glass.reflects) for glass in captured.glass) + (
+        world, accuracy_px, reflecting_drawn)
     if previous is not None and previous.key == key:
         return previous
     names = {glass.name for glass in captured.glass}
     meshes = [mesh for mesh in captured.meshes if mesh.name not in names]
     surfaces = [glass.surface for glass in captured.glass]
     count = len(surfaces)
-    # Drawn as meshes only to fill the pre-pass: mirrors in front of glass hide it.
+    searches = [prepared_search(glass, index, accuracy_px) if reflecting_drawn or not glass.reflects
+                else (None, "it reflects, and Render Image traces it") for index, glass in enumerate(captured.glass)]
+    methods = [method for method, _ in searches if method is not None]
+    iors = np.array([glass.ior for glass in captured.glass])
+    f0 = np.where([glass.reflects for glass in captured.glass], ((iors - 1.0) / (iors + 1.0)) ** 2, np.nan)
+    # Mirrors are drawn as meshes: through glass they show as solid objects, and in front
+    # of it they hide it.
     renderer = ReflectionRenderer(surfaces, meshes + [_solid(mirror) for mirror in captured.reflectors],
-                                  reflector_colors=np.ones((count, 4), np.float32),
-                                  reflectivity=np.zeros(count, np.float32),
-                                  fresnel_f0=np.full(count, np.nan, np.float32),
-                                  attenuation_distance=np.zeros(count, np.float32))
-    return GlassLayer(key, GlassSet(list(captured.glass)), renderer, BandTracer(captured.reflectors, meshes))
+                                  reflector_colors=np.tile(world, (count, 1)).astype(np.float32),
+                                  reflectivity=np.ones(count, np.float32), fresnel_f0=f0.astype(np.float32),
+                                  transmits=np.ones(count, bool), attenuation_distance=np.zeros(count, np.float32),
+                                  passes=(RefractionPass.factory(methods),) if methods else ())
+    unsearched = {glass.name: reason for glass, (method, reason) in zip(captured.glass, searches) if method is None}
+    return GlassLayer(key, GlassSet(list(captured.glass)), renderer, BandTracer(captured.reflectors, meshes),
+                      unsearched=unsearched)
+
+
+def prepared_search(glass, index: int, accuracy_px: float) -> tuple:
+    """(``refraction_search.RefractedGlass`` or None, the reason it has none) of one
+    glass object, the ``index``-th of the scene's glass: its map from the cache the
+    mirrors' searches use (made once per shape, on the GPU when it is ready)."""
+    shape, reflector_map = star_maps.star_map(glass.surface)
+    return refracted_glass(glass, index, shape, reflector_map, accuracy_px)
 
 
 def _solid(mirror) -> DiffuseMesh:

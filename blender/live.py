@@ -125,9 +125,12 @@ def _capture(state: LiveScene, scene, depsgraph, reflectors: bool, wait: bool = 
         remesh = False
         captured = capture_scene(depsgraph)
     scene_bounds(captured.reflectors, captured.meshes)  # bad input raises here, before any work
-    if not captured.reflectors:  # glass alone
-        raise SceneInputError(scene.name, "has glass but no reflector: the viewport draws mirrors' reflections, "
-                              "and glass in Render Image only")
+    if not captured.reflectors:  # glass alone: no mirror to prepare or build cameras for
+        state.glass_alone(scene, captured)
+        state.generation += 1
+        state.counts["captures"] += 1
+        state.drawing = True
+        return True
     if remesh:
         state.counts["remeshes"] += 1
         _renew_renderer(state, scene, captured, seal=True)
@@ -192,6 +195,9 @@ def _finish_preparing(state: LiveScene, scene, wait: bool) -> bool:
 def _restart_stale(state: LiveScene, reflectors: bool, wait: bool) -> None:
     """Rebuild the cameras a new capture made stale: all after new reflectors, those
     whose bounds no longer hold the scene after new meshes."""
+    if state.renderer is None:  # glass alone: no camera to build
+        state.cameras.clear()
+        return
     stale = {key: c.view for key, c in state.cameras.items() if reflectors or not _inside(state.bounds, c.bounds)}
     for key, view in stale.items():
         if key not in state.requests:
@@ -315,6 +321,9 @@ def start(scene, depsgraph, views: dict | None = None, wait: bool = False) -> Li
         state.requests.update({key: (view, 0.0) for key, view in views.items()})
         ensure_timer()
         return state
+    if state.renderer is None:  # glass alone: drawn per frame, nothing to build
+        state.report('INFO', "Reflections up to date")
+        return state
     state.report('INFO', "Building reflections...")
     for key, view in views.items():
         _start_camera(state, key, view, wait)
@@ -378,7 +387,9 @@ def process(scene, depsgraph, wait: bool = False, now: float | None = None) -> b
             if _capture(state, scene, depsgraph, reflectors, wait):
                 _restart_stale(state, reflectors, wait)
         for key, (view, asked) in list(state.requests.items()):
-            if state.preparing is None and (wait or (now - asked >= DEBOUNCE_SECONDS and key not in state.jobs)):
+            if state.renderer is None:  # glass alone
+                state.requests.pop(key)
+            elif state.preparing is None and (wait or (now - asked >= DEBOUNCE_SECONDS and key not in state.jobs)):
                 _start_camera(state, key, view, wait)
     except SceneInputError as error:
         _capture_failed(state, error)
@@ -412,8 +423,10 @@ def draw(scene, key, view: View) -> bool:
     drawn. Raises what drawing raises (the callers catch it).
     """
     state = state_of(scene)
-    if state is None or state.renderer is None or not state.drawing:
+    if state is None or not state.drawing:
         return False
+    if state.renderer is None:  # glass alone
+        return _draw_glass(state, view, exact=False) if state.glass is not None else False
     failed = state.failed.get(key)
     if failed is not None and failed.same_as(view):
         return False  # the status line says why; a new view or a Refresh tries again
@@ -479,6 +492,7 @@ def _draw_with(state: LiveScene, view: View, camera: ViewCamera | None) -> bool:
     targets = state.renderer.draw(view, source, state.world, reflectors_only=True, camera=sbc,
                                   accuracy_px=state.settings.accuracy_px, exact=resting,
                                   traced=camera_traced if band is None else band)
+    _draw_glass(state, view, resting)
     if live_traces.start_band(state, view, targets, sbc, source) or tracing:
         ensure_timer()  # it redraws once they land
     if state.last_view is None or not state.last_view[0].same_as(view) or state.last_view[2] is not sbc:
@@ -500,6 +514,16 @@ def _draw_with(state: LiveScene, view: View, camera: ViewCamera | None) -> bool:
         state.stats["unanswered"] = sum(c["unanswered"] for c in counts.values())
         state.stats["searched"] = sum(c["found"] + c["unanswered"] for c in counts.values())
         state.stats["counted_at"] = time.monotonic()
+    return True
+
+
+def _draw_glass(state: LiveScene, view: View, exact: bool) -> bool:
+    """The glass's own overlay (``glass_layer``): the refracted images on the glass,
+    placed exactly with ``exact`` (a resting view). Returns whether there was glass."""
+    if state.glass is None:
+        return False
+    state.glass.renderer.draw(view, None, state.world, reflectors_only=True, accuracy_px=state.settings.accuracy_px,
+                              exact=exact)
     return True
 
 

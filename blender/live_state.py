@@ -7,6 +7,7 @@ from __future__ import annotations
 import weakref
 from concurrent.futures import Future
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 from ..engine.frame_settings import FrameSettings
 from ..engine.view import View
@@ -108,6 +109,7 @@ class LiveScene(FramePipeline):
     checking: tuple | None = None
     #: The band of the last resting view, traced (``live_traces.BandTrace``).
     band: object = None
+    DRAWS_REFLECTING_GLASS: ClassVar[bool] = True
 
     def report(self, level: str, message: str) -> None:
         self.level, self.status = level, message

@@ -194,8 +194,22 @@ class VIEW3D_PT_curved_reflections_glass(_SubPanel, bpy.types.Panel):
         if settings.ior <= 0.0:
             column.label(text=f"From the material: {glass_ior(obj):.3f}", icon='MATERIAL')
         if settings.is_refractor:
-            _wrapped(layout, "Render Image ray traces it (refraction, total internal reflection, Fresnel); the "
-                             "viewport shows it as a solid object, and mirrors reflect it so.", 'INFO')
+            _wrapped(layout, glass_note(obj.name, live.state_of(context.scene)), 'INFO')
+
+
+def glass_note(name: str, state) -> str:
+    """What draws glass object ``name`` in the viewport (the live ``state``'s glass layer,
+    None before a Start) and in Render Image, and why."""
+    layer = None if state is None else state.glass
+    rendered = "Render Image ray traces it exactly (refraction, total internal reflection, Fresnel)."
+    if layer is None or name not in {glass.name for glass in layer.glass.glasses}:
+        return f"{rendered} The viewport draws it once reflections are started."
+    if name in layer.unsearched:
+        return (f"The viewport shows it as a solid object: {layer.unsearched[name]}. {rendered} "
+                "Mirrors reflect it as a solid object.")
+    return ("The viewport draws what lies behind it by the refraction search (a convex solid), mixed by "
+            f"Fresnel with the world colour for what it reflects, mirrors behind it as solid objects. {rendered} "
+            "Mirrors reflect it as a solid object.")
 
 
 class VIEW3D_PT_curved_reflections_reflectors(_SubPanel, bpy.types.Panel):

@@ -154,12 +154,14 @@ def _prepass_parts(meshes, attributes, image_of_mesh, reflectors, colors, mirror
 
 def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=None,
                      edge_fraction: float = subdivision.EDGE_FRACTION, fresnel_f0=None,
-                     attenuation_distance=None, sealed=None) -> DrawGeometry:
+                     attenuation_distance=None, sealed=None, transmits=None) -> DrawGeometry:
     """Arrays of one scene for :class:`.reflection_draw.ReflectionRenderer`.
 
     ``reflector_colors`` (R, 3 or 4) linear, default white; ``reflectivity`` (R,) in
     [0, 1], default 1 (perfect mirrors); ``fresnel_f0`` (R,) Schlick's reflectance at
-    normal incidence, NaN or negative for no Fresnel (default none); ``attenuation_distance``
+    normal incidence, NaN or negative for no Fresnel (default none); ``transmits`` (R,)
+    bool: the weight is 1 minus the Fresnel term instead (glass, whose drawn image is the
+    refracted one: encoded as -2 - F0); ``attenuation_distance``
     (R,) the distance over which reflections fade to the world (0 or default: none).
     SBC paper section V-D. ``sealed`` (R,): each reflector's ``ReflectorSet.sealed``
     (its winding where it is closed and holds nothing, else 0; default 0), the fourth
@@ -179,6 +181,9 @@ def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=Non
     f0 = np.full(n_reflectors, -1.0, np.float32) if fresnel_f0 is None else np.asarray(
         fresnel_f0, dtype=np.float32).reshape(n_reflectors)
     f0 = np.where(np.isfinite(f0) & (f0 >= 0), np.clip(f0, 0.0, 1.0), -1.0).astype(np.float32)
+    if transmits is not None:
+        f0 = np.where(np.asarray(transmits, dtype=bool).reshape(n_reflectors) & (f0 >= 0), -2.0 - f0, f0)
+        f0 = f0.astype(np.float32)
     fade = np.zeros(n_reflectors, np.float32) if attenuation_distance is None else np.maximum(
         np.asarray(attenuation_distance, dtype=np.float32).reshape(n_reflectors), 0.0)
     sense = np.zeros(n_reflectors, np.float32) if sealed is None else np.sign(

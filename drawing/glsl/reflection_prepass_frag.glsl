@@ -5,7 +5,9 @@
  * with the desired view's eye vector), a reflector at its own flat colour. Target 1, the
  * label: (id, reflection weight, attenuation distance, eye depth of the surface: `eye_depth`). The weight is the reflector's
  * reflectivity, times Schlick's Fresnel term F0 + (1 - F0)(1 - cos t)^5 with cos t = |n . e|
- * when F0 is given (SBC paper, section V-D: the reflected share grows at grazing angles).
+ * when F0 is given (SBC paper, section V-D: the reflected share grows at grazing angles);
+ * glass, whose drawn image is the refracted one, gets 1 minus that term (its z holds
+ * -2 - F0: draw_geometry.prepare_geometry's `transmits`).
  * Target 2: the smooth normal (for the per-frame passes' law-of-reflection test) and, as
  * w, 1 where the pixel's view ray starts inside a sealed mirror, else 0.
  *
@@ -31,11 +33,13 @@ void main()
     }
     rgb = shade(albedo.rgb, lit_interp, normal_interp, to_eye);
   }
-  else if (label_interp.z >= 0.0) {
+  else if (label_interp.z >= 0.0 || label_interp.z <= -2.0) {
     float lengths = length(normal_interp) * length(to_eye);
     float cosine = lengths > 1e-30 ? min(abs(dot(normal_interp, to_eye)) / lengths, 1.0) : 1.0;
-    float f0 = label_interp.z;
-    weight *= f0 + (1.0 - f0) * pow(1.0 - cosine, 5.0);
+    bool transmits = label_interp.z <= -2.0;
+    float f0 = transmits ? -2.0 - label_interp.z : label_interp.z;
+    float fresnel = f0 + (1.0 - f0) * pow(1.0 - cosine, 5.0);
+    weight *= transmits ? 1.0 - fresnel : fresnel;
   }
   float inside = 0.0;
   if (label_interp.x > 0.5 && lit_interp != 0.0 && gl_FrontFacing != (lit_interp > 0.0)) {

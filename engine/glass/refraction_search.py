@@ -20,13 +20,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..methods.iterative import search as mirror_search
-from ..methods.iterative.reflector_map import DEFAULT_FACE_SIZE, ReflectorMap
-from ..methods.iterative.star import prepare_iterative
+from ..methods.iterative.reflector_map import ReflectorMap
+from ..methods.iterative.star import StarShape
 from .paths import Glass
 
-#: Texels along a cube face of a glass's map, as a mirror's: at half of it a box's normals,
-#: blended across its edges over a texel, move images there by pixels.
-GLASS_FACE_SIZE = DEFAULT_FACE_SIZE
 #: Newton steps at most per start (as the mirror search's).
 MAX_ITERATIONS = mirror_search.MAX_ITERATIONS
 #: A search stops when its step moves A by less than this share of the Accuracy, as the
@@ -80,17 +77,16 @@ class RefractedGlass:
     accuracy_px: float = 1.0
 
 
-def prepare_refraction(glass: Glass, index: int, accuracy_px: float = 1.0,
-                       face_size: int = GLASS_FACE_SIZE) -> tuple[RefractedGlass | None, str]:
-    """The search for one glass object, or None and the reason it has none (for the
-    panel): the glass must be a closed solid seen whole from one centre (its map,
-    ``methods/iterative/star.py``) and convex."""
-    shape, bake = prepare_iterative(glass.surface, face_size)
-    if bake is None:
+def refracted_glass(glass: Glass, index: int, shape: StarShape, reflector_map: ReflectorMap | None,
+                    accuracy_px: float = 1.0) -> tuple[RefractedGlass | None, str]:
+    """The search for one glass object from its star-shape verdict and cube map
+    (``methods/iterative/star.py``), or None and the reason it has none (for the panel):
+    the glass must be a closed solid seen whole from one centre, and convex."""
+    if reflector_map is None:
         return None, shape.reason
-    if not bake.reflector_map.convex:
+    if not reflector_map.convex:
         return None, f"{glass.name!r} is not convex: a ray inside it may leave and enter it again"
-    return RefractedGlass(index, glass.name, bake.reflector_map, float(glass.ior), float(accuracy_px)), ""
+    return RefractedGlass(index, glass.name, reflector_map, float(glass.ior), float(accuracy_px)), ""
 
 
 def search_defines() -> dict:
