@@ -58,7 +58,7 @@ EXIT_BISECTIONS = 24
 EXIT_START = 1e-4
 #: A vertex is a flipped image where the leaving rays' cross-section there, against its
 #: orientation at the glass, turns over by more than this sine: clearly between two
-#: focal lines, not the noise of a focus (``glsl/refraction_search.glsl``).
+#: focal lines, not the noise of a focus (``drawing/glsl/refraction_search.glsl``).
 FLIP_SINE = 0.1
 #: Samples of the segments into and out of the glass tested against the other glass.
 OCCLUSION_SAMPLES = mirror_search.OCCLUSION_SAMPLES
