@@ -119,9 +119,9 @@ class FramePipeline:
     plan_warnings: list = field(default_factory=list)
     #: The capture's glass and its renderer (``glass_layer.GlassLayer``), None without glass.
     glass: object = None
-    #: Whether the refraction search draws glass that reflects too (the live view's
-    #: picture); Render Image traces that glass per pixel, Fresnel and all.
-    DRAWS_REFLECTING_GLASS: ClassVar[bool] = False
+    #: Whether the refraction search draws the glass (the live view's picture); Render
+    #: Image traces it per pixel, Fresnel and all.
+    SEARCHES_GLASS: ClassVar[bool] = False
 
     def plan_reflectors(self, scene, captured, bake_missing: bool = False, final_render: bool | None = None) -> None:
         """Load the baked grids the reflectors want (with ``bake_missing``, bake a grid
@@ -147,7 +147,7 @@ class FramePipeline:
         self.world = world_color(scene)
         self.bounds = scene_bounds(captured.reflectors, captured.meshes)
         self.glass = glass_layer(self.glass, captured, captured_key(captured), self.world, self.settings.accuracy_px,
-                                 self.DRAWS_REFLECTING_GLASS)
+                                 self.SEARCHES_GLASS)
 
     def glass_alone(self, scene, captured, key: tuple | None = None) -> None:
         """A capture of glass and no mirror: no renderer of mirrors, the glass's layer
@@ -156,7 +156,7 @@ class FramePipeline:
         self.world = world_color(scene)
         self.bounds = scene_bounds(captured.reflectors, captured.meshes)
         self.glass = glass_layer(self.glass, captured, captured_key(captured) if key is None else key, self.world,
-                                 self.settings.accuracy_px, self.DRAWS_REFLECTING_GLASS)
+                                 self.settings.accuracy_px, self.SEARCHES_GLASS)
 
     def update(self, scene, depsgraph, settings: FrameSettings) -> None:
         """Render Image's frame: capture the scene and make again only what changed since

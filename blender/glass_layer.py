@@ -13,11 +13,13 @@ included (``band_trace.BandTracer.trace_rays``: a mirror seen through glass show
 reflections, to the scene's Max Order). The exact dielectric Fresnel reflectance
 (``snell.fresnel_dielectric``) mixes in the ray reflected off the glass at the first
 interface and the one reflected back inside at the last (followed out once), as Cycles'
-Glass BSDF shows them. Glass of a Refraction BSDF reflects nothing (and where it should
-reflect totally, shows black, as Cycles does): there the search's drawn pixels are kept
-and only those near the edges of its images traced. Those pixels replace the frame's
-(where the mirrors' renderer drew the glass as a solid object); a scene of glass alone
-is the layer's frame. Mirrors reflect glass as a solid object, and the panel says so.
+Glass BSDF shows them; glass of a Refraction BSDF reflects nothing (and where it should
+reflect totally, shows black, as Cycles does). Those pixels replace the frame's (where
+the mirrors' renderer drew the glass as a solid object); a scene of glass alone is the
+layer's frame. Render Image does not use the search: through a strong lens an object
+close behind it has several images, and the search draws one per point (the glass
+demo's cube covered a fifth of the ball wrongly). Mirrors reflect glass as a solid
+object, and the panel says so.
 """
 
 from __future__ import annotations
@@ -30,7 +32,6 @@ from ..drawing.gpu_data import read_depth, read_texture
 from ..drawing.methods.refraction_draw import RefractionPass
 from ..drawing.reflection_draw import ReflectionRenderer
 from ..engine.errors import SceneInputError
-from ..engine.geometry import band_trace
 from ..engine.geometry.band_trace import BandTracer
 from ..engine.geometry.raytrace import reflect
 from ..engine.glass import GlassSet, fresnel_dielectric
@@ -39,11 +40,6 @@ from ..engine.methods.sbc.sbc_build import check_view_outside_reflectors
 from ..engine.scene import DiffuseMesh
 from ..engine.view import View
 from . import star_maps
-
-#: Drawn pixels this close (px) to a pixel of the same glass without a refracted image are
-#: traced too: a reflected triangle with an unanswered corner is dropped whole, so the
-#: image's edge may lie a pixel short of or past the true one.
-HOLE_MARGIN_PX = 2
 
 
 @dataclass
@@ -60,8 +56,6 @@ class GlassLayer:
     nested: tuple = ()
     #: {name: reason} of the glass the refraction search cannot draw (open, not convex...).
     unsearched: dict = field(default_factory=dict)
-    #: How many of the last frame's glass pixels were ray traced (the rest were drawn).
-    traced: int = 0
 
     def render(self, view: View, world, max_order: int) -> tuple[np.ndarray, np.ndarray]:
         """((H, W, 4) linear RGBA rows bottom to top, (H, W) bool where a glass object is
@@ -76,28 +70,13 @@ class GlassLayer:
         targets = self.renderer.targets(view.width, view.height)
         labels = read_texture(targets.prepass_labels, view.width, view.height)
         in_front = labels[..., 0] >= 0.5
-        rows, columns = np.nonzero(in_front & ~self._drawn_exactly(targets, labels[..., 0]))
-        self.traced = int(len(rows))
+        rows, columns = np.nonzero(in_front)
         depth = read_depth(targets.prepass, view.width, view.height)
         pixels = np.stack([columns, rows], axis=1) + 0.5
         colors = self.trace(view, pixels, world, max_order, view.window_points(pixels, depth[rows, columns]))
         image[rows, columns, :3] = colors
         image[rows, columns, 3] = 1.0
         return image, in_front
-
-    def _drawn_exactly(self, targets, labels: np.ndarray) -> np.ndarray:
-        """(H, W) bool: the pixels whose drawn refraction is the whole picture, and which
-        are not traced: drawn by the refraction search, on glass that does not reflect
-        (a Refraction BSDF), away from any pixel of that glass left without an image (where
-        the search's images end, its triangles reach partly past them)."""
-        plain = [index for index, glass in enumerate(self.glass.glasses)
-                 if not glass.reflects and glass.name not in self.unsearched]
-        if not plain:
-            return np.zeros(labels.shape, dtype=bool)
-        size = labels.shape[::-1]
-        drawn = read_texture(targets.reflection_colors, *size)[..., 3] > 0.5
-        on_plain = np.isin(np.rint(labels).astype(np.int64) - 1, plain)
-        return drawn & on_plain & ~band_trace.drawn_near_gaps(np.where(on_plain, labels, 0.0), drawn, HOLE_MARGIN_PX)
 
     def trace(self, view: View, pixels: np.ndarray, world, max_order: int, surface=None) -> np.ndarray:
         """(K, 3) linear RGB of the glass seen through ``pixels`` (K, 2): the refracted
@@ -147,7 +126,7 @@ class GlassLayer:
 
 
 def glass_layer(previous: GlassLayer | None, captured, key: tuple, world=(0.0, 0.0, 0.0, 1.0),
-                accuracy_px: float = 1.0, reflecting_drawn: bool = True) -> GlassLayer | None:
+                accuracy_px: float = 1.0, searched: bool = True) -> GlassLayer | None:
     """The glass of ``captured`` (``None`` without any): ``previous`` while its ``key``
     holds (the capture's, ``frame_pipeline.captured_key``, with each glass's name, index
     of refraction and whether it reflects, the ``world`` colour and the Accuracy).
@@ -156,21 +135,21 @@ def glass_layer(previous: GlassLayer | None, captured, key: tuple, world=(0.0, 0
     draws, through each convex glass solid, the refraction search's images
     (``drawing/methods/refraction_draw.py``), weighed by 1 minus the glass's Fresnel
     term (Schlick's, from its IOR) over the world colour, which stands for what the glass
-    reflects: the live view's picture of glass. Without ``reflecting_drawn`` (Render
-    Image, which traces glass that reflects) only glass that does not reflect is searched."""
+    reflects: the live view's picture of glass. Without ``searched`` (Render Image, which
+    traces the glass) no glass is searched, and the renderer only finds it on screen."""
     if not captured.glass:
         return None
     world = tuple(float(c) for c in world)[:3]
     key = key + tuple((glass.name, glass.ior, glass.reflects) for glass in captured.glass) + (
-        world, accuracy_px, reflecting_drawn)
+        world, accuracy_px, searched)
     if previous is not None and previous.key == key:
         return previous
     names = {glass.name for glass in captured.glass}
     meshes = [mesh for mesh in captured.meshes if mesh.name not in names]
     surfaces = [glass.surface for glass in captured.glass]
     count = len(surfaces)
-    searches = [prepared_search(glass, index, accuracy_px) if reflecting_drawn or not glass.reflects
-                else (None, "it reflects, and Render Image traces it") for index, glass in enumerate(captured.glass)]
+    searches = [prepared_search(glass, index, accuracy_px) if searched else (None, "Render Image traces it")
+                for index, glass in enumerate(captured.glass)]
     methods = [method for method, _ in searches if method is not None]
     iors = np.array([glass.ior for glass in captured.glass])
     f0 = np.where([glass.reflects for glass in captured.glass], ((iors - 1.0) / (iors + 1.0)) ** 2, np.nan)

@@ -109,7 +109,7 @@ class LiveScene(FramePipeline):
     checking: tuple | None = None
     #: The band of the last resting view, traced (``live_traces.BandTrace``).
     band: object = None
-    DRAWS_REFLECTING_GLASS: ClassVar[bool] = True
+    SEARCHES_GLASS: ClassVar[bool] = True
 
     def report(self, level: str, message: str) -> None:
         self.level, self.status = level, message

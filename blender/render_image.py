@@ -134,8 +134,7 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
         started = time.perf_counter()
         glass_image, in_front = state.glass.render(view, state.world, settings.max_order)
         image = over(image, glass_image, in_front)
-        stats["glass"] = {"pixels": int(in_front.sum()), "traced": state.glass.traced,
-                          "seconds": time.perf_counter() - started}
+        stats["glass"] = {"pixels": int(in_front.sum()), "seconds": time.perf_counter() - started}
         if state.glass.nested:
             stats["warnings"].append(f"Glass inside other glass (seen through {', '.join(state.glass.nested)}): a ray "
                                      "leaving the inner glass is drawn as if it left into air")
@@ -303,9 +302,8 @@ class CURVED_REFLECTIONS_OT_render_image(bpy.types.Operator):
         for message in result.stats["warnings"]:
             self.report({'WARNING'}, message)
         if "glass" in result.stats:
-            glass = result.stats["glass"]
-            self.report({'INFO'}, f"Glass on {glass['pixels']:,} pixels, {glass['traced']:,} of them ray traced, "
-                                  f"in {glass['seconds']:.2f} s")
+            self.report({'INFO'}, f"Glass ray traced on {result.stats['glass']['pixels']:,} pixels in "
+                                  f"{result.stats['glass']['seconds']:.2f} s")
         untraced = result.stats.get("untraced_pixels", 0)
         if untraced:
             self.report({'WARNING'}, f"{untraced} mirror pixels without a reflection were filled, not ray traced "

@@ -44,7 +44,7 @@ def search_defines() -> dict:
 
 def map_search_info(extra_floats=(), extra_samplers=()) -> "gpu.types.GPUShaderCreateInfo":
     """What a per-vertex search on the cube maps (``glsl/map_search.glsl``) declares:
-    the view's push constants (:func:`view_uniforms`), the vertices, the maps and their
+    the view's push constants (:func:`bind_map_search`), the vertices, the maps and their
     parameters, a read-write ``result`` image, one invocation per vertex texel; then the
     float push constants ``extra_floats`` and samplers ``extra_samplers`` of the search."""
     info = gpu.types.GPUShaderCreateInfo()
@@ -69,17 +69,28 @@ def search_shader():
     return gpu.shader.create_from_info(info)
 
 
-def view_uniforms(shader, view, shift) -> float:
-    """Set a bound search shader's ``camera`` (the eye relative to ``shift``, w 1; or the
-    direction toward the viewer, w 0) and ``w_row`` (the last row of the view-projection,
-    for clip w); returns the size of a pixel at clip w 1 (its ``stop_per_w`` per pixel)."""
+def bind_map_search(shader, view, meshes: ReflectedMeshes, atlas: "MapAtlas", warm: bool) -> float:
+    """Bind a search shader (:func:`map_search_info`) and set what every dispatch of a
+    frame shares: ``camera`` (the eye relative to the meshes' shift, w 1; or the direction
+    toward the viewer, w 0), ``w_row`` (the view-projection's last row, for clip w), the
+    vertices, the maps of ``atlas``, and ``warm``. Returns the size of a pixel at clip w 1
+    (the ``stop_per_w`` of one pixel)."""
+    shift = meshes.geometry.shift
     world_to_clip = np.asarray(view.projection_matrix) @ np.asarray(view.view_matrix)
     translate = np.eye(4)
     translate[:3, 3] = shift
     w_row = (world_to_clip @ translate)[3]
     camera = (*(view.eye - shift), 1.0) if view.is_perspective else (*view.backward, 0.0)
+    shader.bind()
     shader.uniform_float("camera", tuple(float(c) for c in camera))
     shader.uniform_float("w_row", tuple(float(c) for c in w_row))
+    shader.uniform_int("n_vertices", meshes.n_vertices)
+    shader.uniform_int("positions_width", meshes.width)
+    shader.uniform_int("warm", int(bool(warm)))
+    shader.uniform_int("n_maps", atlas.count)
+    shader.uniform_sampler("vertex_positions", meshes.positions)
+    shader.uniform_sampler("reflector_maps", atlas.texture)
+    shader.uniform_sampler("map_params", atlas.params)
     return 2.0 / (float(view.projection_matrix[0][0]) * view.width)
 
 
@@ -102,6 +113,7 @@ class MapAtlas:
             params[3 * k] = (*(np.asarray(rmap.centre) - shift), rmap.max_radius)
             params[3 * k + 1] = (rows[k], rmap.face_size, float(bool(rmap.convex)), rmap.mean_radius)
             params[3 * k + 2] = (patch_rows[k], len(patches[k]), rmap.min_radius, 0.0)
+        self.count = len(maps)
         self.texture = data_texture(texels)
         self.params = data_texture(params, len(params))
         # One row at least: a texture may not be empty.
@@ -172,15 +184,7 @@ class IterativePass(FramePass):
             return
         self._ensure()
         shader = search_shader()
-        shader.bind()
-        pixel_scale = view_uniforms(shader, view, self.geometry.shift)
-        shader.uniform_int("n_vertices", self.n_vertices)
-        shader.uniform_int("positions_width", self.meshes.width)
-        shader.uniform_int("warm", int(bool(warm)))
-        shader.uniform_int("n_maps", len(self.methods))
-        shader.uniform_sampler("vertex_positions", self.meshes.positions)
-        shader.uniform_sampler("reflector_maps", self._atlas.texture)
-        shader.uniform_sampler("map_params", self._atlas.params)
+        pixel_scale = bind_map_search(shader, view, self.meshes, self._atlas, warm)
         shader.uniform_sampler("map_patches", self._atlas.patches)
         for k, method in enumerate(self.methods):
             shader.uniform_float("stop_per_w", search_module.STOP_FRACTION * method.accuracy_px * pixel_scale)

@@ -25,7 +25,7 @@ from ..frame_pass import Frame, FramePass, PassInputs
 from ..reflected_meshes import FLIPPED_CODE, ReflectedMeshes
 from ..shader_cache import cached_shader
 from ..shader_sources import glsl_source
-from .iterative_draw import LOCAL_SIZE, MapAtlas, map_search_info, view_uniforms
+from .iterative_draw import LOCAL_SIZE, MapAtlas, bind_map_search, map_search_info
 
 #: The search's status codes that are not the mirror search's (the rest are shared).
 TOTAL_REFLECTION = -5
@@ -98,15 +98,7 @@ class RefractionPass(FramePass):
             return
         self._ensure()
         shader = refraction_shader()
-        shader.bind()
-        pixel_scale = view_uniforms(shader, view, self.geometry.shift)
-        shader.uniform_int("n_vertices", self.n_vertices)
-        shader.uniform_int("positions_width", self.meshes.width)
-        shader.uniform_int("warm", int(bool(warm)))
-        shader.uniform_int("n_maps", len(self.methods))
-        shader.uniform_sampler("vertex_positions", self.meshes.positions)
-        shader.uniform_sampler("reflector_maps", self._atlas.texture)
-        shader.uniform_sampler("map_params", self._atlas.params)
+        pixel_scale = bind_map_search(shader, view, self.meshes, self._atlas, warm)
         for k, method in enumerate(self.methods):
             shader.uniform_float("stop_per_w", search_module.STOP_FRACTION * method.accuracy_px * pixel_scale)
             shader.uniform_float("eta", float(method.ior))

@@ -293,16 +293,6 @@ def band_pixels(labels: np.ndarray, drawn: np.ndarray, radius: int, edges_of_dra
     return _pixels((ids > 0) & ~drawn & near_edge)
 
 
-def drawn_near_gaps(labels: np.ndarray, drawn: np.ndarray, radius: int) -> np.ndarray:
-    """(H, W) bool: reflector pixels with a drawn image within ``radius`` (Chebyshev) of
-    a pixel with another id or of a reflector pixel without one (``labels`` and ``drawn``
-    as :func:`band_pixels`): an image drawn as whole triangles ends up to a pixel off
-    where its triangles' answers end."""
-    ids = np.rint(labels).astype(np.int64)
-    drawn = np.asarray(drawn, dtype=bool)
-    return (ids > 0) & drawn & (_near_another_id(ids, radius) | _near((ids > 0) & ~drawn, radius))
-
-
 def drawn_pixels_in(labels: np.ndarray, drawn: np.ndarray, region: np.ndarray) -> np.ndarray:
     """(K, 2) integer pixels (x, y) of reflector pixels in ``region`` (H, W) bool that
     have a drawn reflection (``labels`` and ``drawn`` as :func:`band_pixels`): where the

@@ -236,24 +236,6 @@ def _refraction_scene():
     return scene
 
 
-def test_render_image_takes_the_refraction_search_where_it_drew_and_traces_the_rest(empty_scene, registered,
-                                                                                     gpu_ready):
-    """A Refraction BSDF ball: the refraction search's drawn image is the picture but
-    within two pixels of its outline and of where the search left gaps (traced); the
-    panels agree with exact rays on 99.5 % of the inner pixels (the fully traced picture:
-    all of them but along its outline; a straight edge seen through the ball is curved, a
-    drawn triangle's edge straight), 22 % of the glass's pixels traced."""
-    scene = _refraction_scene()
-    result = render_scene(scene, bpy.context.evaluated_depsgraph_get())
-    glass = result.stats["glass"]
-    assert glass["traced"] < 0.3 * glass["pixels"]
-    captured = capture_scene(bpy.context.evaluated_depsgraph_get())
-    rows, columns = np.nonzero(np.ones((HEIGHT, WIDTH), dtype=bool))
-    truth = _traced_labels(captured, result.view, np.stack([columns, rows], axis=1)).reshape(HEIGHT, WIDTH)
-    inner = _inner(truth > -2)
-    assert inner.sum() > 1500 and (_labels(result.image) == truth)[inner].mean() > 0.99
-
-
 def _live_image(scene):
     """The live view of the scene camera drawn as the draw handler draws it, over a black
     framebuffer whose depth is cleared (nothing of Blender's own drawing in front)."""
