@@ -89,11 +89,11 @@ def measure_accuracy(name, kind, surface, eye, width: int, height: int, n_points
     search.search(view)
     entry, _, status = search.read(0)
     exact = solve_refractions(GlassSet([glass]), view, points, stride=REFERENCE_STRIDE)
+    found = status == 1
     paths = GlassSet([glass]).trace(*view.pixel_rays(view.to_pixels(entry[found])[0]))
     offset = points[found] - paths.origin
     across = offset - np.einsum("ij,ij->i", offset, paths.direction)[:, None] * paths.direction
     true_paths = (paths.interfaces == 2) & (np.linalg.norm(across, axis=1) < TRUE_PATH_MISS)
-    found = status == 1
     pixels = np.full((len(points), 2), np.nan)
     pixels[found] = view.to_pixels(entry[found])[0]
     error = np.linalg.norm(pixels[exact.point] - exact.pixel, axis=1)
