@@ -153,10 +153,10 @@ def measure_frames(width: int, height: int, frames: int, folder: Path) -> dict:
             "glass": ", ".join(counts)}
 
 
-def report(rows: list, frames: dict, command: str, machine: str) -> str:
+def report(rows: list, frames: dict, command: str, machine: str, size: tuple) -> str:
     lines = ["# The refraction search: accuracy and cost", "",
              f"Command: `{command}`", "", f"Machine: {machine}", "",
-             f"Points behind each glass solid (IOR {IOR:g}) against the exact solver, a view of the size given; "
+             f"Points behind each glass solid (IOR {IOR:g}) against the exact solver, a {size[0]}x{size[1]} view; "
              f"targets: p99 <= {TARGET_P99_PX:g} px, coverage >= {100 * TARGET_COVERAGE:g} % of the exact images. "
              "*Coverage*: exact images within a pixel of an answer; *points*: points with an image that got one "
              "(the search keeps one image per point); *several*: points with more than one exact image; "
@@ -210,7 +210,8 @@ def main(argv=None) -> int:
     args.images.mkdir(parents=True, exist_ok=True)
     rows = [measure_accuracy(*glass, args.width, args.height, args.points) for glass in _glasses()]
     frames = measure_frames(args.width, args.height, args.frames, args.images)
-    text = report(rows, frames, bench_draw.command_line("bench_refraction_search.py", argv), bench_draw._machine())
+    text = report(rows, frames, bench_draw.command_line("bench_refraction_search.py", argv), bench_draw._machine(),
+                  (args.width, args.height))
     return bench_draw.write_report(args.out, text)
 
 
