@@ -146,8 +146,9 @@ class FramePipeline:
         self.captured = captured
         self.world = world_color(scene)
         self.bounds = scene_bounds(captured.reflectors, captured.meshes)
+        # The capture's key hashes every mesh: only glass needs it here.
         self.glass = glass_layer(self.glass, captured, captured_key(captured), self.world, self.settings.accuracy_px,
-                                 self.SEARCHES_GLASS)
+                                 self.SEARCHES_GLASS) if captured.glass else None
 
     def glass_alone(self, scene, captured, key: tuple | None = None) -> None:
         """A capture of glass and no mirror: no renderer of mirrors, the glass's layer
