@@ -80,7 +80,6 @@ vec3 sphere_guess(vec3 point)
 vec3 chart_axis;
 vec3 chart_t1;
 vec3 chart_t2;
-vec3 vertex;
 
 bool evaluate(vec2 x, out vec2 f, out vec3 p, out vec3 n, out vec3 h)
 {
@@ -234,13 +233,11 @@ const vec2 starts[5] = vec2[5](vec2(0.0, 0.0), vec2(RESTART_OFFSET, 0.0), vec2(-
 void main()
 {
   ivec2 texel;
-  if (!vertex_texel(texel)) {
+  vec4 last;
+  bool resume;
+  if (!start_search(texel, last, resume)) {
     return;
   }
-  use_map(self_map);
-  vertex = texelFetch(vertex_positions, texel, 0).xyz - centre;
-  vec4 last = imageLoad(result, texel);
-  bool resume = warm != 0 && int(last.w) % 16 == FOUND + 8;
   int status = NO_SURFACE;
   int steps = 0;
   bool image_flipped = false;
@@ -305,16 +302,8 @@ void main()
   /* The other star-shaped mirrors may block the reflected segment: there this point's
    * reflection is of another mirror (a higher order). */
   vec3 answer = p + centre;
-  vec3 target = vertex + centre;
-  for (int map = 0; map < n_maps && status == FOUND; map++) {
-    if (map != self_map) {
-      use_map(map);
-      vec3 to_point = target - answer;
-      if (segment_blocked(answer - centre, normalize(to_point), length(to_point), false)) {
-        status = OCCLUDED;
-      }
-    }
+  if (status == FOUND && other_map_blocks(answer, vertex + centre)) {
+    status = OCCLUDED;
   }
-  bool flip = status == FOUND && image_flipped;
-  imageStore(result, texel, vec4(answer, float(status + 8) + 16.0 * float(steps) + (flip ? float(FLIPPED_CODE) : 0.0)));
+  imageStore(result, texel, vec4(answer, answer_code(status, steps, image_flipped)));
 }

@@ -2,9 +2,11 @@
 /* What the per-vertex searches on a star-shaped surface's cube map share
  * (iterative_search.glsl, refraction_search.glsl): their status codes, the invocation's
  * vertex, the map's reading (layout in engine/methods/iterative/reflector_map.py) and the
- * Newton step in a chart of it. Expects the samplers `map_params`, `reflector_maps` and
- * `vertex_positions`, the push constants `camera`, `w_row`, `stop_per_w`, `n_vertices`
- * and `positions_width`, and the define OCCLUSION_SAMPLES. */
+ * Newton step in a chart of it, the test of the other maps on a segment and the answer's
+ * code. Expects the samplers `map_params`, `reflector_maps` and `vertex_positions`, the
+ * image `result`, the push constants `camera`, `w_row`, `stop_per_w`, `n_vertices`,
+ * `positions_width`, `warm`, `self_map` and `n_maps`, and the defines OCCLUSION_SAMPLES
+ * and FLIPPED_CODE. */
 
 #define FOUND 1
 #define NOT_CONVERGED 0
@@ -12,14 +14,6 @@
 #define FACES_AWAY -2
 #define OCCLUDED -3
 #define INSIDE -4
-
-/* The texel of this invocation's vertex (one per diffuse vertex, rows of
- * `positions_width`); false past the last vertex. */
-bool vertex_texel(out ivec2 texel)
-{
-  texel = ivec2(gl_GlobalInvocationID.xy);
-  return texel.x < positions_width && texel.y * positions_width + texel.x < n_vertices;
-}
 
 /* The Newton step -J^-1 f for the Jacobian's columns ju, jv (zero where J is singular). */
 vec2 newton_step(vec2 ju, vec2 jv, vec2 f)
@@ -133,3 +127,46 @@ bool segment_blocked(vec3 start, vec3 direction, float length_, bool dense_near_
   return false;
 }
 
+/* The searched vertex, relative to the centre of the searched map (start_search). */
+vec3 vertex;
+
+/* This invocation's vertex (one per diffuse vertex, rows of `positions_width`; false
+ * past the last vertex): its texel, the searched map in use and `vertex` relative to its
+ * centre, the answer texel the last search left, and whether to resume from it (a warm
+ * frame, and that search found the vertex's point). */
+bool start_search(out ivec2 texel, out vec4 last, out bool resume)
+{
+  texel = ivec2(gl_GlobalInvocationID.xy);
+  if (texel.x >= positions_width || texel.y * positions_width + texel.x >= n_vertices) {
+    return false;
+  }
+  use_map(self_map);
+  vertex = texelFetch(vertex_positions, texel, 0).xyz - centre;
+  last = imageLoad(result, texel);
+  resume = warm != 0 && int(last.w) % 16 == FOUND + 8;
+  return true;
+}
+
+/* Whether a searched map other than `self_map` holds a point of the segment from `start`
+ * to `end` (relative to the renderer's shift): there the path meets another surface the
+ * search does not follow. Leaves the last map tested in use. */
+bool other_map_blocks(vec3 start, vec3 end)
+{
+  vec3 along = end - start;
+  for (int map = 0; map < n_maps; map++) {
+    if (map != self_map) {
+      use_map(map);
+      if (segment_blocked(start - centre, normalize(along), length(along), false)) {
+        return true;
+      }
+    }
+  }
+  return false;
+}
+
+/* An answer texel's code: (status + 8) + 16 steps, plus FLIPPED_CODE for a found flipped
+ * image (reflected_meshes.py reads it). */
+float answer_code(int status, int steps, bool flipped)
+{
+  return float(status + 8) + 16.0 * float(steps) + (status == FOUND && flipped ? float(FLIPPED_CODE) : 0.0);
+}

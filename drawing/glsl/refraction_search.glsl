@@ -10,10 +10,10 @@
  * `exit_point`), and refracted out; the residual is the angle between that ray and the
  * direction from B to the vertex, driven to zero by damped Newton with a finite-difference
  * Jacobian, as iterative_search.glsl does for the half vector:
- *   1. first guess: the same path on the sphere of the map's mean radius, in the plane
- *      of the eye, the centre and the vertex, where a whole path has a closed form; the
- *      entry angle is sampled across the sphere's visible cap and bisected where the
- *      path's signed miss changes sign (`sphere_guess`); warm, last frame's answer first;
+ *   1. first guesses: entry directions in the plane of the eye, the centre and the vertex
+ *      (where a sphere's whole path lies), sampled across the part of the map the eye may
+ *      see and bisected where the path's signed miss changes sign (`plane_guesses`);
+ *      warm, last frame's answer first;
  *   2. damped Newton on the true map (trust radius, line search);
  *   3. stop when a step moves A by less than `stop_per_w` times the view's clip w at A;
  *   4. checks: the residual vanishes, A faces the eye, neither interface reflects
@@ -21,9 +21,9 @@
  * A closed convex solid is entered and left once: nothing of it lies between the eye and
  * A, or between B and the vertex, once A faces the eye and the ray leaves toward the
  * vertex. Everything runs relative to the map's centre O.
- * Output texels: `result` (A relative to the renderer's shift, (status + 8) + 16 * steps
- * + FLIPPED_CODE where the vertex lies beyond the caustic of the rays leaving the glass,
- * as iterative_search.glsl's flipped_image); `exit_result` (B relative to the shift, 0). */
+ * Output texels: `result` (A relative to the renderer's shift, `answer_code`, with
+ * FLIPPED_CODE where the image is mirrored: `flipped_image`); `exit_result` (B relative
+ * to the shift, 0). */
 
 #define TOTAL_REFLECTION -5
 
@@ -83,13 +83,12 @@ bool exit_point(vec3 a, vec3 t, out vec3 b, out vec3 n)
   return map_surface(normalize(b), radius, n) && dot(t, n) > 0.0;
 }
 
-/* The chart around the guess, the residual's fixed axes and the vertex (relative to O). */
+/* The chart around the guess and the residual's fixed axes. */
 vec3 chart_axis;
 vec3 chart_t1;
 vec3 chart_t2;
 vec3 residual_e1;
 vec3 residual_e2;
-vec3 vertex;
 
 /* The refracted path entering at chart point x: entry a, exit b, the ray o leaving b;
  * f, the leaving ray's offset from the direction toward the vertex on the residual's
@@ -300,13 +299,11 @@ int newton(vec2 x, inout int steps, out vec3 a, out vec3 b)
 void main()
 {
   ivec2 texel;
-  if (!vertex_texel(texel)) {
+  vec4 last;
+  bool resume;
+  if (!start_search(texel, last, resume)) {
     return;
   }
-  use_map(self_map);
-  vertex = texelFetch(vertex_positions, texel, 0).xyz - centre;
-  vec4 last = imageLoad(result, texel);
-  bool resume = warm != 0 && int(last.w) % 16 == FOUND + 8;
   int status = NO_SURFACE;
   int steps = 0;
   bool image_flipped = false;
@@ -358,20 +355,11 @@ void main()
    * glass, which this path does not follow. */
   vec3 entry = a + centre;
   vec3 leave = b + centre;
-  vec3 target = vertex + centre;
-  vec3 eye = camera.xyz;
-  for (int map = 0; map < n_maps && status == FOUND; map++) {
-    if (map != self_map) {
-      use_map(map);
-      vec3 out_ray = target - leave;
-      vec3 in_ray = camera.w > 0.5 ? entry - eye : -1e3 * max_radius * camera.xyz;
-      if (segment_blocked(leave - centre, normalize(out_ray), length(out_ray), false) ||
-          segment_blocked(entry - in_ray - centre, normalize(in_ray), length(in_ray), false)) {
-        status = OCCLUDED;
-      }
-    }
+  /* Orthographic: the eye's ray starts a thousand of the glass's radii back. */
+  vec3 eye = camera.w > 0.5 ? camera.xyz : entry + 1e3 * max_radius * camera.xyz;
+  if (status == FOUND && (other_map_blocks(leave, vertex + centre) || other_map_blocks(eye, entry))) {
+    status = OCCLUDED;
   }
-  bool flip = status == FOUND && image_flipped;
-  imageStore(result, texel, vec4(entry, float(status + 8) + 16.0 * float(steps) + (flip ? float(FLIPPED_CODE) : 0.0)));
+  imageStore(result, texel, vec4(entry, answer_code(status, steps, image_flipped)));
   imageStore(exit_result, texel, vec4(leave, 0.0));
 }
