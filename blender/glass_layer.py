@@ -18,8 +18,8 @@ reflect totally, shows black, as Cycles does). Those pixels replace the frame's 
 the mirrors' renderer drew the glass as a solid object); a scene of glass alone is the
 layer's frame. Render Image does not use the search: through a strong lens an object
 close behind it has several images, and the search draws one per point (the glass
-demo's cube covered a fifth of the ball wrongly). Mirrors reflect glass as a solid
-object, and the panel says so.
+demo's cube, 0.1 behind the ball, would cover a fifth of it). Mirrors reflect glass as
+a solid object, and the panel says so.
 """
 
 from __future__ import annotations
@@ -148,8 +148,8 @@ def glass_layer(previous: GlassLayer | None, captured, key: tuple, world=(0.0, 0
     meshes = [mesh for mesh in captured.meshes if mesh.name not in names]
     surfaces = [glass.surface for glass in captured.glass]
     count = len(surfaces)
-    searches = [prepared_search(glass, index, accuracy_px) if searched else (None, "Render Image traces it")
-                for index, glass in enumerate(captured.glass)]
+    searches = ([prepared_search(glass, index, accuracy_px) for index, glass in enumerate(captured.glass)]
+                if searched else [])
     methods = [method for method, _ in searches if method is not None]
     iors = np.array([glass.ior for glass in captured.glass])
     f0 = np.where([glass.reflects for glass in captured.glass], ((iors - 1.0) / (iors + 1.0)) ** 2, np.nan)

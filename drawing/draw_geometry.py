@@ -182,8 +182,8 @@ def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=Non
         fresnel_f0, dtype=np.float32).reshape(n_reflectors)
     f0 = np.where(np.isfinite(f0) & (f0 >= 0), np.clip(f0, 0.0, 1.0), -1.0).astype(np.float32)
     if transmits is not None:
-        f0 = np.where(np.asarray(transmits, dtype=bool).reshape(n_reflectors) & (f0 >= 0), -2.0 - f0, f0)
-        f0 = f0.astype(np.float32)
+        f0 = np.where(np.asarray(transmits, dtype=bool).reshape(n_reflectors) & (f0 >= 0), -2.0 - f0, f0).astype(
+            np.float32)
     fade = np.zeros(n_reflectors, np.float32) if attenuation_distance is None else np.maximum(
         np.asarray(attenuation_distance, dtype=np.float32).reshape(n_reflectors), 0.0)
     sense = np.zeros(n_reflectors, np.float32) if sealed is None else np.sign(

@@ -74,8 +74,8 @@ class RefractionPass(FramePass):
 
     @property
     def folded_reflectors(self) -> list:
-        """Every glass: past its focus the images turn over (the caustic), and triangles
-        across it are dropped."""
+        """Every glass: between two focal lines its images are mirrored (a caustic), and
+        triangles across it are dropped."""
         return self.reflector_indices
 
     def update(self, frame: Frame) -> None:

@@ -3,7 +3,8 @@
 
 ``snell`` holds the optics of one interface (Snell's law, total internal reflection,
 dielectric Fresnel); ``paths`` follows rays through a scene's glass, interface after
-interface. Not shipped: the exact reference solver of refracted images
+interface; ``refraction_search`` says which glass the GPU's per-vertex search of refracted
+paths can draw (``drawing/methods/refraction_draw.py``), and holds its constants. Not shipped: the exact reference solver of refracted images
 (``tools/exact_refraction.py``) and sample-based cameras on refracted rays
 (``tools/glass_camera.py``, SBC paper VII).
 """

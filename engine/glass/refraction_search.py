@@ -11,8 +11,9 @@ coordinates on the glass's cube map as its unknowns, follows the path from A to 
 same map, and drives the leaving ray onto the point; the reflected-mesh renderer then
 draws each diffuse vertex at A (``drawing/methods/refraction_draw.py``). Convexity is what
 makes two interfaces the whole path: a ray inside leaves once and never meets the solid
-again. Glass that is open, not star-shaped or not convex has no search; Render Image traces
-it per pixel (``blender/glass_layer.py``).
+again. Glass that is open, not star-shaped or not convex has no search, and the viewport
+shows it as a solid object; Render Image traces all glass per pixel
+(``blender/glass_layer.py``).
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ STOP_FRACTION = mirror_search.STOP_FRACTION
 GUESS_SAMPLES = 24
 #: Bisections of the guess's entry angle between two samples (1/128 of a sample's span).
 GUESS_BISECTIONS = 7
-#: Starts tried at most per vertex (the guess sphere's images, in order of entry angle).
+#: Starts tried at most per vertex (the guesses' sign changes, in order of entry angle).
 MAX_STARTS = 2
 #: The mirror search's chart constants serve the same chart here.
 DERIVATIVE_STEP = mirror_search.DERIVATIVE_STEP
