@@ -152,13 +152,8 @@ int newton(vec2 x, inout int steps, out vec3 p)
      * reflected ray leave it (as engine/reference/exact.py asks of the facet). */
     vec3 facet = cross(pu - p, pv - p);
     face = dot(facet, p) < 0.0 ? -facet : facet;
-    vec2 ju = (fu - f) / DERIVATIVE_STEP;
-    vec2 jv = (fv - f) / DERIVATIVE_STEP;
-    vec2 delta = newton_step(ju, jv, f);
-    float reach = length(delta);
-    if (reach > TRUST_RADIUS) {
-      delta *= TRUST_RADIUS / reach;
-    }
+    vec2 ju, jv;
+    vec2 delta = trusted_step(f, fu, fv, ju, jv);
     /* Line search: scales 1, 1/2, ... until |F| falls; the last one is taken regardless. */
     float current = length(f);
     float scale = 1.0;

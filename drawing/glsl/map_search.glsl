@@ -5,8 +5,8 @@
  * Newton step in a chart of it, the test of the other maps on a segment and the answer's
  * code. Expects the samplers `map_params`, `reflector_maps` and `vertex_positions`, the
  * image `result`, the push constants `camera`, `w_row`, `stop_per_w`, `n_vertices`,
- * `positions_width`, `warm`, `self_map` and `n_maps`, and the defines OCCLUSION_SAMPLES
- * and FLIPPED_CODE. */
+ * `positions_width`, `warm`, `self_map` and `n_maps`, and the defines OCCLUSION_SAMPLES,
+ * FLIPPED_CODE, DERIVATIVE_STEP and TRUST_RADIUS. */
 
 #define FOUND 1
 #define NOT_CONVERGED 0
@@ -20,6 +20,21 @@ vec2 newton_step(vec2 ju, vec2 jv, vec2 f)
 {
   float det = ju.x * jv.y - jv.x * ju.y;
   return abs(det) > 1e-30 ? -vec2(jv.y * f.x - jv.x * f.y, ju.x * f.y - ju.y * f.x) / det : vec2(0.0);
+}
+
+/* The damped Newton step from the residual f and its values fu, fv a DERIVATIVE_STEP along
+ * each chart axis: -J^-1 f for the finite-difference Jacobian (its columns left in ju,
+ * jv), no longer than TRUST_RADIUS. */
+vec2 trusted_step(vec2 f, vec2 fu, vec2 fv, out vec2 ju, out vec2 jv)
+{
+  ju = (fu - f) / DERIVATIVE_STEP;
+  jv = (fv - f) / DERIVATIVE_STEP;
+  vec2 delta = newton_step(ju, jv, f);
+  float reach = length(delta);
+  if (reach > TRUST_RADIUS) {
+    delta *= TRUST_RADIUS / reach;
+  }
+  return delta;
 }
 
 /* The map in use (use_map): its centre, radii, rows and size. */
