@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import SceneInputError
+from .geometry.components import component_roots, numbered_in_order
 
 #: Normals shorter than this are treated as zero-length (degenerate) input.
 MIN_NORMAL_LENGTH = 1e-8
@@ -75,34 +76,10 @@ def smooth_pieces(triangles: np.ndarray, n_vertices: int) -> np.ndarray:
     continuous across them; across a sharp edge (split vertices) it jumps, and so do the
     reflected rays. A piece is a connected set of triangles through shared vertices: the
     mirror surfaces over which the reflected ray field is continuous. Connected
-    components by hooking roots to the lowest and pointer jumping (Shiloach and Vishkin;
-    whole arrays, a number of passes that grows with the logarithm of a piece's size).
+    components (``geometry.components``).
     """
-    # Labels are vertex indices: 32 bits hold them (a million triangles' (T, 3) copies
-    # each pass: 12 MB, not 24).
-    index = np.int32 if n_vertices < 2 ** 31 else np.int64
-    triangles = np.asarray(triangles).astype(index, copy=False)
-    label = np.arange(n_vertices, dtype=index)
-    while True:
-        # Hook every corner's root to the lowest root of its triangle, then jump each
-        # vertex to its new root: whole trees merge in a pass (log-many passes), where
-        # moving each vertex's own label takes a pass per ring (tens of seconds on a
-        # million-triangle mirror).
-        roots = label[triangles]
-        merged = label.copy()
-        np.minimum.at(merged, roots.reshape(-1), np.repeat(roots.min(axis=1), 3))
-        while True:
-            jumped = merged[merged]
-            if np.array_equal(jumped, merged):
-                break
-            merged = jumped
-        if np.array_equal(merged, label):
-            break
-        label = merged
-    _, first, piece = np.unique(label[triangles[:, 0]], return_index=True, return_inverse=True)
-    renumber = np.empty(len(first), dtype=np.int64)
-    renumber[np.argsort(first, kind="stable")] = np.arange(len(first))
-    return renumber[piece.reshape(-1)]
+    label = component_roots(triangles, n_vertices)
+    return numbered_in_order(label[np.asarray(triangles)[:, 0]])
 
 
 @dataclass(frozen=True)
