@@ -43,10 +43,11 @@ from typing import Callable
 import numpy as np
 
 from ...geometry.raytrace import ReflectorSet
-from ...geometry.vectors import dot, lengths, normalized
+from ...geometry.vectors import dot, lengths
 from ...projection import Projection
 from ...scene import Reflector
 from ...view import View
+from .patches import face_cells, grouped_patches, texel_grid
 from .reflector_map import MapBake, ReflectorMap, texel_directions
 from .search import IterativeReflector
 from .star import MIN_COSINE
@@ -238,36 +239,16 @@ def piece_patches(rmap: ReflectorMap, earlier: tuple = (), size: float = 1.0, ce
     found from either side, and a point is searched from each part of the surface a
     few times, not once per piece that sees it (the greedy order puts the largest
     pieces first)."""
-    side = rmap.face_size + 2
     directions = texel_directions(rmap.face_size).reshape(-1, 3)
     texels = rmap.texels.reshape(-1, 4).astype(np.float64)
-    row, column = np.divmod(np.arange(len(texels)), side)
-    face, row = np.divmod(row, side)
+    _, row, column = texel_grid(rmap.face_size)
     sampled = np.flatnonzero((texels[:, 0] > 0) & (row % PATCH_STRIDE == 0) & (column % PATCH_STRIDE == 0))
-    direction, normal = directions[sampled], normalized(texels[sampled, 1:])
-    position = texels[sampled, :1] * direction
+    position = texels[sampled, :1] * directions[sampled]
     holders = np.zeros(len(sampled), dtype=np.int64)
     for other in earlier:
         holders += _holds(other, rmap.centre + position, HELD_TOLERANCE * size)
-    added = holders < STARTS_PER_POINT
-    cell = (face * cells + row * cells // side) * cells + column * cells // side
-    cell, direction, normal, position = cell[sampled[added]], direction[added], normal[added], position[added]
-    used, cell = np.unique(cell, return_inverse=True)
-    count = np.bincount(cell, minlength=len(used)).astype(np.float64)
-
-    def mean(values):
-        return np.stack([np.bincount(cell, values[:, k], len(used)) for k in range(3)], axis=1) / count[:, None]
-
-    start, axis, centre = normalized(mean(direction)), normalized(mean(normal)), mean(position)
-    half_angle = np.zeros(len(used))
-    np.maximum.at(half_angle, cell, np.arccos(np.clip(dot(normal, axis[cell]), -1.0, 1.0)))
-    radius = np.zeros(len(used))
-    np.maximum.at(radius, cell, lengths(position - centre[cell]))
-    patches = np.zeros((len(used), 3, 4), np.float32)
-    patches[:, 0, :3], patches[:, 0, 3] = axis, half_angle
-    patches[:, 1, :3], patches[:, 1, 3] = centre, radius
-    patches[:, 2, :3] = start
-    return patches
+    added = sampled[holders < STARTS_PER_POINT]
+    return grouped_patches(rmap, added, face_cells(rmap.face_size, cells)[added])
 
 
 def uncovered_share(reflector: Reflector, maps: list) -> float:
