@@ -23,6 +23,7 @@ import numpy as np
 from ..engine.geometry.closed_surfaces import winding
 from ..engine.geometry.raytrace import ReflectorSet
 from ..engine.methods.iterative import StarShape, check_star_shaped
+from ..engine.methods.iterative.fold_patches import folded
 from ..engine.methods.iterative.reflector_map import bake_reflector_map
 from ..engine.methods.iterative.pieces import StarPieces, map_first_surface, split_into_pieces
 from ..engine.methods.iterative.star import verdict
@@ -118,7 +119,7 @@ def _entry(reflector, face_size: int | None) -> _Entry:
     if shape.star_shaped:
         bake = _bake(reflector, shape.centre, face_size)
         shape = verdict(reflector.name, shape.centre, bake, shape.hidden_share)
-        rmap = bake.reflector_map if shape.star_shaped else None
+        rmap = folded(bake.reflector_map) if shape.star_shaped else None
     _maps.append(_Entry(topology, face_size, reflector.vertices - reflector.vertices[0], reflector.normals.copy(),
                         reflector.vertices[0].copy(), shape, rmap))
     del _maps[:-CACHED_MAPS]

@@ -9,17 +9,21 @@ answer). :class:`ReflectedMeshes` holds what they share, uploaded once per geome
 vertices as a float texture (what the compute stages read) and the indexed reflected
 meshes with their shading data; :meth:`ReflectedMeshes.draw` draws the meshes of each
 answer texture with ``glsl/iterative_mesh_vert.glsl`` (a vertex at its answer, a triangle
-with an unanswered corner discarded) and the sample-based camera's fragment stage.
+with an unanswered corner discarded) and the sample-based camera's fragment stage; a
+folded mirror's answers, several images per vertex in slots, as triangle corners matched
+across the slots (:class:`AnswerSet`, :meth:`ReflectedMeshes.corner_batch`).
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import gpu
 import numpy as np
 
 from ..engine.methods.iterative import search as search_module
+from ..engine.methods.iterative.fold_patches import MAX_IMAGES
 from .draw_shaders import reflected_fragment_source, reflected_interface, shading_source
 from .gpu_data import data_texture, read_texture, vertex_buffer
 from .shader_sources import glsl_source
@@ -31,6 +35,12 @@ TEXTURE_WIDTH = 4096
 #: another image in the same slot) misses by far more; an interpolated point of a small
 #: reflected triangle by far less.
 REFLECTION_COSINE = math.cos(math.radians(20.0))
+#: 5 degrees: the law of reflection's tolerance where a folded mirror's answer slots are
+#: drawn. Its triangles are matched across slots by their corners' nearest images, and
+#: where a corner's own image is missing the nearest is another image of a neighbouring
+#: point: a triangle across a fold or a caustic loop, whose pixels reflect toward points
+#: close to its own (within 20 degrees on the tuning star ball's columns).
+FOLDED_REFLECTION_COSINE = math.cos(math.radians(5.0))
 #: A reflected fragment is kept only where the interpolated validity of its triangle's
 #: corners reaches this: 1 inside triangles whose corners all have an answer, below it
 #: everywhere else but within 1e-4 of an edge's length from a valid corner.
@@ -57,19 +67,37 @@ UNANSWERED_CELLS = 64
 
 
 
+class AnswerSet(NamedTuple):
+    """One reflector's answers of a per-frame pass, for :meth:`ReflectedMeshes.draw`:
+    ``texture`` holds an answer texel per vertex (:meth:`ReflectedMeshes.answer_texture`);
+    ``exit_points``, for glass, the point each vertex's path leaves it
+    (``methods/refraction_draw.py``); ``images``: 1, or :data:`MAX_IMAGES` answer slots
+    one below another, every image of a vertex in a folded mirror (the triangles are
+    then matched across slots, ``glsl/iterative_mesh_vert.glsl``)."""
+
+    reflector_index: int
+    texture: object
+    exit_points: object = None
+    images: int = 1
+
+
 @cached_shader
-def reflected_shader(law_test: bool = True, hidden_test: bool = True, refracted: bool = False):
+def reflected_shader(law_test: bool = True, hidden_test: bool = True, refracted: bool = False, images: bool = False):
     """The reflected meshes' shader, built on first use (fragment stage shared with the
     sample-based camera's reflected meshes), with or without the fragment stage's
     law-of-reflection and hidden-point tests (:func:`fragment_tests`); ``refracted``:
     the vertices are seen through glass, along the ray leaving it at the point the
-    ``exit_points`` texture holds per vertex (``methods/refraction_draw.py``)."""
+    ``exit_points`` texture holds per vertex (``methods/refraction_draw.py``);
+    ``images``: the answers hold :data:`MAX_IMAGES` slots, drawn a slot of each
+    triangle's first corner at a time (the triangle-corner batch, push constant ``slot``)."""
     interface = reflected_interface("curved_reflections_iterative_interface", searched=True)
     info = gpu.types.GPUShaderCreateInfo()
-    # In this order 120 bytes, within the 128 Vulkan guarantees (Blender counts 128).
+    # In this order 116 bytes (120 with `slot`), within the 128 Vulkan guarantees
+    # (Blender counts 128 with `slot`); the vertices' texture width is read from it.
     info.push_constant('MAT4', "view_projection")
     info.push_constant('VEC4', "camera")
-    info.push_constant('INT', "result_width")
+    if images:
+        info.push_constant('INT', "slot")
     info.push_constant('FLOAT', "inverse_diameter")
     info.push_constant('FLOAT', "order_range")
     info.push_constant('FLOAT', "reflector_id")
@@ -88,9 +116,12 @@ def reflected_shader(law_test: bool = True, hidden_test: bool = True, refracted:
     info.vertex_in(1, 'VEC4', "color")
     info.vertex_in(2, 'VEC4', "normal_lit")
     info.vertex_in(3, 'VEC2', "uv")
+    if images:
+        info.vertex_in(4, 'INT', "anchor_index")
     info.vertex_out(interface)
     info.fragment_out(0, 'VEC4', "color_out")
-    info.vertex_source("#define EXIT_POINTS\n" * refracted + shading_source() + glsl_source(
+    defines_in = "#define EXIT_POINTS\n" * refracted + f"#define IMAGES {MAX_IMAGES}\n" * images
+    info.vertex_source(defines_in + shading_source() + glsl_source(
         "iterative_mesh_vert.glsl", {"FOUND_CODE": FOUND_CODE, "FLIPPED_CODE": FLIPPED_CODE,
                                      "UNANSWERED_CELLS": f"{UNANSWERED_CELLS:.1f}"}))
     defines = f"#define SEARCHED\n#define VALID_THRESHOLD {VALID_THRESHOLD}\n"
@@ -143,6 +174,7 @@ class ReflectedMeshes:
         self.height = max(1, -(-self.n_vertices // self.width))
         self._positions = None
         self._batch = None
+        self._corner_batch = None
 
     @property
     def positions(self):
@@ -163,9 +195,28 @@ class ReflectedMeshes:
             self._batch = gpu.types.GPUBatch(type='TRIS', buf=vertex_buffer(attributes), elem=gpu.types.GPUIndexBuf(
                 type='TRIS', seq=np.asarray(g.triangles, dtype=np.int32)))
 
-    def answer_texture(self):
-        """A new answer texture, one RGBA32F texel per vertex."""
-        return gpu.types.GPUTexture((self.width, self.height), format='RGBA32F')
+    def corner_batch(self):
+        """The reflected meshes as a batch of triangle corners (no index buffer), each
+        with its vertex's data and its triangle's first corner (``anchor_index``): a
+        folded mirror's answer slots are matched per triangle (``glsl/iterative_mesh_vert.glsl``).
+        Made on first use."""
+        self._ensure()
+        if self._corner_batch is None and self._batch is not None:
+            g = self.geometry
+            corners = np.asarray(g.triangles, dtype=np.int32)
+            flat = corners.reshape(-1)
+            attributes = {"vertex_index": (flat, 'I32', 'INT'),
+                          "color": (np.asarray(g.colors)[flat], 'F32', 'FLOAT'),
+                          "normal_lit": (np.c_[g.normals, g.lit].astype(np.float32)[flat], 'F32', 'FLOAT'),
+                          "uv": (np.asarray(g.uvs)[flat], 'F32', 'FLOAT'),
+                          "anchor_index": (np.repeat(corners[:, 0], 3), 'I32', 'INT')}
+            self._corner_batch = gpu.types.GPUBatch(type='TRIS', buf=vertex_buffer(attributes))
+        return self._corner_batch
+
+    def answer_texture(self, images: int = 1):
+        """A new answer texture, one RGBA32F texel per vertex in each of ``images`` slots
+        (one below another)."""
+        return gpu.types.GPUTexture((self.width, self.height * images), format='RGBA32F')
 
     def work_groups(self, local_size: int) -> tuple:
         """The work groups of a compute stage with one invocation per vertex texel."""
@@ -199,41 +250,46 @@ class ReflectedMeshes:
             return
         mirrored = setup.get("mirrored", frozenset())
         windings = self.geometry.range_windings or (0,) * len(self.geometry.ranges)
-        for reflector_index, texture, *exit_points in answers:
+        for answer in answers:
+            reflector_index, texture, exit_points, images = AnswerSet(*answer)
             law_test, hidden_test = fragment_tests(reflector_index, setup)
-            law_test &= not exit_points  # refracted: the law of reflection does not hold
-            shader = reflected_shader(law_test, hidden_test, bool(exit_points))
+            law_test &= exit_points is None  # refracted: the law of reflection does not hold
+            shader = reflected_shader(law_test, hidden_test, exit_points is not None, images > 1)
             shader.bind()
             shader.uniform_float("view_projection", view_projection)
-            shader.uniform_int("result_width", self.width)
             shader.uniform_float("inverse_diameter", setup["inverse_diameter"])
             shader.uniform_float("order_range", setup["order_range"])
             shader.uniform_sampler("vertex_positions", self._positions)
             shader.uniform_sampler("prepass_labels", targets.prepass_labels)
             shader.uniform_float("snap_grid", snap_grid(setup["view_size"], setup.get("snap_px", 0.0)))
             shader.uniform_sampler("search_result", texture)
-            if exit_points:
-                shader.uniform_sampler("exit_points", exit_points[0])
+            if exit_points is not None:
+                shader.uniform_sampler("exit_points", exit_points)
             shader.uniform_float("reflector_id", float(reflector_index + 1))
             if law_test or hidden_test:
                 shader.uniform_float("camera", setup["camera"])
             if law_test:
                 shader.uniform_sampler("prepass_normals", targets.prepass_normals)
-                shader.uniform_float("reflection_cosine", setup["reflection_cosine"])
+                cosine = setup["reflection_cosine"]
+                shader.uniform_float("reflection_cosine", max(cosine, FOLDED_REFLECTION_COSINE) if images > 1 else cosine)
             if hidden_test:
                 shader.uniform_float("hidden_tolerance",
                                      setup["hidden_fraction"] * float(self.geometry.reflector_sizes[reflector_index]))
-            for (image, first, count), winding in zip(self.geometry.ranges, windings):
-                gpu.state.face_culling_set(_culled_faces(winding) if reflector_index in mirrored else 'NONE')
-                shader.uniform_int("use_image", int(image >= 0))
-                shader.uniform_sampler("image", image_of(image))
-                self._batch.draw_range(shader, elem_start=3 * first, elem_count=3 * count)
+            batch = self.corner_batch() if images > 1 else self._batch
+            for slot in range(images):
+                if images > 1:
+                    shader.uniform_int("slot", slot)
+                for (image, first, count), winding in zip(self.geometry.ranges, windings):
+                    gpu.state.face_culling_set(_culled_faces(winding) if reflector_index in mirrored else 'NONE')
+                    shader.uniform_int("use_image", int(image >= 0))
+                    shader.uniform_sampler("image", image_of(image))
+                    batch.draw_range(shader, elem_start=3 * first, elem_count=3 * count)
         gpu.state.face_culling_set('NONE')
 
-    def read(self, texture) -> tuple[np.ndarray, np.ndarray]:
-        """An answer texture read back: (N, 3) world points (NaN where no answer) and the
-        (N,) int64 codes."""
-        texels = self._texels(texture)
+    def read(self, texture, slot: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """An answer texture read back (its slot ``slot``): (N, 3) world points (NaN where
+        no answer) and the (N,) int64 codes."""
+        texels = self._texels(texture, slot)
         code = texels[:, 3].astype(np.int64)
         found = code % 16 == FOUND_CODE
         return np.where(found[:, None], texels[:, :3] + self.geometry.shift, np.nan), code
@@ -242,5 +298,6 @@ class ReflectedMeshes:
         """(N, 3) world points of a texture of one point per vertex, read back."""
         return self._texels(texture)[:, :3] + self.geometry.shift
 
-    def _texels(self, texture) -> np.ndarray:
-        return read_texture(texture, self.width, self.height).reshape(-1, 4)[:self.n_vertices].astype(np.float64)
+    def _texels(self, texture, slot: int = 0) -> np.ndarray:
+        rows = read_texture(texture, self.width, texture.height).reshape(-1, self.width, 4)
+        return rows[slot * self.height:(slot + 1) * self.height].reshape(-1, 4)[:self.n_vertices].astype(np.float64)

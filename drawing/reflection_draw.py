@@ -100,7 +100,7 @@ from .draw_geometry import prepare_geometry
 from .frame_pass import Frame, PassInputs
 from .frame_targets import FrameTargets
 from .gpu_data import data_texture, read_depth, read_texture, saved_state, vertex_buffer
-from .reflected_meshes import ReflectedMeshes
+from .reflected_meshes import AnswerSet, ReflectedMeshes
 from .traced_pixels import traced_rgba, traced_texture
 from .screen_space import (FULL_SCREEN, box_corners, box_on_screen, camera_position, depth_bias, pixel_box,
                            view_projection)
@@ -119,6 +119,11 @@ MAX_TRACED_FRACTION = 0.25
 #: reflection within this many pixels of its silhouette or, on a non-convex mirror or
 #: with other mirrors in the scene, of a drawn reflection.
 SEARCHED_BAND_PX = 2
+#: A render traces the pixels of a searched mirror that folds its reflections which got
+#: no reflection but lie inside its drawn reflections (``band_trace.hole_pixels``): a hole
+#: up to twice this across, where a fold dropped the triangles of an image (a corner's
+#: image missed, or the law of reflection failing across the fold).
+FOLD_HOLE_PX = 8
 #: A render also traces the pixels of a mirror drawn from its morphing grid that got no
 #: reflection within this many pixels both of its silhouette and of a drawn reflection
 #: (``band_trace.rim_gap_pixels``): near the silhouette not every node of the eye's cell
@@ -393,8 +398,10 @@ class ReflectionRenderer:
         baked grids, perturbation), one row per image slot, read back from the GPU: what
         the live view's accuracy check (``engine/spot_check.py``) measures."""
         found: dict = {}
-        for index, texture, *_ in self._answers():
-            found.setdefault(index, []).append(self.meshes.read(texture)[0])
+        for answer in self._answers():
+            answer = AnswerSet(*answer)
+            found.setdefault(answer.reflector_index, []).extend(
+                self.meshes.read(answer.texture, slot)[0] for slot in range(answer.images))
         return {index: np.stack(slots) for index, slots in found.items()}
 
     def _answers(self) -> list:
@@ -503,8 +510,8 @@ class ReflectionRenderer:
             # on a non-convex mirror also where a fold crowds several images (and triangles
             # across a fold are dropped), and with other mirrors where their reflection (a
             # higher order) begins. The pixels without a reflection next to the
-            # silhouette, and in those two cases next to a drawn reflection, are traced
-            # (those farther from both show the world).
+            # silhouette, and in those two cases next to a drawn reflection or enclosed by
+            # drawn reflections, are traced (the others show the world).
             # A blended mirror's reflection also stops short of the silhouette where not
             # every node of the eye's cell sees the mirror: the strip between the two is
             # traced, wider (the pixels farther from a drawn reflection show the world).
@@ -514,6 +521,7 @@ class ReflectionRenderer:
             pixels = np.unique(np.concatenate([
                 pixels, band_trace.band_pixels(searched_labels, drawn, reach),
                 band_trace.band_pixels(np.where(folded, searched_labels, 0.0), drawn, reach, edges_of_drawn=True),
+                band_trace.hole_pixels(np.where(folded, searched_labels, 0.0), drawn, FOLD_HOLE_PX),
                 band_trace.rim_gap_pixels(np.where(blended, searched_labels, 0.0), drawn, max(radius, RIM_GAP_PX))]),
                 axis=0)
         # Pixels whose view ray starts inside a sealed mirror are black (the composite), not traced.

@@ -26,10 +26,52 @@
  * a point and is dropped before rasterisation, and neighbours sharing a vertex still
  * meet. */
 
+#ifdef IMAGES
+/* A folded mirror's answers hold IMAGES slots, one below another (iterative_search.glsl's
+ * search_images), and the meshes are drawn as triangle corners, a slot at a time: the
+ * first corner's answer in `slot`, and each other corner's answer of the same parity
+ * (flipped or not) nearest to it. The corners of a small triangle seen in one image lie
+ * next to each other on the mirror, and its images elsewhere lie farther; where a
+ * corner's nearest answer is another image all the same (its own is missing), the
+ * fragment stage's law of reflection (reflected_meshes.FOLDED_REFLECTION_COSINE) drops
+ * the triangle's fragments. */
+vec4 matched_answer(ivec2 texel, int result_width)
+{
+  int rows = textureSize(search_result, 0).y / IMAGES;
+  ivec2 anchor_texel = ivec2(anchor_index % result_width, anchor_index / result_width);
+  vec4 anchor = texelFetch(search_result, anchor_texel + ivec2(0, slot * rows), 0);
+  if (vertex_index == anchor_index || int(anchor.w) % 16 != FOUND_CODE) {
+    return anchor;
+  }
+  vec4 nearest = anchor;
+  nearest.w = 0.0;  /* no answer of its own: unanswered */
+  float best = 1e30;
+  bool anchor_flipped = int(anchor.w) >= FLIPPED_CODE;
+  for (int k = 0; k < IMAGES; k++) {
+    vec4 candidate = texelFetch(search_result, texel + ivec2(0, k * rows), 0);
+    /* An image of the other parity lies across a fold from the anchor's: it counts as
+     * farther than any of the same parity (beside a fold, a neighbour's two images lie
+     * on both sides of the anchor's, the wrong one as near as the right one). */
+    bool other_parity = (int(candidate.w) >= FLIPPED_CODE) != anchor_flipped;
+    float apart = length(candidate.xyz - anchor.xyz) + (other_parity ? 1e20 : 0.0);
+    if (int(candidate.w) % 16 == FOUND_CODE && apart < best) {
+      best = apart;
+      nearest = candidate;
+    }
+  }
+  return nearest;
+}
+#endif
+
 void main()
 {
+  int result_width = textureSize(vertex_positions, 0).x;
   ivec2 texel = ivec2(vertex_index % result_width, vertex_index / result_width);
+#ifdef IMAGES
+  vec4 found = matched_answer(texel, result_width);
+#else
   vec4 found = texelFetch(search_result, texel, 0);
+#endif
   vec3 vertex = texelFetch(vertex_positions, texel, 0).xyz;
   vec3 p = found.xyz;
   vec4 clip = view_projection * vec4(p, 1.0);

@@ -16,6 +16,7 @@
  *   4. checks: P faces the eye and the vertex (by the interpolated normal and by the map
  *      surface's own), the residual vanishes, and on a non-convex mirror nothing of it
  *      lies between P and either.
+ * A folded mirror's map (images > 1) is searched for every image instead (search_images).
  * Everything runs relative to O. Output texel: (P relative to the renderer's shift,
  * (status + 8) + 16 * steps + FLIPPED_CODE * flipped), status as the numpy twin's
  * (FOUND = 1), flipped: the image lies beyond the caustic (flipped_image). */
@@ -27,7 +28,8 @@
  * `result`, where it had one), self_map (the searched reflector's map) and n_maps.
  * `reflector_maps` holds every star-shaped reflector's (or piece's) cube map, one below
  * another; `map_params` three texels per map: (O relative to the shift, largest radius),
- * (first row, face size, convex, mean radius) and (first patch, patches, smallest radius); `map_patches`
+ * (first row, face size, convex, mean radius) and (first patch, patches, smallest radius,
+ * images: answer slots); `map_patches`
  * a piece's patches (engine/methods/iterative/pieces.py), three texels a row: (normal-
  * cone axis, its half-angle), (bounding sphere's centre relative to O, its radius),
  * (start direction, 0). */
@@ -134,6 +136,10 @@ int check(vec3 p, vec3 n, vec3 h, vec3 face)
   return FOUND;
 }
 
+/* Whether a start whose line search finds no smaller |F| fails there (search_images:
+ * near a fold |F| has minima that are no roots). */
+bool give_up_stalled = false;
+
 /* Damped Newton from chart point x; returns NOT_CONVERGED, NO_SURFACE or the verdict
  * of check() on the converged sample (in p). */
 int newton(vec2 x, inout int steps, out vec3 p)
@@ -160,9 +166,11 @@ int newton(vec2 x, inout int steps, out vec3 p)
     vec3 previous = p;
     vec3 previous_n = n;
     bool valid = false;
+    bool fell = false;
     for (int k = 0; k <= HALVINGS; k++) {
       valid = evaluate(x + scale * delta, ft, pt, nt, ht);
-      if (valid && length(ft) < current || k == HALVINGS) {
+      fell = valid && length(ft) < current;
+      if (fell || k == HALVINGS) {
         break;
       }
       scale *= 0.5;
@@ -173,7 +181,7 @@ int newton(vec2 x, inout int steps, out vec3 p)
     n = nt;
     h = ht;
     steps += 1;
-    if (!valid || length(x) > MAX_CHART) {
+    if (!valid || length(x) > MAX_CHART || give_up_stalled && !fell) {
       return NO_SURFACE;
     }
     /* The step after this one, predicted with this step's Jacobian (a chord step): where
@@ -222,6 +230,76 @@ bool patch_admits(int k)
   return 1.0 - dot(half_vector, cone.xyz) <= 0.5 * reach * reach || point_distance < NEAR_PATCH * sphere.w;
 }
 
+/* Whether the vertex or the eye lies inside the mirror (or the vertex at its centre):
+ * there it has no reflection. */
+bool vertex_or_eye_inside()
+{
+  bool eye_inside = camera.w > 0.5 && inside_surface(camera.xyz - centre);
+  return eye_inside || length(vertex) <= 1e-9 * max(max_radius, 1e-30) || inside_surface(vertex);
+}
+
+/* A folded mirror (images > 1, engine/methods/iterative/fold_patches.py): the numpy
+ * twin's search_images. Newton from the first guess and from every patch that admits
+ * the vertex, each distinct root kept (SAME_IMAGE), up to `images` of them, in answer
+ * slots one below another (slot k at row k times the rows of vertices). No warm start:
+ * a slot's root may be another image's next frame. */
+void search_images(ivec2 texel)
+{
+  vec4 roots[MAX_IMAGES];
+  give_up_stalled = true;
+  int count = 0;
+  int steps = 0;
+  bool inside = vertex_or_eye_inside();
+  /* The one-image search's first guess (attempt -1), then every patch that admits the vertex. */
+  int next = -1;
+  while (!inside && next < patch_count && count < images) {
+    int attempt = next;
+    if (attempt < 0) {
+      chart_axis = sphere_guess(vertex);
+    }
+    else {
+      while (attempt < patch_count && !patch_admits(attempt)) {
+        attempt++;
+      }
+      if (attempt >= patch_count) {
+        break;
+      }
+      chart_axis = texelFetch(map_patches, ivec2(2, patch_row + attempt), 0).xyz;
+    }
+    next = attempt + 1;
+    chart_t1 = perpendicular(chart_axis);
+    chart_t2 = cross(chart_axis, chart_t1);
+    vec3 answer;
+    if (newton(vec2(0.0), steps, answer) != FOUND) {
+      continue;
+    }
+    float same = SAME_IMAGE_PER_STOP * pixel_tolerance(answer);
+    bool known = false;
+    for (int k = 0; k < count; k++) {
+      known = known || length(roots[k].xyz - answer) < same;
+    }
+    if (!known) {
+      roots[count] = vec4(answer, flipped ? 1.0 : 0.0);
+      count++;
+    }
+  }
+  int rows = (n_vertices + positions_width - 1) / positions_width;
+  vec3 point = vertex + centre;
+  vec3 shift = centre;  /* other_map_blocks leaves another map in use */
+  for (int k = 0; k < images; k++) {
+    int status = inside ? INSIDE : NO_SURFACE;
+    vec3 answer = vec3(0.0);
+    if (k < count) {
+      answer = roots[k].xyz + shift;
+      status = other_map_blocks(answer, point) ? OCCLUDED : FOUND;
+    }
+    /* Every start's steps in slot 0, within the code's step field. */
+    int counted = k == 0 ? min(steps, FLIPPED_CODE / 16 - 1) : 0;
+    bool image_flipped = k < count && roots[k].w > 0.5;
+    imageStore(result, texel + ivec2(0, k * rows), vec4(answer, answer_code(status, counted, image_flipped)));
+  }
+}
+
 const vec2 starts[5] = vec2[5](vec2(0.0, 0.0), vec2(RESTART_OFFSET, 0.0), vec2(-RESTART_OFFSET, 0.0),
                                vec2(0.0, RESTART_OFFSET), vec2(0.0, -RESTART_OFFSET));
 
@@ -231,6 +309,10 @@ void main()
   vec4 last;
   bool resume;
   if (!start_search(texel, last, resume)) {
+    return;
+  }
+  if (images > 1) {
+    search_images(texel);
     return;
   }
   int status = NO_SURFACE;
@@ -257,8 +339,7 @@ void main()
     }
     else {
       if (!outside_checked) {
-        bool eye_inside = camera.w > 0.5 && inside_surface(camera.xyz - centre);
-        if (eye_inside || length(vertex) <= 1e-9 * max(max_radius, 1e-30) || inside_surface(vertex)) {
+        if (vertex_or_eye_inside()) {
           status = INSIDE;
           break;
         }

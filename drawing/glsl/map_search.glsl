@@ -47,6 +47,7 @@ int face_size;
 int convex;
 int patch_row;
 int patch_count;
+int images;
 
 void use_map(int map)
 {
@@ -62,6 +63,7 @@ void use_map(int map)
   patch_row = int(c.x);
   patch_count = int(c.y);
   min_radius = c.z;
+  images = max(int(c.w), 1);
 }
 
 

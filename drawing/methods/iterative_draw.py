@@ -5,7 +5,8 @@ Roger & Holzschuch (2006), section 3.3.7: the search runs on the GPU, and its se
 strategy (compute the reflected positions in one pass, draw them in another), which
 the paper could not use for want of render-to-vertex-buffer, is the one here: a compute
 shader (``glsl/iterative_search.glsl``, the twin of ``engine/methods/iterative/search.py``)
-writes each vertex's reflection point into a float texture, one texel per vertex, and
+writes each vertex's reflection point into a float texture, one texel per vertex (per
+image slot on a folded mirror: every image, ``engine/methods/iterative/fold_patches.py``), and
 the reflected meshes' vertex stage (``glsl/iterative_mesh_vert.glsl``) reads its
 vertex's texel (``reflected_meshes.py``, shared with morphing). What is uploaded once:
 the diffuse vertices (a texture) with their shading data (a vertex buffer), and every star-shaped
@@ -20,10 +21,10 @@ from __future__ import annotations
 import gpu
 import numpy as np
 
-from ...engine.methods.iterative import search as search_module
+from ...engine.methods.iterative import fold_patches, search as search_module
 from ..frame_pass import Frame, FramePass, PassInputs
 from ..gpu_data import data_texture
-from ..reflected_meshes import FLIPPED_CODE, ReflectedMeshes
+from ..reflected_meshes import FLIPPED_CODE, AnswerSet, ReflectedMeshes
 from ..shader_sources import glsl_source
 from ..shader_cache import cached_shader
 
@@ -39,7 +40,8 @@ def search_defines() -> dict:
             "HALVINGS": s.HALVINGS, "MAX_CHART": f"{s.MAX_CHART:.9e}",
             "RESIDUAL_TOLERANCE": f"{s.RESIDUAL_TOLERANCE:.9e}", "OCCLUSION_SAMPLES": s.OCCLUSION_SAMPLES,
             "RESTART_OFFSET": f"{s.RESTARTS[1][0]:.9e}", "FLIPPED_CODE": FLIPPED_CODE,
-            "PATCH_MARGIN": f"{s.PATCH_MARGIN:.9e}", "NEAR_PATCH": f"{s.NEAR_PATCH:.9e}"}
+            "PATCH_MARGIN": f"{s.PATCH_MARGIN:.9e}", "NEAR_PATCH": f"{s.NEAR_PATCH:.9e}",
+            "MAX_IMAGES": fold_patches.MAX_IMAGES, "SAME_IMAGE_PER_STOP": f"{s.SAME_IMAGE / s.STOP_FRACTION:.9e}"}
 
 
 def map_search_info(extra_floats=(), extra_samplers=()) -> "gpu.types.GPUShaderCreateInfo":
@@ -112,7 +114,7 @@ class MapAtlas:
             texels[rows[k]:rows[k + 1], :rmap.texels.shape[1]] = rmap.texels
             params[3 * k] = (*(np.asarray(rmap.centre) - shift), rmap.max_radius)
             params[3 * k + 1] = (rows[k], rmap.face_size, float(bool(rmap.convex)), rmap.mean_radius)
-            params[3 * k + 2] = (patch_rows[k], len(patches[k]), rmap.min_radius, 0.0)
+            params[3 * k + 2] = (patch_rows[k], len(patches[k]), rmap.min_radius, rmap.images)
         self.count = len(maps)
         self.texture = data_texture(texels)
         self.params = data_texture(params, len(params))
@@ -174,7 +176,7 @@ class IterativePass(FramePass):
             self._atlas = MapAtlas(self.methods, self.geometry.shift)
         for method in self.methods:
             if _key(method) not in self._results:
-                self._results[_key(method)] = self.meshes.answer_texture()
+                self._results[_key(method)] = self.meshes.answer_texture(method.reflector_map.images)
 
     def search(self, view, warm: bool = False) -> None:
         """This frame's search: one dispatch per reflector, into its result texture.
@@ -194,14 +196,15 @@ class IterativePass(FramePass):
         self.counts["searches"] += 1
 
     def answers(self) -> list:
-        """(reflector index, answer texture) of the last search, one per map (a mirror
-        searched as pieces has one per piece), for ``ReflectedMeshes.draw``."""
-        return [(m.index, self._results[_key(m)]) for m in self.methods if _key(m) in self._results]
+        """The AnswerSet of the last search per map (a mirror searched as pieces has one
+        per piece; a folded one, its slots in one texture), for ``ReflectedMeshes.draw``."""
+        return [AnswerSet(m.index, self._results[_key(m)], images=m.reflector_map.images)
+                for m in self.methods if _key(m) in self._results]
 
-    def read(self, reflector_index: int, piece: int = 0) -> search_module.SearchResult:
-        """The last search of one reflector (or of one of its pieces), read back (tests,
-        the status counts)."""
-        positions, code = self.meshes.read(self._results[(reflector_index, piece)])
+    def read(self, reflector_index: int, piece: int = 0, slot: int = 0) -> search_module.SearchResult:
+        """The last search of one reflector (or of one of its pieces; of a folded one, one
+        answer slot), read back (tests, the status counts)."""
+        positions, code = self.meshes.read(self._results[(reflector_index, piece)], slot)
         status = (code % 16 - 8).astype(np.int8)
         return search_module.SearchResult(positions, status, (code % FLIPPED_CODE // 16).astype(np.int16),
                                           code >= FLIPPED_CODE)

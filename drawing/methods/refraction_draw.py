@@ -22,7 +22,7 @@ import numpy as np
 from ...engine.glass import refraction_search as search_module
 from ...engine.methods.iterative.search import FOUND, NOT_CONVERGED
 from ..frame_pass import Frame, FramePass, PassInputs
-from ..reflected_meshes import FLIPPED_CODE, ReflectedMeshes
+from ..reflected_meshes import FLIPPED_CODE, AnswerSet, ReflectedMeshes
 from ..shader_cache import cached_shader
 from ..shader_sources import glsl_source
 from .iterative_draw import LOCAL_SIZE, MapAtlas, bind_map_search, map_search_info
@@ -110,8 +110,8 @@ class RefractionPass(FramePass):
         self.counts["searches"] += 1
 
     def answers(self) -> list:
-        """(glass index, entry texture, exit texture) of the last search."""
-        return [(index, *textures) for index, textures in self._results.items()]
+        """The AnswerSet (glass index, entry texture, exit texture) of the last search per glass."""
+        return [AnswerSet(index, entry, leave) for index, (entry, leave) in self._results.items()]
 
     def read(self, glass_index: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The last search of one glass, read back: (N, 3) entry and exit points (world

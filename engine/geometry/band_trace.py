@@ -293,6 +293,16 @@ def band_pixels(labels: np.ndarray, drawn: np.ndarray, radius: int, edges_of_dra
     return _pixels((ids > 0) & ~drawn & near_edge)
 
 
+def hole_pixels(labels: np.ndarray, drawn: np.ndarray, radius: int) -> np.ndarray:
+    """(K, 2) integer pixels (x, y) of reflector pixels without a drawn reflection that the
+    drawn reflections enclose: within the morphological closing of ``drawn`` by a square
+    of ``radius`` pixels (a hole up to about 2 ``radius`` across, not the world shown
+    beyond a reflection's outer edge). ``labels`` and ``drawn`` as :func:`band_pixels`."""
+    drawn = np.asarray(drawn, dtype=bool)
+    closed = ~_near(~_near(drawn, radius), radius)
+    return _pixels((np.rint(labels) > 0) & ~drawn & closed)
+
+
 def drawn_pixels_in(labels: np.ndarray, drawn: np.ndarray, region: np.ndarray) -> np.ndarray:
     """(K, 2) integer pixels (x, y) of reflector pixels in ``region`` (H, W) bool that
     have a drawn reflection (``labels`` and ``drawn`` as :func:`band_pixels`): where the

@@ -100,7 +100,7 @@ def test_a_torus_in_iterative_mode_is_searched_as_pieces_and_in_auto_mode_the_li
     assert live.draw_safely(fig3, live.CAMERA_KEY, _camera_view(fig3))
     search = state.renderer.pass_named("iterative")
     ring = pieces.index
-    assert [index for index, _ in search.answers()].count(ring) == len(pieces.pieces)
+    assert [answer.reflector_index for answer in search.answers()].count(ring) == len(pieces.pieces)
     # The camera (Max Order 2: the torus reflects itself) leaves the searched first orders out.
     camera = state.cameras[live.CAMERA_KEY]
     assert camera.sbc is None or not {tuple(h) for h in camera.sbc.groups} & {(0,), (ring,)}

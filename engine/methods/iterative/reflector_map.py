@@ -52,7 +52,8 @@ class ReflectorMap:
     ``patches``: for a piece of a mirror that is not star-shaped (``pieces.py``), the
     starts of its search, (K, 3, 4) float32 rows (normal-cone axis, its half-angle),
     (centre of the patch's bounding sphere relative to O, its radius), (start direction,
-    0); None for a star-shaped mirror (one guess).
+    0); None for a star-shaped mirror (one guess), or on a folded one the starts from
+    which every image is searched (``images``).
     """
 
     centre: np.ndarray
@@ -62,6 +63,9 @@ class ReflectorMap:
     min_radius: float
     max_radius: float
     patches: np.ndarray | None = None
+    #: Images of a point the search keeps: 1, or up to this many distinct roots found
+    #: from every patch on a folded star-shaped mirror (``fold_patches.py``).
+    images: int = 1
 
     @functools.cached_property
     def mean_radius(self) -> float:

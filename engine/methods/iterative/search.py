@@ -22,7 +22,9 @@ direction d from O, and the search runs in two dimensions:
    (:data:`RESTARTS`; a convex mirror has one reflection of a point at most, so there a
    failed start means none). A piece of a mirror that is not star-shaped (:mod:`.pieces`)
    starts instead from each of its patches whose normal cone can hold the point's
-   reflection (:func:`patch_admits`), until one finds it. On a bumpy sphere the secant
+   reflection (:func:`patch_admits`), until one finds it; a folded star-shaped mirror
+   (:mod:`.fold_patches`) from every one of them, keeping every image
+   (:func:`search_images`). On a bumpy sphere the secant
    triangle cycles between the roots of neighbouring bumps and misses many of the exact
    solver's reflections; Newton from one start misses fewer, and with the restarts few.
 3. **Stop** (3.2, the geometric bound): when a step moves P by less than
@@ -85,6 +87,10 @@ RESIDUAL_TOLERANCE = 1e-3
 PATCH_MARGIN = 0.05
 #: ... or where the point lies within this many radii of the patch's centre.
 NEAR_PATCH = 1.5
+#: Two roots of one point closer than this share of the accuracy (pixels, in the view
+#: at the root) are one image found twice (``search_images``): each lies within
+#: STOP_FRACTION of it.
+SAME_IMAGE = 0.5
 #: Samples along each segment (P to the eye, P to V) of the occlusion test.
 OCCLUSION_SAMPLES = 16
 
@@ -217,12 +223,15 @@ def flipped_images(camera, perspective: bool, points, position, normal, position
     return dot(cross(q_u, q_v), r) < 0.0
 
 
-def _newton(chart: _Chart, view: View, rows: np.ndarray, start, accuracy_px: float):
+def _newton(chart: _Chart, view: View, rows: np.ndarray, start, accuracy_px: float, give_up_stalled: bool = False):
     """Damped Newton from chart point ``start`` (2,) for the points ``rows``: converged
     (K,) bool, left (K,) bool (off the map or the chart), position, normal, half vector
     (K, 3) of the last sample, the map surface's outward normal there (from the last
     Jacobian's samples, not unit), the steps taken (K,) and whether a converged image is
-    flipped (K,) (:func:`flipped_images`, from the last Jacobian's samples)."""
+    flipped (K,) (:func:`flipped_images`, from the last Jacobian's samples).
+    ``give_up_stalled``: a start whose line search finds no smaller |F| fails there (a
+    search for every image, :func:`search_images`: near a fold |F| has minima that are
+    no roots, and a start there would take every step it is allowed)."""
     k = len(rows)
     x = np.broadcast_to(np.asarray(start, dtype=np.float64), (k, 2)).copy()
     f, position, normal, half, ok = chart.evaluate(rows, x)
@@ -262,7 +271,7 @@ def _newton(chart: _Chart, view: View, rows: np.ndarray, start, accuracy_px: flo
             scale[trying] *= 0.5
         moved = lengths(new_p - position[live])
         tolerance = STOP_FRACTION * accuracy_px * view.pixel_size_at(new_p)
-        lost = ~new_ok | (lengths(new_x) > MAX_CHART)
+        lost = ~new_ok | (lengths(new_x) > MAX_CHART) | (give_up_stalled & ~accepted)
         # The step after this one, predicted with this step's Jacobian (a chord step):
         # where it would move P by less than the tolerance it is taken without new
         # samples (P moved along the chart's tangents), and the search ends a step early.
@@ -300,14 +309,8 @@ def search_reflections(rmap: ReflectorMap, view: View, points, accuracy_px: floa
     flipped = np.zeros(n, dtype=bool)
     answer = np.full((n, 3), np.nan)
     camera, perspective = _camera(view)
-    finite = np.isfinite(points).all(axis=1)
-    safe_points = np.where(finite[:, None], points, rmap.centre)
-    inside = finite & (lengths(safe_points - rmap.centre) <= 1e-9 * max(rmap.max_radius, 1e-300))
-    inside |= finite & rmap.inside(safe_points)
-    if perspective and rmap.inside(camera[None])[0]:
-        inside = finite
+    active, inside = _searched(rmap, camera, perspective, points)
     status[inside] = INSIDE
-    active = np.flatnonzero(finite & ~inside)
     if len(active) == 0:
         return SearchResult(answer, status, iterations, flipped)
     pending = active
@@ -350,14 +353,80 @@ def search_reflections(rmap: ReflectorMap, view: View, points, accuracy_px: floa
         answer[rows[verdict == FOUND]] = position[verdict == FOUND]
         flipped[rows[verdict == FOUND]] = image_flipped[verdict == FOUND]
         pending = np.setdiff1d(pending, rows[verdict == FOUND], assume_unique=True)
-    found = np.flatnonzero(status == FOUND)
-    for occluder in occluders:
-        found = found[status[found] == FOUND]  # a blocked answer is NaN now
-        blocked = found[_segment_blocked(occluder, answer[found], points[found], dense_near_start=False)]
-        status[blocked] = OCCLUDED
-        answer[blocked] = np.nan
-        flipped[blocked] = False
+    _block(SearchResult(answer, status, iterations, flipped), points, occluders)
     return SearchResult(answer, status, iterations, flipped)
+
+
+def _searched(rmap: ReflectorMap, camera, perspective: bool, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(indices of the points to search, (P,) bool of those INSIDE the mirror): a point
+    that is not finite is neither; with the eye inside, every finite point is inside."""
+    finite = np.isfinite(points).all(axis=1)
+    safe_points = np.where(finite[:, None], points, rmap.centre)
+    inside = finite & (lengths(safe_points - rmap.centre) <= 1e-9 * max(rmap.max_radius, 1e-300))
+    inside |= finite & rmap.inside(safe_points)
+    if perspective and rmap.inside(camera[None])[0]:
+        inside = finite
+    return np.flatnonzero(finite & ~inside), inside
+
+
+def _block(result: SearchResult, points: np.ndarray, occluders) -> None:
+    """Mark OCCLUDED (in place) the answers whose segment to their point an occluder's
+    map blocks (another mirror's surface: a higher order)."""
+    found = np.flatnonzero(result.status == FOUND)
+    for occluder in occluders:
+        found = found[result.status[found] == FOUND]  # a blocked answer is NaN now
+        blocked = found[_segment_blocked(occluder, result.reflector_points[found], points[found],
+                                         dense_near_start=False)]
+        result.status[blocked] = OCCLUDED
+        result.reflector_points[blocked] = np.nan
+        result.flipped[blocked] = False
+
+
+def search_images(rmap: ReflectorMap, view: View, points, accuracy_px: float = 1.0, occluders=()) -> list:
+    """Every image of every point (P, 3) in a folded mirror's map (``rmap.images`` > 1,
+    with ``patches``, :mod:`.fold_patches`): Newton from the first guess and from every
+    patch that admits a point,
+    each distinct root kept (:data:`SAME_IMAGE`), in the order the patches find them, up
+    to ``rmap.images``. A list of ``rmap.images`` SearchResults, slot k holding each
+    point's k-th image (status NO_SURFACE where it has fewer; iterations: every start's
+    steps, counted in slot 0)."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    n, slots = len(points), rmap.images
+    camera, perspective = _camera(view)
+    results = [SearchResult(np.full((n, 3), np.nan), np.full(n, NO_SURFACE, np.int8), np.zeros(n, np.int16),
+                            np.zeros(n, dtype=bool)) for _ in range(slots)]
+    answers = np.full((slots, n, 3), np.nan)
+    active, inside = _searched(rmap, camera, perspective, points)
+    for result in results:
+        result.status[inside] = INSIDE
+    count = np.zeros(n, np.int64)
+    chart = _Chart(rmap, camera, perspective, points, np.tile((0.0, 0.0, 1.0), (n, 1)))
+    for rows, start in _image_starts(rmap, chart, active):
+        rows = rows[count[rows] < slots]
+        if len(rows) == 0:
+            continue
+        converged, _, position, normal, half, face, steps, image_flipped = _newton(
+            chart, view, rows, start, accuracy_px, give_up_stalled=True)
+        results[0].iterations[rows] += steps
+        found = np.flatnonzero(converged)
+        found = found[_check(rmap, camera, perspective, points[rows[found]], position[found], normal[found],
+                             half[found], face[found]) == FOUND]
+        rows, position, image_flipped = rows[found], position[found], image_flipped[found]
+        apart = np.linalg.norm(answers[:, rows] - position, axis=2)
+        same = SAME_IMAGE * accuracy_px * view.pixel_size_at(position)
+        new = ~(apart < same).any(axis=0)
+        rows, position, image_flipped = rows[new], position[new], image_flipped[new]
+        slot_of = count[rows]
+        answers[slot_of, rows] = position
+        for k in np.unique(slot_of):
+            into = slot_of == k
+            slot = results[k]
+            slot.reflector_points[rows[into]], slot.status[rows[into]] = position[into], FOUND
+            slot.flipped[rows[into]] = image_flipped[into]
+        count[rows] += 1
+    for result in results:
+        _block(result, points, occluders)
+    return results
 
 
 def patch_admits(patch: np.ndarray, camera, perspective: bool, points: np.ndarray) -> np.ndarray:
@@ -394,6 +463,15 @@ def _patch_starts(rmap: ReflectorMap, chart: _Chart, pending: np.ndarray) -> Ite
         rows = pending[patch_admits(centred, chart.camera, chart.perspective, chart.points[pending])]
         chart.aim(rows, np.broadcast_to(patch[2, :3], (len(rows), 3)))
         yield rows, (0.0, 0.0)
+
+
+def _image_starts(rmap: ReflectorMap, chart: _Chart, active: np.ndarray) -> Iterator:
+    """The starts of a search for every image: the one-image search's first guess (so it
+    finds what that search finds first), then every patch (:func:`_patch_starts`)."""
+    chart.aim(active, sphere_guess(rmap.centre, chart.camera, chart.perspective, chart.points[active],
+                                   rmap.mean_radius))
+    yield active, RESTARTS[0]
+    yield from _patch_starts(rmap, chart, active)
 
 
 def _residual_passes(normal: np.ndarray, half: np.ndarray) -> np.ndarray:
@@ -478,16 +556,30 @@ class IterativeReflector:
         return [(self.index,)]
 
     def search(self, view: View, points) -> SearchResult:
-        return search_reflections(self.reflector_map, view, points, self.accuracy_px, occluders=self.occluders)
+        """The first answer slot (the only one but on a folded mirror)."""
+        return self.search_slots(view, points)[0]
+
+    def search_slots(self, view: View, points) -> list:
+        """The SearchResult of each answer slot: one, or ``reflector_map.images`` for a
+        folded mirror (:func:`search_images`)."""
+        if self.reflector_map.images > 1:
+            return search_images(self.reflector_map, view, points, self.accuracy_px, occluders=self.occluders)
+        return [search_reflections(self.reflector_map, view, points, self.accuracy_px, occluders=self.occluders)]
 
     def project(self, view: View, points) -> Projection:
+        """Where ``points`` appear, one row of the projection per answer slot."""
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        found = self.search(view, points)
-        valid = found.found & view.in_view(np.nan_to_num(found.reflector_points))
-        reflector_points = np.where(valid[:, None], found.reflector_points, np.nan)
-        pixels, _ = view.to_pixels(np.nan_to_num(reflector_points))
-        pixels[~valid] = np.nan
-        distance = np.where(valid, lengths(points - np.nan_to_num(reflector_points)), np.nan)
-        return Projection(groups=self.groups, reflector_points=reflector_points[None], valid=valid[None],
-                          leaf_kind=np.where(valid, SEARCH_ANSWER, NOT_PROJECTED).astype(np.int8)[None], pixels=pixels[None],
-                          ray_distance=distance[None])
+        rows = [_projected(view, points, found) for found in self.search_slots(view, points)]
+        return Projection(groups=self.groups * len(rows),
+                          **{name: np.stack([row[name] for row in rows]) for name in rows[0]})
+
+
+def _projected(view: View, points: np.ndarray, found: SearchResult) -> dict:
+    """One answer slot as a Projection's rows (its answers in the view)."""
+    valid = found.found & view.in_view(np.nan_to_num(found.reflector_points))
+    reflector_points = np.where(valid[:, None], found.reflector_points, np.nan)
+    pixels, _ = view.to_pixels(np.nan_to_num(reflector_points))
+    pixels[~valid] = np.nan
+    distance = np.where(valid, lengths(points - np.nan_to_num(reflector_points)), np.nan)
+    return {"reflector_points": reflector_points, "valid": valid, "pixels": pixels, "ray_distance": distance,
+            "leaf_kind": np.where(valid, SEARCH_ANSWER, NOT_PROJECTED).astype(np.int8)}

@@ -128,6 +128,26 @@ def test_rim_gap_pixels_are_the_strip_between_a_reflection_and_the_silhouette():
     assert strip <= ring and any(j < 10 for _, j in ring)
 
 
+def test_hole_pixels_are_the_undrawn_pixels_the_drawn_reflections_enclose():
+    """A 40 x 40 mirror drawn but for a 10-pixel hole, a 30-pixel hole and its lower
+    quarter (the world beyond the reflection's edge): the small hole is traced, the wide
+    one and the quarter are not."""
+    from curved_reflections.engine.geometry.band_trace import hole_pixels
+
+    labels = np.zeros((50, 50))
+    labels[5:45, 5:45] = 1.0
+    drawn = labels > 0
+    drawn[35:45] = False  # the lower quarter shows the world
+    drawn[10:20, 10:20] = False
+    wide = np.zeros_like(drawn)
+    wide[12:32, 22:44] = True  # 20 x 22, wider than twice the radius
+    drawn &= ~wide
+    traced = {tuple(p) for p in hole_pixels(labels, drawn, 8).tolist()}
+    assert {(x, y) for y in range(10, 20) for x in range(10, 20)} <= traced
+    assert not any(y >= 35 for _, y in traced)
+    assert sum(wide[y, x] for x, y in traced) < 0.5 * wide.sum()
+
+
 def test_eye_rays_that_start_inside_a_sealed_mirror_see_no_light():
     """A view whose near plane cuts into the ball: rays starting inside it meet it from
     inside. Sealed (nothing inside), they show black at distance 0 (``NO_LIGHT``), as
