@@ -385,11 +385,10 @@ def _block(result: SearchResult, points: np.ndarray, occluders) -> None:
 def search_images(rmap: ReflectorMap, view: View, points, accuracy_px: float = 1.0, occluders=()) -> list:
     """Every image of every point (P, 3) in a folded mirror's map (``rmap.images`` > 1,
     with ``patches``, :mod:`.fold_patches`): Newton from the first guess and from every
-    patch that admits a point,
-    each distinct root kept (:data:`SAME_IMAGE`), in the order the patches find them, up
-    to ``rmap.images``. A list of ``rmap.images`` SearchResults, slot k holding each
-    point's k-th image (status NO_SURFACE where it has fewer; iterations: every start's
-    steps, counted in slot 0)."""
+    patch that admits a point, each distinct root kept (:data:`SAME_IMAGE`) in the order
+    the starts find them, up to ``rmap.images``. A list of ``rmap.images`` SearchResults,
+    slot k holding each point's k-th image (status NO_SURFACE where it has fewer;
+    iterations: every start's steps, counted in slot 0)."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     n, slots = len(points), rmap.images
     camera, perspective = _camera(view)
