@@ -391,7 +391,7 @@ def folded_star(gpu_ready):
 def test_gpu_search_for_every_image_agrees_with_the_numpy_twin(folded_star):
     reflector, rmap = folded_star
     view = look_at_view((3.5, -2.0, 1.5), (0, 0, 0), width=640, height=480)
-    geometry = _geometry(reflector, _cloud(600, 4))
+    geometry = _geometry(reflector, _cloud(400, 4))
     method = IterativeReflector(0, reflector.name, rmap, 1.0)
     gpu_pass = IterativePass(geometry, [method])
     gpu_pass.search(view)
