@@ -147,7 +147,8 @@ class FramePass:
         return frozenset()
 
     def answers(self) -> list:
-        """(reflector index, answer texture) of the last update, for ``ReflectedMeshes.draw``."""
+        """The last update's answers, for ``ReflectedMeshes.draw``: ``reflected_meshes.AnswerSet``
+        s, or (reflector index, answer texture) pairs, which it reads as one."""
         raise NotImplementedError
 
     def draw(self, frame: Frame) -> None:
