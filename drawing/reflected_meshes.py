@@ -289,15 +289,23 @@ class ReflectedMeshes:
     def read(self, texture, slot: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """An answer texture read back (its slot ``slot``): (N, 3) world points (NaN where
         no answer) and the (N,) int64 codes."""
-        texels = self._texels(texture, slot)
-        code = texels[:, 3].astype(np.int64)
-        found = code % 16 == FOUND_CODE
-        return np.where(found[:, None], texels[:, :3] + self.geometry.shift, np.nan), code
+        return self.read_slots(texture)[slot]
+
+    def read_slots(self, texture) -> list:
+        """Every answer slot of an answer texture, read back at once: (points, codes) per
+        slot, as :meth:`read`."""
+        slots = []
+        for texels in self._texels(texture):
+            code = texels[:, 3].astype(np.int64)
+            found = code % 16 == FOUND_CODE
+            slots.append((np.where(found[:, None], texels[:, :3] + self.geometry.shift, np.nan), code))
+        return slots
 
     def read_points(self, texture) -> np.ndarray:
         """(N, 3) world points of a texture of one point per vertex, read back."""
-        return self._texels(texture)[:, :3] + self.geometry.shift
+        return self._texels(texture)[0, :, :3] + self.geometry.shift
 
-    def _texels(self, texture, slot: int = 0) -> np.ndarray:
-        rows = read_texture(texture, self.width, texture.height).reshape(-1, self.width, 4)
-        return rows[slot * self.height:(slot + 1) * self.height].reshape(-1, 4)[:self.n_vertices].astype(np.float64)
+    def _texels(self, texture) -> np.ndarray:
+        """(slots, N, 4) float64 texels of a texture of one texel per vertex in each slot."""
+        texels = read_texture(texture, self.width, texture.height).reshape(-1, self.height * self.width, 4)
+        return texels[:, :self.n_vertices].astype(np.float64)

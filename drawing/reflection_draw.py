@@ -401,7 +401,7 @@ class ReflectionRenderer:
         for answer in self._answers():
             answer = AnswerSet(*answer)
             found.setdefault(answer.reflector_index, []).extend(
-                self.meshes.read(answer.texture, slot)[0] for slot in range(answer.images))
+                points for points, _ in self.meshes.read_slots(answer.texture))
         return {index: np.stack(slots) for index, slots in found.items()}
 
     def _answers(self) -> list:

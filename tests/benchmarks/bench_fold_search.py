@@ -58,9 +58,10 @@ def _points(count: int, seed: int) -> np.ndarray:
     return direction * rng.uniform(1.25, 3.0, (count, 1))
 
 
-def _gpu_answers(reflector, rmap, view, points, repeats: int = 3) -> tuple[np.ndarray, float]:
-    """(K, P, 3) answers of the GPU search in ``view`` (NaN: none), and the median seconds
-    of a cold search, read back included."""
+def _gpu_answers(reflector, rmap, view, points, repeats: int = 3) -> tuple[np.ndarray, np.ndarray, float]:
+    """The points in the renderer's order (it sorts its vertices), the (K, P, 3) answers of
+    the GPU search in ``view`` (NaN: none) and the median seconds of a cold search, read
+    back included."""
     from curved_reflections.drawing.draw_geometry import prepare_geometry
     from curved_reflections.drawing.methods.iterative_draw import IterativePass
     from curved_reflections.engine.methods.iterative import IterativeReflector
@@ -74,13 +75,9 @@ def _gpu_answers(reflector, rmap, view, points, repeats: int = 3) -> tuple[np.nd
     for _ in range(repeats):
         start = time.perf_counter()
         search.search(view)
-        slots = [search.read(0, 0, slot).reflector_points for slot in range(rmap.images)]
+        slots = [points for points, _ in search.meshes.read_slots(search.answers()[0].texture)]
         times.append(time.perf_counter() - start)
-    # The renderer sorts its vertices: back to the order of ``points``.
-    order = np.lexsort(geometry.vertices.T[::-1])
-    rank = np.empty(len(points), np.int64)
-    rank[np.lexsort(points.T[::-1])] = np.arange(len(points))
-    return np.stack(slots)[:, order[rank]], float(np.median(times))
+    return geometry.vertices, np.stack(slots), float(np.median(times))
 
 
 def _compare(reflector_set, view, points, answers) -> dict:
@@ -127,8 +124,7 @@ def measure(name: str, kind: str, width: int, height: int, n_points: int) -> dic
         totals = {"images": 0, "covered": 0, "errors": [], "unmatched": 0, "answers": 0, "seconds": []}
         for k, eye in enumerate(EYES):
             view = look_at_view(eye, (0.0, 0.0, 0.0), width=width, height=height)
-            points = _points(n_points, 11 + k)
-            answers, seconds = _gpu_answers(reflector, rmap, view, points)
+            points, answers, seconds = _gpu_answers(reflector, rmap, view, _points(n_points, 11 + k))
             found = _compare(reflector_set, view, points, answers)
             for key in ("images", "covered", "unmatched", "answers"):
                 totals[key] += found[key]
