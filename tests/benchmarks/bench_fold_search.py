@@ -176,12 +176,7 @@ def parse_args(argv):
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     args = parse_args(argv)
-    bench_sbc.import_package()
-    import bpy  # noqa: F401  (gpu and mathutils)
-
-    from curved_reflections.blender.gpu_init import ensure_gpu
-
-    ensure_gpu()
+    bench_sbc.import_package_on_gpu()
     rows = [measure(name, kind, args.width, args.height, args.points) for name, kind in MIRRORS]
     text = report(rows, bench_draw.command_line("bench_fold_search.py", argv), bench_draw._machine(),
                   (args.width, args.height), args.points)

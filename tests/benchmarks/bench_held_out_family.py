@@ -254,10 +254,7 @@ def _as_auto(mode: str, auto_first: dict) -> bool:
 
 
 def worker(args) -> int:
-    bench_sbc.import_package()
-    from curved_reflections.blender.gpu_init import ensure_gpu
-
-    ensure_gpu()
+    bench_sbc.import_package_on_gpu()
     folder = Path(args.folder)
     folder.mkdir(parents=True, exist_ok=True)
     row = measure(args.worker, args.width, args.height, args.frames, args.samples, folder)

@@ -90,10 +90,7 @@ def parse_args(argv):
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     args = parse_args(argv)
-    bench_sbc.import_package()
-    from curved_reflections.blender.gpu_init import ensure_gpu
-
-    ensure_gpu()
+    bench_sbc.import_package_on_gpu()
     results = []
     for size in args.sizes:
         results.append(measure(args.subdivisions, size))

@@ -267,10 +267,7 @@ def parse_args(argv):
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parse_args(argv)
-    bench_sbc.import_package()
-    from curved_reflections.blender.gpu_init import ensure_gpu
-
-    ensure_gpu()
+    bench_sbc.import_package_on_gpu()
     command = " ".join([".venv/bin/python", "tests/benchmarks/bench_real_mirrors.py"] + [shlex.quote(a) for a in argv])
     folder = args.images or Path(tempfile.mkdtemp(prefix="real_mirrors_"))
     folder.mkdir(parents=True, exist_ok=True)

@@ -201,12 +201,7 @@ def parse_args(argv):
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     args = parse_args(argv)
-    bench_sbc.import_package()
-    import bpy  # noqa: F401  (gpu and mathutils)
-
-    from curved_reflections.blender.gpu_init import ensure_gpu
-
-    ensure_gpu()
+    bench_sbc.import_package_on_gpu()
     args.images.mkdir(parents=True, exist_ok=True)
     rows = [measure_accuracy(*glass, args.width, args.height, args.points) for glass in _glasses()]
     frames = measure_frames(args.width, args.height, args.frames, args.images)

@@ -102,6 +102,16 @@ def import_package():
     return link.import_registered(REPO_ROOT, prefix="curved_reflections_bench_")
 
 
+def import_package_on_gpu():
+    """:func:`import_package`, then Blender's GPU module made ready
+    (``blender/gpu_init.py``): what a benchmark that draws or dispatches needs first."""
+    package = import_package()
+    from curved_reflections.blender.gpu_init import ensure_gpu
+
+    ensure_gpu()
+    return package
+
+
 @dataclass
 class BenchScene:
     """One measured scene: reflectors, view, box, points and their exact visible reflections."""
