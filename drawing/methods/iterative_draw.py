@@ -122,29 +122,91 @@ class MapAtlas:
         self.patches = data_texture(np.concatenate(patches + [np.zeros((1, 3, 4), np.float32)]))
 
 
-class IterativePass(FramePass):
+class MapSearchPass(FramePass):
+    """A per-vertex search on the cube maps (``glsl/map_search.glsl``) for one renderer's
+    geometry (on the GPU as ``meshes``, a :class:`..reflected_meshes.ReflectedMeshes`, made
+    here when not given) and its searched maps (``methods``, each with a
+    ``reflector_map`` and an ``accuracy_px``): the maps in one :class:`MapAtlas`, one
+    dispatch per map a frame into its own result textures. A search says how its shader
+    is made (:meth:`shader`), what each map's results are (:meth:`new_results`, keyed by
+    :meth:`key`) and what a dispatch binds besides the shared inputs (:meth:`bind`)."""
+
+    searches = True
+
+    def __init__(self, geometry, methods, meshes: ReflectedMeshes | None = None):
+        self.geometry = geometry
+        self.methods = list(methods)
+        self.meshes = meshes if meshes is not None else ReflectedMeshes(geometry)
+        self.n_vertices = self.meshes.n_vertices
+        self._atlas = None
+        self._results: dict = {}
+        self.counts = {"searches": 0}
+
+    @property
+    def accuracy_px(self) -> float | None:
+        """The finest Accuracy of the searched maps (their searches stop at a tenth of it)."""
+        return min((m.accuracy_px for m in self.methods), default=None)
+
+    def update(self, frame: Frame) -> None:
+        """:meth:`search` (``frame.claimed`` never holds a searched reflector: the
+        search draws it in every view, :meth:`drawn_in`, so a camera leaves it out)."""
+        self.search(frame.view, frame.warm)
+
+    def shader(self):
+        """The search's compute shader (:func:`map_search_info`, built once)."""
+        raise NotImplementedError
+
+    def key(self, method):
+        """The key of a searched map's results."""
+        raise NotImplementedError
+
+    def new_results(self, method):
+        """A searched map's result textures, made on first use."""
+        raise NotImplementedError
+
+    def bind(self, shader, method, results) -> None:
+        """What one map's dispatch binds besides the view, the maps and ``self_map``."""
+        raise NotImplementedError
+
+    def _ensure(self) -> None:
+        if self._atlas is None:
+            self._atlas = MapAtlas(self.methods, self.geometry.shift)
+        for method in self.methods:
+            if self.key(method) not in self._results:
+                self._results[self.key(method)] = self.new_results(method)
+
+    def search(self, view, warm: bool = False) -> None:
+        """This frame's search: one dispatch per map, into its result textures.
+        ``warm``: each vertex starts from its last answer (a viewport whose view moves
+        a little each frame); cold, the answer depends on this view alone."""
+        if self.n_vertices == 0 or not self.methods:
+            return
+        self._ensure()
+        shader = self.shader()
+        pixel_scale = bind_map_search(shader, view, self.meshes, self._atlas, warm)
+        for k, method in enumerate(self.methods):
+            shader.uniform_float("stop_per_w", search_module.STOP_FRACTION * method.accuracy_px * pixel_scale)
+            shader.uniform_int("self_map", k)
+            self.bind(shader, method, self._results[self.key(method)])
+            gpu.compute.dispatch(shader, *self.meshes.work_groups(LOCAL_SIZE))
+        self.counts["searches"] += 1
+
+
+class IterativePass(MapSearchPass):
     """The iterative method's GPU side for one renderer's reflected geometry (a
-    ``draw_geometry.DrawGeometry``, on the GPU as ``meshes``, a
-    :class:`..reflected_meshes.ReflectedMeshes`, made here when not given) and its
-    star-shaped reflectors (``engine.methods.iterative.IterativeReflector`` each), among
-    ``n_reflectors`` of the scene."""
+    ``draw_geometry.DrawGeometry``) and its star-shaped reflectors
+    (``engine.methods.iterative.IterativeReflector`` each, a piece's or a folded mirror's
+    too), among ``n_reflectors`` of the scene."""
 
     name = "iterative"
-    searches = True
 
     @classmethod
     def of_inputs(cls, methods: tuple, inputs: PassInputs) -> "IterativePass":
         return cls(inputs.geometry, methods, inputs.meshes, len(inputs.reflectors))
 
     def __init__(self, geometry, methods, meshes: ReflectedMeshes | None = None, n_reflectors: int = 1):
-        self.geometry = geometry
-        self.methods = list(methods)
+        super().__init__(geometry, methods, meshes)
         self.n_reflectors = n_reflectors
-        self.meshes = meshes if meshes is not None else ReflectedMeshes(geometry)
-        self.n_vertices = self.meshes.n_vertices
-        self._atlas = None
-        self._results: dict = {}
-        self.counts = {"searches": 0}
 
     @property
     def folded_reflectors(self) -> list:
@@ -154,52 +216,32 @@ class IterativePass(FramePass):
         return _unique(m.index for m in self.methods if not m.reflector_map.convex or self.n_reflectors > 1)
 
     @property
-    def accuracy_px(self) -> float | None:
-        """The finest Accuracy of the searched mirrors (their searches stop at a tenth of it)."""
-        return min((m.accuracy_px for m in self.methods), default=None)
-
-    @property
     def mirrored_reflectors(self) -> list:
         """The searched mirrors that are convex (``reflector_map.is_convex``)."""
         return _unique(m.index for m in self.methods if m.reflector_map.convex)
 
-    def update(self, frame: Frame) -> None:
-        """:meth:`search` (``frame.claimed`` never holds a searched reflector: the
-        search draws it in every view, :meth:`drawn_in`, so a camera leaves it out)."""
-        self.search(frame.view, frame.warm)
-
     def frame_stats(self) -> dict:
         return {"iterative": self.status_counts()}
 
-    def _ensure(self) -> None:
-        if self._atlas is None:
-            self._atlas = MapAtlas(self.methods, self.geometry.shift)
-        for method in self.methods:
-            if _key(method) not in self._results:
-                self._results[_key(method)] = self.meshes.answer_texture(method.reflector_map.images)
+    def shader(self):
+        return search_shader()
 
-    def search(self, view, warm: bool = False) -> None:
-        """This frame's search: one dispatch per reflector, into its result texture.
-        ``warm``: each vertex starts from its last answer (a viewport whose view moves
-        a little each frame); cold, the answer depends on this view alone."""
-        if self.n_vertices == 0 or not self.methods:
-            return
-        self._ensure()
-        shader = search_shader()
-        pixel_scale = bind_map_search(shader, view, self.meshes, self._atlas, warm)
+    def key(self, method) -> tuple:
+        """A searched map's answer texture: its reflector and piece."""
+        return method.index, method.piece
+
+    def new_results(self, method):
+        return self.meshes.answer_texture(method.reflector_map.images)
+
+    def bind(self, shader, method, results) -> None:
         shader.uniform_sampler("map_patches", self._atlas.patches)
-        for k, method in enumerate(self.methods):
-            shader.uniform_float("stop_per_w", search_module.STOP_FRACTION * method.accuracy_px * pixel_scale)
-            shader.uniform_int("self_map", k)
-            shader.image("result", self._results[_key(method)])
-            gpu.compute.dispatch(shader, *self.meshes.work_groups(LOCAL_SIZE))
-        self.counts["searches"] += 1
+        shader.image("result", results)
 
     def answers(self) -> list:
         """The AnswerSet of the last search per map (a mirror searched as pieces has one
         per piece; a folded one, its slots in one texture), for ``ReflectedMeshes.draw``."""
-        return [AnswerSet(m.index, self._results[_key(m)], images=m.reflector_map.images)
-                for m in self.methods if _key(m) in self._results]
+        return [AnswerSet(m.index, self._results[self.key(m)], images=m.reflector_map.images)
+                for m in self.methods if self.key(m) in self._results]
 
     def read(self, reflector_index: int, piece: int = 0, slot: int = 0) -> search_module.SearchResult:
         """The last search of one reflector (or of one of its pieces; of a folded one, one
@@ -216,18 +258,13 @@ class IterativePass(FramePass):
         converged where one did not converge and none found it."""
         found, stuck = {}, {}
         for method in self.methods:
-            if _key(method) not in self._results:
+            if self.key(method) not in self._results:
                 continue
             status = self.read(method.index, method.piece).status
             found[method.name] = found.get(method.name, False) | (status == search_module.FOUND)
             stuck[method.name] = stuck.get(method.name, False) | (status == search_module.NOT_CONVERGED)
         return {name: {"found": int(found[name].sum()), "not_converged": int((stuck[name] & ~found[name]).sum()),
                        "unanswered": int((~found[name]).sum())} for name in found}
-
-
-def _key(method) -> tuple:
-    """A searched map's answer texture: its reflector and piece."""
-    return method.index, method.piece
 
 
 def _unique(indices) -> list:

@@ -21,11 +21,11 @@ import numpy as np
 
 from ...engine.glass import refraction_search as search_module
 from ...engine.methods.iterative.search import FOUND, NOT_CONVERGED
-from ..frame_pass import Frame, FramePass, PassInputs
-from ..reflected_meshes import FLIPPED_CODE, AnswerSet, ReflectedMeshes
+from ..frame_pass import PassInputs
+from ..reflected_meshes import FLIPPED_CODE, AnswerSet
 from ..shader_cache import cached_shader
 from ..shader_sources import glsl_source
-from .iterative_draw import LOCAL_SIZE, MapAtlas, bind_map_search, map_search_info
+from .iterative_draw import MapSearchPass, map_search_info
 
 #: The search's status codes that are not the mirror search's (the rest are shared).
 TOTAL_REFLECTION = -5
@@ -41,13 +41,13 @@ def refraction_shader():
     return gpu.shader.create_from_info(info)
 
 
-class RefractionPass(FramePass):
+class RefractionPass(MapSearchPass):
     """The refraction search's GPU side for one renderer's diffuse geometry and its
     convex glass solids (``engine.glass.refraction_search.RefractedGlass`` each, whose
-    ``index`` is the renderer's reflector index of that glass)."""
+    ``index`` is the renderer's reflector index of that glass): an entry and an exit
+    texture per glass."""
 
     name = "refraction"
-    searches = True
     #: No hidden-point test: an entry point facing the eye is never hidden by its own
     #: convex solid, and the pre-pass's ids drop what other surfaces hide. (Through a
     #: magnifying lens a triangle spans much of the glass, and its entry points,
@@ -58,56 +58,29 @@ class RefractionPass(FramePass):
     def of_inputs(cls, methods: tuple, inputs: PassInputs) -> "RefractionPass":
         return cls(inputs.geometry, methods, inputs.meshes)
 
-    def __init__(self, geometry, methods, meshes: ReflectedMeshes | None = None):
-        self.geometry = geometry
-        self.methods = list(methods)
-        self.meshes = meshes if meshes is not None else ReflectedMeshes(geometry)
-        self.n_vertices = self.meshes.n_vertices
-        self._atlas = None
-        self._results: dict = {}
-        self.counts = {"searches": 0}
-
-    @property
-    def accuracy_px(self) -> float | None:
-        """The finest Accuracy of the searched glass."""
-        return min((m.accuracy_px for m in self.methods), default=None)
-
     @property
     def folded_reflectors(self) -> list:
         """Every glass: between two focal lines its images are mirrored (a caustic), and
         triangles across it are dropped."""
         return self.reflector_indices
 
-    def update(self, frame: Frame) -> None:
-        self.search(frame.view, frame.warm)
-
     def frame_stats(self) -> dict:
         return {"refraction": self.status_counts()}
 
-    def _ensure(self) -> None:
-        if self._atlas is None:
-            self._atlas = MapAtlas(self.methods, self.geometry.shift)
-        for method in self.methods:
-            if method.index not in self._results:
-                self._results[method.index] = (self.meshes.answer_texture(), self.meshes.answer_texture())
+    def shader(self):
+        return refraction_shader()
 
-    def search(self, view, warm: bool = False) -> None:
-        """This frame's search: one dispatch per glass, into its two result textures.
-        ``warm``: each vertex starts from its last answer."""
-        if self.n_vertices == 0 or not self.methods:
-            return
-        self._ensure()
-        shader = refraction_shader()
-        pixel_scale = bind_map_search(shader, view, self.meshes, self._atlas, warm)
-        for k, method in enumerate(self.methods):
-            shader.uniform_float("stop_per_w", search_module.STOP_FRACTION * method.accuracy_px * pixel_scale)
-            shader.uniform_float("eta", float(method.ior))
-            shader.uniform_int("self_map", k)
-            entry, leave = self._results[method.index]
-            shader.image("result", entry)
-            shader.image("exit_result", leave)
-            gpu.compute.dispatch(shader, *self.meshes.work_groups(LOCAL_SIZE))
-        self.counts["searches"] += 1
+    def key(self, method) -> int:
+        return method.index
+
+    def new_results(self, method) -> tuple:
+        return self.meshes.answer_texture(), self.meshes.answer_texture()
+
+    def bind(self, shader, method, results) -> None:
+        shader.uniform_float("eta", float(method.ior))
+        entry, leave = results
+        shader.image("result", entry)
+        shader.image("exit_result", leave)
 
     def answers(self) -> list:
         """The AnswerSet (glass index, entry texture, exit texture) of the last search per glass."""
