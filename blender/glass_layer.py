@@ -3,8 +3,10 @@
 
 The layer's renderer holds the glass as its "mirrors" and every other surface as meshes.
 Through convex glass the refraction search draws every diffuse vertex where it appears
-(``drawing/methods/refraction_draw.py``), every frame: the live view's picture, weighed by
-1 minus the glass's Fresnel term over the world colour (what the glass reflects).
+(``drawing/methods/refraction_draw.py``), every frame, each fragment a ray cast along its
+pixel's own path through the glass: the live view's picture, weighed by 1 minus the
+glass's Fresnel term over the world colour (what the glass reflects), black where glass
+that does not reflect must reflect totally.
 
 Render Image ray traces each pixel where a glass object is in front: its eye ray is
 followed through the glass (``engine/glass/paths.py``: Snell's law at every interface,
@@ -16,10 +18,10 @@ interface and the one reflected back inside at the last (followed out once), as 
 Glass BSDF shows them; glass of a Refraction BSDF reflects nothing (and where it should
 reflect totally, shows black, as Cycles does). Those pixels replace the frame's (where
 the mirrors' renderer drew the glass as a solid object); a scene of glass alone is the
-layer's frame. Render Image does not use the search: through a strong lens an object
-close behind it has several images, and the search draws one per point (the glass
-demo's cube, 0.1 behind the ball, would cover a fifth of it). Mirrors reflect glass as
-a solid object, and the panel says so.
+layer's frame. Render Image does not use the search: close behind a strong lens (near
+its focus) a triangle's image strays far from straight, and the live view's stand-ins
+there are approximate (the glass demo's cube, 0.1 behind the ball). Mirrors reflect glass
+as a solid object, and the panel says so.
 """
 
 from __future__ import annotations

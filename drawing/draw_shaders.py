@@ -103,9 +103,11 @@ def _build_project():
     return gpu.shader.create_from_info(info)
 
 
-def reflected_interface(name: str, searched: bool = False):
+def reflected_interface(name: str, searched: bool = False, refracted: bool = False):
     """The varyings of a reflected-mesh vertex stage, read by ``glsl/reflection_mesh_frag.glsl``;
-    ``searched`` adds the per-frame passes' interpolated validity."""
+    ``searched`` adds the per-frame passes' interpolated validity, ``refracted`` the point
+    of the mesh (relative to the shift), its barycentric coordinates in its triangle and
+    the index of its mesh, for the refraction test."""
     interface = gpu.types.GPUStageInterfaceInfo(name)
     interface.smooth('VEC4', "color_interp")
     interface.smooth('VEC3', "normal_interp")
@@ -118,6 +120,10 @@ def reflected_interface(name: str, searched: bool = False):
     interface.flat('FLOAT', "first_order_interp")
     if searched:
         interface.smooth('FLOAT', "valid_interp")
+    if refracted:
+        interface.smooth('VEC3', "mesh_point_interp")
+        interface.smooth('VEC3', "barycentric_interp")
+        interface.flat('INT', "mesh_interp")
     return interface
 
 

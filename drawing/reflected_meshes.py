@@ -22,8 +22,9 @@ from typing import NamedTuple
 import gpu
 import numpy as np
 
+from ..engine.geometry.subdivision import EDGE_FRACTION
+from ..engine.glass import refraction_search
 from ..engine.methods.iterative import search as search_module
-from ..engine.methods.iterative.fold_patches import MAX_IMAGES
 from .draw_shaders import reflected_fragment_source, reflected_interface, shading_source
 from .gpu_data import data_texture, read_texture, vertex_buffer
 from .shader_sources import glsl_source
@@ -51,6 +52,9 @@ FOUND_CODE = search_module.FOUND + 8
 #: Added to the code of a flipped image (``search.flipped_images``): a triangle whose
 #: corners disagree spans a fold and is not drawn. Above 16 times any step count.
 FLIPPED_CODE = 2048
+#: Added to the code of a vertex without an answer that is placed all the same, for the
+#: fragment stage's ray cast through glass (``glsl/refraction_search.glsl``).
+PLACED_CODE = 4096
 #: The live view snaps reflected vertices to a grid of this share of its Accuracy (px):
 #: at most half a cell off on each axis (0.71 of a cell in all), the answer itself a
 #: tenth of the Accuracy off (``search.STOP_FRACTION``): within the Accuracy together.
@@ -71,9 +75,9 @@ class AnswerSet(NamedTuple):
     """One reflector's answers of a per-frame pass, for :meth:`ReflectedMeshes.draw`:
     ``texture`` holds an answer texel per vertex (:meth:`ReflectedMeshes.answer_texture`);
     ``exit_points``, for glass, the point each vertex's path leaves it
-    (``methods/refraction_draw.py``); ``images``: 1, or :data:`MAX_IMAGES` answer slots
-    one below another, every image of a vertex in a folded mirror (the triangles are
-    then matched across slots, ``glsl/iterative_mesh_vert.glsl``)."""
+    (``methods/refraction_draw.py``); ``images``: 1, or the answer slots one below
+    another, every image of a vertex in a folded mirror
+    (``engine/methods/iterative/fold_patches.MAX_IMAGES``) or through glass (the triangles are then matched across slots, ``glsl/iterative_mesh_vert.glsl``)."""
 
     reflector_index: int
     texture: object
@@ -82,21 +86,26 @@ class AnswerSet(NamedTuple):
 
 
 @cached_shader
-def reflected_shader(law_test: bool = True, hidden_test: bool = True, refracted: bool = False, images: bool = False):
+def reflected_shader(law_test: bool = True, hidden_test: bool = True, refracted: bool = False, images: int = 1):
     """The reflected meshes' shader, built on first use (fragment stage shared with the
     sample-based camera's reflected meshes), with or without the fragment stage's
     law-of-reflection and hidden-point tests (:func:`fragment_tests`); ``refracted``:
     the vertices are seen through glass, along the ray leaving it at the point the
-    ``exit_points`` texture holds per vertex (``methods/refraction_draw.py``);
-    ``images``: the answers hold :data:`MAX_IMAGES` slots, drawn a slot of each
-    triangle's first corner at a time (the triangle-corner batch, push constant ``slot``)."""
-    interface = reflected_interface("curved_reflections_iterative_interface", searched=True)
+    ``exit_points`` texture holds per vertex (``methods/refraction_draw.py``), each
+    fragment held to the path its pixel takes through the glass (``methods/glass_rays.py``);
+    ``images``: the answers hold that many slots, drawn a slot of each triangle's first
+    corner at a time (the triangle-corner batch, push constant ``slot``); glass is
+    drawn as triangle corners even from one slot (its fragments' ray cast needs each
+    corner's place in its triangle)."""
+    interface = reflected_interface(f"curved_reflections_iterative_interface{'_refracted' * refracted}",
+                                    searched=True, refracted=refracted)
     info = gpu.types.GPUShaderCreateInfo()
     # In this order 116 bytes (120 with `slot`), within the 128 Vulkan guarantees
     # (Blender counts 128 with `slot`); the vertices' texture width is read from it.
     info.push_constant('MAT4', "view_projection")
     info.push_constant('VEC4', "camera")
-    if images:
+    corners = images > 1 or refracted
+    if corners:
         info.push_constant('INT', "slot")
     info.push_constant('FLOAT', "inverse_diameter")
     info.push_constant('FLOAT', "order_range")
@@ -112,20 +121,27 @@ def reflected_shader(law_test: bool = True, hidden_test: bool = True, refracted:
     info.sampler(4, 'FLOAT_2D', "prepass_normals")
     if refracted:
         info.sampler(5, 'FLOAT_2D', "exit_points")
+        info.sampler(6, 'FLOAT_2D', "glass_exits")
+        info.sampler(7, 'FLOAT_2D', "glass_leaving")
+        info.sampler(8, 'FLOAT_2D', "mesh_boxes")
     info.vertex_in(0, 'INT', "vertex_index")
     info.vertex_in(1, 'VEC4', "color")
     info.vertex_in(2, 'VEC4', "normal_lit")
     info.vertex_in(3, 'VEC2', "uv")
-    if images:
+    if corners:
         info.vertex_in(4, 'INT', "anchor_index")
+        info.vertex_in(5, 'INT', "corner")
     info.vertex_out(interface)
     info.fragment_out(0, 'VEC4', "color_out")
-    defines_in = "#define EXIT_POINTS\n" * refracted + f"#define IMAGES {MAX_IMAGES}\n" * images
+    defines_in = "#define EXIT_POINTS\n" * refracted + f"#define IMAGES {images}\n" * corners
     info.vertex_source(defines_in + shading_source() + glsl_source(
-        "iterative_mesh_vert.glsl", {"FOUND_CODE": FOUND_CODE, "FLIPPED_CODE": FLIPPED_CODE,
+        "iterative_mesh_vert.glsl", {"FOUND_CODE": FOUND_CODE, "FLIPPED_CODE": FLIPPED_CODE, "PLACED_CODE": PLACED_CODE,
                                      "UNANSWERED_CELLS": f"{UNANSWERED_CELLS:.1f}"}))
     defines = f"#define SEARCHED\n#define VALID_THRESHOLD {VALID_THRESHOLD}\n"
     defines += "#define LAW_TEST\n" * law_test + "#define HIDDEN_TEST\n" * hidden_test
+    defines += (f"#define REFRACTION_TEST\n#define PATH_FOUND {search_module.FOUND}\n"
+                f"#define OUTSIDE_PX {refraction_search.OUTSIDE_PX:.9e}\n"
+                f"#define REFRACTION_REACH {refraction_search.REFRACTION_REACH * EDGE_FRACTION:.9e}\n") * refracted
     info.fragment_source(reflected_fragment_source(defines))
     return gpu.shader.create_from_info(info)
 
@@ -175,18 +191,35 @@ class ReflectedMeshes:
         self._positions = None
         self._batch = None
         self._corner_batch = None
+        self._mesh_boxes = None
 
     @property
     def positions(self):
-        """The vertices relative to the shift, one RGBA32F texel each (rows of ``width``)."""
+        """The vertices relative to the shift, one RGBA32F texel each (rows of ``width``),
+        the index of each one's mesh as w."""
         self._ensure()
         return self._positions
+
+    @property
+    def mesh_boxes(self):
+        """Each diffuse mesh's bounding box relative to the shift: two RGBA32F texels per
+        mesh (its lowest and highest corner), made on first use."""
+        if self._mesh_boxes is None:
+            g = self.geometry
+            count = max(1, len(g.mesh_names))
+            low, high = np.full((count, 3), np.inf), np.full((count, 3), -np.inf)
+            mesh = np.zeros(self.n_vertices, int) if g.vertex_mesh is None else g.vertex_mesh
+            np.minimum.at(low, mesh, g.vertices - g.shift)
+            np.maximum.at(high, mesh, g.vertices - g.shift)
+            self._mesh_boxes = data_texture(np.stack([low, high], axis=1).reshape(-1, 3), 2 * count)
+        return self._mesh_boxes
 
     def _ensure(self) -> None:
         if self._positions is not None:
             return
         g = self.geometry
-        self._positions = data_texture((g.vertices - g.shift).astype(np.float32), self.width)
+        mesh = np.zeros(self.n_vertices) if g.vertex_mesh is None else g.vertex_mesh
+        self._positions = data_texture(np.c_[g.vertices - g.shift, mesh].astype(np.float32), self.width)
         attributes = {"vertex_index": (np.arange(self.n_vertices, dtype=np.int32), 'I32', 'INT'),
                       "color": (g.colors, 'F32', 'FLOAT'),
                       "normal_lit": (np.c_[g.normals, g.lit].astype(np.float32), 'F32', 'FLOAT'),
@@ -197,8 +230,10 @@ class ReflectedMeshes:
 
     def corner_batch(self):
         """The reflected meshes as a batch of triangle corners (no index buffer), each
-        with its vertex's data and its triangle's first corner (``anchor_index``): a
-        folded mirror's answer slots are matched per triangle (``glsl/iterative_mesh_vert.glsl``).
+        with its vertex's data, its triangle's first corner (``anchor_index``) and which
+        corner it is (``corner``, 0-2): a folded mirror's answer slots are matched per
+        triangle (``glsl/iterative_mesh_vert.glsl``), and a fragment seen through glass is
+        tested against its own triangle (``glsl/reflection_mesh_frag.glsl``).
         Made on first use."""
         self._ensure()
         if self._corner_batch is None and self._batch is not None:
@@ -209,7 +244,8 @@ class ReflectedMeshes:
                           "color": (np.asarray(g.colors)[flat], 'F32', 'FLOAT'),
                           "normal_lit": (np.c_[g.normals, g.lit].astype(np.float32)[flat], 'F32', 'FLOAT'),
                           "uv": (np.asarray(g.uvs)[flat], 'F32', 'FLOAT'),
-                          "anchor_index": (np.repeat(corners[:, 0], 3), 'I32', 'INT')}
+                          "anchor_index": (np.repeat(corners[:, 0], 3), 'I32', 'INT'),
+                          "corner": (np.tile(np.arange(3, dtype=np.int32), len(corners)), 'I32', 'INT')}
             self._corner_batch = gpu.types.GPUBatch(type='TRIS', buf=vertex_buffer(attributes))
         return self._corner_batch
 
@@ -254,7 +290,7 @@ class ReflectedMeshes:
             reflector_index, texture, exit_points, images = AnswerSet(*answer)
             law_test, hidden_test = fragment_tests(reflector_index, setup)
             law_test &= exit_points is None  # refracted: the law of reflection does not hold
-            shader = reflected_shader(law_test, hidden_test, exit_points is not None, images > 1)
+            shader = reflected_shader(law_test, hidden_test, exit_points is not None, images)
             shader.bind()
             shader.uniform_float("view_projection", view_projection)
             shader.uniform_float("inverse_diameter", setup["inverse_diameter"])
@@ -265,6 +301,9 @@ class ReflectedMeshes:
             shader.uniform_sampler("search_result", texture)
             if exit_points is not None:
                 shader.uniform_sampler("exit_points", exit_points)
+                for name, texture in zip(("glass_exits", "glass_leaving"), setup["glass_rays"]):
+                    shader.uniform_sampler(name, texture)
+                shader.uniform_sampler("mesh_boxes", self.mesh_boxes)
             shader.uniform_float("reflector_id", float(reflector_index + 1))
             if law_test or hidden_test:
                 shader.uniform_float("camera", setup["camera"])
@@ -275,9 +314,10 @@ class ReflectedMeshes:
             if hidden_test:
                 shader.uniform_float("hidden_tolerance",
                                      setup["hidden_fraction"] * float(self.geometry.reflector_sizes[reflector_index]))
-            batch = self.corner_batch() if images > 1 else self._batch
+            corners = images > 1 or exit_points is not None
+            batch = self.corner_batch() if corners else self._batch
             for slot in range(images):
-                if images > 1:
+                if corners:
                     shader.uniform_int("slot", slot)
                 for (image, first, count), winding in zip(self.geometry.ranges, windings):
                     gpu.state.face_culling_set(_culled_faces(winding) if reflector_index in mirrored else 'NONE')
@@ -303,7 +343,11 @@ class ReflectedMeshes:
 
     def read_points(self, texture) -> np.ndarray:
         """(N, 3) world points of a texture of one point per vertex, read back."""
-        return self._texels(texture)[0, :, :3] + self.geometry.shift
+        return self.read_slot_points(texture)[0]
+
+    def read_slot_points(self, texture) -> np.ndarray:
+        """(slots, N, 3) world points of a texture of one point per vertex in each slot."""
+        return self._texels(texture)[..., :3] + self.geometry.shift
 
     def _texels(self, texture) -> np.ndarray:
         """(slots, N, 4) float64 texels of a texture of one texel per vertex in each slot."""

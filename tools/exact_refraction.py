@@ -66,6 +66,29 @@ class Refractions:
     def count_per_point(self, n_points: int) -> np.ndarray:
         return np.bincount(self.point, minlength=n_points)
 
+    def crossing(self, interfaces: int, more: bool = False) -> "Refractions":
+        """The images whose paths cross ``interfaces`` glass surfaces (``more``: at least
+        that many). Two: in and out of a convex solid; more: reflected inside first."""
+        count = (self.history >= 0).sum(axis=1)
+        keep = count >= interfaces if more else count == interfaces
+        return Refractions(self.point[keep], self.pixel[keep], self.history[keep], self.first_position[keep],
+                           self.distance[keep])
+
+    def matched(self, answers) -> tuple[np.ndarray, np.ndarray]:
+        """How a search's answers meet these images: ``answers`` (slots, N, 2) pixels of
+        the N points (NaN: no answer in that slot). Returns (S,) each exact image's
+        distance to its point's nearest answer (inf: none), and (slots, N) each answer's
+        distance to its point's nearest exact image (inf where the point has none, NaN
+        where there is no answer)."""
+        answers = np.asarray(answers, dtype=np.float64)
+        answers = answers.reshape((-1,) + answers.shape[-2:])
+        apart = np.linalg.norm(answers[:, self.point] - self.pixel[None], axis=2)
+        apart = np.nan_to_num(apart, nan=np.inf)
+        nearest = np.full(answers.shape[:2], np.inf)
+        for slot in range(len(answers)):
+            np.minimum.at(nearest[slot], self.point, apart[slot])
+        return apart.min(axis=0), np.where(np.isnan(answers[..., 0]), np.nan, nearest)
+
 
 def solve_refractions(glass: GlassSet, view: View, points: np.ndarray, stride: float = 2.0) -> Refractions:
     """Every image of ``points`` (P, 3) seen through ``glass`` in ``view`` (see the module)."""

@@ -26,6 +26,18 @@
  * a point and is dropped before rasterisation, and neighbours sharing a vertex still
  * meet. */
 
+/* An answer texel's code: found (FOUND_CODE modulo 16), flipped (FLIPPED_CODE), placed
+ * without an answer (PLACED_CODE). */
+bool is_found(float code)
+{
+  return int(code) % 16 == FOUND_CODE;
+}
+
+bool is_flipped(float code)
+{
+  return (int(code) / FLIPPED_CODE) % 2 == 1;
+}
+
 #ifdef IMAGES
 /* A folded mirror's answers hold IMAGES slots, one below another (iterative_search.glsl's
  * search_images), and the meshes are drawn as triangle corners, a slot at a time: the
@@ -35,28 +47,49 @@
  * corner's nearest answer is another image all the same (its own is missing), the
  * fragment stage's law of reflection (reflected_meshes.FOLDED_REFLECTION_COSINE) drops
  * the triangle's fragments. */
-vec4 matched_answer(ivec2 texel, int result_width)
+vec4 matched_answer(ivec2 texel, int result_width, out ivec2 chosen)
 {
   int rows = textureSize(search_result, 0).y / IMAGES;
   ivec2 anchor_texel = ivec2(anchor_index % result_width, anchor_index / result_width);
-  vec4 anchor = texelFetch(search_result, anchor_texel + ivec2(0, slot * rows), 0);
-  if (vertex_index == anchor_index || int(anchor.w) % 16 != FOUND_CODE) {
+  chosen = anchor_texel + ivec2(0, slot * rows);
+  vec4 anchor = texelFetch(search_result, chosen, 0);
+  if (vertex_index == anchor_index) {
     return anchor;
   }
-  vec4 nearest = anchor;
-  nearest.w = 0.0;  /* no answer of its own: unanswered */
+  if (!is_found(anchor.w)) {
+#ifdef EXIT_POINTS
+    /* Through glass each corner where its own search put it (an answer in this slot, or
+     * placed, PLACED_CODE): the fragment stage's ray cast keeps what the pixels' rays hit. */
+    chosen = texel + ivec2(0, slot * rows);
+    return texelFetch(search_result, chosen, 0);
+#else
+    return anchor;  /* collapsed with the anchor: no area, dropped before set-up */
+#endif
+  }
+  /* Without an answer of its own: unanswered, or placed (glass, PLACED_CODE) in its first slot. */
+  chosen = texel;
+  vec4 nearest = texelFetch(search_result, texel, 0);
+  if (is_found(nearest.w)) {
+    nearest.w = 0.0;
+  }
   float best = 1e30;
-  bool anchor_flipped = int(anchor.w) >= FLIPPED_CODE;
+  bool anchor_flipped = is_flipped(anchor.w);
   for (int k = 0; k < IMAGES; k++) {
     vec4 candidate = texelFetch(search_result, texel + ivec2(0, k * rows), 0);
     /* An image of the other parity lies across a fold from the anchor's: it counts as
      * farther than any of the same parity (beside a fold, a neighbour's two images lie
      * on both sides of the anchor's, the wrong one as near as the right one). */
-    bool other_parity = (int(candidate.w) >= FLIPPED_CODE) != anchor_flipped;
+    bool other_parity = is_flipped(candidate.w) != anchor_flipped;
     float apart = length(candidate.xyz - anchor.xyz) + (other_parity ? 1e20 : 0.0);
-    if (int(candidate.w) % 16 == FOUND_CODE && apart < best) {
+#ifdef EXIT_POINTS
+    /* Through glass the anchor's own slot first: images keep their order (of entry
+     * angle) from vertex to vertex, and beside a caustic the nearest may be another. */
+    apart *= k == slot ? 1.0 : 1e10;
+#endif
+    if (is_found(candidate.w) && apart < best) {
       best = apart;
       nearest = candidate;
+      chosen = texel + ivec2(0, k * rows);
     }
   }
   return nearest;
@@ -67,22 +100,29 @@ void main()
 {
   int result_width = textureSize(vertex_positions, 0).x;
   ivec2 texel = ivec2(vertex_index % result_width, vertex_index / result_width);
+  /* The texel of the answer taken (its slot's, for the exit point through glass). */
+  ivec2 chosen = texel;
 #ifdef IMAGES
-  vec4 found = matched_answer(texel, result_width);
+  vec4 found = matched_answer(texel, result_width, chosen);
 #else
   vec4 found = texelFetch(search_result, texel, 0);
 #endif
   vec3 vertex = texelFetch(vertex_positions, texel, 0).xyz;
   vec3 p = found.xyz;
   vec4 clip = view_projection * vec4(p, 1.0);
-  bool valid = int(found.w) % 16 == FOUND_CODE && clip.w > 0.0;
-  bool flipped = int(found.w) >= FLIPPED_CODE;
+  bool valid = is_found(found.w) && clip.w > 0.0;
+  bool flipped = is_flipped(found.w);
+  bool placed = false;
   vec3 to_mirror = p - vertex;
 #ifdef EXIT_POINTS
   /* Seen through glass (refraction_search.glsl): along the ray leaving it at the exit
    * point; two vertices on one pixel share the path inside, so the distance from the exit
    * orders them as the distance from P would. */
-  to_mirror = texelFetch(exit_points, texel, 0).xyz - vertex;
+  to_mirror = texelFetch(exit_points, chosen, 0).xyz - vertex;
+  mesh_point_interp = vertex;
+  mesh_interp = int(texelFetch(vertex_positions, texel, 0).w);
+  barycentric_interp = vec3(corner == 0, corner == 1, corner == 2);
+  placed = !valid && int(found.w) >= PLACED_CODE && clip.w > 0.0;
 #endif
   float distance = length(to_mirror);
   color_interp = color;
@@ -97,7 +137,7 @@ void main()
   valid_interp = valid ? (flipped ? -1.0 : 1.0) : 0.0;
   float depth = clamp(distance * inverse_diameter, 0.0, 1.0) * order_range;
   vec2 ndc = clip.xy / clip.w;
-  if (!valid) {
+  if (!valid && !placed) {
     ndc = (floor(ndc * (0.5 * UNANSWERED_CELLS)) + 0.5) / (0.5 * UNANSWERED_CELLS);
   }
   else if (snap_grid.x > 0.0) {

@@ -1,19 +1,11 @@
 /* SPDX-License-Identifier: GPL-3.0-or-later */
-/* What the per-vertex searches on a star-shaped surface's cube map share
- * (iterative_search.glsl, refraction_search.glsl): their status codes, the invocation's
- * vertex, the map's reading (layout in engine/methods/iterative/reflector_map.py) and the
- * Newton step in a chart of it, the test of the other maps on a segment and the answer's
- * code. Expects the samplers `map_params`, `reflector_maps` and `vertex_positions`, the
+/* What the per-vertex searches on a star-shaped surface's cube map (cube_map.glsl, before
+ * this) share (iterative_search.glsl, refraction_search.glsl): the invocation's vertex,
+ * the Newton step in a chart of the map, the test of the other maps on a segment and the
+ * answer's code. Expects the sampler `vertex_positions`, the
  * image `result`, the push constants `camera`, `w_row`, `stop_per_w`, `n_vertices`,
  * `positions_width`, `warm`, `self_map` and `n_maps`, and the defines OCCLUSION_SAMPLES,
  * FLIPPED_CODE, DERIVATIVE_STEP and TRUST_RADIUS. */
-
-#define FOUND 1
-#define NOT_CONVERGED 0
-#define NO_SURFACE -1
-#define FACES_AWAY -2
-#define OCCLUDED -3
-#define INSIDE -4
 
 /* The Newton step -J^-1 f for the Jacobian's columns ju, jv (zero where J is singular). */
 vec2 newton_step(vec2 ju, vec2 jv, vec2 f)
@@ -35,82 +27,6 @@ vec2 trusted_step(vec2 f, vec2 fu, vec2 fv, out vec2 ju, out vec2 jv)
     delta *= TRUST_RADIUS / reach;
   }
   return delta;
-}
-
-/* The map in use (use_map): its centre, radii, rows and size. */
-vec3 centre;
-float max_radius;
-float mean_radius;
-float min_radius;
-int map_row;
-int face_size;
-int convex;
-int patch_row;
-int patch_count;
-int images;
-
-void use_map(int map)
-{
-  vec4 a = texelFetch(map_params, ivec2(3 * map, 0), 0);
-  vec4 b = texelFetch(map_params, ivec2(3 * map + 1, 0), 0);
-  vec4 c = texelFetch(map_params, ivec2(3 * map + 2, 0), 0);
-  centre = a.xyz;
-  max_radius = a.w;
-  map_row = int(b.x);
-  face_size = int(b.y);
-  convex = int(b.z);
-  mean_radius = b.w;
-  patch_row = int(c.x);
-  patch_count = int(c.y);
-  min_radius = c.z;
-  images = max(int(c.w), 1);
-}
-
-
-/* Bilinear radius and normal of the map along unit direction d; false on a hole. */
-bool map_surface(vec3 d, out float radius, out vec3 normal)
-{
-  vec3 m = abs(d);
-  int axis = (m.x >= m.y && m.x >= m.z) ? 0 : ((m.y >= m.z) ? 1 : 2);
-  float major = d[axis];
-  float scale = 1.0 / max(abs(major), 1e-30);
-  float u = d[(axis + 1) % 3] * scale;
-  float v = d[(axis + 2) % 3] * scale;
-  int face = 2 * axis + (major < 0.0 ? 1 : 0);
-  float size = float(face_size);
-  float fx = (u + 1.0) * 0.5 * size + 0.5;
-  float fy = (v + 1.0) * 0.5 * size + 0.5;
-  float i = clamp(floor(fx), 0.0, size);
-  float j = clamp(floor(fy), 0.0, size);
-  float tx = fx - i;
-  float ty = fy - j;
-  ivec2 base = ivec2(int(i), map_row + face * (face_size + 2) + int(j));
-  vec4 a = texelFetch(reflector_maps, base, 0);
-  vec4 b = texelFetch(reflector_maps, base + ivec2(1, 0), 0);
-  vec4 c = texelFetch(reflector_maps, base + ivec2(0, 1), 0);
-  vec4 e = texelFetch(reflector_maps, base + ivec2(1, 1), 0);
-  vec4 value = (1.0 - tx) * (1.0 - ty) * a + tx * (1.0 - ty) * b + (1.0 - tx) * ty * c + tx * ty * e;
-  bool valid = min(min(a.x, b.x), min(c.x, e.x)) > 0.0;
-  radius = valid ? value.x : 0.0;
-  normal = value.yzw / max(length(value.yzw), 1e-30);
-  return valid;
-}
-
-bool inside_surface(vec3 p)
-{
-  float distance = length(p);
-  float radius;
-  vec3 normal;
-  bool valid = map_surface(p / max(distance, 1e-30), radius, normal);
-  return valid && distance < radius;
-}
-
-vec3 perpendicular(vec3 d)
-{
-  vec3 m = abs(d);
-  vec3 helper = (m.x <= m.y && m.x <= m.z) ? vec3(1.0, 0.0, 0.0) :
-                ((m.y <= m.z) ? vec3(0.0, 1.0, 0.0) : vec3(0.0, 0.0, 1.0));
-  return normalize(cross(d, helper));
 }
 
 float pixel_tolerance(vec3 p)

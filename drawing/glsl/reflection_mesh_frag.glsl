@@ -15,9 +15,18 @@
 
 void main()
 {
-#ifdef SEARCHED
+#ifdef REFRACTION_TEST
+  /* Before any discard: screen derivatives need the whole 2 x 2 quad. */
+  vec3 across_x = dFdx(mesh_point_interp);
+  vec3 across_y = dFdy(mesh_point_interp);
+  vec3 dFdx_barycentric = dFdx(barycentric_interp);
+  vec3 dFdy_barycentric = dFdy(barycentric_interp);
+  vec4 exit_ray = texelFetch(glass_exits, ivec2(gl_FragCoord.xy), 0);
+#endif
+#if defined(SEARCHED) && !defined(REFRACTION_TEST)
   /* Iterative search (iterative_mesh_vert.glsl): a triangle with an unanswered corner, or
-   * joining a flipped image (-1) to a direct one (1). */
+   * joining a flipped image (-1) to a direct one (1). Through glass the ray cast below
+   * decides. */
   if (!(abs(valid_interp) >= VALID_THRESHOLD)) {  /* NaN too */
     discard;
   }
@@ -68,6 +77,59 @@ void main()
       discard;
     }
   }
+#endif
+#ifdef REFRACTION_TEST
+  /* Through glass, a ray cast: the pixel's own refracted path (glass_rays.glsl) must
+   * exist, and its ray leaving the glass is met with the plane of the fragment's
+   * triangle, spanned by the screen derivatives of the point of the mesh. The meeting
+   * point's barycentric coordinates follow from theirs (both are affine across the drawn
+   * triangle, wherever its corners were placed), so whether the ray hits the triangle is
+   * exact: a hit, within OUTSIDE_PX of the drawn edges (a pixel whose ray meets the
+   * neighbour a fraction of a pixel away). Where a strong lens magnifies a coarse
+   * triangle its straight image strays from its true one, and the rays that hit it cross
+   * its neighbours' images: a fragment of a triangle whose corners were all answered (in
+   * images of one parity) stands in where its ray passes the fragment's point within
+   * REFRACTION_REACH of the meshes' subdivision limit (engine/geometry/subdivision.py: a
+   * share of the larger of the glass's radius and the point's distance from its centre,
+   * here bounded by the distance from the exit plus the radius). A triangle drawn across
+   * two images of a lens (either side of a focus) spans pixels whose rays pass it farther
+   * off, and is dropped. A hit lies at the distance along its ray to the plane, a stand-in
+   * at its own. */
+  if (int(exit_ray.w) != PATH_FOUND) {
+    discard;
+  }
+  vec4 leaving = texelFetch(glass_leaving, ivec2(gl_FragCoord.xy), 0);
+  vec3 plane_normal = cross(across_x, across_y);
+  float rate = dot(leaving.xyz, plane_normal);
+  float ahead = dot(mesh_point_interp - exit_ray.xyz, plane_normal) / (abs(rate) > 1e-30 ? rate : 1e-30);
+  vec3 offset = exit_ray.xyz + ahead * leaving.xyz - mesh_point_interp;
+  float xx = dot(across_x, across_x);
+  float xy = dot(across_x, across_y);
+  float yy = dot(across_y, across_y);
+  float det = xx * yy - xy * xy;
+  /* The hit's offset from this fragment, in pixels of the drawn triangle. */
+  vec2 moved = vec2(yy * dot(offset, across_x) - xy * dot(offset, across_y),
+                    xx * dot(offset, across_y) - xy * dot(offset, across_x)) / max(det, 1e-38);
+  vec3 at = barycentric_interp + moved.x * dFdx_barycentric + moved.y * dFdy_barycentric;
+  /* Each coordinate's fall per pixel is its gradient's length. */
+  vec3 per_pixel = sqrt(dFdx_barycentric * dFdx_barycentric + dFdy_barycentric * dFdy_barycentric);
+  bool hit = ahead > 0.0 && det > 0.0 && all(greaterThanEqual(at, -OUTSIDE_PX * per_pixel));
+  float radius = abs(leaving.w);
+  float reach = REFRACTION_REACH * max(radius, length(mesh_point_interp - exit_ray.xyz) + radius);
+  /* The ray through the mesh's bounding box (slabs): a stand-in for a mesh it misses
+   * would show the mesh where the pixel sees past it. */
+  vec3 low = texelFetch(mesh_boxes, ivec2(2 * mesh_interp, 0), 0).xyz - exit_ray.xyz;
+  vec3 high = texelFetch(mesh_boxes, ivec2(2 * mesh_interp + 1, 0), 0).xyz - exit_ray.xyz;
+  vec3 inverse = 1.0 / leaving.xyz;
+  vec3 t0 = min(low * inverse, high * inverse);
+  vec3 t1 = max(low * inverse, high * inverse);
+  bool through_box = max(max(t0.x, t0.y), max(t0.z, 0.0)) <= min(min(t1.x, t1.y), t1.z);
+  bool stands_in = abs(valid_interp) >= VALID_THRESHOLD && ahead > 0.0 && dot(offset, offset) <= reach * reach &&
+                   through_box;
+  if (!hit && !stands_in) {
+    discard;
+  }
+  gl_FragDepth = clamp((hit ? ahead : distance_interp) * inverse_diameter, 0.0, 1.0) * order_range;
 #endif
   vec4 albedo = color_interp;
   if (use_image != 0) {

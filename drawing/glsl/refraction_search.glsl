@@ -4,10 +4,10 @@
  *
  * The iterative search of Roger & Holzschuch (2006, section 3.3) carried over to a
  * refracted path, as Chen & Arvo (2000, section VI) carry path perturbation over: the
- * unknown is the entry point A on the glass's cube map (map_search.glsl), two chart
+ * unknown is the entry point A on the glass's cube map (cube_map.glsl), two chart
  * coordinates around a first guess. From A the eye's ray is refracted in (Snell's law
  * with the map's interpolated normal), followed to where it leaves the surface (B,
- * `exit_point`), and refracted out; the residual is the angle between that ray and the
+ * `exit_point`), and refracted out (glass_path.glsl); the residual is the angle between that ray and the
  * direction from B to the vertex, driven to zero by damped Newton with a finite-difference
  * Jacobian, as iterative_search.glsl does for the half vector:
  *   1. first guesses: entry directions in the plane of the eye, the centre and the vertex
@@ -21,67 +21,13 @@
  * A closed convex solid is entered and left once: nothing of it lies between the eye and
  * A, or between B and the vertex, once A faces the eye and the ray leaves toward the
  * vertex. Everything runs relative to the map's centre O.
- * Output texels: `result` (A relative to the renderer's shift, `answer_code`, with
- * FLIPPED_CODE where the image is mirrored: `flipped_image`); `exit_result` (B relative
- * to the shift, 0). */
-
-#define TOTAL_REFLECTION -5
-
-/* Unit direction of the eye's ray arriving at p. */
-vec3 eye_ray(vec3 p)
-{
-  return camera.w > 0.5 ? normalize(p - (camera.xyz - centre)) : -camera.xyz;
-}
-
-/* Where the ray from `a` (on the surface) along unit `t` (into the solid) leaves it: the
- * exit B and its outward normal. Plane steps (the ray met with the tangent plane where
- * the map's surface lies along the current estimate's direction; exact in one step on a
- * flat face), from the chord of the sphere through `a`; bisection on the sign of
- * |x| - r(x / |x|) within the bounding sphere where they fail to settle. */
-bool exit_point(vec3 a, vec3 t, out vec3 b, out vec3 n)
-{
-  float along = dot(a, t);
-  float far = -along + sqrt(max(along * along - (dot(a, a) - max_radius * max_radius), 0.0));
-  if (far <= 0.0) {
-    return false;
-  }
-  float tolerance = EXIT_TOLERANCE * max_radius;
-  float s = clamp(-2.0 * along, 0.0, far);
-  float radius;
-  for (int k = 0; k < EXIT_STEPS; k++) {
-    vec3 x = a + s * t;
-    float distance = max(length(x), 1e-30);
-    if (!map_surface(x / distance, radius, n)) {
-      return false;
-    }
-    float rate = dot(t, n);
-    if (rate <= 1e-4) {
-      break;
-    }
-    float next = clamp(s + dot((radius - distance) * (x / distance), n) / rate, 0.0, far);
-    if (abs(next - s) < tolerance) {
-      b = a + next * t;
-      return map_surface(normalize(b), radius, n);
-    }
-    s = next;
-  }
-  float lo = EXIT_START * far;
-  float hi = far;
-  for (int k = 0; k < EXIT_BISECTIONS; k++) {
-    float mid = 0.5 * (lo + hi);
-    vec3 x = a + mid * t;
-    float distance = max(length(x), 1e-30);
-    bool valid = map_surface(x / distance, radius, n);
-    if (valid && distance < radius) {
-      lo = mid;
-    }
-    else {
-      hi = mid;
-    }
-  }
-  b = a + hi * t;
-  return map_surface(normalize(b), radius, n) && dot(t, n) > 0.0;
-}
+ * Output texels, IMAGES answer slots one below another: `result` (A relative to the
+ * renderer's shift, `answer_code`, with FLIPPED_CODE where the image is mirrored:
+ * `flipped_image`); `exit_result` (B relative to the shift, 0). A vertex without an image
+ * whose nearest search stopped within PLACED_RESIDUAL of a path to it (beside the edge of
+ * what the glass shows, where a triangle has corners on both sides) keeps that search's
+ * end in its first slot, marked PLACED_CODE: its triangles are drawn for the fragment
+ * stage's ray cast (reflection_mesh_frag.glsl) to keep what the rays through them hit. */
 
 /* The chart around the guess and the residual's fixed axes. */
 vec3 chart_axis;
@@ -106,25 +52,12 @@ int evaluate(vec2 x, out vec2 f, out vec3 a, out vec3 b, out vec3 o)
     return NO_SURFACE;
   }
   a = radius * d;
-  vec3 incoming = eye_ray(a);
-  if (dot(incoming, n) >= 0.0) {
-    return FACES_AWAY;
+  int status = refracted_path(a, n, b, o);
+  if (status == FOUND) {
+    vec3 offset = o - normalize(vertex - b);
+    f = vec2(dot(offset, residual_e1), dot(offset, residual_e2));
   }
-  vec3 inside = refract(incoming, n, 1.0 / eta);
-  vec3 exit_normal;
-  if (dot(inside, inside) == 0.0) {
-    return TOTAL_REFLECTION;
-  }
-  if (!exit_point(a, inside, b, exit_normal)) {
-    return NO_SURFACE;
-  }
-  o = refract(inside, -exit_normal, eta);
-  if (dot(o, o) == 0.0) {
-    return TOTAL_REFLECTION;
-  }
-  vec3 offset = o - normalize(vertex - b);
-  f = vec2(dot(offset, residual_e1), dot(offset, residual_e2));
-  return FOUND;
+  return status;
 }
 
 /* The signed miss of the path entering along direction `d` from O (the eye's ray
@@ -147,7 +80,7 @@ float path_miss(vec3 d, vec3 side, out bool ahead)
  * lies), sampled across the part of the map the eye may see, where the path's signed
  * miss across that plane changes sign with the vertex ahead, bisected; or, with none,
  * the sample that misses least. */
-vec3 guesses[MAX_STARTS];
+vec3 guesses[MAX_STARTS + PIXEL_STARTS];
 
 int plane_guesses()
 {
@@ -202,6 +135,72 @@ int plane_guesses()
   return count;
 }
 
+/* Up to PIXEL_STARTS more first guesses after the first `count`, from the pixels' own
+ * paths through the glass (glass_rays.glsl), when the frame has them (`pixel_rect`, the
+ * glass's box on screen in pixels, x0 y0 x1 y1, empty without): the entries of the pixels,
+ * on a grid PIXEL_GRID across the box, whose leaving rays pass the vertex at the smallest
+ * angles, PIXEL_APART grid cells apart at least (distinct images). They find what the
+ * plane's guesses cannot: images off that plane (a lens seen at an angle), and paths
+ * reflected inside (a box's side). */
+int pixel_guesses(int count)
+{
+  if (pixel_rect.z <= pixel_rect.x || pixel_rect.w <= pixel_rect.y) {
+    return count;
+  }
+  float best[PIXEL_STARTS];
+  ivec2 best_cell[PIXEL_STARTS];
+  vec3 best_entry[PIXEL_STARTS];
+  for (int k = 0; k < PIXEL_STARTS; k++) {
+    best[k] = PLACED_RESIDUAL;
+    best_cell[k] = ivec2(-1000);
+  }
+  vec3 target = vertex + centre;
+  for (int j = 0; j < PIXEL_GRID; j++) {
+    for (int i = 0; i < PIXEL_GRID; i++) {
+      ivec2 pixel = pixel_rect.xy + (ivec2(i, j) * (pixel_rect.zw - 1 - pixel_rect.xy)) / (PIXEL_GRID - 1);
+      vec4 entry = texelFetch(pixel_entries, pixel, 0);
+      vec4 exit_ray = texelFetch(pixel_exits, pixel, 0);
+      if (abs(entry.w - glass_id) > 0.5 || int(exit_ray.w) != FOUND) {
+        continue;
+      }
+      vec3 toward = target - exit_ray.xyz;
+      vec3 leaving = texelFetch(pixel_leaving, pixel, 0).xyz;
+      float along = dot(toward, leaving);
+      float miss = along > 0.0 ? length(toward - along * leaving) / along : 1e30;
+      /* Kept in order of miss, no two within PIXEL_APART cells: a nearer one replaces
+       * what it is near. */
+      ivec2 cell = ivec2(i, j);
+      for (int k = 0; k < PIXEL_STARTS; k++) {
+        ivec2 apart = abs(cell - best_cell[k]);
+        bool near = max(apart.x, apart.y) < PIXEL_APART;
+        if (miss < best[k]) {
+          if (!near) {
+            for (int m = PIXEL_STARTS - 1; m > k; m--) {
+              best[m] = best[m - 1];
+              best_cell[m] = best_cell[m - 1];
+              best_entry[m] = best_entry[m - 1];
+            }
+          }
+          best[k] = miss;
+          best_cell[k] = cell;
+          best_entry[k] = entry.xyz;
+          break;
+        }
+        if (near) {
+          break;
+        }
+      }
+    }
+  }
+  for (int k = 0; k < PIXEL_STARTS; k++) {
+    if (best[k] < PLACED_RESIDUAL) {
+      guesses[count] = best_entry[k];
+      count++;
+    }
+  }
+  return count;
+}
+
 /* Whether the last converged answer of newton() is a flipped image: the bundle of the
  * eye's rays around the path, oriented as it enters at A (det [A_u, A_v, i] for the
  * incoming direction i), arrives at the vertex turned over (det [Q_u, Q_v, o] for
@@ -212,6 +211,8 @@ int plane_guesses()
  * focal lines (astigmatism, a fold) changes it. Near a focus both columns are short and
  * their finite differences noisy: the margin keeps that noise from marking a vertex. */
 bool flipped;
+/* The residual (radians) where the last newton() that took a step stopped. */
+float newton_residual;
 
 bool flipped_image(vec3 a, vec3 au, vec3 av, vec3 b, vec3 o, vec3 bu, vec3 ou, vec3 bv, vec3 ov)
 {
@@ -281,14 +282,31 @@ int newton(vec2 x, inout int steps, out vec3 a, out vec3 b)
     f = ft;
     a = at;
     b = bt;
+    newton_residual = length(f);
     if (length(a - previous) < pixel_tolerance(a)) {
       flipped = flipped_image(previous, au, av, previous_b, previous_o, bu, ou, bv, ov);  /* where sampled */
       o = ot;
-      return length(f) < RESIDUAL_TOLERANCE ? FOUND : NOT_CONVERGED;
+      return newton_residual < RESIDUAL_TOLERANCE ? FOUND : NOT_CONVERGED;
     }
     o = ot;
   }
   return NOT_CONVERGED;
+}
+
+/* Whether `entry` is one of the first `count` images kept (within SAME_IMAGE_PER_STOP of
+ * the stop tolerance: half the Accuracy). */
+vec3 kept_entry[IMAGES];
+vec3 kept_exit[IMAGES];
+bool kept_flipped[IMAGES];
+
+bool already_kept(vec3 entry, int count)
+{
+  for (int k = 0; k < count; k++) {
+    if (length(entry - kept_entry[k]) < SAME_IMAGE_PER_STOP * pixel_tolerance(entry)) {
+      return true;
+    }
+  }
+  return false;
 }
 
 void main()
@@ -301,9 +319,11 @@ void main()
   }
   int status = NO_SURFACE;
   int steps = 0;
-  bool image_flipped = false;
-  vec3 a = vec3(0.0);
-  vec3 b = vec3(0.0);
+  int count = 0;
+  /* Where a vertex without an image is placed: the end of the search that came nearest. */
+  float placed_residual = PLACED_RESIDUAL;
+  vec3 placed_entry = vec3(0.0);
+  vec3 placed_exit = vec3(0.0);
   bool eye_inside = camera.w > 0.5 && inside_surface(camera.xyz - centre);
   vec3 toward_eye = camera.w > 0.5 ? normalize(camera.xyz - centre) : camera.xyz;
   if (eye_inside || length(vertex) <= 1e-9 * max(max_radius, 1e-30) || inside_surface(vertex)) {
@@ -318,43 +338,68 @@ void main()
   else {
     residual_e1 = perpendicular(normalize(vertex));
     residual_e2 = cross(normalize(vertex), residual_e1);
-    /* One loop calls newton() once, as in iterative_search.glsl: llvmpipe compiles one
-     * copy of it, not one per start. Attempt -1: last frame's answer; the guesses are
-     * made only when it fails. */
-    int starts = 1;
-    for (int attempt = resume ? -1 : 0; attempt < starts; attempt++) {
-      if (attempt == 0) {
-        starts = plane_guesses();
-        if (starts == 0) {
-          break;
-        }
+    /* Every image: Newton from each of the plane's guesses, then the pixels', each
+     * distinct root kept in that order; warm, from last frame's images instead, where
+     * there were any (the guesses find the images a moving view gains when it stops,
+     * cold). One loop calls newton() once, as in iterative_search.glsl: llvmpipe
+     * compiles one copy of it, not one per start. */
+    int starts = 0;
+    int rows = imageSize(result).y / IMAGES;
+    for (int slot = 0; resume && slot < IMAGES && starts < MAX_STARTS; slot++) {
+      vec4 image = imageLoad(result, texel + ivec2(0, slot * rows));
+      if (int(image.w) % 16 == FOUND + 8) {
+        guesses[starts] = normalize(image.xyz - centre);
+        starts++;
       }
-      chart_axis = attempt < 0 ? normalize(last.xyz - centre) : guesses[attempt];
+    }
+    if (starts == 0) {
+      starts = pixel_guesses(plane_guesses());
+    }
+    for (int attempt = 0; attempt < starts && count < IMAGES; attempt++) {
+      chart_axis = guesses[attempt];
       chart_t1 = perpendicular(chart_axis);
       chart_t2 = cross(chart_axis, chart_t1);
       vec3 entry, leave;
       flipped = false;
+      newton_residual = 1e30;
       int verdict = newton(vec2(0.0), steps, entry, leave);
-      if (attempt <= 0 || verdict == FOUND) {
-        status = verdict;
-        a = entry;
-        b = leave;
-        image_flipped = flipped;
+      if (verdict == NOT_CONVERGED && newton_residual < placed_residual) {
+        placed_residual = newton_residual;
+        placed_entry = entry;
+        placed_exit = leave;
       }
-      if (verdict == FOUND) {
-        break;
+      /* Other glass on the way in or out: there the vertex is seen through more than
+       * this glass, which this path does not follow. (Orthographic: the eye's ray starts
+       * a thousand of the glass's radii back.) */
+      vec3 eye = camera.w > 0.5 ? camera.xyz : entry + centre + 1e3 * max_radius * camera.xyz;
+      vec3 entry_at = entry + centre;
+      vec3 leave_at = leave + centre;
+      vec3 vertex_at = vertex + centre;
+      if (verdict == FOUND && (other_map_blocks(leave_at, vertex_at) || other_map_blocks(eye, entry_at))) {
+        verdict = OCCLUDED;
+      }
+      use_map(self_map);
+      if (verdict == FOUND && !already_kept(entry, count)) {
+        kept_entry[count] = entry;
+        kept_exit[count] = leave;
+        kept_flipped[count] = flipped;
+        count++;
+      }
+      else if (count == 0 && attempt == 0) {
+        status = verdict;
       }
     }
   }
-  /* Other glass on the way in or out: there the vertex is seen through more than this
-   * glass, which this path does not follow. */
-  vec3 entry = a + centre;
-  vec3 leave = b + centre;
-  /* Orthographic: the eye's ray starts a thousand of the glass's radii back. */
-  vec3 eye = camera.w > 0.5 ? camera.xyz : entry + 1e3 * max_radius * camera.xyz;
-  if (status == FOUND && (other_map_blocks(leave, vertex + centre) || other_map_blocks(eye, entry))) {
-    status = OCCLUDED;
+  bool placed = count == 0 && placed_residual < PLACED_RESIDUAL;
+  int slots = imageSize(result).y / IMAGES;
+  for (int slot = 0; slot < IMAGES; slot++) {
+    ivec2 at = texel + ivec2(0, slot * slots);
+    bool kept = slot < count;
+    int code_status = kept ? FOUND : (slot == 0 ? status : NO_SURFACE);
+    vec3 entry = kept ? kept_entry[slot] : (placed ? placed_entry : vec3(0.0));
+    vec3 leave = kept ? kept_exit[slot] : (placed ? placed_exit : vec3(0.0));
+    float code = answer_code(code_status, steps, kept && kept_flipped[slot]);
+    imageStore(result, at, vec4(entry + centre, code + (placed && slot == 0 ? float(PLACED_CODE) : 0.0)));
+    imageStore(exit_result, at, vec4(leave + centre, 0.0));
   }
-  imageStore(result, texel, vec4(entry, answer_code(status, steps, image_flipped)));
-  imageStore(exit_result, texel, vec4(leave, 0.0));
 }

@@ -44,17 +44,27 @@ def search_defines() -> dict:
             "MAX_IMAGES": fold_patches.MAX_IMAGES, "SAME_IMAGE_PER_STOP": f"{s.SAME_IMAGE / s.STOP_FRACTION:.9e}"}
 
 
-def map_search_info(extra_floats=(), extra_samplers=()) -> "gpu.types.GPUShaderCreateInfo":
+def map_search_prelude(*then: str) -> str:
+    """The GLSL a per-vertex search on the cube maps begins with: the maps' reading
+    (``glsl/cube_map.glsl``), what the searches share (``glsl/map_search.glsl``), then the
+    files ``then``."""
+    return "".join(glsl_source(name) for name in ("cube_map.glsl", "map_search.glsl") + then)
+
+
+def map_search_info(extra_floats=(), extra_samplers=(), extra_ints=(), extra_ivec4s=()) -> "gpu.types.GPUShaderCreateInfo":
     """What a per-vertex search on the cube maps (``glsl/map_search.glsl``) declares:
     the view's push constants (:func:`bind_map_search`), the vertices, the maps and their
     parameters, a read-write ``result`` image, one invocation per vertex texel; then the
-    float push constants ``extra_floats`` and samplers ``extra_samplers`` of the search."""
+    float, int and ivec4 push constants ``extra_floats``, ``extra_ints`` and
+    ``extra_ivec4s`` and the samplers ``extra_samplers`` of the search."""
     info = gpu.types.GPUShaderCreateInfo()
     info.push_constant('VEC4', "camera")
     info.push_constant('VEC4', "w_row")
+    for name in extra_ivec4s:
+        info.push_constant('IVEC4', name)
     for name in ("stop_per_w",) + tuple(extra_floats):
         info.push_constant('FLOAT', name)
-    for name in ("n_vertices", "positions_width", "warm", "self_map", "n_maps"):
+    for name in ("n_vertices", "positions_width", "warm", "self_map", "n_maps") + tuple(extra_ints):
         info.push_constant('INT', name)
     for slot, name in enumerate(("vertex_positions", "reflector_maps", "map_params") + tuple(extra_samplers)):
         info.sampler(slot, 'FLOAT_2D', name)
@@ -67,7 +77,7 @@ def map_search_info(extra_floats=(), extra_samplers=()) -> "gpu.types.GPUShaderC
 def search_shader():
     """The compute shader of the search, built on first use."""
     info = map_search_info(extra_samplers=("map_patches",))
-    info.compute_source(glsl_source("iterative_search.glsl", search_defines(), glsl_source("map_search.glsl")))
+    info.compute_source(glsl_source("iterative_search.glsl", search_defines(), map_search_prelude()))
     return gpu.shader.create_from_info(info)
 
 

@@ -55,8 +55,8 @@ def measure_accuracy(name, kind, surface, eye, width: int, height: int, n_points
     """One glass's row: the search against the exact solver, and its GPU time per frame."""
     import gpu  # noqa: F401  (the drawing modules need it loaded)
 
-    from curved_reflections.drawing.draw_geometry import prepare_geometry
     from curved_reflections.drawing.methods.refraction_draw import RefractionPass
+    from curved_reflections.drawing.reflection_draw import ReflectionRenderer
     from curved_reflections.engine.glass import Glass, GlassSet
     from curved_reflections.blender import star_maps
     from curved_reflections.engine.glass.refraction_search import refracted_glass
@@ -72,40 +72,49 @@ def measure_accuracy(name, kind, surface, eye, width: int, height: int, n_points
     rng = np.random.default_rng(len(name))
     points = np.c_[rng.uniform(-1.8, 1.8, (n_points, 2)), rng.uniform(-4.0, -1.0, n_points)]
     triangles = np.arange(n_points - n_points % 3).reshape(-1, 3)
-    geometry = prepare_geometry([surface], [DiffuseMesh("points", points, triangles, np.ones((n_points, 4)))],
-                                edge_fraction=None)
-    points = geometry.vertices
+    # The glass layer's renderer (blender/glass_layer.py): its frame traces the pixels'
+    # paths, which the search starts from too.
+    renderer = ReflectionRenderer([surface], [DiffuseMesh("points", points, triangles, np.ones((n_points, 4)))],
+                                  reflector_colors=np.zeros((1, 3), np.float32), reflectivity=np.ones(1, np.float32),
+                                  transmits=np.ones(1, bool), edge_fraction=None,
+                                  passes=(RefractionPass.factory([method]),))
+    search = renderer.pass_named("refraction")
+    points = renderer.geometry.vertices
     view = look_at_view(eye, (0.0, 0.0, 0.0), fov_y_deg=30.0, width=width, height=height)
-    search = RefractionPass(geometry, [method])
     cold, warm = [], []
     for k in range(5):
         turned = look_at_view(np.asarray(eye) + (0.02 * k, 0.0, 0.0), (0.0, 0.0, 0.0), fov_y_deg=30.0, width=width,
                               height=height)
         for times, is_warm in ((cold, False), (warm, True)):
             started = time.perf_counter()
-            search.search(turned, warm=is_warm)
-            search.read(0)
+            renderer.draw_passes(turned, None, warm=is_warm)
+            search.read(0, slot=None)
             times.append(time.perf_counter() - started)
-    search.search(view)
-    entry, _, status = search.read(0)
-    exact = solve_refractions(GlassSet([glass]), view, points, stride=REFERENCE_STRIDE)
+    renderer.draw_passes(view, None)
+    entry, _, status = search.read(0, slot=None)
+    every = solve_refractions(GlassSet([glass]), view, points, stride=REFERENCE_STRIDE)
+    exact, inside = every.crossing(2), every.crossing(3, more=True)
     found = status == 1
+    answered_point = np.nonzero(found)[1]
     paths = GlassSet([glass]).trace(*view.pixel_rays(view.to_pixels(entry[found])[0]))
-    offset = points[found] - paths.origin
+    offset = points[answered_point] - paths.origin
     across = offset - np.einsum("ij,ij->i", offset, paths.direction)[:, None] * paths.direction
-    true_paths = (paths.interfaces == 2) & (np.linalg.norm(across, axis=1) < TRUE_PATH_MISS)
-    pixels = np.full((len(points), 2), np.nan)
+    true_paths = np.linalg.norm(across, axis=1) < TRUE_PATH_MISS
+    pixels = np.full(entry.shape[:-1] + (2,), np.nan)
     pixels[found] = view.to_pixels(entry[found])[0]
-    error = np.linalg.norm(pixels[exact.point] - exact.pixel, axis=1)
-    nearest = np.full(len(points), np.inf)
-    np.minimum.at(nearest, exact.point, np.nan_to_num(error, nan=np.inf))
+    error = exact.matched(pixels)[0]
+    nearest = every.matched(pixels)[1]
+    per_point = np.full(len(points), np.inf)
+    np.minimum.at(per_point, exact.point, error)
     seen = exact.count_per_point(len(points)) > 0
-    answered = found & np.isfinite(nearest)
+    answered = np.isfinite(nearest)
     return {"name": name, "kind": kind, "points": int(len(points)), "images": int(len(exact.point)),
+            "inside": int(len(inside.point)),
+            "inside_coverage": float((inside.matched(pixels)[0] < 1.0).mean()) if len(inside.point) else float("nan"),
             "several": int((exact.count_per_point(len(points)) > 1).sum()),
-            "coverage": float((error < 1.0).mean()), "point_coverage": float((nearest[seen] < 1.0).mean()),
+            "coverage": float((error < 1.0).mean()), "point_coverage": float((per_point[seen] < 1.0).mean()),
             "p99": float(np.percentile(nearest[answered], 99)) if answered.any() else float("nan"),
-            "unmatched": int((found & ~(nearest < 1.0) & seen).sum()), "bake": bake,
+            "unmatched": int((found & ~(nearest < 1.0)).sum()), "bake": bake,
             "true_paths": float(true_paths.mean()) if len(true_paths) else float("nan"),
             "cold_ms": 1000.0 * float(np.median(cold)), "warm_ms": 1000.0 * float(np.median(warm))}
 
@@ -153,24 +162,38 @@ def measure_frames(width: int, height: int, frames: int, folder: Path) -> dict:
             "glass": ", ".join(counts)}
 
 
+def search_images() -> int:
+    """The answer slots per point of the refraction search."""
+    from curved_reflections.engine.glass.refraction_search import IMAGES
+
+    return IMAGES
+
+
 def report(rows: list, frames: dict, command: str, machine: str, size: tuple) -> str:
     lines = ["# The refraction search: accuracy and cost", "",
              f"Command: `{command}`", "", f"Machine: {machine}", "",
              f"Points behind each glass solid (IOR {IOR:g}) against the exact solver, a {size[0]}x{size[1]} view; "
              f"targets: p99 <= {TARGET_P99_PX:g} px, coverage >= {100 * TARGET_COVERAGE:g} % of the exact images. "
-             "*Coverage*: exact images within a pixel of an answer; *points*: points with an image that got one "
-             "(the search keeps one image per point); *several*: points with more than one exact image; "
-             "*unmatched*: answers more than a pixel from every exact image of their point; *true paths*: answers "
-             f"whose pixel's eye ray, traced on the mesh, passes within {TRUE_PATH_MISS:g} of their point; "
-             f"the exact solver's grid is {REFERENCE_STRIDE:g} px; *map*: the "
-             "star-shape check and the cube map's bake (on the GPU, as the add-on makes it). Search "
-             "times: median of 5 on the GPU, cold (from the guesses) and warm (from the last frame's answers), "
-             "read back included.", "",
-             "| glass | set | points | exact images | several | coverage | points | p99 px | unmatched | "
+             "The search runs in the glass layer's frame, as the viewport runs it (the pixels' paths through the "
+             "glass first: its starts come from them too). *Exact images*: the exact solver's images in and "
+             "straight out of the glass (two interfaces); *inside*: those reflected inside first (a Glass "
+             "BSDF's, three interfaces or more; the search follows one reflection), and the share of them "
+             "answered; *coverage*: exact images (two "
+             f"interfaces) within a pixel of an answer (the search keeps up to {search_images()} images per "
+             "point); *points*: points with an image that got one; *several*: points with more than one exact "
+             "image; *unmatched*: answers more than a pixel from every exact image of their point; *true paths*: "
+             f"answers whose pixel's eye ray, traced on the mesh, passes within {TRUE_PATH_MISS:g} of their point; "
+             f"the exact solver's grid is {REFERENCE_STRIDE:g} px; *map*: the star-shape check and the cube map's "
+             "bake (on the GPU, as the add-on makes it). Frame times: the glass layer's passes (pre-pass, the "
+             "pixels' paths, the search, the refracted meshes), median of 5, cold (from the guesses) and warm "
+             "(from the last frame's answers), read back included.", "",
+             "| glass | set | points | exact images | inside | several | coverage | points | p99 px | unmatched | "
              "true paths | map s | cold ms | warm ms |",
-             "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
-        lines.append(f"| {r['name']} | {r['kind']} | {r['points']:,} | {r['images']:,} | {r['several']:,} | "
+        inside = f"{r['inside']:,} ({100 * r['inside_coverage']:.0f} %)" if r["inside"] else "0"
+        lines.append(f"| {r['name']} | {r['kind']} | {r['points']:,} | {r['images']:,} | {inside} | "
+                     f"{r['several']:,} | "
                      f"**{100 * r['coverage']:.1f} %** | {100 * r['point_coverage']:.1f} % | **{r['p99']:.3f}** | "
                      f"{r['unmatched']} | {100 * r['true_paths']:.1f} % | {r['bake']:.1f} | {r['cold_ms']:.0f} | "
                      f"{r['warm_ms']:.0f} |")

@@ -8,7 +8,7 @@ the command line; the figures themselves are the full run's
 
 import re
 
-ROW = re.compile(r"^\| (?P<name>[a-z ]+) \| (?P<set>tuned|held out) \| (?P<points>[\d,]+) \| [\d,]+ \| [\d,]+ \| "
+ROW = re.compile(r"^\| (?P<name>[a-z ]+) \| (?P<set>tuned|held out) \| (?P<points>[\d,]+) \| [\d,]+ \| [\d,]+(?: \([\d]+ %\))? \| [\d,]+ \| "
                  r"\*\*(?P<coverage>[\d.]+) %\*\* \| (?P<points_share>[\d.]+) % \| \*\*(?P<p99>[\d.]+)\*\* \|",
                  flags=re.MULTILINE)
 

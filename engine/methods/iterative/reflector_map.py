@@ -17,7 +17,7 @@ numpy agree exactly). Each face is one texel wider on every side than its [-1, 1
 square (texels taken along directions just past the face's edge), so a bilinear lookup
 never needs a second face.
 
-Layout (shared with ``drawing/glsl/map_search.glsl``): face f = 2 a + s for
+Layout (shared with ``drawing/glsl/cube_map.glsl``): face f = 2 a + s for
 the major axis a (0 x, 1 y, 2 z) and s = 1 where that component is negative; on it
 u = d[(a + 1) % 3] / |d[a]|, v = d[(a + 2) % 3] / |d[a]|. Texel (i, j) of face f, with
 i, j in 0 .. S + 1 for face size S, has its centre at u = (i - 0.5) 2 / S - 1 (v alike)
