@@ -34,6 +34,7 @@ from ..drawing.gpu_data import read_depth, read_texture
 from ..drawing.methods.refraction_draw import RefractionPass
 from ..drawing.reflection_draw import ReflectionRenderer
 from ..engine.errors import SceneInputError
+from ..engine.geometry import subdivision
 from ..engine.geometry.band_trace import BandTracer
 from ..engine.geometry.raytrace import reflect
 from ..engine.glass import GlassSet, fresnel_dielectric
@@ -148,23 +149,33 @@ def glass_layer(previous: GlassLayer | None, captured, key: tuple, world=(0.0, 0
         return previous
     names = {glass.name for glass in captured.glass}
     meshes = [mesh for mesh in captured.meshes if mesh.name not in names]
-    surfaces = [glass.surface for glass in captured.glass]
-    count = len(surfaces)
     searches = ([prepared_search(glass, index, accuracy_px) for index, glass in enumerate(captured.glass)]
                 if searched else [])
     methods = [method for method, _ in searches if method is not None]
-    iors = np.array([glass.ior for glass in captured.glass])
-    f0 = np.where([glass.reflects for glass in captured.glass], ((iors - 1.0) / (iors + 1.0)) ** 2, np.nan)
     # Mirrors are drawn as meshes: through glass they show as solid objects, and in front
     # of it they hide it.
-    renderer = ReflectionRenderer(surfaces, meshes + [_solid(mirror) for mirror in captured.reflectors],
-                                  reflector_colors=np.tile(world, (count, 1)).astype(np.float32),
-                                  reflectivity=np.ones(count, np.float32), fresnel_f0=f0.astype(np.float32),
-                                  transmits=np.ones(count, bool), attenuation_distance=np.zeros(count, np.float32),
-                                  passes=(RefractionPass.factory(methods),) if methods else ())
+    renderer = glass_renderer(captured.glass, meshes + [_solid(mirror) for mirror in captured.reflectors], methods,
+                              world)
     unsearched = {glass.name: reason for glass, (method, reason) in zip(captured.glass, searches) if method is None}
     return GlassLayer(key, GlassSet(list(captured.glass)), renderer, BandTracer(captured.reflectors, meshes),
                       unsearched=unsearched)
+
+
+def glass_renderer(glasses, meshes, methods, world=(0.0, 0.0, 0.0),
+                   edge_fraction: float | None = subdivision.EDGE_FRACTION) -> ReflectionRenderer:
+    """The renderer of ``glasses`` (``engine.glass.Glass`` each) as its reflectors and
+    ``meshes``, drawing through the searched ones (``methods``,
+    ``refraction_search.RefractedGlass`` each) the refraction search's images, weighed by
+    1 minus each glass's Fresnel term (Schlick's, from its IOR; none for glass that does
+    not reflect) over the ``world`` colour; ``edge_fraction`` as ``ReflectionRenderer``'s."""
+    count = len(glasses)
+    iors = np.array([glass.ior for glass in glasses], dtype=np.float64)
+    f0 = np.where([glass.reflects for glass in glasses], ((iors - 1.0) / (iors + 1.0)) ** 2, np.nan)
+    return ReflectionRenderer([glass.surface for glass in glasses], meshes, edge_fraction=edge_fraction,
+                              reflector_colors=np.tile(world, (count, 1)).astype(np.float32),
+                              reflectivity=np.ones(count, np.float32), fresnel_f0=f0.astype(np.float32),
+                              transmits=np.ones(count, bool), attenuation_distance=np.zeros(count, np.float32),
+                              passes=(RefractionPass.factory(methods),) if methods else ())
 
 
 def prepared_search(glass, index: int, accuracy_px: float) -> tuple:

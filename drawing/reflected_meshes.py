@@ -104,7 +104,7 @@ def reflected_shader(law_test: bool = True, hidden_test: bool = True, refracted:
     # (Blender counts 128 with `slot`); the vertices' texture width is read from it.
     info.push_constant('MAT4', "view_projection")
     info.push_constant('VEC4', "camera")
-    corners = images > 1 or refracted
+    corners = drawn_as_corners(images, refracted)
     if corners:
         info.push_constant('INT', "slot")
     info.push_constant('FLOAT', "inverse_diameter")
@@ -144,6 +144,13 @@ def reflected_shader(law_test: bool = True, hidden_test: bool = True, refracted:
                 f"#define REFRACTION_REACH {refraction_search.REFRACTION_REACH * EDGE_FRACTION:.9e}\n") * refracted
     info.fragment_source(reflected_fragment_source(defines))
     return gpu.shader.create_from_info(info)
+
+
+def drawn_as_corners(images: int, refracted: bool) -> bool:
+    """Whether answers in ``images`` slots are drawn from the triangle-corner batch
+    (:meth:`ReflectedMeshes.corner_batch`): several slots are matched per triangle, and a
+    fragment seen through glass is cast against its own triangle."""
+    return images > 1 or refracted
 
 
 def fragment_tests(reflector_index: int, setup: dict) -> tuple[bool, bool]:
@@ -314,7 +321,7 @@ class ReflectedMeshes:
             if hidden_test:
                 shader.uniform_float("hidden_tolerance",
                                      setup["hidden_fraction"] * float(self.geometry.reflector_sizes[reflector_index]))
-            corners = images > 1 or exit_points is not None
+            corners = drawn_as_corners(images, exit_points is not None)
             batch = self.corner_batch() if corners else self._batch
             for slot in range(images):
                 if corners:

@@ -35,18 +35,17 @@ void main()
   /* Perspective: from the eye, at eye depth 0; orthographic: from the near plane. */
   vec3 origin = camera.w > 0.5 ? camera.xyz : near.xyz / near.w;
   float start = camera.w > 0.5 ? 0.0 : -dot(origin, camera.xyz);
-  vec3 seen = origin + (label.w - start) * direction - centre;
+  vec3 d = normalize(origin + (label.w - start) * direction - centre);
   int status = INSIDE;
   vec3 b = vec3(0.0);
   vec3 o = vec3(0.0);
   if (!(camera.w > 0.5 && inside_surface(camera.xyz - centre))) {
-    vec3 d = normalize(seen);
     float radius;
     vec3 n;
     status = map_surface(d, radius, n) ? refracted_path(radius * d, n, b, o) : NO_SURFACE;
   }
   bool dark = status == TOTAL_REFLECTION && reflects == 0;
-  imageStore(entry_rays, pixel, vec4(normalize(seen), glass_id));
+  imageStore(entry_rays, pixel, vec4(d, glass_id));
   imageStore(exit_rays, pixel, vec4(b + centre, float(status)));
   imageStore(leaving_rays, pixel, vec4(o, dark ? -max_radius : max_radius));
 }

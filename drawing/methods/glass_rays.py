@@ -7,10 +7,12 @@ is then filled between its corners' images, and through a strong lens two corner
 answered in different images of the glass (either side of a focus, where the image turns
 round): the triangle spans the lens. A compute stage (``glsl/glass_rays.glsl``) follows
 each pixel of each searched glass through it, from the surface the pre-pass saw, on the
-glass's cube map (``glsl/glass_path.glsl``, the search's own path), and keeps the exit and
-the ray that leaves. The refracted meshes' fragment stage drops a fragment whose point of
-the mesh that ray does not leave toward (``glsl/reflection_mesh_frag.glsl``,
-REFRACTION_TEST), as the mirrors' fragments are held to the law of reflection. Where the
+glass's cube map (``glsl/glass_path.glsl``, the search's own path), and keeps the entry,
+the exit and the ray that leaves. The refracted meshes' fragment stage casts that ray at
+each fragment's triangle and keeps the fragment where it hits, or passes near enough to
+stand in (``glsl/reflection_mesh_frag.glsl``, REFRACTION_TEST), as the mirrors' fragments
+are held to the law of reflection; the next search starts from the pixels whose rays
+pass each vertex nearest (``glsl/refraction_search.glsl``). Where the
 path must reflect totally inside a glass that does not reflect (a Refraction BSDF),
 Cycles shows black, and so does the frame (:meth:`GlassRays.draw_dark`); glass that
 reflects (a Glass BSDF) reflects the path inside, and it leaves where it next can.
@@ -93,7 +95,7 @@ class GlassRays:
             self.leaving = gpu.types.GPUTexture(size, format='RGBA32F')
             self.entries = gpu.types.GPUTexture(size, format='RGBA32F')
             self._size = size
-        for texture in self.textures + (self.entries,):
+        for texture in (self.exits, self.leaving, self.entries):
             texture.clear(format='FLOAT', value=(0.0, 0.0, 0.0, 0.0))
         shader = rays_shader()
         shader.bind()

@@ -55,8 +55,7 @@ def measure_accuracy(name, kind, surface, eye, width: int, height: int, n_points
     """One glass's row: the search against the exact solver, and its GPU time per frame."""
     import gpu  # noqa: F401  (the drawing modules need it loaded)
 
-    from curved_reflections.drawing.methods.refraction_draw import RefractionPass
-    from curved_reflections.drawing.reflection_draw import ReflectionRenderer
+    from curved_reflections.blender.glass_layer import glass_renderer
     from curved_reflections.engine.glass import Glass, GlassSet
     from curved_reflections.blender import star_maps
     from curved_reflections.engine.glass.refraction_search import refracted_glass
@@ -74,10 +73,8 @@ def measure_accuracy(name, kind, surface, eye, width: int, height: int, n_points
     triangles = np.arange(n_points - n_points % 3).reshape(-1, 3)
     # The glass layer's renderer (blender/glass_layer.py): its frame traces the pixels'
     # paths, which the search starts from too.
-    renderer = ReflectionRenderer([surface], [DiffuseMesh("points", points, triangles, np.ones((n_points, 4)))],
-                                  reflector_colors=np.zeros((1, 3), np.float32), reflectivity=np.ones(1, np.float32),
-                                  transmits=np.ones(1, bool), edge_fraction=None,
-                                  passes=(RefractionPass.factory([method]),))
+    renderer = glass_renderer([glass], [DiffuseMesh("points", points, triangles, np.ones((n_points, 4)))], [method],
+                              edge_fraction=None)
     search = renderer.pass_named("refraction")
     points = renderer.geometry.vertices
     view = look_at_view(eye, (0.0, 0.0, 0.0), fov_y_deg=30.0, width=width, height=height)

@@ -20,14 +20,12 @@ WIDTH, HEIGHT = 160, 120
 def _renderer(surface, meshes, reflects=True):
     """The glass layer's renderer of one glass solid (``blender/glass_layer.py``)."""
     from curved_reflections.blender import star_maps
-    from curved_reflections.drawing.methods.refraction_draw import RefractionPass
-    from curved_reflections.drawing.reflection_draw import ReflectionRenderer
+    from curved_reflections.blender.glass_layer import glass_renderer
 
-    method, reason = refracted_glass(Glass(surface, N, reflects), 0, *star_maps.star_map(surface))
+    glass = Glass(surface, N, reflects)
+    method, reason = refracted_glass(glass, 0, *star_maps.star_map(surface))
     assert method is not None, reason
-    return ReflectionRenderer([surface], meshes, reflector_colors=np.zeros((1, 3), np.float32),
-                              reflectivity=np.ones(1, np.float32), transmits=np.ones(1, bool),
-                              passes=(RefractionPass.factory([method]),))
+    return glass_renderer([glass], meshes, [method])
 
 
 def _paths(renderer, view):
@@ -150,7 +148,10 @@ def test_refracted_fragments_lie_on_their_pixels_rays_and_stand_ins_fill_the_res
     for reach in (0.0, refraction_search.REFRACTION_REACH):
         monkeypatch.setattr(refraction_search, "REFRACTION_REACH", reach)
         release_shaders()
-        drawn[reach] = _labels(_renderer(surface, meshes).render(view, None, (0.0, 0.0, 0.0, 1.0), trace=False))
+        # A Refraction BSDF's ball (no Fresnel reflection to tint the labels; a ball
+        # reflects no path inside, so the search is the same).
+        renderer = _renderer(surface, meshes, reflects=False)
+        drawn[reach] = _labels(renderer.render(view, None, (0.0, 0.0, 0.0, 1.0), trace=False))
     release_shaders()
     hits = drawn[0.0]
     shown = glass & (hits >= 0) & (hits != list(PALETTE).index("world"))
