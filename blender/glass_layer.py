@@ -2,11 +2,15 @@
 """Glass: what lies behind a glass object, refracted, and what it reflects.
 
 The layer's renderer holds the glass as its "mirrors" and every other surface as meshes.
-Through convex glass the refraction search draws every diffuse vertex where it appears
-(``drawing/methods/refraction_draw.py``), every frame, each fragment a ray cast along its
-pixel's own path through the glass: the live view's picture, weighed by 1 minus the
-glass's Fresnel term over the world colour (what the glass reflects), black where glass
-that does not reflect must reflect totally.
+Live, through convex glass, each glass pixel's path is followed on the GPU and its rays
+(the one leaving the glass, the one the glass reflects where it is seen, the one it
+reflects back inside where the path leaves) are met with the scene there
+(``drawing/methods/scene_trace.py``). Where a mesh has an image texture, the refraction
+search draws every diffuse vertex where it appears instead
+(``drawing/methods/refraction_draw.py``), each fragment a ray cast along its pixel's path,
+and the iterative search draws the glass's reflections as a mirror's (:func:`glass_mirror`).
+The refraction is weighed by 1 minus the glass's exact Fresnel reflectance over its
+reflection, and is black where glass that does not reflect must reflect totally.
 
 Render Image ray traces each pixel where a glass object is in front: its eye ray is
 followed through the glass (``engine/glass/paths.py``: Snell's law at every interface,
@@ -31,14 +35,17 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..drawing.gpu_data import read_depth, read_texture
+from ..drawing.methods.iterative_draw import IterativePass
 from ..drawing.methods.refraction_draw import RefractionPass
 from ..drawing.reflection_draw import ReflectionRenderer
+from ..drawing.screen_space import pixel_box
 from ..engine.errors import SceneInputError
 from ..engine.geometry import subdivision
 from ..engine.geometry.band_trace import BandTracer
 from ..engine.geometry.raytrace import reflect
 from ..engine.glass import GlassSet, fresnel_dielectric
 from ..engine.glass.refraction_search import refracted_glass
+from ..engine.methods.iterative import IterativeReflector
 from ..engine.methods.sbc.sbc_build import check_view_outside_reflectors
 from ..engine.scene import DiffuseMesh
 from ..engine.view import View
@@ -59,6 +66,27 @@ class GlassLayer:
     nested: tuple = ()
     #: {name: reason} of the glass the refraction search cannot draw (open, not convex...).
     unsearched: dict = field(default_factory=dict)
+    #: The live view's renderer of the glass as mirrors (:func:`glass_mirror`): what the
+    #: searched glass that reflects shows by its Fresnel reflectance. None without any.
+    mirror: ReflectionRenderer | None = None
+
+    def draw(self, view: View, world, accuracy_px: float, exact: bool) -> None:
+        """The live view's glass over the bound framebuffer (an overlay, as
+        ``ReflectionRenderer.draw`` with ``reflectors_only``): the refracted images, over
+        the glass's own reflections by the Fresnel reflectance (traced by the refraction
+        pass, or drawn first offscreen by :attr:`mirror`). ``exact``: nothing snaps."""
+        beneath = None
+        if self.mirror is not None:
+            targets = self.mirror.targets(view.width, view.height)
+            rect = self.mirror.mirrors_rect(view, targets)
+            targets = self.mirror.draw_passes(view, None, warm=True, mirrors_only=True, accuracy_px=accuracy_px,
+                                              scissor=pixel_box(rect, targets.width, targets.height, 1),
+                                              snap=not exact)
+            beneath, framebuffer = targets.output
+            with framebuffer.bind():
+                self.mirror.composite(targets, world, reflectors_only=True, rect=rect)
+        self.renderer.draw(view, None, world, reflectors_only=True, accuracy_px=accuracy_px, exact=exact,
+                           beneath=beneath)
 
     def render(self, view: View, world, max_order: int) -> tuple[np.ndarray, np.ndarray]:
         """((H, W, 4) linear RGBA rows bottom to top, (H, W) bool where a glass object is
@@ -90,7 +118,7 @@ class GlassLayer:
         world = np.asarray(world, dtype=np.float64)[:4]
         paths = self.glass.trace(origins, directions, near_surface=surface)
         self.nested = tuple(self.glass.glasses[k].name for k in np.unique(paths.history[paths.nested, 0]))
-        color = self._leaving(paths, world, max_order)
+        color = self.leaving_colors(paths, world, max_order)
         met = np.flatnonzero(self.glass.reflecting(paths.history[:, 0]))
         if len(met):
             normal = paths.first_normal[met]
@@ -107,7 +135,7 @@ class GlassLayer:
         """How far a reflected ray starts off the glass, so as not to meet it again."""
         return 1e-9 * self.glass.surfaces.scale
 
-    def _leaving(self, paths, world, max_order: int) -> np.ndarray:
+    def leaving_colors(self, paths, world, max_order: int) -> np.ndarray:
         """(K, 3) what the rays of ``paths`` show once they leave the glass, with the ray
         reflected back inside at their last interface mixed in by its Fresnel
         reflectance (followed until it leaves in turn, once)."""
@@ -137,9 +165,9 @@ def glass_layer(previous: GlassLayer | None, captured, key: tuple, world=(0.0, 0
     Its renderer holds the glass as its reflectors and every other surface as meshes, and
     draws, through each convex glass solid, the refraction search's images
     (``drawing/methods/refraction_draw.py``), weighed by 1 minus the glass's Fresnel
-    term (Schlick's, from its IOR) over the world colour, which stands for what the glass
-    reflects: the live view's picture of glass. Without ``searched`` (Render Image, which
-    traces the glass) no glass is searched, and the renderer only finds it on screen."""
+    reflectance over what it reflects (:func:`glass_mirror`): the live view's picture of
+    glass. Without ``searched`` (Render Image, which traces the glass) no glass is
+    searched, and the renderer only finds it on screen."""
     if not captured.glass:
         return None
     world = tuple(float(c) for c in world)[:3]
@@ -154,20 +182,40 @@ def glass_layer(previous: GlassLayer | None, captured, key: tuple, world=(0.0, 0
     methods = [method for method, _ in searches if method is not None]
     # Mirrors are drawn as meshes: through glass they show as solid objects, and in front
     # of it they hide it.
-    renderer = glass_renderer(captured.glass, meshes + [_solid(mirror) for mirror in captured.reflectors], methods,
-                              world)
+    seen = meshes + [_solid(mirror) for mirror in captured.reflectors]
+    renderer = glass_renderer(captured.glass, seen, methods, world)
     unsearched = {glass.name: reason for glass, (method, reason) in zip(captured.glass, searches) if method is None}
     return GlassLayer(key, GlassSet(list(captured.glass)), renderer, BandTracer(captured.reflectors, meshes),
-                      unsearched=unsearched)
+                      unsearched=unsearched, mirror=glass_mirror(captured.glass, seen, methods, world))
+
+
+def glass_mirror(glasses, meshes, methods, world=(0.0, 0.0, 0.0)) -> ReflectionRenderer | None:
+    """The renderer of ``glasses`` as perfect mirrors reflecting ``meshes``, each searched
+    one (``methods``) that reflects (a Glass BSDF) by the iterative search on its cube
+    map (Roger & Holzschuch 2006: convex glass is star-shaped), the others showing the
+    ``world`` colour: what the live view shows beneath the refracted images, weighed by
+    the Fresnel reflectance (:meth:`GlassLayer.draw`), where a mesh has an image texture.
+    None without such glass, or without image textures: the refraction pass then meets
+    each pixel's reflected ray with the scene (``drawing/methods/scene_trace.py``)."""
+    searched = [IterativeReflector(method.index, method.name, method.reflector_map, method.accuracy_px)
+                for method in methods if method.reflects]
+    if not searched or all(getattr(mesh, "image", None) is None for mesh in meshes):
+        return None
+    count = len(glasses)
+    return ReflectionRenderer([glass.surface for glass in glasses], meshes,
+                              reflector_colors=np.tile(world, (count, 1)).astype(np.float32),
+                              reflectivity=np.ones(count, np.float32), passes=(IterativePass.factory(searched),))
 
 
 def glass_renderer(glasses, meshes, methods, world=(0.0, 0.0, 0.0),
-                   edge_fraction: float | None = subdivision.EDGE_FRACTION) -> ReflectionRenderer:
+                   edge_fraction: float | None = subdivision.EDGE_FRACTION, traced: bool = True) -> ReflectionRenderer:
     """The renderer of ``glasses`` (``engine.glass.Glass`` each) as its reflectors and
     ``meshes``, drawing through the searched ones (``methods``,
     ``refraction_search.RefractedGlass`` each) the refraction search's images, weighed by
-    1 minus each glass's Fresnel term (Schlick's, from its IOR; none for glass that does
-    not reflect) over the ``world`` colour; ``edge_fraction`` as ``ReflectionRenderer``'s."""
+    1 minus each glass's exact Fresnel reflectance (from its IOR; none for glass that does
+    not reflect) over the ``world`` colour, or over what its :class:`GlassLayer.draw` puts
+    beneath; ``edge_fraction`` as ``ReflectionRenderer``'s; ``traced``: each glass pixel's
+    ray is met with the scene on the GPU (``RefractionPass``'s)."""
     count = len(glasses)
     iors = np.array([glass.ior for glass in glasses], dtype=np.float64)
     f0 = np.where([glass.reflects for glass in glasses], ((iors - 1.0) / (iors + 1.0)) ** 2, np.nan)
@@ -175,7 +223,7 @@ def glass_renderer(glasses, meshes, methods, world=(0.0, 0.0, 0.0),
                               reflector_colors=np.tile(world, (count, 1)).astype(np.float32),
                               reflectivity=np.ones(count, np.float32), fresnel_f0=f0.astype(np.float32),
                               transmits=np.ones(count, bool), attenuation_distance=np.zeros(count, np.float32),
-                              passes=(RefractionPass.factory(methods),) if methods else ())
+                              passes=(RefractionPass.factory(methods, traced, world),) if methods else ())
 
 
 def prepared_search(glass, index: int, accuracy_px: float) -> tuple:

@@ -518,12 +518,12 @@ def _draw_with(state: LiveScene, view: View, camera: ViewCamera | None) -> bool:
 
 
 def _draw_glass(state: LiveScene, view: View, exact: bool) -> bool:
-    """The glass's own overlay (``glass_layer``): the refracted images on the glass,
-    placed exactly with ``exact`` (a resting view). Returns whether there was glass."""
+    """The glass's own overlay (``glass_layer.GlassLayer.draw``): the refracted images
+    on the glass over its reflections, placed exactly with ``exact`` (a resting view).
+    Returns whether there was glass."""
     if state.glass is None:
         return False
-    state.glass.renderer.draw(view, None, state.world, reflectors_only=True, accuracy_px=state.settings.accuracy_px,
-                              exact=exact)
+    state.glass.draw(view, state.world, state.settings.accuracy_px, exact)
     return True
 
 

@@ -207,9 +207,13 @@ def glass_note(name: str, state) -> str:
     if name in layer.unsearched:
         return (f"The viewport shows it as a solid object: {layer.unsearched[name]}. {rendered} "
                 "Mirrors reflect it as a solid object.")
-    return ("The viewport draws what lies behind it by the refraction search (a convex solid), mixed by "
-            f"Fresnel with the world colour for what it reflects, mirrors behind it as solid objects. {rendered} "
-            "Mirrors reflect it as a solid object.")
+    if layer.renderer.pass_named("refraction").searches_vertices:
+        drawn = ("The viewport draws what lies behind it by the refraction search (a convex solid; an object in the "
+                 "scene has an image texture), mixed by Fresnel with what it reflects, drawn as a mirror's")
+    else:
+        drawn = ("The viewport traces it on the GPU every frame (a convex solid): each pixel's path through it and "
+                 "what its rays meet, mixed by Fresnel as Render Image mixes them")
+    return f"{drawn}; mirrors behind it show as solid objects. {rendered} Mirrors reflect it as a solid object."
 
 
 class VIEW3D_PT_curved_reflections_reflectors(_SubPanel, bpy.types.Panel):

@@ -160,8 +160,9 @@ def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=Non
     ``reflector_colors`` (R, 3 or 4) linear, default white; ``reflectivity`` (R,) in
     [0, 1], default 1 (perfect mirrors); ``fresnel_f0`` (R,) Schlick's reflectance at
     normal incidence, NaN or negative for no Fresnel (default none); ``transmits`` (R,)
-    bool: the weight is 1 minus the Fresnel term instead (glass, whose drawn image is the
-    refracted one: encoded as -2 - F0); ``attenuation_distance``
+    bool: the weight is 1 minus the exact dielectric reflectance of the index of
+    refraction F0 stands for instead (glass, whose drawn image is the refracted one:
+    encoded as -2 - F0); ``attenuation_distance``
     (R,) the distance over which reflections fade to the world (0 or default: none).
     SBC paper section V-D. ``sealed`` (R,): each reflector's ``ReflectorSet.sealed``
     (its winding where it is closed and holds nothing, else 0; default 0), the fourth

@@ -31,6 +31,9 @@ class FrameTargets:
         zero = np.zeros(4, np.float32)
         self.no_trace = gpu.types.GPUTexture((1, 1), format='RGBA32F', data=gpu.types.Buffer('FLOAT', 4, zero))
         self.traced = None  # RGBA32F of the traced band of the last frame, or None
+        #: RGBA32F of what the reflector pixels show beneath their drawn images, where a
+        #: pass made it this frame (glass's traced reflections), else None: their colours.
+        self.beneath = None
         #: (x, y, width, height): the pixels the last frame cleared and drew (an overlay's
         #: scissor); None: all of them. The rest hold an older frame's values.
         self.box = None

@@ -278,7 +278,7 @@ class ReflectionRenderer:
 
     def draw(self, view, textures, world_color=(0.0, 0.0, 0.0, 1.0), reflectors_only: bool = False,
              fill_radius: int | None = None, camera=None, accuracy_px: float | None = None,
-             traced=None, exact: bool = False) -> FrameTargets:
+             traced=None, exact: bool = False, beneath=None) -> FrameTargets:
         """Pre-pass and reflections of ``view`` into the frame targets
         (:meth:`draw_passes`), then the composite into the framebuffer bound by the
         caller (:meth:`composite`). What a viewport draw handler calls, with the
@@ -293,7 +293,10 @@ class ReflectionRenderer:
         camera's down-sampling), where :meth:`render` traces instead; ``traced``
         (:class:`.traced_pixels.TracedPixels`) are drawn over the reflections where
         they were traced for this very view. ``exact``: nothing snaps (a resting view's
-        draw, placed as a render places it).
+        draw, placed as a render places it). ``beneath``: with ``reflectors_only``, a
+        texture of the view's size whose colours the reflector pixels show beneath their
+        reflections instead of the reflectors' own (a glass's reflection beneath its
+        refraction, ``blender/glass_layer.py``); default: a pass's (``targets.beneath``).
 
         ``reflectors_only`` (the viewport overlay): the pre-pass draws the reflectors
         alone, and the composite is depth-tested against the bound framebuffer's depth,
@@ -313,7 +316,8 @@ class ReflectionRenderer:
         # A viewport of the view's size is drawn into where it is; otherwise from (0, 0).
         origin = (x, y) if (width, height) == (targets.width, targets.height) else None
         self.composite(targets, world_color, reflectors_only, fill_radius, origin,
-                       scene_depth=view if reflectors_only else None, rect=rect)
+                       scene_depth=view if reflectors_only else None, rect=rect,
+                       beneath=(targets.beneath if beneath is None else beneath) if reflectors_only else None)
         return targets
 
     def mirrors_rect(self, view, targets: FrameTargets) -> tuple:
@@ -355,7 +359,7 @@ class ReflectionRenderer:
             self._batches = self._make_batches()
         batches, g = self._batches, self.geometry
         targets = self.targets(view.width, view.height)
-        width, height = targets.width, targets.height
+        width, height, targets.beneath = targets.width, targets.height, None
         frame = Frame(view, targets, view_projection(view, g.shift), self._image, warm, accuracy_px, snap,
                       textures, camera)
         with saved_state():
@@ -413,7 +417,7 @@ class ReflectionRenderer:
         return [index for frame_pass in self.passes for index in kind(frame_pass)]
 
     def composite(self, targets: FrameTargets, world_color=(0.0, 0.0, 0.0, 1.0), reflectors_only: bool = False,
-                  fill_radius: int = 0, origin=None, scene_depth=None, rect=None) -> None:
+                  fill_radius: int = 0, origin=None, scene_depth=None, rect=None, beneath=None) -> None:
         """The composite of the frame targets into the framebuffer bound by the caller;
         traced band colours (``targets.traced``, see :meth:`trace_band`) when present.
 
@@ -424,7 +428,8 @@ class ReflectionRenderer:
         depth, brought nearer by :data:`screen_space.SCENE_DEPTH_BIAS` of its distance
         (:func:`depth_bias`), with the depth test (depth writes off): hidden where the
         scene has a nearer surface. ``rect``: the part of the view drawn (normalised
-        device coordinates, :meth:`mirrors_rect`; ``None``: all of it). (Drawing the
+        device coordinates, :meth:`mirrors_rect`; ``None``: all of it). ``beneath``: the
+        pre-pass colours' stand-in (:meth:`draw`). (Drawing the
         mirrors' own triangles instead of one rectangle cost twice as much on llvmpipe
         with the band's fill: small triangles shade their pixels in partly covered
         blocks.)"""
@@ -445,7 +450,7 @@ class ReflectionRenderer:
             shader.uniform_int("reflectors_only", int(bool(reflectors_only)))
             shader.uniform_int("fill_radius", max(0, int(fill_radius)))
             shader.uniform_int("origin", (int(origin[0]), int(origin[1])))
-            shader.uniform_sampler("prepass_colors", targets.prepass_colors)
+            shader.uniform_sampler("prepass_colors", targets.prepass_colors if beneath is None else beneath)
             shader.uniform_sampler("prepass_labels", targets.prepass_labels)
             shader.uniform_sampler("reflection_colors", targets.reflection_colors)
             shader.uniform_sampler("traced_colors", targets.traced if targets.traced is not None else targets.no_trace)

@@ -66,38 +66,50 @@ bool exit_point(vec3 a, vec3 t, out vec3 b, out vec3 n)
   return map_surface(normalize(b), radius, n) && dot(t, n) > 0.0;
 }
 
-/* The path entering at `a` (on the surface, relative to the centre) whose outward normal
- * there is `n`: FOUND with its exit `b` and the unit ray `o` leaving there, or why there
- * is none (the surface faces away from the eye, a hole of the map, total reflection).
- * Where the ray inside meets the surface past the critical angle, glass that `reflects`
- * (a Glass BSDF) reflects it inside, INSIDE_REFLECTIONS times at most, and the path
- * leaves where it next can; glass that does not (a Refraction BSDF) stops it there,
- * TOTAL_REFLECTION, black in Cycles. */
-int refracted_path(vec3 a, vec3 n, out vec3 b, out vec3 o)
+/* The ray inside from `from` (on the surface, relative to the centre) along unit `inside`
+ * until it leaves: FOUND with its exit `b`, the unit ray `o` leaving there, and the ray
+ * inside that met the surface there (`last`, with the outward normal `normal`), or why it
+ * does not leave (a hole of the map, total reflection). Where the ray inside meets the
+ * surface past the critical angle, glass that `reflects` (a Glass BSDF) reflects it
+ * inside, INSIDE_REFLECTIONS times at most, and the path leaves where it next can; glass
+ * that does not (a Refraction BSDF) stops it there, TOTAL_REFLECTION, black in Cycles. */
+int leave_glass(vec3 from, vec3 inside, out vec3 b, out vec3 o, out vec3 last, out vec3 normal)
 {
   b = vec3(0.0);
   o = vec3(0.0);
-  vec3 incoming = eye_ray(a);
-  if (dot(incoming, n) >= 0.0) {
-    return FACES_AWAY;
-  }
-  vec3 inside = refract(incoming, n, 1.0 / eta);
-  vec3 from = a;
+  normal = vec3(0.0);
   for (int bounce = 0; bounce <= INSIDE_REFLECTIONS; bounce++) {
-    vec3 exit_normal;
-    if (!exit_point(from, inside, b, exit_normal)) {
+    last = inside;
+    if (!exit_point(from, inside, b, normal)) {
       return NO_SURFACE;
     }
-    o = refract(inside, -exit_normal, eta);
+    o = refract(inside, -normal, eta);
     if (dot(o, o) > 0.0) {
       return FOUND;
     }
     if (reflects == 0) {
       break;
     }
-    inside = reflect(inside, -exit_normal);
+    inside = reflect(inside, -normal);
     from = b;
   }
   o = vec3(0.0);
   return TOTAL_REFLECTION;
+}
+
+/* The path entering at `a` (on the surface, relative to the centre) whose outward normal
+ * there is `n`: FOUND with its exit `b` and the unit ray `o` leaving there
+ * (`leave_glass`, which `last` and `normal` are from), or why there is none (the surface
+ * faces away from the eye, or `leave_glass`'s reason). */
+int refracted_path(vec3 a, vec3 n, out vec3 b, out vec3 o, out vec3 last, out vec3 normal)
+{
+  vec3 incoming = eye_ray(a);
+  if (dot(incoming, n) >= 0.0) {
+    b = vec3(0.0);
+    o = vec3(0.0);
+    last = vec3(0.0);
+    normal = vec3(0.0);
+    return FACES_AWAY;
+  }
+  return leave_glass(a, refract(incoming, n, 1.0 / eta), b, o, last, normal);
 }

@@ -5,9 +5,10 @@
  * with the desired view's eye vector), a reflector at its own flat colour. Target 1, the
  * label: (id, reflection weight, attenuation distance, eye depth of the surface: `eye_depth`). The weight is the reflector's
  * reflectivity, times Schlick's Fresnel term F0 + (1 - F0)(1 - cos t)^5 with cos t = |n . e|
- * when F0 is given (SBC paper, section V-D: the reflected share grows at grazing angles);
- * glass, whose drawn image is the refracted one, gets 1 minus that term (its z holds
- * -2 - F0: draw_geometry.prepare_geometry's `transmits`).
+ * when F0 is given (SBC paper, section V-D: the reflected share grows at grazing angles).
+ * Glass, whose drawn image is the refracted one, gets 1 minus its exact dielectric
+ * reflectance (`dielectric_reflectance`, as Cycles' Glass BSDF and Render Image weigh it; its
+ * z holds -2 - F0: draw_geometry.prepare_geometry's `transmits`).
  * Target 2: the smooth normal (for the per-frame passes' law-of-reflection test) and, as
  * w, 1 where the pixel's view ray starts inside a sealed mirror, else 0.
  *
@@ -38,8 +39,9 @@ void main()
     float cosine = lengths > 1e-30 ? min(abs(dot(normal_interp, to_eye)) / lengths, 1.0) : 1.0;
     bool transmits = label_interp.z <= -2.0;
     float f0 = transmits ? -2.0 - label_interp.z : label_interp.z;
-    float fresnel = f0 + (1.0 - f0) * pow(1.0 - cosine, 5.0);
-    weight *= transmits ? 1.0 - fresnel : fresnel;
+    /* The index of refraction n from F0 = ((n - 1) / (n + 1))^2. */
+    float n = (1.0 + sqrt(f0)) / max(1.0 - sqrt(f0), 1e-6);
+    weight *= transmits ? 1.0 - dielectric_reflectance(cosine, 1.0 / n) : f0 + (1.0 - f0) * pow(1.0 - cosine, 5.0);
   }
   float inside = 0.0;
   if (label_interp.x > 0.5 && lit_interp != 0.0 && gl_FrontFacing != (lit_interp > 0.0)) {

@@ -20,6 +20,22 @@ vec3 shade(vec3 albedo, float lit, vec3 normal, vec3 to_eye)
   return albedo * (SHADE_AMBIENT + (1.0 - SHADE_AMBIENT) * cosine);
 }
 
+/* Unpolarised Fresnel reflectance of a dielectric interface (Fresnel's equations: the mean
+ * of the s and p amplitudes squared) for the incidence cosine `cosine` and `ratio` =
+ * n1 / n2 of the indices before and after it; 1 past the critical angle (numpy twin:
+ * engine/glass/snell.py, `fresnel_dielectric`). */
+float dielectric_reflectance(float cosine, float ratio)
+{
+  float sine2 = ratio * ratio * (1.0 - cosine * cosine);
+  if (sine2 >= 1.0) {
+    return 1.0;
+  }
+  float refracted = sqrt(1.0 - sine2);
+  float s = (ratio * cosine - refracted) / max(ratio * cosine + refracted, 1e-30);
+  float p = (cosine - ratio * refracted) / max(cosine + ratio * refracted, 1e-30);
+  return 0.5 * (s * s + p * p);
+}
+
 /* How far `p` lies from the eye: the distance to it (`camera.w` 1: the eye, perspective), or
  * its depth along the view (`camera.w` 0: the unit direction toward the viewer,
  * orthographic). The pre-pass writes it for the visible surface of each pixel; the

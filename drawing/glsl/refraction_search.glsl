@@ -52,7 +52,8 @@ int evaluate(vec2 x, out vec2 f, out vec3 a, out vec3 b, out vec3 o)
     return NO_SURFACE;
   }
   a = radius * d;
-  int status = refracted_path(a, n, b, o);
+  vec3 last, normal;
+  int status = refracted_path(a, n, b, o, last, normal);
   if (status == FOUND) {
     vec3 offset = o - normalize(vertex - b);
     f = vec2(dot(offset, residual_e1), dot(offset, residual_e2));

@@ -14,7 +14,7 @@ stand in (``glsl/reflection_mesh_frag.glsl``, REFRACTION_TEST), as the mirrors' 
 are held to the law of reflection; the next search starts from the pixels whose rays
 pass each vertex nearest (``glsl/refraction_search.glsl``). Where the
 path must reflect totally inside a glass that does not reflect (a Refraction BSDF),
-Cycles shows black, and so does the frame (:meth:`GlassRays.draw_dark`); glass that
+Cycles shows black, and so does the frame (:meth:`GlassRays.draw_settled`); glass that
 reflects (a Glass BSDF) reflects the path inside, and it leaves where it next can.
 """
 
@@ -24,6 +24,7 @@ import gpu
 import numpy as np
 
 from ...engine.glass import refraction_search as search_module
+from ..draw_shaders import shading_source
 from ..gpu_data import read_texture, vertex_buffer
 from ..screen_space import camera_position
 from ..shader_cache import cached_shader
@@ -31,6 +32,12 @@ from ..shader_sources import glsl_source
 
 #: Invocations per work group of the per-pixel stage (8 x 8 pixels).
 LOCAL_SIZE = 8
+#: Total reflections inside glass that reflects (a Glass BSDF) each pixel's path follows
+#: at most (the search's follow ``refraction_search.INSIDE_REFLECTIONS``): one path per
+#: pixel, where each more costs one exit search at the pixels that reflect again. A box
+#: seen from above reflects a quarter of its pixels' paths twice; Render Image follows
+#: ``paths.MAX_INTERFACES`` interfaces.
+PIXEL_INSIDE_REFLECTIONS = 4
 
 
 @cached_shader
@@ -44,44 +51,68 @@ def rays_shader():
     info.push_constant('FLOAT', "glass_id")
     info.push_constant('INT', "self_map")
     info.push_constant('INT', "reflects")
-    for slot, name in enumerate(("reflector_maps", "map_params", "prepass_labels")):
+    for slot, name in enumerate(("reflector_maps", "map_params", "prepass_labels", "prepass_normals")):
         info.sampler(slot, 'FLOAT_2D', name)
     info.image(0, 'RGBA32F', 'FLOAT_2D', "exit_rays", qualifiers={'WRITE'})
     info.image(1, 'RGBA32F', 'FLOAT_2D', "leaving_rays", qualifiers={'WRITE'})
     info.image(2, 'RGBA32F', 'FLOAT_2D', "entry_rays", qualifiers={'WRITE'})
+    info.image(3, 'RGBA32F', 'FLOAT_2D', "back_exits", qualifiers={'WRITE'})
+    info.image(4, 'RGBA32F', 'FLOAT_2D', "back_leaving_rays", qualifiers={'WRITE'})
+    info.image(5, 'RGBA32F', 'FLOAT_2D', "front_points", qualifiers={'WRITE'})
+    info.image(6, 'RGBA32F', 'FLOAT_2D', "front_rays", qualifiers={'WRITE'})
     info.local_group_size(LOCAL_SIZE, LOCAL_SIZE)
-    prelude = glsl_source("cube_map.glsl") + glsl_source("glass_path.glsl")
-    info.compute_source(glsl_source("glass_rays.glsl", search_module.search_defines(), prelude))
+    prelude = shading_source() + glsl_source("cube_map.glsl") + glsl_source("glass_path.glsl")
+    defines = {**search_module.search_defines(), "INSIDE_REFLECTIONS": PIXEL_INSIDE_REFLECTIONS}
+    info.compute_source(glsl_source("glass_rays.glsl", defines, prelude))
     return gpu.shader.create_from_info(info)
 
 
 @cached_shader
-def dark_shader():
-    """Black where :func:`rays_shader` marked a pixel dark, one full-screen triangle."""
+def settled_shader():
+    """The pixels settled per pixel, one full-screen triangle: black where
+    :func:`rays_shader` marked a pixel dark, the traced colour where
+    ``scene_trace.SceneTrace`` traced one, each at depth 0, which the refracted meshes
+    drawn next cannot pass."""
     info = gpu.types.GPUShaderCreateInfo()
     info.sampler(0, 'FLOAT_2D', "leaving_rays")
+    info.sampler(1, 'FLOAT_2D', "traced_colors")
     info.vertex_in(0, 'VEC2', "position")
     info.fragment_out(0, 'VEC4', "color_out")
+    info.depth_write('ANY')
     info.vertex_source("void main()\n{\n  gl_Position = vec4(position, 0.0, 1.0);\n}\n")
     # Alpha 1: a drawn reflection at distance 0, which the composite does not fade.
-    info.fragment_source("void main()\n{\n  if (texelFetch(leaving_rays, ivec2(gl_FragCoord.xy), 0).w >= 0.0) {\n"
-                         "    discard;\n  }\n  color_out = vec4(0.0, 0.0, 0.0, 1.0);\n}\n")
+    info.fragment_source(
+        "void main()\n{\n  ivec2 pixel = ivec2(gl_FragCoord.xy);\n"
+        "  vec4 traced = texelFetch(traced_colors, min(pixel, textureSize(traced_colors, 0) - 1), 0);\n"
+        "  if (texelFetch(leaving_rays, pixel, 0).w < 0.0) {\n    color_out = vec4(0.0, 0.0, 0.0, 1.0);\n  }\n"
+        "  else if (traced.a > 0.5) {\n    color_out = vec4(traced.rgb, 1.0);\n  }\n"
+        "  else {\n    discard;\n  }\n  gl_FragDepth = 0.0;\n}\n")
     return gpu.shader.create_from_info(info)
 
 
 class GlassRays:
-    """The per-pixel paths of one renderer's searched glass: three RGBA32F textures of the
+    """The per-pixel paths of one renderer's searched glass: RGBA32F textures of the
     view's size (:attr:`exits`: exit point and status; :attr:`leaving`: the leaving ray,
     and the glass's bounding radius, negative where dark; :attr:`entries`: the entry's
-    direction from the glass's centre, and the glass's id), made again when the size
-    changes."""
+    direction from the glass's centre, and the glass's id; :attr:`back_exits`,
+    :attr:`back_leaving`, :attr:`front_points` and :attr:`front_rays` below), made again
+    when the size changes."""
 
     def __init__(self):
         self.exits = None
         self.leaving = None
         self.entries = None
+        #: Where glass that reflects lets a path out: where the ray it reflects back inside
+        #: leaves, with the share reflected (0 elsewhere); and the ray leaving, with its status.
+        self.back_exits = None
+        self.back_leaving = None
+        #: Where glass that reflects is seen: the point, with the share reflected (0
+        #: elsewhere); and the ray reflected there.
+        self.front_points = None
+        self.front_rays = None
         self._size = None
         self._screen = None
+        self._untraced = None
 
     def trace(self, frame, methods, atlas, shift) -> None:
         """The paths of ``frame`` (``frame_pass.Frame``, its pre-pass drawn) through each
@@ -94,8 +125,13 @@ class GlassRays:
             self.exits = gpu.types.GPUTexture(size, format='RGBA32F')
             self.leaving = gpu.types.GPUTexture(size, format='RGBA32F')
             self.entries = gpu.types.GPUTexture(size, format='RGBA32F')
+            self.back_exits = gpu.types.GPUTexture(size, format='RGBA32F')
+            self.back_leaving = gpu.types.GPUTexture(size, format='RGBA32F')
+            self.front_points = gpu.types.GPUTexture(size, format='RGBA32F')
+            self.front_rays = gpu.types.GPUTexture(size, format='RGBA32F')
             self._size = size
-        for texture in (self.exits, self.leaving, self.entries):
+        for texture in (self.exits, self.leaving, self.entries, self.back_exits, self.back_leaving, self.front_points,
+                        self.front_rays):
             texture.clear(format='FLOAT', value=(0.0, 0.0, 0.0, 0.0))
         shader = rays_shader()
         shader.bind()
@@ -105,9 +141,14 @@ class GlassRays:
         shader.uniform_sampler("reflector_maps", atlas.texture)
         shader.uniform_sampler("map_params", atlas.params)
         shader.uniform_sampler("prepass_labels", targets.prepass_labels)
+        shader.uniform_sampler("prepass_normals", targets.prepass_normals)
         shader.image("exit_rays", self.exits)
         shader.image("leaving_rays", self.leaving)
         shader.image("entry_rays", self.entries)
+        shader.image("back_exits", self.back_exits)
+        shader.image("back_leaving_rays", self.back_leaving)
+        shader.image("front_points", self.front_points)
+        shader.image("front_rays", self.front_rays)
         groups = (-(-size[0] // LOCAL_SIZE), -(-size[1] // LOCAL_SIZE), 1)
         for k, method in enumerate(methods):
             shader.uniform_float("eta", float(method.ior))
@@ -121,18 +162,25 @@ class GlassRays:
         """(exits, leaving): what the refracted meshes' ray cast reads."""
         return self.exits, self.leaving
 
-    def draw_dark(self) -> None:
-        """Black into the bound reflection target where the last paths marked it dark
-        (before the refracted meshes, which the same pixels drop)."""
+    def draw_settled(self, traced) -> None:
+        """Into the bound reflection target, before the refracted meshes: black where the
+        last paths marked it dark, and the colours of ``traced`` (RGBA32F of the view's
+        size, ``scene_trace.SceneTrace.colors``; None: none) where they were traced."""
         if self.leaving is None:
             return
         if self._screen is None:
             corners = np.array([[-1.0, -1.0], [3.0, -1.0], [-1.0, 3.0]], np.float32)
             self._screen = gpu.types.GPUBatch(type='TRIS', buf=vertex_buffer({"position": (corners, 'F32', 'FLOAT')}))
-        shader = dark_shader()
+        if traced is None:
+            if self._untraced is None:
+                self._untraced = gpu.types.GPUTexture((1, 1), format='RGBA32F')
+                self._untraced.clear(format='FLOAT', value=(0.0, 0.0, 0.0, 0.0))
+            traced = self._untraced
+        shader = settled_shader()
         shader.bind()
         shader.uniform_sampler("leaving_rays", self.leaving)
-        gpu.state.depth_test_set('NONE')
+        shader.uniform_sampler("traced_colors", traced)
+        gpu.state.depth_test_set('ALWAYS')
         self._screen.draw(shader)
         gpu.state.depth_test_set('LESS')
 

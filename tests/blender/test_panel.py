@@ -204,15 +204,19 @@ def test_the_glass_panel_shows_the_index_of_refraction_in_use_and_what_draws_the
 
 def test_the_glass_note_names_what_draws_each_glass_in_the_viewport_and_why():
     """Once reflections are started, the note follows the live state's glass layer: the
-    refraction search for convex glass, the reason it has none for other glass."""
+    GPU's trace for convex glass (the refraction search where an object has an image
+    texture), the reason it has neither for other glass."""
     from types import SimpleNamespace
 
     from curved_reflections.blender.panel import glass_note
 
     reason = "'Bottle' is not convex: a ray inside it may leave and enter it again"
+    refraction = SimpleNamespace(searches_vertices=False)
     layer = SimpleNamespace(glass=SimpleNamespace(glasses=[SimpleNamespace(name="Ball"), SimpleNamespace(name="Bottle")]),
-                            unsearched={"Bottle": reason})
+                            unsearched={"Bottle": reason}, renderer=SimpleNamespace(pass_named=lambda name: refraction))
     state = SimpleNamespace(glass=layer)
+    assert glass_note("Ball", state).startswith("The viewport traces it on the GPU every frame")
+    refraction.searches_vertices = True
     assert glass_note("Ball", state).startswith("The viewport draws what lies behind it by the refraction search")
     assert glass_note("Bottle", state).startswith(f"The viewport shows it as a solid object: {reason}. Render Image")
     assert glass_note("Lamp", state).endswith("The viewport draws it once reflections are started.")

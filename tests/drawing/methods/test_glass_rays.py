@@ -17,15 +17,16 @@ N = 1.5
 WIDTH, HEIGHT = 160, 120
 
 
-def _renderer(surface, meshes, reflects=True):
-    """The glass layer's renderer of one glass solid (``blender/glass_layer.py``)."""
+def _renderer(surface, meshes, reflects=True, traced=False):
+    """The glass layer's renderer of one glass solid (``blender/glass_layer.py``), its
+    pixels drawn by the search's meshes alone unless ``traced``."""
     from curved_reflections.blender import star_maps
     from curved_reflections.blender.glass_layer import glass_renderer
 
     glass = Glass(surface, N, reflects)
     method, reason = refracted_glass(glass, 0, *star_maps.star_map(surface))
     assert method is not None, reason
-    return glass_renderer([glass], meshes, [method])
+    return glass_renderer([glass], meshes, [method], traced=traced)
 
 
 def _paths(renderer, view):
@@ -65,8 +66,8 @@ def test_where_a_box_must_reflect_totally_its_paths_reflect_inside_or_go_dark(gp
     """A glass box seen from above its front: rays entering its top meet a side past the
     critical angle (2,407 of its 3,582 pixels). Glass that does not reflect (a Refraction
     BSDF, which Cycles shows black there) marks exactly those pixels (99.9 % agree with
-    the exact paths) and they are dark; glass that reflects follows them inside (once)
-    and out, as the exact paths do (measured at the 98th percentile: exits 2e-5 apart, rays 0.035
+    the exact paths) and they are dark; glass that reflects follows them inside and out
+    (those reflected once here), as the exact paths do (measured at the 98th percentile: exits 2e-5 apart, rays 0.035
     degrees; the last 2 % pass within a texel of an edge, which the cube map rounds), and
     none is dark."""
     surface = flat_box("Box", (-0.8, -0.8, -0.8), (0.8, 0.8, 0.8))
@@ -80,7 +81,7 @@ def test_where_a_box_must_reflect_totally_its_paths_reflect_inside_or_go_dark(gp
         assert ((status[on_glass] == -5) == inside).mean() > 0.99
         assert (dark[on_glass] == (status[on_glass] == -5)).all()
         return
-    once = paths.total_reflections == 1  # what the search follows (INSIDE_REFLECTIONS)
+    once = paths.total_reflections == 1
     assert not dark.any() and once.sum() > 300 and (status[on_glass][once] == 1).mean() > 0.99
     followed = once & (status[on_glass] == 1)
     apart = np.linalg.norm(exits[on_glass][followed] - paths.exit_position[followed], axis=1)

@@ -1,0 +1,82 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later */
+/* The nearest triangle along a ray, through a bounding volume hierarchy on the GPU
+ * (drawing/methods/scene_trace.py packs it from engine/geometry/bvh.py's tree).
+ *
+ * The tree is complete: node h's children are 2h and 2h + 1, the root is 1 and the leaves
+ * are `leaf_first` + i, each holding LEAF_SIZE triangle slots. `bvh_boxes` holds two texels
+ * per node (lowest corner with w 1 where the node holds a triangle, else 0; highest
+ * corner), `bvh_slots` one per slot (the triangle's three vertex indices, and the index
+ * of its mesh's image, -1 for none; x -1 for an empty slot), `scene_vertices` the
+ * vertices (relative to the renderer's shift, as the ray). A complete tree is walked
+ * without a stack: past a node, climb while it is a right child, then go to its sibling. */
+
+vec4 table_texel(sampler2D table, int index)
+{
+  int width = textureSize(table, 0).x;
+  return texelFetch(table, ivec2(index % width, index / width), 0);
+}
+
+/* Whether the ray meets the box within [0, far] (slabs; `inverse` holds 1 / direction). */
+bool meets_box(vec3 origin, vec3 inverse, vec3 low, vec3 high, float far)
+{
+  vec3 t0 = (low - origin) * inverse;
+  vec3 t1 = (high - origin) * inverse;
+  vec3 near3 = min(t0, t1);
+  vec3 far3 = max(t0, t1);
+  return max(max(near3.x, near3.y), max(near3.z, 0.0)) <= min(min(far3.x, far3.y), min(far3.z, far));
+}
+
+/* The nearest hit of the ray past `t_min`: its slot (-1 for none), distance and barycentric
+ * (u, v) of its second and third corners (Moller & Trumbore 1997). */
+int nearest_hit(vec3 origin, vec3 direction, float t_min, out float t_hit, out vec2 hit_uv)
+{
+  vec3 safe = mix(direction, vec3(1e-30), lessThan(abs(direction), vec3(1e-30)));
+  vec3 inverse = 1.0 / safe;
+  t_hit = 3.0e38;
+  hit_uv = vec2(0.0);
+  int hit = -1;
+  int node = 1;
+  for (int visits = 0; visits < 4 * leaf_first; visits++) {
+    vec4 low = table_texel(bvh_boxes, 2 * node);
+    vec4 high = table_texel(bvh_boxes, 2 * node + 1);
+    if (low.w > 0.5 && meets_box(origin, inverse, low.xyz, high.xyz, t_hit)) {
+      if (node < leaf_first) {
+        node *= 2;
+        continue;
+      }
+      for (int k = 0; k < LEAF_SIZE; k++) {
+        int slot = (node - leaf_first) * LEAF_SIZE + k;
+        vec4 corners = table_texel(bvh_slots, slot);
+        if (corners.x < 0.0) {
+          continue;
+        }
+        vec3 a = table_texel(scene_vertices, int(corners.x)).xyz;
+        vec3 e1 = table_texel(scene_vertices, int(corners.y)).xyz - a;
+        vec3 e2 = table_texel(scene_vertices, int(corners.z)).xyz - a;
+        vec3 p = cross(direction, e2);
+        float det = dot(e1, p);
+        if (abs(det) < 1e-30) {
+          continue;
+        }
+        vec3 s = (origin - a) / det;
+        float u = dot(s, p);
+        vec3 q = cross(s, e1);
+        float v = dot(direction, q);
+        float t = dot(e2, q);
+        if (u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t > t_min && t < t_hit) {
+          t_hit = t;
+          hit_uv = vec2(u, v);
+          hit = slot;
+        }
+      }
+    }
+    while ((node & 1) == 1) {
+      node >>= 1;
+    }
+    if (node == 0) {
+      break;
+    }
+    node += 1;
+  }
+  return hit;
+}
