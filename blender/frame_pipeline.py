@@ -148,7 +148,7 @@ class FramePipeline:
         self.bounds = scene_bounds(captured.reflectors, captured.meshes)
         # The capture's key hashes every mesh: only glass needs it here.
         self.glass = glass_layer(self.glass, captured, captured_key(captured), self.world, self.settings.accuracy_px,
-                                 self.SEARCHES_GLASS) if captured.glass else None
+                                 self.SEARCHES_GLASS, self.settings.max_order) if captured.glass else None
 
     def glass_alone(self, scene, captured, key: tuple | None = None) -> None:
         """A capture of glass and no mirror: no renderer of mirrors, the glass's layer
@@ -157,7 +157,7 @@ class FramePipeline:
         self.world = world_color(scene)
         self.bounds = scene_bounds(captured.reflectors, captured.meshes)
         self.glass = glass_layer(self.glass, captured, captured_key(captured) if key is None else key, self.world,
-                                 self.settings.accuracy_px, self.SEARCHES_GLASS)
+                                 self.settings.accuracy_px, self.SEARCHES_GLASS, self.settings.max_order)
 
     def update(self, scene, depsgraph, settings: FrameSettings) -> None:
         """Render Image's frame: capture the scene and make again only what changed since

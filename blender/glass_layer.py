@@ -37,6 +37,7 @@ import numpy as np
 from ..drawing.gpu_data import read_depth, read_texture
 from ..drawing.methods.iterative_draw import IterativePass
 from ..drawing.methods.refraction_draw import RefractionPass
+from ..drawing.methods.scene_trace import TracedScene
 from ..drawing.reflection_draw import ReflectionRenderer
 from ..drawing.screen_space import pixel_box
 from ..engine.errors import SceneInputError
@@ -157,10 +158,11 @@ class GlassLayer:
 
 
 def glass_layer(previous: GlassLayer | None, captured, key: tuple, world=(0.0, 0.0, 0.0, 1.0),
-                accuracy_px: float = 1.0, searched: bool = True) -> GlassLayer | None:
+                accuracy_px: float = 1.0, searched: bool = True, max_order: int = 1) -> GlassLayer | None:
     """The glass of ``captured`` (``None`` without any): ``previous`` while its ``key``
     holds (the capture's, ``frame_pipeline.captured_key``, with each glass's name, index
-    of refraction and whether it reflects, the ``world`` colour and the Accuracy).
+    of refraction and whether it reflects, the ``world`` colour, the Accuracy and the
+    scene's Max Order, the mirror reflections a ray through glass follows live).
 
     Its renderer holds the glass as its reflectors and every other surface as meshes, and
     draws, through each convex glass solid, the refraction search's images
@@ -172,7 +174,7 @@ def glass_layer(previous: GlassLayer | None, captured, key: tuple, world=(0.0, 0
         return None
     world = tuple(float(c) for c in world)[:3]
     key = key + tuple((glass.name, glass.ior, glass.reflects) for glass in captured.glass) + (
-        world, accuracy_px, searched)
+        world, accuracy_px, searched, max_order)
     if previous is not None and previous.key == key:
         return previous
     names = {glass.name for glass in captured.glass}
@@ -180,13 +182,12 @@ def glass_layer(previous: GlassLayer | None, captured, key: tuple, world=(0.0, 0
     searches = ([prepared_search(glass, index, accuracy_px) for index, glass in enumerate(captured.glass)]
                 if searched else [])
     methods = [method for method, _ in searches if method is not None]
-    # Mirrors are drawn as meshes: through glass they show as solid objects, and in front
-    # of it they hide it.
-    seen = meshes + [_solid(mirror) for mirror in captured.reflectors]
-    renderer = glass_renderer(captured.glass, seen, methods, world)
+    renderer = glass_renderer(captured.glass, meshes, methods, world, mirrors=captured.reflectors,
+                              max_order=max_order)
     unsearched = {glass.name: reason for glass, (method, reason) in zip(captured.glass, searches) if method is None}
     return GlassLayer(key, GlassSet(list(captured.glass)), renderer, BandTracer(captured.reflectors, meshes),
-                      unsearched=unsearched, mirror=glass_mirror(captured.glass, seen, methods, world))
+                      unsearched=unsearched,
+                      mirror=glass_mirror(captured.glass, meshes + _solids(captured.reflectors), methods, world))
 
 
 def glass_mirror(glasses, meshes, methods, world=(0.0, 0.0, 0.0)) -> ReflectionRenderer | None:
@@ -208,22 +209,27 @@ def glass_mirror(glasses, meshes, methods, world=(0.0, 0.0, 0.0)) -> ReflectionR
 
 
 def glass_renderer(glasses, meshes, methods, world=(0.0, 0.0, 0.0),
-                   edge_fraction: float | None = subdivision.EDGE_FRACTION, traced: bool = True) -> ReflectionRenderer:
+                   edge_fraction: float | None = subdivision.EDGE_FRACTION, traced: bool = True, mirrors=(),
+                   max_order: int = 1) -> ReflectionRenderer:
     """The renderer of ``glasses`` (``engine.glass.Glass`` each) as its reflectors and
     ``meshes``, drawing through the searched ones (``methods``,
     ``refraction_search.RefractedGlass`` each) the refraction search's images, weighed by
     1 minus each glass's exact Fresnel reflectance (from its IOR; none for glass that does
     not reflect) over the ``world`` colour, or over what its :class:`GlassLayer.draw` puts
     beneath; ``edge_fraction`` as ``ReflectionRenderer``'s; ``traced``: each glass pixel's
-    ray is met with the scene on the GPU (``RefractionPass``'s)."""
+    rays are met with the scene on the GPU (``RefractionPass``'s). ``mirrors``
+    (``engine.Reflector`` each) are drawn as solid meshes (in front of glass they hide
+    it); the trace reflects off them ``max_order`` times at most."""
     count = len(glasses)
     iors = np.array([glass.ior for glass in glasses], dtype=np.float64)
     f0 = np.where([glass.reflects for glass in glasses], ((iors - 1.0) / (iors + 1.0)) ** 2, np.nan)
-    return ReflectionRenderer([glass.surface for glass in glasses], meshes, edge_fraction=edge_fraction,
+    scene = TracedScene(world, frozenset(mirror.name for mirror in mirrors), max_order) if traced else None
+    return ReflectionRenderer([glass.surface for glass in glasses], list(meshes) + _solids(mirrors),
+                              edge_fraction=edge_fraction,
                               reflector_colors=np.tile(world, (count, 1)).astype(np.float32),
                               reflectivity=np.ones(count, np.float32), fresnel_f0=f0.astype(np.float32),
                               transmits=np.ones(count, bool), attenuation_distance=np.zeros(count, np.float32),
-                              passes=(RefractionPass.factory(methods, traced, world),) if methods else ())
+                              passes=(RefractionPass.factory(methods, scene),) if methods else ())
 
 
 def prepared_search(glass, index: int, accuracy_px: float) -> tuple:
@@ -234,10 +240,12 @@ def prepared_search(glass, index: int, accuracy_px: float) -> tuple:
     return refracted_glass(glass, index, shape, reflector_map, accuracy_px)
 
 
-def _solid(mirror) -> DiffuseMesh:
-    """A mirror as a grey solid mesh (what the glass's pre-pass needs of it: its depth)."""
-    return DiffuseMesh(mirror.name, mirror.vertices, mirror.triangles,
-                       np.full((len(mirror.vertices), 4), 0.5, np.float32), normals=mirror.normals)
+def _solids(mirrors) -> list:
+    """Mirrors as grey solid meshes (what the glass's pre-pass needs of them: their depth;
+    the trace reflects off them by name)."""
+    return [DiffuseMesh(mirror.name, mirror.vertices, mirror.triangles,
+                        np.full((len(mirror.vertices), 4), 0.5, np.float32), normals=mirror.normals)
+            for mirror in mirrors]
 
 
 def over(image: np.ndarray | None, glass_image: np.ndarray, in_front: np.ndarray) -> np.ndarray:

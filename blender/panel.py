@@ -209,11 +209,12 @@ def glass_note(name: str, state) -> str:
                 "Mirrors reflect it as a solid object.")
     if layer.renderer.pass_named("refraction").searches_vertices:
         drawn = ("The viewport draws what lies behind it by the refraction search (a convex solid; an object in the "
-                 "scene has an image texture), mixed by Fresnel with what it reflects, drawn as a mirror's")
+                 "scene has an image texture), mixed by Fresnel with what it reflects, drawn as a mirror's; mirrors "
+                 "behind it show as solid objects")
     else:
         drawn = ("The viewport traces it on the GPU every frame (a convex solid): each pixel's path through it and "
-                 "what its rays meet, mixed by Fresnel as Render Image mixes them")
-    return f"{drawn}; mirrors behind it show as solid objects. {rendered} Mirrors reflect it as a solid object."
+                 "what its rays meet, mirrors' reflections too, mixed by Fresnel as Render Image mixes them")
+    return f"{drawn}. {rendered} Mirrors reflect it as a solid object."
 
 
 class VIEW3D_PT_curved_reflections_reflectors(_SubPanel, bpy.types.Panel):

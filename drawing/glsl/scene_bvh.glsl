@@ -6,7 +6,8 @@
  * are `leaf_first` + i, each holding LEAF_SIZE triangle slots. `bvh_boxes` holds two texels
  * per node (lowest corner with w 1 where the node holds a triangle, else 0; highest
  * corner), `bvh_slots` one per slot (the triangle's three vertex indices, and the index
- * of its mesh's image, -1 for none; x -1 for an empty slot), `scene_vertices` the
+ * of its mesh's image, -1 for none, MIRROR_CODE for a mirror's; x -1 for an empty slot),
+ * `scene_vertices` the
  * vertices (relative to the renderer's shift, as the ray). A complete tree is walked
  * without a stack: past a node, climb while it is a right child, then go to its sibling. */
 
@@ -26,9 +27,10 @@ bool meets_box(vec3 origin, vec3 inverse, vec3 low, vec3 high, float far)
   return max(max(near3.x, near3.y), max(near3.z, 0.0)) <= min(min(far3.x, far3.y), min(far3.z, far));
 }
 
-/* The nearest hit of the ray past `t_min`: its slot (-1 for none), distance and barycentric
- * (u, v) of its second and third corners (Moller & Trumbore 1997). */
-int nearest_hit(vec3 origin, vec3 direction, float t_min, out float t_hit, out vec2 hit_uv)
+/* The nearest hit of the ray past `t_min`, slot `skip` aside (the triangle a reflected ray
+ * leaves; -1: none): its slot (-1 for none), distance and barycentric (u, v) of its second
+ * and third corners (Moller & Trumbore 1997). */
+int nearest_hit(vec3 origin, vec3 direction, float t_min, int skip, out float t_hit, out vec2 hit_uv)
 {
   vec3 safe = mix(direction, vec3(1e-30), lessThan(abs(direction), vec3(1e-30)));
   vec3 inverse = 1.0 / safe;
@@ -47,7 +49,7 @@ int nearest_hit(vec3 origin, vec3 direction, float t_min, out float t_hit, out v
       for (int k = 0; k < LEAF_SIZE; k++) {
         int slot = (node - leaf_first) * LEAF_SIZE + k;
         vec4 corners = table_texel(bvh_slots, slot);
-        if (corners.x < 0.0) {
+        if (corners.x < 0.0 || slot == skip) {
           continue;
         }
         vec3 a = table_texel(scene_vertices, int(corners.x)).xyz;

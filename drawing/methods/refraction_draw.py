@@ -33,7 +33,7 @@ from ..reflected_meshes import FLIPPED_CODE, PLACED_CODE, AnswerSet
 from ..shader_cache import cached_shader
 from ..shader_sources import glsl_source
 from .glass_rays import GlassRays
-from .scene_trace import SceneTrace
+from .scene_trace import SceneTrace, TracedScene
 from .iterative_draw import MapSearchPass, map_search_info, map_search_prelude
 
 #: The search's status codes that are not the mirror search's (the rest are shared).
@@ -66,22 +66,21 @@ class RefractionPass(MapSearchPass):
     hidden_fraction = float("inf")
 
     @classmethod
-    def factory(cls, methods, traced: bool = True, world=(0.0, 0.0, 0.0)):
-        """The pass's factory (``frame_pass.FramePass.factory``), ``traced`` and ``world`` as below."""
-        return functools.partial(cls.of_inputs, tuple(methods), traced=traced, world=world)
+    def factory(cls, methods, traced: TracedScene | None = TracedScene()):
+        """The pass's factory (``frame_pass.FramePass.factory``), ``traced`` as below."""
+        return functools.partial(cls.of_inputs, tuple(methods), traced=traced)
 
     @classmethod
-    def of_inputs(cls, methods: tuple, inputs: PassInputs, traced: bool = True,
-                  world=(0.0, 0.0, 0.0)) -> "RefractionPass":
-        return cls(inputs.geometry, methods, inputs.meshes, traced, world)
+    def of_inputs(cls, methods: tuple, inputs: PassInputs,
+                  traced: TracedScene | None = TracedScene()) -> "RefractionPass":
+        return cls(inputs.geometry, methods, inputs.meshes, traced)
 
-    def __init__(self, geometry, methods, meshes=None, traced: bool = True, world=(0.0, 0.0, 0.0)):
+    def __init__(self, geometry, methods, meshes=None, traced: TracedScene | None = TracedScene()):
         super().__init__(geometry, methods, meshes)
         self.rays = GlassRays()
-        #: The glass pixels' rays met with the scene on the GPU (``scene_trace.py``; those
-        #: that meet nothing show the ``world`` colour); None: every pixel is left to the
-        #: search's meshes.
-        self.scene_trace = SceneTrace(self.geometry, self.meshes, world) if traced else None
+        #: The glass pixels' rays met with the scene on the GPU (``scene_trace.py``, what
+        #: else they show as ``traced`` says); None: every pixel is left to the search's meshes.
+        self.scene_trace = None if traced is None else SceneTrace(self.geometry, self.meshes, traced)
         #: {glass index: (x0, y0, x1, y1)}: each glass's box on screen in pixels this frame,
         #: where the search reads the pixels' paths (none: a search without a frame).
         self._pixel_rects = {}

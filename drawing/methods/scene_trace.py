@@ -19,6 +19,8 @@ per glass over its box on screen.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import gpu
 import numpy as np
 
@@ -37,16 +39,30 @@ LOCAL_SIZE = 8
 #: A leaving ray meets triangles from this share of the scene's diameter on (the glass it
 #: leaves is no triangle of the scene, but an object may touch it).
 START_SHARE = 1e-7
+#: A slot's image index for a mirror's triangle (``glsl/scene_bvh.glsl``; -1: no image).
+MIRROR_CODE = -2
+
+
+@dataclass(frozen=True)
+class TracedScene:
+    """What the trace shows besides the meshes' colours: the ``world`` colour (linear RGB)
+    where a ray meets nothing, which meshes are ``mirrors`` (by name: a ray reflects off
+    them) and how many mirror reflections a ray follows (the scene's Max Order)."""
+
+    world: tuple = (0.0, 0.0, 0.0)
+    mirrors: frozenset = frozenset()
+    max_order: int = 1
 
 
 @cached_shader
 def trace_shader():
-    """The per-pixel compute shader, built on first use (40 bytes of push constants)."""
+    """The per-pixel compute shader, built on first use (44 bytes of push constants)."""
     info = gpu.types.GPUShaderCreateInfo()
     info.push_constant('IVEC4', "rect")
     info.push_constant('VEC4', "world")
     info.push_constant('FLOAT', "t_min")
     info.push_constant('INT', "leaf_first")
+    info.push_constant('INT', "max_order")
     names = ("exit_rays", "leaving_rays", "back_exits", "back_leaving_rays", "front_points", "front_rays",
              "bvh_boxes", "bvh_slots", "scene_vertices", "vertex_colors", "vertex_normals")
     for slot, name in enumerate(names):
@@ -55,15 +71,15 @@ def trace_shader():
     info.image(1, 'RGBA32F', 'FLOAT_2D', "front_colors", qualifiers={'WRITE'})
     info.local_group_size(LOCAL_SIZE, LOCAL_SIZE)
     prelude = shading_source() + glsl_source("scene_bvh.glsl")
-    defines = {"LEAF_SIZE": LEAF_SIZE, "FOUND": FOUND}
+    defines = {"LEAF_SIZE": LEAF_SIZE, "FOUND": FOUND, "MIRROR_CODE": f"{MIRROR_CODE:.1f}"}
     info.compute_source(glsl_source("glass_trace.glsl", defines, prelude))
     return gpu.shader.create_from_info(info)
 
 
-def bvh_tables(vertices: np.ndarray, triangles: np.ndarray, triangle_images: np.ndarray) -> tuple:
+def bvh_tables(vertices: np.ndarray, triangles: np.ndarray, codes: np.ndarray) -> tuple:
     """((2 n, 4) node texels, (slots, 4) slot texels, first leaf's node index) of the tree
-    over ``triangles`` (``glsl/scene_bvh.glsl`` says what they hold); ``triangle_images``
-    (T,) each triangle's image index, -1 for none."""
+    over ``triangles`` (``glsl/scene_bvh.glsl`` says what they hold); ``codes`` (T,) each
+    triangle's image index, -1 for none (:func:`triangle_codes`)."""
     bvh = build_bvh(vertices, triangles, leaf_size=LEAF_SIZE)
     leaf_first = 1 << bvh.depth
     boxes = np.zeros((4 * leaf_first, 4), np.float32)
@@ -75,28 +91,32 @@ def bvh_tables(vertices: np.ndarray, triangles: np.ndarray, triangle_images: np.
     slots = np.full((len(bvh.order), 4), -1.0, np.float32)
     filled = bvh.order >= 0
     slots[filled, :3] = triangles[bvh.order[filled]]
-    slots[filled, 3] = triangle_images[bvh.order[filled]]
+    slots[filled, 3] = codes[bvh.order[filled]]
     return boxes, slots, leaf_first
 
 
-def triangle_images(geometry) -> np.ndarray:
-    """(T,) the image index of each reflected triangle of ``geometry`` (-1: none), from its
-    ranges of triangles sorted by image."""
-    images = np.full(len(geometry.triangles), -1, np.int64)
+def triangle_codes(geometry, mirrors=frozenset()) -> np.ndarray:
+    """(T,) each reflected triangle's image index (-1: none) from ``geometry``'s ranges of
+    triangles sorted by image, :data:`MIRROR_CODE` for the meshes named in ``mirrors``."""
+    codes = np.full(len(geometry.triangles), -1, np.int64)
     for image, first, count in geometry.ranges:  # one slice per image
-        images[first:first + count] = image
-    return images
+        codes[first:first + count] = image
+    mirror_meshes = np.flatnonzero(np.isin(np.asarray(geometry.mesh_names, dtype=object), list(mirrors)))
+    if len(mirror_meshes) and len(codes):
+        codes[np.isin(geometry.vertex_mesh[np.asarray(geometry.triangles)[:, 0]], mirror_meshes)] = MIRROR_CODE
+    return codes
 
 
 class SceneTrace:
     """The scene's triangles of one renderer's geometry on the GPU as a tree, and each
-    frame's traced glass pixels (:attr:`colors`, RGBA32F of the view's size); rays that
-    meet nothing show ``world`` (linear RGB)."""
+    frame's traced glass pixels (:attr:`colors`, RGBA32F of the view's size), ``scene``
+    (:class:`TracedScene`) saying what else the rays show."""
 
-    def __init__(self, geometry, meshes, world=(0.0, 0.0, 0.0)):
+    def __init__(self, geometry, meshes, scene: TracedScene = TracedScene()):
         self.geometry = geometry
         self.meshes = meshes
-        self.world = tuple(float(c) for c in world)[:3] + (1.0,)
+        self.scene = scene
+        self.world = tuple(float(c) for c in scene.world)[:3] + (1.0,)
         self.colors = None
         #: What glass that reflects reflects where each pixel sees it (RGBA32F of the
         #: view's size, the world colour elsewhere): the composite's colours beneath the
@@ -109,7 +129,8 @@ class SceneTrace:
         if self._tables is not None:
             return
         g = self.geometry
-        boxes, slots, leaf_first = bvh_tables(g.vertices - g.shift, np.asarray(g.triangles), triangle_images(g))
+        boxes, slots, leaf_first = bvh_tables(g.vertices - g.shift, np.asarray(g.triangles),
+                                              triangle_codes(g, self.scene.mirrors))
         self._tables = (data_texture(boxes), data_texture(slots), data_texture(g.colors, self.meshes.width),
                         data_texture(np.c_[g.normals, g.lit], self.meshes.width), leaf_first)
 
@@ -130,6 +151,7 @@ class SceneTrace:
         shader.bind()
         shader.uniform_float("t_min", START_SHARE * self.geometry.diameter)
         shader.uniform_int("leaf_first", leaf_first)
+        shader.uniform_int("max_order", int(self.scene.max_order))
         shader.uniform_float("world", self.world)
         for name, texture in (("exit_rays", rays.exits), ("leaving_rays", rays.leaving),
                               ("back_exits", rays.back_exits), ("back_leaving_rays", rays.back_leaving),

@@ -107,3 +107,41 @@ def test_a_mesh_with_an_image_texture_is_left_to_the_search(gpu_ready):
     method, _ = refracted_glass(glass, 0, *star_maps.star_map(surface))
     refraction = glass_renderer([glass], meshes, [method]).pass_named("refraction")
     assert refraction.searches_vertices
+
+
+def test_a_mirror_behind_glass_shows_what_it_reflects_as_render_image_traces_it(gpu_ready):
+    """A glass ball before a mirror tilted to reflect a panel of two colours above it:
+    the pixels whose paths through the ball meet the mirror show the panel the mirror
+    reflects, as Render Image traces it (``BandTracer.trace_rays`` to Max Order 1;
+    measured: every one of the ball's pixels within 0.02); at Max Order 0 the mirror
+    shows the world, as Render Image's does."""
+    from curved_reflections.blender import star_maps
+    from curved_reflections.blender.glass_layer import GlassLayer, glass_renderer
+    from curved_reflections.drawing.gpu_data import read_texture
+    from curved_reflections.engine import Reflector
+    from curved_reflections.engine.geometry.band_trace import BandTracer
+
+    surface = icosphere((0.0, 0.0, 0.0), 1.0, 5, "Ball")
+    glass = Glass(surface, N, False)
+    method, _ = refracted_glass(glass, 0, *star_maps.star_map(surface))
+    across, up = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, -1.0]) / np.sqrt(2.0)
+    corners = (0.0, 0.0, -2.5) + 3.0 * np.array([-across - up, across - up, across + up, -across + up])
+    mirror = Reflector("Mirror", corners, np.array([[0, 1, 2], [0, 2, 3]]), np.tile([0.0, 1.0, 1.0], (4, 1)))
+    panel = shapes.box((8.0, 0.1, 8.0))
+    colour = np.where(panel.vertices[:, :1] > 0.0, [[0.9, 0.8, 0.1, 1.0]], [[0.6, 0.1, 0.8, 1.0]])
+    meshes = [DiffuseMesh("Panel", panel.vertices + (0.0, 4.0, -2.5), panel.triangles, colour.astype(np.float32))]
+    view = look_at_view((0.3, 0.2, 5.0), (0.0, 0.0, 0.0), fov_y_deg=30.0, width=WIDTH, height=HEIGHT)
+    ys, xs = np.mgrid[0:HEIGHT, 0:WIDTH]
+    paths = GlassSet([glass]).trace(*view.pixel_rays(np.c_[xs.ravel(), ys.ravel()] + 0.5))
+    out = (paths.interfaces == 2) & ~paths.trapped
+    tracer = BandTracer([mirror], meshes)
+    layer = GlassLayer((), GlassSet([glass]), None, tracer)
+    world = np.array([0.2, 0.2, 0.2, 1.0])
+    for order in (1, 0):
+        renderer = glass_renderer([glass], meshes, [method], world[:3], mirrors=[mirror], max_order=order)
+        drawn = read_texture(renderer.draw_passes(view, None).reflection_colors, WIDTH, HEIGHT).reshape(-1, 4)[out]
+        truth = layer.leaving_colors(paths, world, order)[out]
+        wrong = np.abs(drawn[:, :3] - truth).max(axis=1) > 0.02
+        reflected = tracer.trace_rays(paths.origin[out], paths.direction[out], 1, world)[:, 3]
+        mirrored = np.isfinite(reflected) & (reflected > 0.0)
+        assert out.sum() > 2500 and mirrored.sum() > 1000 and wrong.mean() < 0.01, (order, wrong.mean())
