@@ -199,10 +199,13 @@ class FramePipeline:
 
     def camera_job(self, view: View) -> CameraJob | None:
         """The sample-based camera ``view`` needs, or None: every reflector's first order
-        is drawn by a per-frame pass in it, and no higher order can show."""
+        is drawn by a per-frame pass in it, and no higher order can show, or a pass (the
+        trace) draws every order of every reflector."""
         per_frame = self.renderer.per_frame_reflectors(view)
         higher_orders = self.settings.max_order > 1 and self.renderer.convex_mirrors.higher_orders
-        if len(per_frame) >= len(self.captured.reflectors) and not higher_orders:
+        every_order = frozenset().union(*(frame_pass.every_order_reflectors for frame_pass in self.renderer.passes))
+        if len(per_frame) >= len(self.captured.reflectors) and (not higher_orders or
+                                                                len(every_order) >= len(self.captured.reflectors)):
             return None
         return CameraJob(self.reflector_set, view, self.camera_bounds(), self.settings, per_frame)
 

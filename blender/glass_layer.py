@@ -5,8 +5,8 @@ The layer's renderer holds the glass as its "mirrors" and every other surface as
 Live, through convex glass, each glass pixel's path is followed on the GPU and its rays
 (the one leaving the glass, the one the glass reflects where it is seen, the one it
 reflects back inside where the path leaves) are met with the scene there
-(``drawing/methods/scene_trace.py``). Where a mesh has an image texture, the refraction
-search draws every diffuse vertex where it appears instead
+(``drawing/methods/scene_trace.py``). Where the meshes have more image textures than it
+samples, the refraction search draws every diffuse vertex where it appears instead
 (``drawing/methods/refraction_draw.py``), each fragment a ray cast along its pixel's path,
 and the iterative search draws the glass's reflections as a mirror's (:func:`glass_mirror`).
 The refraction is weighed by 1 minus the glass's exact Fresnel reflectance over its
@@ -37,7 +37,7 @@ import numpy as np
 from ..drawing.gpu_data import read_depth, read_texture
 from ..drawing.methods.iterative_draw import IterativePass
 from ..drawing.methods.refraction_draw import RefractionPass
-from ..drawing.methods.scene_trace import TracedScene
+from ..drawing.methods.scene_tables import MAX_IMAGES, TracedScene
 from ..drawing.reflection_draw import ReflectionRenderer
 from ..drawing.screen_space import pixel_box
 from ..engine.errors import SceneInputError
@@ -195,12 +195,13 @@ def glass_mirror(glasses, meshes, methods, world=(0.0, 0.0, 0.0)) -> ReflectionR
     one (``methods``) that reflects (a Glass BSDF) by the iterative search on its cube
     map (Roger & Holzschuch 2006: convex glass is star-shaped), the others showing the
     ``world`` colour: what the live view shows beneath the refracted images, weighed by
-    the Fresnel reflectance (:meth:`GlassLayer.draw`), where a mesh has an image texture.
-    None without such glass, or without image textures: the refraction pass then meets
-    each pixel's reflected ray with the scene (``drawing/methods/scene_trace.py``)."""
+    the Fresnel reflectance (:meth:`GlassLayer.draw`), where the meshes have more image
+    textures than the trace samples (``scene_tables.MAX_IMAGES``). None without such
+    glass, or without that many: the refraction pass then meets each pixel's reflected
+    ray with the scene (``drawing/methods/scene_trace.py``)."""
     searched = [IterativeReflector(method.index, method.name, method.reflector_map, method.accuracy_px)
                 for method in methods if method.reflects]
-    if not searched or all(getattr(mesh, "image", None) is None for mesh in meshes):
+    if not searched or sum(getattr(mesh, "image", None) is not None for mesh in meshes) <= MAX_IMAGES:
         return None
     count = len(glasses)
     return ReflectionRenderer([glass.surface for glass in glasses], meshes,

@@ -7,16 +7,17 @@ registered later) or Auto. :func:`plan` asks the mode's method whether it takes 
 reflector (its *offer*); a method that refuses (the iterative search on a mirror that is
 not star-shaped, a grid mode without a baked grid) hands the reflector to Runtime, and
 the panel line says why. Auto asks the methods marked ``in_auto`` in registry order
-(the iterative search, then a baked morphing grid) and falls back to Runtime.
+(the iterative search, a baked morphing grid, then the trace per pixel, which takes any
+mirror) and falls back to Runtime.
 
 The live view checks each drawn method's answers against exactly traced rays when the
 view settles (``blender/accuracy.py``); an Auto reflector whose method measured
 outside the scene's Accuracy there is passed to the next method until Refresh
 (:func:`note_measured`).
 
-Higher orders: the per-frame methods draw first-order reflections; reflections of order
-2 and more, in every mode, come from the sample-based camera, which is built for them
-(and for the reflectors no per-frame pass drew) alone.
+Higher orders: the per-frame methods draw first-order reflections (the trace draws every
+order its rays reach); reflections of order 2 and more come from the sample-based camera,
+which is built for them (and for the reflectors no per-frame pass drew) alone.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from . import method_registry
-from .method_registry import AUTO, ITERATIVE, MORPHING, OCTREE, PERTURBATION, RUNTIME, PlanInputs  # noqa: F401
+from .method_registry import AUTO, ITERATIVE, MORPHING, OCTREE, PERTURBATION, RUNTIME, TRACED, PlanInputs  # noqa: F401
 from .scene_status import status_of
 
 #: The modes drawn from a baked grid (``morph_bake``; the renderer's ``MorphPass`` draws both).

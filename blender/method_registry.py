@@ -31,10 +31,11 @@ from ..engine.methods.perturbation import AnalyticSurface, PerturbationReflector
 from ..drawing.methods.iterative_draw import IterativePass
 from ..drawing.methods.morph_pass import MorphPass
 from ..drawing.methods.perturbation_pass import PerturbationPass
+from ..drawing.methods.traced_pass import TracedMirror, TracedPass
 from . import star_maps
 
-AUTO, ITERATIVE, RUNTIME, MORPHING, OCTREE, PERTURBATION = (
-    'AUTO', 'ITERATIVE', 'RUNTIME', 'MORPHING', 'OCTREE', 'PERTURBATION')
+AUTO, ITERATIVE, RUNTIME, MORPHING, OCTREE, PERTURBATION, TRACED = (
+    'AUTO', 'ITERATIVE', 'RUNTIME', 'MORPHING', 'OCTREE', 'PERTURBATION', 'TRACED')
 #: A declared exact surface is used when the mesh's vertices lie this close to it
 #: (share of its radius); farther, the mesh itself reflects and the panel says why.
 ANALYTIC_TOLERANCE = 0.02
@@ -213,6 +214,11 @@ def _offer_perturbation(inputs: PlanInputs, index: int, reflector) -> Offer:
                  PerturbationReflector(index, reflector.name, surface))
 
 
+def _offer_traced(inputs: PlanInputs, index: int, reflector) -> Offer:
+    return Offer(True, "each pixel's reflected ray traced on the GPU every frame: every image, to Max Order",
+                 TracedMirror(index, reflector.name))
+
+
 def _offer_runtime(inputs: PlanInputs, index: int, reflector) -> Offer:
     return Offer(True, "a camera per view")
 
@@ -237,6 +243,10 @@ def register_builtin() -> None:
                     "vertex's reflection from the nearest one by its path Jacobian and Hessian (Chen & Arvo 2000); "
                     "any smooth reflector", 'FORCE_HARMONIC', _offer_perturbation, PerturbationPass.factory,
                     summary="by perturbation of paths traced each view"))
+    register(Method(TRACED, "Ray Traced (GPU)", "Trace each mirror pixel's reflected ray through the scene on the "
+                    "GPU every frame: any mirror, folded or not star-shaped, every image, no bake",
+                    'SHADING_RENDERED', _offer_traced, TracedPass.factory, in_auto=True,
+                    summary="ray traced on the GPU every frame"))
 
 
 register_builtin()

@@ -19,6 +19,7 @@ import textwrap
 
 import bpy
 
+from ..drawing.methods.scene_tables import MAX_IMAGES
 from . import accuracy, live, method_plan, method_registry, morph_bake
 from .capture import SURFACE_TYPES
 from .material_ior import glass_ior
@@ -208,8 +209,8 @@ def glass_note(name: str, state) -> str:
         return (f"The viewport shows it as a solid object: {layer.unsearched[name]}. {rendered} "
                 "Mirrors reflect it as a solid object.")
     if layer.renderer.pass_named("refraction").searches_vertices:
-        drawn = ("The viewport draws what lies behind it by the refraction search (a convex solid; an object in the "
-                 "scene has an image texture), mixed by Fresnel with what it reflects, drawn as a mirror's; mirrors "
+        drawn = ("The viewport draws what lies behind it by the refraction search (a convex solid; the scene has "
+                 f"more than {MAX_IMAGES} image textures), mixed by Fresnel with what it reflects, drawn as a mirror's; mirrors "
                  "behind it show as solid objects")
     else:
         drawn = ("The viewport traces it on the GPU every frame (a convex solid): each pixel's path through it and "

@@ -126,7 +126,7 @@ def _sorted_by_image(triangles: np.ndarray, image: np.ndarray) -> tuple[np.ndarr
     return triangles[order], tuple((int(image[k]), int(k), int(c)) for k, c in zip(starts, counts))
 
 
-def _mesh_attributes(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def mesh_attributes(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Normals (N, 3) (the mesh's, else smooth ones from its faces), UVs (N, 2) and lit (N,)."""
     normals = mesh.normals if getattr(mesh, "normals", None) is not None else vertex_normals(
         mesh.vertices, mesh.triangles)
@@ -196,7 +196,7 @@ def prepare_geometry(reflectors, meshes, reflector_colors=None, reflectivity=Non
         image_of_mesh.append(-1 if image is None else len(images))
         if image is not None:
             images.append(np.ascontiguousarray(image, dtype=np.float32))
-    attributes = [_mesh_attributes(m) for m in meshes]
+    attributes = [mesh_attributes(m) for m in meshes]
 
     parts = _prepass_parts(meshes, attributes, image_of_mesh, reflectors, colors, mirror, f0, fade, sense)
     if parts:

@@ -48,6 +48,9 @@ class PassInputs:
     reflector_set: object
     convex_mirrors: object
     settings: FrameSettings
+    #: The diffuse meshes as given (``engine.scene.DiffuseMesh`` each), before subdivision:
+    #: what a trace meets rays with.
+    diffuse: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -193,6 +196,12 @@ class FramePass:
         mirror reverses the winding of every triangle, so the far sides of closed
         solids can be culled by winding (``ReflectedMeshes.draw``)."""
         return []
+
+    @property
+    def every_order_reflectors(self) -> frozenset:
+        """Reflectors whose reflections of every order the pass draws (its rays follow
+        them through further mirrors): no camera is needed for them."""
+        return frozenset()
 
     @property
     def gap_reflectors(self) -> list:

@@ -18,8 +18,9 @@ class FrameTargets:
         self.prepass_colors = gpu.types.GPUTexture(size, format='RGBA32F')
         self.prepass_labels = gpu.types.GPUTexture(size, format='RGBA32F')
         #: The smooth normal of the surface each pixel shows (the mirrors' for the
-        #: reflected meshes' law-of-reflection test).
-        self.prepass_normals = gpu.types.GPUTexture(size, format='RGBA16F')
+        #: reflected meshes' law-of-reflection test; float32: a traced mirror pixel is
+        #: reflected about it, ``methods/traced_pass.py``).
+        self.prepass_normals = gpu.types.GPUTexture(size, format='RGBA32F')
         self.prepass_depth = gpu.types.GPUTexture(size, format='DEPTH_COMPONENT32F')
         self.prepass = gpu.types.GPUFrameBuffer(depth_slot=self.prepass_depth,
                                                 color_slots=(self.prepass_colors, self.prepass_labels,

@@ -187,7 +187,8 @@ class ReflectionRenderer:
         #: The diffuse meshes on the GPU, placed by the per-frame passes' answers.
         self.meshes = ReflectedMeshes(self.geometry)
         self.convex_mirrors = convex = ConvexMirrors(reflectors)  # tested once, for every pass
-        inputs = PassInputs(self.geometry, self.meshes, tuple(reflectors), reflector_set, convex, settings)
+        inputs = PassInputs(self.geometry, self.meshes, tuple(reflectors), reflector_set, convex, settings,
+                            tuple(meshes))
         per_frame = tuple(make(inputs) for make in passes)
         self.stats = dict(self.geometry.stats)
         self.counts = {"projections": 0, "frames": 0}

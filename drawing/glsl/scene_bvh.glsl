@@ -9,27 +9,39 @@
  * of its mesh's image, -1 for none, MIRROR_CODE for a mirror's; x -1 for an empty slot),
  * `scene_vertices` the
  * vertices (relative to the renderer's shift, as the ray). A complete tree is walked
- * without a stack: past a node, climb while it is a right child, then go to its sibling. */
+ * without a stack: past a node, climb while it is the second child its parent visits,
+ * then go to its sibling (`left_first` says which is first, from the ray's direction). */
 
+/* Texel `index` of a table of TABLE_ROW texels a row (a power of two: no division). */
 vec4 table_texel(sampler2D table, int index)
 {
-  int width = textureSize(table, 0).x;
-  return texelFetch(table, ivec2(index % width, index / width), 0);
+  return texelFetch(table, ivec2(index & (TABLE_ROW - 1), index >> TABLE_ROW_BITS), 0);
 }
 
-/* Whether the ray meets the box within [0, far] (slabs; `inverse` holds 1 / direction). */
-bool meets_box(vec3 origin, vec3 inverse, vec3 low, vec3 high, float far)
+/* Whether the ray meets the box within [near, far] (slabs; `inverse` holds 1 / direction). */
+bool meets_box(vec3 origin, vec3 inverse, vec3 low, vec3 high, float near, float far)
 {
   vec3 t0 = (low - origin) * inverse;
   vec3 t1 = (high - origin) * inverse;
   vec3 near3 = min(t0, t1);
   vec3 far3 = max(t0, t1);
-  return max(max(near3.x, near3.y), max(near3.z, 0.0)) <= min(min(far3.x, far3.y), min(far3.z, far));
+  return max(max(near3.x, near3.y), max(near3.z, near)) <= min(min(far3.x, far3.y), min(far3.z, far));
+}
+
+/* Whether a ray along `direction` visits node `parent`'s left child first: the child
+ * whose box lies lower along the axis the two differ most on (the parent's highest-corner
+ * texel's w: +(axis + 1) where the left one is lower, -(axis + 1) where the right one is). */
+bool left_first(int parent, vec3 direction)
+{
+  float split = table_texel(bvh_boxes, 2 * parent + 1).w;
+  int axis = clamp(int(abs(split)) - 1, 0, 2);
+  return (split > 0.0) == (direction[axis] >= 0.0);
 }
 
 /* The nearest hit of the ray past `t_min`, slot `skip` aside (the triangle a reflected ray
  * leaves; -1: none): its slot (-1 for none), distance and barycentric (u, v) of its second
- * and third corners (Moller & Trumbore 1997). */
+ * and third corners (Moller & Trumbore 1997). Children are visited nearer first, so that
+ * a near hit prunes the boxes behind it. */
 int nearest_hit(vec3 origin, vec3 direction, float t_min, int skip, out float t_hit, out vec2 hit_uv)
 {
   vec3 safe = mix(direction, vec3(1e-30), lessThan(abs(direction), vec3(1e-30)));
@@ -41,9 +53,9 @@ int nearest_hit(vec3 origin, vec3 direction, float t_min, int skip, out float t_
   for (int visits = 0; visits < 4 * leaf_first; visits++) {
     vec4 low = table_texel(bvh_boxes, 2 * node);
     vec4 high = table_texel(bvh_boxes, 2 * node + 1);
-    if (low.w > 0.5 && meets_box(origin, inverse, low.xyz, high.xyz, t_hit)) {
+    if (low.w > 0.5 && meets_box(origin, inverse, low.xyz, high.xyz, t_min, t_hit)) {
       if (node < leaf_first) {
-        node *= 2;
+        node = 2 * node + (left_first(node, direction) ? 0 : 1);
         continue;
       }
       for (int k = 0; k < LEAF_SIZE; k++) {
@@ -72,13 +84,14 @@ int nearest_hit(vec3 origin, vec3 direction, float t_min, int skip, out float t_
         }
       }
     }
-    while ((node & 1) == 1) {
+    /* Up while this node is its parent's second child visited, then to its sibling. */
+    while (node > 1 && ((node & 1) == 0) != left_first(node >> 1, direction)) {
       node >>= 1;
     }
-    if (node == 0) {
+    if (node <= 1) {
       break;
     }
-    node += 1;
+    node ^= 1;
   }
   return hit;
 }

@@ -14,7 +14,7 @@ stand in (``glsl/reflection_mesh_frag.glsl``, REFRACTION_TEST), as the mirrors' 
 are held to the law of reflection; the next search starts from the pixels whose rays
 pass each vertex nearest (``glsl/refraction_search.glsl``). Where the
 path must reflect totally inside a glass that does not reflect (a Refraction BSDF),
-Cycles shows black, and so does the frame (:meth:`GlassRays.draw_settled`); glass that
+Cycles shows black, and so does the frame (``settled_draw.py``); glass that
 reflects (a Glass BSDF) reflects the path inside, and it leaves where it next can.
 """
 
@@ -25,10 +25,11 @@ import numpy as np
 
 from ...engine.glass import refraction_search as search_module
 from ..draw_shaders import shading_source
-from ..gpu_data import read_texture, vertex_buffer
+from ..gpu_data import read_texture
 from ..screen_space import camera_position
 from ..shader_cache import cached_shader
 from ..shader_sources import glsl_source
+from .settled_draw import draw_settled
 
 #: Invocations per work group of the per-pixel stage (8 x 8 pixels).
 LOCAL_SIZE = 8
@@ -67,29 +68,6 @@ def rays_shader():
     return gpu.shader.create_from_info(info)
 
 
-@cached_shader
-def settled_shader():
-    """The pixels settled per pixel, one full-screen triangle: black where
-    :func:`rays_shader` marked a pixel dark, the traced colour where
-    ``scene_trace.SceneTrace`` traced one, each at depth 0, which the refracted meshes
-    drawn next cannot pass."""
-    info = gpu.types.GPUShaderCreateInfo()
-    info.sampler(0, 'FLOAT_2D', "leaving_rays")
-    info.sampler(1, 'FLOAT_2D', "traced_colors")
-    info.vertex_in(0, 'VEC2', "position")
-    info.fragment_out(0, 'VEC4', "color_out")
-    info.depth_write('ANY')
-    info.vertex_source("void main()\n{\n  gl_Position = vec4(position, 0.0, 1.0);\n}\n")
-    # Alpha 1: a drawn reflection at distance 0, which the composite does not fade.
-    info.fragment_source(
-        "void main()\n{\n  ivec2 pixel = ivec2(gl_FragCoord.xy);\n"
-        "  vec4 traced = texelFetch(traced_colors, min(pixel, textureSize(traced_colors, 0) - 1), 0);\n"
-        "  if (texelFetch(leaving_rays, pixel, 0).w < 0.0) {\n    color_out = vec4(0.0, 0.0, 0.0, 1.0);\n  }\n"
-        "  else if (traced.a > 0.5) {\n    color_out = vec4(traced.rgb, 1.0);\n  }\n"
-        "  else {\n    discard;\n  }\n  gl_FragDepth = 0.0;\n}\n")
-    return gpu.shader.create_from_info(info)
-
-
 class GlassRays:
     """The per-pixel paths of one renderer's searched glass: RGBA32F textures of the
     view's size (:attr:`exits`: exit point and status; :attr:`leaving`: the leaving ray,
@@ -111,8 +89,6 @@ class GlassRays:
         self.front_points = None
         self.front_rays = None
         self._size = None
-        self._screen = None
-        self._untraced = None
 
     def trace(self, frame, methods, atlas, shift) -> None:
         """The paths of ``frame`` (``frame_pass.Frame``, its pre-pass drawn) through each
@@ -166,23 +142,8 @@ class GlassRays:
         """Into the bound reflection target, before the refracted meshes: black where the
         last paths marked it dark, and the colours of ``traced`` (RGBA32F of the view's
         size, ``scene_trace.SceneTrace.colors``; None: none) where they were traced."""
-        if self.leaving is None:
-            return
-        if self._screen is None:
-            corners = np.array([[-1.0, -1.0], [3.0, -1.0], [-1.0, 3.0]], np.float32)
-            self._screen = gpu.types.GPUBatch(type='TRIS', buf=vertex_buffer({"position": (corners, 'F32', 'FLOAT')}))
-        if traced is None:
-            if self._untraced is None:
-                self._untraced = gpu.types.GPUTexture((1, 1), format='RGBA32F')
-                self._untraced.clear(format='FLOAT', value=(0.0, 0.0, 0.0, 0.0))
-            traced = self._untraced
-        shader = settled_shader()
-        shader.bind()
-        shader.uniform_sampler("leaving_rays", self.leaving)
-        shader.uniform_sampler("traced_colors", traced)
-        gpu.state.depth_test_set('ALWAYS')
-        self._screen.draw(shader)
-        gpu.state.depth_test_set('LESS')
+        if self.leaving is not None:
+            draw_settled(traced, self.leaving)
 
     def read(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The last paths read back, rows bottom up: (H, W, 3) exit points (relative to

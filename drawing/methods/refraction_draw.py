@@ -33,7 +33,8 @@ from ..reflected_meshes import FLIPPED_CODE, PLACED_CODE, AnswerSet
 from ..shader_cache import cached_shader
 from ..shader_sources import glsl_source
 from .glass_rays import GlassRays
-from .scene_trace import SceneTrace, TracedScene
+from .scene_tables import MAX_IMAGES, TracedScene
+from .scene_trace import SceneTrace
 from .iterative_draw import MapSearchPass, map_search_info, map_search_prelude
 
 #: The search's status codes that are not the mirror search's (the rest are shared).
@@ -73,14 +74,15 @@ class RefractionPass(MapSearchPass):
     @classmethod
     def of_inputs(cls, methods: tuple, inputs: PassInputs,
                   traced: TracedScene | None = TracedScene()) -> "RefractionPass":
-        return cls(inputs.geometry, methods, inputs.meshes, traced)
+        return cls(inputs.geometry, methods, inputs.meshes, traced, inputs.diffuse)
 
-    def __init__(self, geometry, methods, meshes=None, traced: TracedScene | None = TracedScene()):
+    def __init__(self, geometry, methods, meshes=None, traced: TracedScene | None = TracedScene(), diffuse=()):
         super().__init__(geometry, methods, meshes)
         self.rays = GlassRays()
-        #: The glass pixels' rays met with the scene on the GPU (``scene_trace.py``, what
-        #: else they show as ``traced`` says); None: every pixel is left to the search's meshes.
-        self.scene_trace = None if traced is None else SceneTrace(self.geometry, self.meshes, traced)
+        #: The glass pixels' rays met with the ``diffuse`` meshes as given on the GPU
+        #: (``scene_trace.py``, what else they show as ``traced`` says); None: every pixel
+        #: is left to the search's meshes.
+        self.scene_trace = None if traced is None else SceneTrace(diffuse, self.geometry, traced)
         #: {glass index: (x0, y0, x1, y1)}: each glass's box on screen in pixels this frame,
         #: where the search reads the pixels' paths (none: a search without a frame).
         self._pixel_rects = {}
@@ -101,7 +103,8 @@ class RefractionPass(MapSearchPass):
                                             view.width, view.height, 0)
             self._pixel_rects[method.index] = (x, y, x + width, y + height)
         if self.scene_trace is not None:
-            self.scene_trace.trace(self.rays, self._pixel_rects.values(), (frame.targets.width, frame.targets.height))
+            self.scene_trace.trace(self.rays, self._pixel_rects.values(), (frame.targets.width, frame.targets.height),
+                                   frame.images)
             frame.targets.beneath = self.scene_trace.front_colors
         if not self.searches_vertices:
             self._pixel_rects = {}
@@ -125,8 +128,9 @@ class RefractionPass(MapSearchPass):
     @property
     def searches_vertices(self) -> bool:
         """Whether the search runs and its meshes are drawn: without the trace, or where a
-        mesh has an image texture (the trace leaves the pixels that meet it to them)."""
-        return self.scene_trace is None or bool(self.geometry.images)
+        mesh has an image texture past the trace's first ``MAX_IMAGES`` (the trace leaves
+        the pixels that meet it to them)."""
+        return self.scene_trace is None or len(self.geometry.images) > MAX_IMAGES
 
     @property
     def folded_reflectors(self) -> list:

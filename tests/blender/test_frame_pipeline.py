@@ -91,8 +91,8 @@ def test_auto_passes_over_a_search_that_misses_a_folded_mirrors_images(fig3, amp
     """With bumps of 15 % of the ball's radius a column is seen two or three times. Render
     Image searches every image of the folded mirror, and the check keeps it; the live
     view's search for one image per vertex draws only exact answers, but the check counts
-    the exact images it left out, and Auto passes it over with that reason (to Runtime: no
-    grid is baked). With gentle bumps (4 %) both are kept."""
+    the exact images it left out, and Auto passes it over with that reason (to the trace:
+    no grid is baked). With gentle bumps (4 %) both are kept."""
     from curved_reflections.blender import method_plan
     from curved_reflections.blender.frame_pipeline import FramePipeline
 
@@ -128,10 +128,10 @@ def test_auto_passes_over_a_search_that_misses_a_folded_mirrors_images(fig3, amp
     assert check.missed >= 2 and check.missed > 0.2 * check.images and check.percentile(95) < 0.5
     assert check.missed_in in {"FloorA", "FloorB", "Cube"} | {f"Column{k}" for k in range(1, 8)}
     [choice] = pipeline.plan.choices
-    assert choice.method == method_plan.RUNTIME and pipeline.renderer is not searched
+    assert choice.method == method_plan.TRACED and pipeline.renderer is not searched
     assert f"Iterative (GPU): {check.missed} of {check.images} exact images of {check.missed_in} not drawn in a view" \
         in choice.reason
-    assert pipeline.camera_job(view) is not None  # the next draw builds a camera for it
+    assert pipeline.renderer.pass_named("traced").methods  # every image, traced per pixel
     assert not pipeline.check_methods(fig3, view)  # nothing of Auto's left to check
 
 

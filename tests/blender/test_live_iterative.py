@@ -78,16 +78,26 @@ def test_a_view_inside_the_searched_reflector_is_reported_and_drawing_resumes_ou
     assert state.level == 'INFO'
 
 
-def test_a_torus_in_iterative_mode_is_searched_as_pieces_and_in_auto_mode_the_live_view_leaves_it_to_runtime(fig3):
+def test_a_torus_in_iterative_mode_is_searched_as_pieces_and_in_auto_mode_the_live_view_traces_it(fig3):
     """A torus is not star-shaped: Iterative mode searches it as pieces seen from inside
     (engine/methods/iterative/pieces.py) in the live view; Auto does so only in Render
-    Image (each redraw would search every piece), and the panel says why."""
+    Image (each redraw would search every piece) and traces it in the live view, with
+    no camera for its first orders, and the panel says why."""
     torus = _torus(fig3)
     state = live.start(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
     choices = {c.reflector: c for c in method_plan.last_choices(fig3)}
-    assert choices["Ring"].method == method_plan.RUNTIME
+    assert choices["Ring"].method == method_plan.TRACED
     assert choices["Ring"].reason.startswith("'Ring' is not star-shaped")
     assert "searched as pieces in Render Image and in Iterative mode" in choices["Ring"].reason
+    assert choices["Ring"].reason.endswith("each pixel's reflected ray traced on the GPU every frame: every image, "
+                                           "to Max Order")
+    assert [m.name for m in state.renderer.pass_named("traced").methods] == ["Ring"]
+    # The ball traced too: the trace draws every order (Max Order 2), so no camera is built.
+    bpy.data.objects["MirrorSphere"].curved_reflections.mode = method_plan.TRACED
+    state = live.start(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
+    assert live.draw_safely(fig3, live.CAMERA_KEY, _camera_view(fig3)) and not state.jobs
+    assert state.camera_job(_camera_view(fig3)) is None and state.renderer.pass_named("traced").claims() == {0, 1}
+    bpy.data.objects["MirrorSphere"].curved_reflections.mode = method_plan.AUTO
 
     torus.curved_reflections.mode = 'ITERATIVE'
     state = live.start(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
@@ -148,8 +158,8 @@ def test_a_mirror_moved_without_turning_keeps_its_map(fig3, monkeypatch):
 
 
 def test_star_shaped_check_of_blender_primitives(fig3):
-    """Suzanne (ears, eye sockets) and a torus are not star-shaped; a UV sphere and a
-    scaled, subdivided cube (rounded) are."""
+    """Suzanne (ears, eye sockets) and a torus are not star-shaped (Auto traces them in
+    the live view); a UV sphere and a scaled, subdivided cube (rounded) are."""
     from curved_reflections.blender.capture import capture_scene
 
     bpy.ops.mesh.primitive_monkey_add(location=(3.0, -2.0, 1.0))
@@ -167,7 +177,7 @@ def test_star_shaped_check_of_blender_primitives(fig3):
     chosen = {c.reflector: c for c in plan.choices}
     assert chosen["MirrorSphere"].method == chosen["Rounded"].method == method_plan.ITERATIVE
     for name in ("Suzanne", "Ring"):
-        assert chosen[name].method == method_plan.RUNTIME
+        assert chosen[name].method == method_plan.TRACED
         assert chosen[name].reason.startswith(f"{name!r} is not star-shaped")
     # Suzanne is open (no pieces seen from inside); the torus is closed (pieces in Render Image).
     assert "not a closed surface" in chosen["Suzanne"].reason
@@ -219,12 +229,12 @@ def test_perturbation_mode_draws_live_with_no_camera_and_the_torus_too(fig3, cap
 def test_the_drawn_methods_accuracy_is_measured_when_the_view_settles(fig3):
     """Once the view has not changed for a moment, the live view checks the drawn
     answers against exactly traced rays (engine/spot_check.py); the panel shows it. The
-    ball's iterative search: sub-pixel. A torus beside it, drawn by a Runtime camera,
-    is measured too."""
+    ball's iterative search: sub-pixel. A torus beside it, drawn by a Runtime camera
+    (in Runtime mode: Auto traces it), is measured too."""
     from curved_reflections.blender import accuracy
 
     # The Runtime camera's check projects accuracy.CAMERA_SAMPLE (3000) of the scene's vertices.
-    _coarse_torus(fig3)
+    _coarse_torus(fig3).curved_reflections.mode = 'RUNTIME'
     state = live.start(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
     view = _camera_view(fig3)
     assert _draw(fig3, view)[0]
@@ -249,8 +259,8 @@ def test_the_drawn_methods_accuracy_is_measured_when_the_view_settles(fig3):
 
 def test_auto_passes_over_a_method_measured_outside_the_accuracy_until_refresh(fig3, monkeypatch):
     """A check that finds the Auto ball's search outside the scene's Accuracy (made to,
-    here) has it drawn by Runtime from then on, and the panel says why; Refresh tries
-    the search again."""
+    here) has it drawn by the next method Auto tries, the trace, from then on, and the
+    panel says why; Refresh tries the search again."""
     from curved_reflections.engine.spot_check import SpotCheck
     from curved_reflections.blender import accuracy
 
@@ -261,10 +271,10 @@ def test_auto_passes_over_a_method_measured_outside_the_accuracy_until_refresh(f
     live.process(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
     live.process(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)  # plans again
     [choice] = method_plan.last_choices(fig3)
-    assert choice.method == method_plan.RUNTIME
+    assert choice.method == method_plan.TRACED
     assert "Iterative (GPU): p95 3.00 px in a view (Accuracy 1 px)" in choice.reason
-    assert not state.plan.engines_of(method_plan.ITERATIVE)
-    assert _draw(fig3, view)[0] or state.requests  # a camera is built for it now
+    assert not state.plan.engines_of(method_plan.ITERATIVE) and state.plan.engines_of(method_plan.TRACED)
+    assert _draw(fig3, view)[0] and state.renderer.pass_named("traced").claims() == {0}
     monkeypatch.undo()
     live.refresh(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
     assert method_plan.last_choices(fig3)[0].method == method_plan.ITERATIVE

@@ -131,12 +131,12 @@ def test_a_reflector_the_method_refuses_is_drawn_in_runtime_mode_with_the_reason
 
 def test_auto_tries_the_registered_methods_in_order_and_the_enum_follows_the_registry(flat_method):
     names = [m.name for m in method_registry.registered()]
-    assert names == ['ITERATIVE', 'RUNTIME', 'MORPHING', 'OCTREE', 'PERTURBATION', FLAT]
+    assert names == ['ITERATIVE', 'RUNTIME', 'MORPHING', 'OCTREE', 'PERTURBATION', 'TRACED', FLAT]
     items = method_registry.enum_items()
     assert [item[0] for item in items] == ['AUTO'] + names
     assert [item[3] for item in items] == list(range(len(names) + 1))  # saved files keep their numbers
-    assert [m.name for m in method_plan._candidates('AUTO')] == ['ITERATIVE', 'MORPHING']
-    assert "Iterative (GPU), Morphing, else Runtime" in items[0][2]
+    assert [m.name for m in method_plan._candidates('AUTO')] == ['ITERATIVE', 'MORPHING', 'TRACED']
+    assert "Iterative (GPU), Morphing, Ray Traced (GPU), else Runtime" in items[0][2]
     method_registry.unregister(FLAT)
     assert FLAT not in [item[0] for item in method_registry.enum_items()]
 
@@ -144,4 +144,4 @@ def test_auto_tries_the_registered_methods_in_order_and_the_enum_follows_the_reg
 def test_methods_sharing_a_pass_key_get_one_pass(flat_method):
     factories = method_registry.pass_factories({method_plan.MORPHING: ["a"], method_plan.OCTREE: ["b"], FLAT: ["c"]})
     made = [factory.args[0] if hasattr(factory, "args") else None for factory in factories]
-    assert made == [(), ("a", "b"), (), ("c",)]  # iterative, grids, perturbation, flat: registry order
+    assert made == [(), ("a", "b"), (), (), ("c",)]  # iterative, grids, perturbation, traced, flat: registry order

@@ -204,8 +204,8 @@ def test_the_glass_panel_shows_the_index_of_refraction_in_use_and_what_draws_the
 
 def test_the_glass_note_names_what_draws_each_glass_in_the_viewport_and_why():
     """Once reflections are started, the note follows the live state's glass layer: the
-    GPU's trace for convex glass (the refraction search where an object has an image
-    texture), the reason it has neither for other glass."""
+    GPU's trace for convex glass (the refraction search past four image textures), the
+    reason it has neither for other glass."""
     from types import SimpleNamespace
 
     from curved_reflections.blender.panel import glass_note

@@ -5,7 +5,7 @@ glsl/scene_bvh.glsl, glsl/glass_trace.glsl), against the exact paths through the
 
 import numpy as np
 
-from curved_reflections.drawing.methods.scene_trace import LEAF_SIZE, bvh_tables
+from curved_reflections.drawing.methods.scene_tables import LEAF_SIZE, MAX_IMAGES, bvh_tables
 from curved_reflections.engine.geometry import shapes
 from curved_reflections.engine.geometry.sphere import icosphere
 from curved_reflections.engine.glass import Glass, GlassSet
@@ -55,58 +55,70 @@ def _box_scene():
     return flat_box("Box", (-0.8, -0.8, -0.8), (0.8, 0.8, 0.8)), meshes
 
 
-def test_a_glass_box_shows_what_its_exact_paths_meet_reflected_inside_up_to_four_times(gpu_ready):
-    """Glass that reflects (a Glass BSDF): every pixel whose exact path leaves the box
-    after at most four reflections inside shows, before the Fresnel mix at its entry, the
-    colour Render Image traces on the CPU along that path's leaving ray, with the share
-    reflected back inside where it leaves (``GlassLayer.leaving_colors``; measured: all
-    but 2.1 %, the twice-reflected ones all but 2.6 %: paths within a texel of the box's
-    edges, which its cube map rounds, leave tens of degrees apart); no vertex is searched
-    (no mesh has an image texture)."""
+def _traced_against_render_image(meshes, world=(0.3, 0.3, 0.6)):
+    """The glass box of :func:`_box_scene` before ``meshes``, traced on the GPU: (its
+    refraction pass, the exact paths through it, which pixels' paths leave after at most
+    four reflections inside, and which of those differ from Render Image's colours along
+    the path's leaving ray with the share reflected back inside where it leaves,
+    ``GlassLayer.leaving_colors``, before the Fresnel mix at the entry)."""
     from curved_reflections.blender import star_maps
     from curved_reflections.blender.glass_layer import GlassLayer, glass_renderer
     from curved_reflections.drawing.gpu_data import read_texture
     from curved_reflections.engine.geometry.band_trace import BandTracer
 
-    surface, meshes = _box_scene()
+    surface, _ = _box_scene()
     glass = Glass(surface, N, True)
     method, reason = refracted_glass(glass, 0, *star_maps.star_map(surface))
     assert method is not None, reason
-    world = (0.3, 0.3, 0.6)
     renderer = glass_renderer([glass], meshes, [method], world)
     view = look_at_view((2.5, -5.0, 3.5), (0.0, 0.0, 0.0), fov_y_deg=35.0, width=WIDTH, height=HEIGHT)
-    targets = renderer.draw_passes(view, None)
-    drawn = read_texture(targets.reflection_colors, WIDTH, HEIGHT)
-    refraction = renderer.pass_named("refraction")
-    assert not refraction.searches_vertices and refraction.answers() == []
+    drawn = read_texture(renderer.draw_passes(view, None).reflection_colors, WIDTH, HEIGHT)
     ys, xs = np.mgrid[0:HEIGHT, 0:WIDTH]
-    pixels = np.c_[xs.ravel(), ys.ravel()] + 0.5
     glass_set = GlassSet([glass])
-    paths = glass_set.trace(*view.pixel_rays(pixels))
+    paths = glass_set.trace(*view.pixel_rays(np.c_[xs.ravel(), ys.ravel()] + 0.5))
     out = (paths.interfaces >= 2) & ~paths.trapped & (paths.total_reflections <= 4)
     layer = GlassLayer((), glass_set, renderer, BandTracer([], meshes))
     truth = layer.leaving_colors(paths, np.array(world + (1.0,)), 0)[out]
     shown = drawn.reshape(-1, 4)[out]
     wrong = (np.abs(shown[:, :3] - truth).max(axis=1) > 0.02) | (shown[:, 3] < 0.5)
+    return renderer.pass_named("refraction"), paths, out, wrong
+
+
+def test_a_glass_box_shows_what_its_exact_paths_meet_reflected_inside_up_to_four_times(gpu_ready):
+    """Glass that reflects (a Glass BSDF): every pixel whose exact path leaves the box
+    after at most four reflections inside shows what Render Image traces along it
+    (:func:`_traced_against_render_image`; measured: all but 2.1 %, the twice-reflected
+    ones all but 2.6 %: paths within a texel of the box's edges, which its cube map
+    rounds, leave tens of degrees apart); no vertex is searched."""
+    refraction, paths, out, wrong = _traced_against_render_image(_box_scene()[1])
+    assert not refraction.searches_vertices and refraction.answers() == []
     twice = paths.total_reflections[out] >= 2
     assert out.sum() > 3000 and twice.sum() > 300
     assert wrong.mean() < 0.03 and wrong[twice].mean() < 0.04, (wrong.mean(), wrong[twice].mean())
 
 
-def test_a_mesh_with_an_image_texture_is_left_to_the_search(gpu_ready):
-    """The trace lights vertex colours alone: where a mesh has an image texture, the
-    search runs and its meshes are drawn as before."""
+def _textured(mesh, image):
+    return DiffuseMesh(mesh.name, mesh.vertices, mesh.triangles, mesh.colors,
+                       uvs=0.25 * mesh.vertices[:, :2], image=image)
+
+
+def test_image_textures_are_sampled_and_past_the_first_four_left_to_the_search(gpu_ready):
+    """The floor under the box with a checker image texture: traced as Render Image
+    samples it (measured: all but 2.1 %, as without the image). With more meshes of
+    image textures than the trace samples, the search runs and its meshes are drawn."""
     from curved_reflections.blender import star_maps
     from curved_reflections.blender.glass_layer import glass_renderer
 
-    surface, meshes = _box_scene()
-    floor = meshes[0]
-    meshes[0] = DiffuseMesh(floor.name, floor.vertices, floor.triangles, floor.colors,
-                            uvs=np.zeros((len(floor.vertices), 2)), image=np.ones((2, 2, 4), np.float32))
+    floor, panel = _box_scene()[1]
+    checker = np.ones((2, 2, 4), np.float32)
+    checker[0, 0, :3] = checker[1, 1, :3] = (0.2, 0.2, 0.9)
+    refraction, _, out, wrong = _traced_against_render_image([_textured(floor, checker), panel])
+    assert not refraction.searches_vertices and out.sum() > 3000 and wrong.mean() < 0.03, wrong.mean()
+    surface, _ = _box_scene()
     glass = Glass(surface, N, True)
     method, _ = refracted_glass(glass, 0, *star_maps.star_map(surface))
-    refraction = glass_renderer([glass], meshes, [method]).pass_named("refraction")
-    assert refraction.searches_vertices
+    many = [_textured(floor, checker * (k + 1) / (MAX_IMAGES + 1)) for k in range(MAX_IMAGES + 1)]
+    assert glass_renderer([glass], many, [method]).pass_named("refraction").searches_vertices
 
 
 def test_a_mirror_behind_glass_shows_what_it_reflects_as_render_image_traces_it(gpu_ready):

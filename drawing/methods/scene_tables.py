@@ -1,0 +1,177 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The scene's triangles on the GPU as a bounding volume hierarchy, for rays traced per pixel.
+
+The tree of ``engine/geometry/bvh.py`` (Morton-sorted triangles under a complete binary
+tree) packed into textures: two texels per node, one per triangle slot, and the
+vertices' positions, colours, normals and texture coordinates. ``glsl/scene_bvh.glsl``
+finds a ray's nearest triangle without a stack, and ``glsl/scene_colors.glsl`` lights
+what it meets as the reflected meshes are lit, reflecting off mirrors to the scene's Max
+Order as Render Image does (``engine/geometry/band_trace.py``). The glass's trace
+(``scene_trace.py``) and the mirrors' (``traced_pass.py``) meet their pixels' rays with it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...engine.geometry.bvh import build_bvh
+from ..draw_geometry import mesh_attributes
+from ..draw_shaders import shading_source
+from ..gpu_data import data_texture
+from ..shader_sources import glsl_source
+
+#: Triangles per leaf of the tree: the slab tests of a deeper tree cost more than the
+#: triangle tests of a fuller leaf.
+LEAF_SIZE = 4
+#: A ray meets triangles from this share of the scene's diameter on (past the surface it
+#: leaves, which an object may touch).
+START_SHARE = 1e-7
+#: A slot's image index for a mirror's triangle (``glsl/scene_bvh.glsl``; -1: no image).
+MIRROR_CODE = -2
+#: Image textures a trace samples (one sampler each); a ray meeting a mesh with a later
+#: image is left to another method.
+MAX_IMAGES = 4
+#: log2 of the texels in a row of every table (``glsl/scene_bvh.glsl``'s ``table_texel``
+#: finds a texel by shifts and masks; integer division costs llvmpipe more).
+TABLE_ROW_BITS = 10
+#: The samplers of the tables, in the order :meth:`SceneTables.bind` binds them.
+TABLES = ("bvh_boxes", "bvh_slots", "scene_vertices", "vertex_colors", "vertex_normals", "vertex_uvs")
+
+
+@dataclass(frozen=True)
+class TracedScene:
+    """What a trace shows besides the meshes' colours: the ``world`` colour (linear RGB)
+    where a ray meets nothing, which meshes are ``mirrors`` (by name: a ray reflects off
+    them) and how many mirror reflections a ray follows (the scene's Max Order)."""
+
+    world: tuple = (0.0, 0.0, 0.0)
+    mirrors: frozenset = frozenset()
+    max_order: int = 1
+
+
+def declare(info, first_sampler: int, world: bool = True) -> None:
+    """The tables' samplers (from slot ``first_sampler`` on) and push constants (12 bytes:
+    ``t_min``, ``leaf_first``, ``max_order``; 16 more for ``world`` with ``world``) on a
+    compute shader's create-info."""
+    if world:
+        info.push_constant('VEC4', "world")
+    info.push_constant('FLOAT', "t_min")
+    info.push_constant('INT', "leaf_first")
+    info.push_constant('INT', "max_order")
+    names = TABLES + tuple(f"scene_image{k}" for k in range(MAX_IMAGES))
+    for slot, name in enumerate(names, first_sampler):
+        info.sampler(slot, 'FLOAT_2D', name)
+
+
+def prelude(world: bool = True) -> str:
+    """The GLSL a trace calls: ``nearest_hit`` and ``traced_color``, with their defines
+    (without ``world``, a ray that meets nothing is black: the caller tells it by its
+    distance)."""
+    defines = {"LEAF_SIZE": LEAF_SIZE, "MIRROR_CODE": f"{MIRROR_CODE:.1f}", "MAX_IMAGES": MAX_IMAGES,
+               "TABLE_ROW": 1 << TABLE_ROW_BITS, "TABLE_ROW_BITS": TABLE_ROW_BITS,
+               "WORLD_COLOR": "world.rgb" if world else "vec3(0.0)"}
+    return shading_source() + glsl_source("scene_bvh.glsl", defines) + glsl_source("scene_colors.glsl")
+
+
+def bvh_tables(vertices: np.ndarray, triangles: np.ndarray, codes: np.ndarray) -> tuple:
+    """((2 n, 4) node texels, (slots, 4) slot texels, first leaf's node index) of the tree
+    over ``triangles`` (``glsl/scene_bvh.glsl`` says what they hold: an inner node's
+    highest corner carries the axis its children are ordered on); ``codes`` (T,) each
+    triangle's image index, -1 for none, or :data:`MIRROR_CODE`."""
+    bvh = build_bvh(vertices, triangles, leaf_size=LEAF_SIZE)
+    leaf_first = 1 << bvh.depth
+    boxes = np.zeros((4 * leaf_first, 4), np.float32)
+    for level, rows in enumerate(bvh.box_rows):  # one slice per level, not per node
+        nodes = (1 << level) + np.arange(1 << level)
+        boxes[2 * nodes, :3] = np.nan_to_num(rows[:3].T)
+        boxes[2 * nodes, 3] = ~np.isnan(rows[0])
+        boxes[2 * nodes + 1, :3] = np.nan_to_num(rows[3:].T)
+        if level < bvh.depth:  # the axis its children's boxes differ most on, signed by which is lower
+            below = bvh.box_rows[level + 1]
+            centres = np.nan_to_num(0.5 * (below[:3] + below[3:]).T).reshape(-1, 2, 3)
+            apart = centres[:, 1] - centres[:, 0]
+            axis = np.argmax(np.abs(apart), axis=1)
+            boxes[2 * nodes + 1, 3] = np.where(apart[np.arange(len(axis)), axis] >= 0.0, 1.0, -1.0) * (axis + 1)
+    slots = np.full((len(bvh.order), 4), -1.0, np.float32)
+    filled = bvh.order >= 0
+    slots[filled, :3] = triangles[bvh.order[filled]]
+    slots[filled, 3] = codes[bvh.order[filled]]
+    return boxes, slots, leaf_first
+
+
+class SceneTables:
+    """One renderer's scene on the GPU for traces: its diffuse ``meshes`` as given
+    (``engine.scene.DiffuseMesh`` each: a trace needs no subdivision, and a wall of two
+    triangles keeps its tree shallow; those named in ``scene.mirrors`` are mirrors) and
+    ``surfaces``, mirrors (``engine.Reflector`` each) not among them; positions relative
+    to the renderer's ``geometry`` (``draw_geometry.DrawGeometry``: its shift, size and
+    images). Uploaded on first :meth:`bind`."""
+
+    def __init__(self, meshes, geometry, scene: TracedScene = TracedScene(), surfaces=()):
+        self.meshes = tuple(meshes)
+        self.geometry = geometry
+        self.scene = scene
+        self.surfaces = tuple(surfaces)
+        self.world = tuple(float(c) for c in scene.world)[:3] + (1.0,)
+        self._textures = None
+
+    @property
+    def empty(self) -> bool:
+        return not any(len(part.triangles) for part in self.meshes + self.surfaces)
+
+    def _arrays(self) -> tuple:
+        """(vertices relative to the shift, triangles, codes, colours, normals and lit, uvs)
+        of the meshes, then the surfaces; a mesh's code is its image's index in the
+        geometry's images (meshes with an image, in order), -1, or :data:`MIRROR_CODE`."""
+        shift = self.geometry.shift
+        parts, count, image = [], 0, 0
+        for mesh in self.meshes:
+            normals, uvs, lit = mesh_attributes(mesh)
+            code = MIRROR_CODE if mesh.name in self.scene.mirrors else (-1 if mesh.image is None else image)
+            image += mesh.image is not None
+            parts.append((mesh.vertices, mesh.triangles, code, mesh.colors, np.c_[normals, lit], uvs))
+        for surface in self.surfaces:
+            parts.append((surface.vertices, surface.triangles, MIRROR_CODE, np.full((len(surface.vertices), 4), 0.5),
+                          np.c_[surface.normals, np.ones(len(surface.vertices))], np.zeros((len(surface.vertices), 2))))
+        vertices, triangles, codes, colors, normals, uvs = [], [], [], [], [], []
+        for points, faces, code, colour, normal, uv in parts:
+            vertices.append(np.asarray(points, np.float64) - shift)
+            triangles.append(np.asarray(faces, np.int64).reshape(-1, 3) + count)
+            codes.append(np.full(len(faces), code))
+            colors.append(colour)
+            normals.append(normal)
+            uvs.append(uv)
+            count += len(points)
+        if not parts:
+            return (np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0), np.zeros((0, 4)), np.zeros((0, 4)),
+                    np.zeros((0, 2)))
+        return tuple(np.concatenate(arrays) for arrays in (vertices, triangles, codes, colors, normals, uvs))
+
+    def _ensure(self) -> None:
+        if self._textures is not None:
+            return
+        vertices, triangles, codes, colors, normals, uvs = self._arrays()
+        boxes, slots, leaf_first = bvh_tables(vertices, triangles, codes)
+        self._textures = ([data_texture(table, 1 << TABLE_ROW_BITS)
+                           for table in (boxes, slots, vertices, colors, normals, uvs)], leaf_first)
+
+    def bind(self, shader, images, bounces: int | None = None, world: bool = True,
+             start_share: float = START_SHARE) -> None:
+        """The tables, the first :data:`MAX_IMAGES` images (``images(k)``, a frame's; -1:
+        none) and the push constants of :func:`declare` (``world`` as there) on a bound
+        ``shader``; a ray reflects off mirrors ``bounces`` times at most (default: the
+        scene's Max Order) and meets triangles from ``start_share`` of the scene's
+        diameter on."""
+        self._ensure()
+        textures, leaf_first = self._textures
+        for name, texture in zip(TABLES, textures):
+            shader.uniform_sampler(name, texture)
+        for k in range(MAX_IMAGES):
+            shader.uniform_sampler(f"scene_image{k}", images(k if k < len(self.geometry.images) else -1))
+        if world:
+            shader.uniform_float("world", self.world)
+        shader.uniform_float("t_min", start_share * self.geometry.diameter)
+        shader.uniform_int("leaf_first", leaf_first)
+        shader.uniform_int("max_order", int(self.scene.max_order if bounces is None else bounces))
