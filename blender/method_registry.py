@@ -19,7 +19,6 @@ takes the first that offers to draw, Runtime last.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 from typing import Callable
 
@@ -147,11 +146,10 @@ def pass_factories(engines_by_method: dict) -> list:
 def _offer_iterative(inputs: PlanInputs, index: int, reflector) -> Offer:
     """A star-shaped mirror's map, or a closed mirror's pieces (``star_maps.piece_maps``):
     in Render Image, and in the live view in Iterative mode only (each redraw searches
-    every piece on the drawing thread: seconds on a CPU rasteriser, where Runtime builds
-    its camera in the background). A folded star-shaped mirror is searched for every image
-    from each of its patches (``fold_patches.py``) likewise; in the live view in Auto it
-    is searched for one image per point, and the accuracy check hands it on where that
-    misses images."""
+    every piece on the drawing thread: seconds on a CPU rasteriser, where the trace costs
+    about a Workbench frame). A folded star-shaped mirror is searched for every image
+    from each of its patches (``fold_patches.py``) likewise; in the live view Auto leaves
+    it to the trace, which draws every image at that cost."""
     shape, reflector_map = star_maps.star_map(reflector)
     if reflector_map is None and (shape.crossings or shape.hidden_share > 0):
         if not star_maps.closed_surface(reflector):
@@ -169,12 +167,11 @@ def _offer_iterative(inputs: PlanInputs, index: int, reflector) -> Offer:
     centre = ", ".join(f"{round(float(c), 2) + 0.0:.2f}" for c in shape.centre)  # no "-0.00"
     found = f"star-shaped around ({centre}): iterative search on the GPU"
     if reflector_map.images > 1:
-        if inputs.final_render or inputs.mode == ITERATIVE:
-            found = f"{found}, every image (it folds its reflections)"
-        else:
-            found = (f"{found}, one image per point (it folds its reflections: every image is searched in Render "
-                     f"Image and in Iterative mode, from each of its {len(reflector_map.patches)} patches)")
-            reflector_map = dataclasses.replace(reflector_map, patches=None, images=1)
+        if not inputs.final_render and inputs.mode != ITERATIVE:
+            return refuse(f"star-shaped around ({centre}), but it folds its reflections: every image is searched "
+                          f"from each of its {len(reflector_map.patches)} patches in Render Image and in Iterative "
+                          "mode (in the live view every redraw would search each patch)")
+        found = f"{found}, every image (it folds its reflections)"
     return Offer(True, found, IterativeReflector(index, reflector.name, reflector_map, inputs.accuracy_px))
 
 
