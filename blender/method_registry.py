@@ -144,19 +144,19 @@ def pass_factories(engines_by_method: dict) -> list:
 
 
 def _offer_iterative(inputs: PlanInputs, index: int, reflector) -> Offer:
-    """A star-shaped mirror's map, or a closed mirror's pieces (``star_maps.piece_maps``):
-    in Render Image, and in the live view in Iterative mode only (each redraw searches
-    every piece on the drawing thread: seconds on a CPU rasteriser, where the trace costs
-    about a Workbench frame). A folded star-shaped mirror is searched for every image
-    from each of its patches (``fold_patches.py``) likewise; in the live view Auto leaves
-    it to the trace, which draws every image at that cost."""
+    """A star-shaped mirror's map, or, in Iterative mode only, a closed mirror's pieces
+    (``star_maps.piece_maps``): each frame searches every piece (seconds on a CPU
+    rasteriser, where the trace costs about a Workbench frame and is exact). A folded
+    star-shaped mirror is searched for every image from each of its patches
+    (``fold_patches.py``) likewise, in Iterative mode only: Auto leaves it to the trace,
+    which draws every image at that cost."""
     shape, reflector_map = star_maps.star_map(reflector)
     if reflector_map is None and (shape.crossings or shape.hidden_share > 0):
         if not star_maps.closed_surface(reflector):
             return refuse(open_refusal(reflector.name))
-        if not inputs.final_render and inputs.mode != ITERATIVE:
-            return refuse(f"{shape.reason}; searched as pieces in Render Image and in Iterative mode (in the live "
-                          "view every redraw would search each piece)")
+        if inputs.mode != ITERATIVE:
+            return refuse(f"{shape.reason}; searched as pieces in Iterative mode (each frame would search each "
+                          "piece)")
         pieces, maps = star_maps.piece_maps(reflector)
         if not maps:
             return refuse(pieces.reason)
@@ -167,10 +167,10 @@ def _offer_iterative(inputs: PlanInputs, index: int, reflector) -> Offer:
     centre = ", ".join(f"{round(float(c), 2) + 0.0:.2f}" for c in shape.centre)  # no "-0.00"
     found = f"star-shaped around ({centre}): iterative search on the GPU"
     if reflector_map.images > 1:
-        if not inputs.final_render and inputs.mode != ITERATIVE:
+        if inputs.mode != ITERATIVE:
             return refuse(f"star-shaped around ({centre}), but it folds its reflections: every image is searched "
-                          f"from each of its {len(reflector_map.patches)} patches in Render Image and in Iterative "
-                          "mode (in the live view every redraw would search each patch)")
+                          f"from each of its {len(reflector_map.patches)} patches in Iterative mode (each frame "
+                          "would search each patch)")
         found = f"{found}, every image (it folds its reflections)"
     return Offer(True, found, IterativeReflector(index, reflector.name, reflector_map, inputs.accuracy_px))
 

@@ -80,15 +80,14 @@ def test_a_view_inside_the_searched_reflector_is_reported_and_drawing_resumes_ou
 
 def test_a_torus_in_iterative_mode_is_searched_as_pieces_and_in_auto_mode_the_live_view_traces_it(fig3):
     """A torus is not star-shaped: Iterative mode searches it as pieces seen from inside
-    (engine/methods/iterative/pieces.py) in the live view; Auto does so only in Render
-    Image (each redraw would search every piece) and traces it in the live view, with
-    no camera for its first orders, and the panel says why."""
+    (engine/methods/iterative/pieces.py); Auto traces it (each redraw would search every
+    piece), with no camera for its first orders, and the panel says why."""
     torus = _torus(fig3)
     state = live.start(fig3, bpy.context.evaluated_depsgraph_get(), wait=True)
     choices = {c.reflector: c for c in method_plan.last_choices(fig3)}
     assert choices["Ring"].method == method_plan.TRACED
     assert choices["Ring"].reason.startswith("'Ring' is not star-shaped")
-    assert "searched as pieces in Render Image and in Iterative mode" in choices["Ring"].reason
+    assert "searched as pieces in Iterative mode" in choices["Ring"].reason
     assert choices["Ring"].reason.endswith("each pixel's reflected ray traced on the GPU every frame: every image, "
                                            "to Max Order")
     assert [m.name for m in state.renderer.pass_named("traced").methods] == ["Ring"]
@@ -180,9 +179,9 @@ def test_star_shaped_check_of_blender_primitives(fig3):
     for name in ("Suzanne", "Ring"):
         assert chosen[name].method == method_plan.TRACED
         assert chosen[name].reason.startswith(f"{name!r} is not star-shaped")
-    # Suzanne is open (no pieces seen from inside); the torus is closed (pieces in Render Image).
+    # Suzanne is open (no pieces seen from inside); the torus is closed (pieces in Iterative mode).
     assert "not a closed surface" in chosen["Suzanne"].reason
-    assert "searched as pieces in Render Image" in chosen["Ring"].reason
+    assert "searched as pieces in Iterative mode" in chosen["Ring"].reason
 
 
 def test_a_new_capture_of_the_reflectors_makes_older_cameras_stale(fig3):
