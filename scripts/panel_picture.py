@@ -12,16 +12,17 @@ shows its header only), its body below when open. Properties of a panel that spl
 them (``use_property_split``) are drawn as Blender does: the name right-aligned in the
 left column, the field in the right one. The picture shows the tab on the mirror-ball
 demo scene with a torus mirror added, baked, both in the default Auto mode: the ball is
-star-shaped and searched on the GPU (Iterative), the torus is not and is drawn in Runtime
-mode, each line saying why; the scene camera's view is drawn and checked, so each
-mirror's lines also show its accuracy measured in that view. The widgets' look is a
+star-shaped and searched on the GPU (Iterative), the torus is not and is ray traced on
+the GPU, each line saying why; the scene camera's view is drawn and checked, so the
+ball's lines also show its accuracy measured in that view (the check measures answers
+per vertex: the trace has none). The widgets' look is a
 sketch, not Blender's theme.
 With ``--perturbation`` the ball is in Perturbation mode on its declared exact sphere:
 
     .venv/bin/python scripts/panel_picture.py --perturbation --out docs/images/panel_perturbation.png
 
 Prints one line per panel (``panel Statistics: closed, 0 rows``), one per mirror checked
-in the view (``checked Ring: In this view (Runtime): p95 ...``), then the file written.
+in the view (``checked MirrorSphere: In this view (Iterative): p95 ...``), then the file written.
 """
 
 from __future__ import annotations

@@ -77,6 +77,23 @@ class Reflections:
         return np.bincount(self.point[mask], minlength=n_points)
 
 
+def convex_candidates(mirrors, eye, points) -> np.ndarray:
+    """Indices of ``points`` that may have a visible reflection in one of the convex
+    ``mirrors`` (a ``ReflectorSet`` each) seen from ``eye``: those whose segment from the
+    eye misses at least one of them. A visible reflection has the eye and the point in
+    front of its facet's plane (the view ray's first hit, the reflected ray leaving the
+    facet), so a convex mirror the segment meets shows none of the point; the solver
+    spends most of its time proving that of the others, so callers solve only these."""
+    eye, points = np.asarray(eye, dtype=np.float64), np.asarray(points, dtype=np.float64)
+    offset = points - eye
+    distance = np.linalg.norm(offset, axis=1)
+    blocked = np.ones(len(points), dtype=bool)
+    for mirror in mirrors:
+        hits = mirror.intersect(np.broadcast_to(eye, points.shape), offset / distance[:, None])
+        blocked &= hits.hit & (hits.t < distance)
+    return np.flatnonzero(~blocked)
+
+
 def solve_reflections(reflector_set: ReflectorSet, view: View, points: np.ndarray) -> Reflections:
     """Every first-order reflection of every point on every reflector, with visibility."""
     points = np.asarray(points, dtype=np.float64)

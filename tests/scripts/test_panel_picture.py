@@ -3,8 +3,7 @@
 
 Run as from the command line (its own Blender state, in a child process); its log names
 each panel drawn, open or closed as by default, with its rows, and each mirror's accuracy
-checked in the scene camera's view; the picture's size follows from the rows. The check
-projects a 300-vertex sample (``--check-sample``; 3000 by default, most of the run's time).
+checked in the scene camera's view; the picture's size follows from the rows.
 """
 
 import os
@@ -30,9 +29,11 @@ def test_panel_picture_is_written(tmp_path, gpu_ready):
                             "Statistics"]
     # Closed: the header alone.
     assert panels["Glass"] == panels["Morphing Grids"] == panels["Statistics"] == "closed, 0 rows"
-    # Both mirrors measured in the view, by the method that drew them, with answers confirmed.
+    # The ball measured in the view by the method that drew it, answers confirmed (the
+    # traced torus has no answers per vertex to check).
     checks = dict(re.findall(r"^checked (\w+): In this view \((\w+)\): p95 [\d.]+ px", run.stdout, re.MULTILINE))
-    assert checks == {"MirrorSphere": "Iterative", "Ring": "Runtime"}, run.stdout[-3000:]
+    assert checks == {"MirrorSphere": "Iterative"}, run.stdout[-3000:]
+    assert "Ring ray traced on the GPU every frame" in run.stdout
     rows = {name: int(state.split(", ")[1].split()[0]) for name, state in panels.items()}
     # The live buttons and status; the mirror's settings; both mirrors with their reasons; the quality settings.
     assert rows["Curved Reflections"] >= 5 and rows["Mirror"] >= 9 and rows["Reflectors"] >= 8 and rows["Quality"] >= 6

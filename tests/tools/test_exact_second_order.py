@@ -117,10 +117,17 @@ def _points_near_the_gap(n, seed):
     return points[outside][:n]
 
 
-def test_sphere_pair_paths_obey_the_reflection_law_when_traced(two_spheres, sphere_view):
+@pytest.fixture(scope="module")
+def gap_paths(two_spheres, sphere_view):
+    """200 points around the gap and every second-order path the solver finds for them:
+    solved once for the tests that check those paths (read only)."""
+    points = _points_near_the_gap(200, seed=4)
+    return points, solve_second_order(two_spheres, sphere_view, points)
+
+
+def test_sphere_pair_paths_obey_the_reflection_law_when_traced(two_spheres, sphere_view, gap_paths):
     """Trace the view ray through each solution's pixel, reflect twice: it passes through p."""
-    points = _points_near_the_gap(100, seed=3)  # 195 visible paths, both histories (583 of 300)
-    found = solve_second_order(two_spheres, sphere_view, points)
+    points, found = gap_paths  # 366 visible paths, both histories
     visible = found.select(found.visible)
     assert len(visible.point) > 60
     assert {tuple(h) for h in visible.history} == {(0, 1), (1, 0)}
@@ -207,9 +214,8 @@ def _refined_by_tracing(reflector_set, view, pixels, points, history, iterations
     return np.where((np.linalg.norm(final, axis=1) < 1e-9)[:, None], q, np.nan)
 
 
-def test_sphere_pair_matches_a_dense_second_order_trace(two_spheres, sphere_view):
-    points = _points_near_the_gap(200, seed=4)
-    found = solve_second_order(two_spheres, sphere_view, points)
+def test_sphere_pair_matches_a_dense_second_order_trace(two_spheres, sphere_view, gap_paths):
+    points, found = gap_paths
     visible = found.select(found.visible)
     bounds = (np.array([-3.0, -3.0, -0.5]), np.array([3.0, 3.0, 3.0]))
     ray_map = trace_ray_map(two_spheres, sphere_view, bounds, downsample=1, max_order=2)

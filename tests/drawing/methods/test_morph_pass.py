@@ -221,11 +221,7 @@ def test_polished_frames_are_the_numpy_engines_and_the_exact_reflections(gpu_rea
     cloud = _cloud(1500)
     geometry = prepare_geometry([box], [cloud], edge_fraction=None)
     view = _view((0.4, -2.6, 0.5))
-    exact = solve_reflections(ReflectorSet([box]), view, geometry.vertices)
-    exact = exact.select(exact.visible)
-    truth = np.full((len(geometry.vertices), 2), np.nan)
-    truth[exact.point] = exact.pixel
-    errors = {}
+    answers = {}
     for polish in (False, True):
         morph = MorphPass(geometry, [(grid, np.eye(4))], polish_frames=polish)
         assert morph.blend(view) == [0]
@@ -237,6 +233,16 @@ def test_polished_frames_are_the_numpy_engines_and_the_exact_reflections(gpu_rea
         both = found & theirs.valid[0]
         pixels, _ = view.to_pixels(ours[both])
         assert np.percentile(np.linalg.norm(pixels - theirs.pixels[0][both], axis=1), 99) < 0.01
+        answers[polish] = ours, both
+    # The exact reflections of the vertices answered either way only: the rest are never
+    # compared (each vertex is solved on its own).
+    solved = np.flatnonzero(answers[False][1] | answers[True][1])
+    exact = solve_reflections(ReflectorSet([box]), view, geometry.vertices[solved])
+    exact = exact.select(exact.visible)
+    truth = np.full((len(geometry.vertices), 2), np.nan)
+    truth[solved[exact.point]] = exact.pixel
+    errors = {}
+    for polish, (ours, both) in answers.items():
         seen = both & np.isfinite(truth[:, 0])
         errors[polish] = np.linalg.norm(view.to_pixels(ours[seen])[0] - truth[seen], axis=1)
     assert np.percentile(errors[False], 99) > 2.0
