@@ -68,7 +68,8 @@ class GlassLayer:
     #: {name: reason} of the glass the refraction search cannot draw (open, not convex...).
     unsearched: dict = field(default_factory=dict)
     #: The live view's renderer of the glass as mirrors (:func:`glass_mirror`): what the
-    #: searched glass that reflects shows by its Fresnel reflectance. None without any.
+    #: searched glass that reflects shows by its Fresnel reflectance where the trace cannot
+    #: (more image textures than it samples). None elsewhere.
     mirror: ReflectionRenderer | None = None
 
     def draw(self, view: View, world, accuracy_px: float, exact: bool) -> None:
@@ -165,11 +166,9 @@ def glass_layer(previous: GlassLayer | None, captured, key: tuple, world=(0.0, 0
     scene's Max Order, the mirror reflections a ray through glass follows live).
 
     Its renderer holds the glass as its reflectors and every other surface as meshes, and
-    draws, through each convex glass solid, the refraction search's images
-    (``drawing/methods/refraction_draw.py``), weighed by 1 minus the glass's Fresnel
-    reflectance over what it reflects (:func:`glass_mirror`): the live view's picture of
-    glass. Without ``searched`` (Render Image, which traces the glass) no glass is
-    searched, and the renderer only finds it on screen."""
+    draws each convex glass solid through its refraction pass (:func:`glass_renderer`):
+    the live view's picture of glass. Without ``searched`` (Render Image, which traces
+    the glass on the CPU) no glass is searched, and the renderer only finds it on screen."""
     if not captured.glass:
         return None
     world = tuple(float(c) for c in world)[:3]

@@ -360,7 +360,8 @@ class ReflectionRenderer:
             self._batches = self._make_batches()
         batches, g = self._batches, self.geometry
         targets = self.targets(view.width, view.height)
-        width, height, targets.beneath = targets.width, targets.height, None
+        width, height = targets.width, targets.height
+        targets.beneath = None  # until a pass makes this frame's
         frame = Frame(view, targets, view_projection(view, g.shift), self._image, warm, accuracy_px, snap,
                       textures, camera)
         with saved_state():
@@ -430,10 +431,7 @@ class ReflectionRenderer:
         (:func:`depth_bias`), with the depth test (depth writes off): hidden where the
         scene has a nearer surface. ``rect``: the part of the view drawn (normalised
         device coordinates, :meth:`mirrors_rect`; ``None``: all of it). ``beneath``: the
-        pre-pass colours' stand-in (:meth:`draw`). (Drawing the
-        mirrors' own triangles instead of one rectangle cost twice as much on llvmpipe
-        with the band's fill: small triangles shade their pixels in partly covered
-        blocks.)"""
+        pre-pass colours' stand-in (:meth:`draw`)."""
         if self._batches is None:
             self._batches = self._make_batches()
         with saved_state():
