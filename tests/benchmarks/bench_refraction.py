@@ -135,7 +135,7 @@ def measure_glass(kind: str, bsdf: str, width: int, height: int, samples: int, e
 
 def _live_view(scene, view) -> tuple:
     """(display sRGB image, seconds of one draw) of the glass as the viewport draws it
-    (the refraction search, every frame), over the world colour."""
+    (each glass pixel traced on the GPU, every frame), over the world colour."""
     import bpy
     import gpu
 
@@ -221,7 +221,7 @@ def report(result: dict, command: str, picture: str) -> str:
              "Cycles' (`tools/metrics.py`). Ours: Render Image, which ray traces the glass's pixels on the CPU "
              "(refraction at every interface, total internal reflection, Fresnel at the first), the second frame "
              "timed, and its time over a Workbench frame of the same scene; the live view: the glass drawn as the "
-             "viewport draws it (the refraction search on the GPU, every frame; the rest of the frame is "
+             "viewport draws it (each glass pixel traced on the GPU, every frame; the rest of the frame is "
              f"Blender's), one draw timed. Target: <= {100 * TARGET:g} %. On "
              "Glass BSDF the palette also holds each object's colour as the glass shows it head on, tinted by "
              "the world it reflects (3.4 % for IOR 1.45, about 0.2 of blue in display units: enough to move the "
