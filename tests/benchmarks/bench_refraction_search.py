@@ -200,8 +200,8 @@ def report(rows: list, frames: dict, command: str, machine: str, size: tuple) ->
     lines += ["", "## The viewport", "",
               f"The glass demo (the ball and the thick lens, {frames['vertices']:,} diffuse vertices after "
               "subdivision, no image texture) drawn as the viewport draws it, the view orbiting a degree a frame: "
-              "each glass pixel's path followed and its rays met with the scene on the GPU (no search), the "
-              "glass's own reflection searched as a mirror's: "
+              "each glass pixel's path followed and its rays (through the glass, and reflected off it) met with "
+              "the scene on the GPU, no search: "
               f"**{frames['draw']:.3f} s** a draw, **{frames['draw'] / frames['workbench']:.1f}x** a Workbench "
               f"frame of the same scene ({frames['workbench']:.3f} s).", ""]
     return "\n".join(lines)
