@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Each pixel's own path through convex glass, on the GPU every frame: what the refracted
-meshes are tested against, and where glass shows black.
+"""Each pixel's own path through convex glass, on the GPU every frame: what the scene is
+traced along (``scene_trace.py``), what the refracted meshes are tested against, and
+where glass shows black.
 
 The refraction search (``refraction_draw.py``) answers per vertex; a refracted triangle
 is then filled between its corners' images, and through a strong lens two corners may be
@@ -15,7 +16,9 @@ are held to the law of reflection; the next search starts from the pixels whose 
 pass each vertex nearest (``glsl/refraction_search.glsl``). Where the
 path must reflect totally inside a glass that does not reflect (a Refraction BSDF),
 Cycles shows black, and so does the frame (``settled_draw.py``); glass that
-reflects (a Glass BSDF) reflects the path inside, and it leaves where it next can.
+reflects (a Glass BSDF) reflects the path inside (up to ``PIXEL_INSIDE_REFLECTIONS``
+times), and it leaves where it next can; what it reflects where the pixel sees it, and
+back inside where the path leaves, is kept for the trace too.
 """
 
 from __future__ import annotations
