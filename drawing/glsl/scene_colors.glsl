@@ -37,14 +37,6 @@ vec4 scene_image(int image, vec2 uv)
   return vec4(1.0);
 }
 
-/* The smooth normal at barycentric `uv` of the triangle in `slot` (unnormalised). */
-vec3 hit_normal(int slot, vec2 uv)
-{
-  ivec3 v = ivec3(table_texel(bvh_slots, slot).xyz);
-  return (1.0 - uv.x - uv.y) * table_texel(vertex_normals, v.x).xyz + uv.x * table_texel(vertex_normals, v.y).xyz +
-         uv.y * table_texel(vertex_normals, v.z).xyz;
-}
-
 /* The lit colour the ray meets (the refracted or reflected meshes' shading: vertex colour
  * times image texture, lit with the true direction back along the ray, SBC paper section
  * V-C), or WORLD_COLOR, and in `distance` how far along its last segment (-1: the world).
@@ -68,7 +60,8 @@ vec3 traced_color(vec3 origin, vec3 direction, int skip, int bounces, out bool k
     vec3 weights = vec3(1.0 - uv.x - uv.y, uv);
     ivec3 v = ivec3(corners.xyz);
     vec4 n0 = table_texel(vertex_normals, v.x);
-    vec3 normal = hit_normal(slot, uv);
+    vec3 normal = weights.x * n0.xyz + weights.y * table_texel(vertex_normals, v.y).xyz +
+                  weights.z * table_texel(vertex_normals, v.z).xyz;
     if (corners.w > MIRROR_CODE + 0.5) {
       vec4 albedo = weights.x * table_texel(vertex_colors, v.x) + weights.y * table_texel(vertex_colors, v.y) +
                     weights.z * table_texel(vertex_colors, v.z);

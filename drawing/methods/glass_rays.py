@@ -42,6 +42,11 @@ LOCAL_SIZE = 8
 #: seen from above reflects a quarter of its pixels' paths twice; Render Image follows
 #: ``paths.MAX_INTERFACES`` interfaces.
 PIXEL_INSIDE_REFLECTIONS = 4
+#: (attribute of :class:`GlassRays`, the shader's image) of each per-pixel texture, in
+#: binding order (``glsl/glass_rays.glsl`` says what each holds).
+PATHS = (("exits", "exit_rays"), ("leaving", "leaving_rays"), ("entries", "entry_rays"),
+         ("back_exits", "back_exits"), ("back_leaving", "back_leaving_rays"), ("front_points", "front_points"),
+         ("front_rays", "front_rays"))
 
 
 @cached_shader
@@ -57,13 +62,8 @@ def rays_shader():
     info.push_constant('INT', "reflects")
     for slot, name in enumerate(("reflector_maps", "map_params", "prepass_labels", "prepass_normals")):
         info.sampler(slot, 'FLOAT_2D', name)
-    info.image(0, 'RGBA32F', 'FLOAT_2D', "exit_rays", qualifiers={'WRITE'})
-    info.image(1, 'RGBA32F', 'FLOAT_2D', "leaving_rays", qualifiers={'WRITE'})
-    info.image(2, 'RGBA32F', 'FLOAT_2D', "entry_rays", qualifiers={'WRITE'})
-    info.image(3, 'RGBA32F', 'FLOAT_2D', "back_exits", qualifiers={'WRITE'})
-    info.image(4, 'RGBA32F', 'FLOAT_2D', "back_leaving_rays", qualifiers={'WRITE'})
-    info.image(5, 'RGBA32F', 'FLOAT_2D', "front_points", qualifiers={'WRITE'})
-    info.image(6, 'RGBA32F', 'FLOAT_2D', "front_rays", qualifiers={'WRITE'})
+    for slot, (_, name) in enumerate(PATHS):
+        info.image(slot, 'RGBA32F', 'FLOAT_2D', name, qualifiers={'WRITE'})
     info.local_group_size(LOCAL_SIZE, LOCAL_SIZE)
     prelude = shading_source() + glsl_source("cube_map.glsl") + glsl_source("glass_path.glsl")
     defines = {**search_module.search_defines(), "INSIDE_REFLECTIONS": PIXEL_INSIDE_REFLECTIONS}
@@ -101,17 +101,11 @@ class GlassRays:
         view, targets = frame.view, frame.targets
         size = (targets.width, targets.height)
         if self._size != size:
-            self.exits = gpu.types.GPUTexture(size, format='RGBA32F')
-            self.leaving = gpu.types.GPUTexture(size, format='RGBA32F')
-            self.entries = gpu.types.GPUTexture(size, format='RGBA32F')
-            self.back_exits = gpu.types.GPUTexture(size, format='RGBA32F')
-            self.back_leaving = gpu.types.GPUTexture(size, format='RGBA32F')
-            self.front_points = gpu.types.GPUTexture(size, format='RGBA32F')
-            self.front_rays = gpu.types.GPUTexture(size, format='RGBA32F')
+            for attribute, _ in PATHS:
+                setattr(self, attribute, gpu.types.GPUTexture(size, format='RGBA32F'))
             self._size = size
-        for texture in (self.exits, self.leaving, self.entries, self.back_exits, self.back_leaving, self.front_points,
-                        self.front_rays):
-            texture.clear(format='FLOAT', value=(0.0, 0.0, 0.0, 0.0))
+        for attribute, _ in PATHS:
+            getattr(self, attribute).clear(format='FLOAT', value=(0.0, 0.0, 0.0, 0.0))
         shader = rays_shader()
         shader.bind()
         shader.uniform_float("inverse_view_projection", frame.world_to_clip.inverted())
@@ -121,13 +115,8 @@ class GlassRays:
         shader.uniform_sampler("map_params", atlas.params)
         shader.uniform_sampler("prepass_labels", targets.prepass_labels)
         shader.uniform_sampler("prepass_normals", targets.prepass_normals)
-        shader.image("exit_rays", self.exits)
-        shader.image("leaving_rays", self.leaving)
-        shader.image("entry_rays", self.entries)
-        shader.image("back_exits", self.back_exits)
-        shader.image("back_leaving_rays", self.back_leaving)
-        shader.image("front_points", self.front_points)
-        shader.image("front_rays", self.front_rays)
+        for attribute, name in PATHS:
+            shader.image(name, getattr(self, attribute))
         groups = (-(-size[0] // LOCAL_SIZE), -(-size[1] // LOCAL_SIZE), 1)
         for k, method in enumerate(methods):
             shader.uniform_float("eta", float(method.ior))

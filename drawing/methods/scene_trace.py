@@ -23,13 +23,14 @@ import gpu
 from ...engine.methods.iterative.search import FOUND
 from ..shader_cache import cached_shader
 from ..shader_sources import glsl_source
-from . import scene_tables
+from . import glass_rays, scene_tables
 from .scene_tables import SceneTables, TracedScene
 
 #: Invocations per work group (8 x 8 pixels).
 LOCAL_SIZE = 8
-#: The per-pixel paths' textures the trace reads, in binding order.
-PATHS = ("exit_rays", "leaving_rays", "back_exits", "back_leaving_rays", "front_points", "front_rays")
+#: The per-pixel paths' textures the trace reads (``glass_rays.PATHS``: their
+#: ``GlassRays`` attribute and name), in binding order.
+PATHS = tuple(path for path in glass_rays.PATHS if path[0] != "entries")
 
 
 @cached_shader
@@ -37,7 +38,7 @@ def trace_shader():
     """The per-pixel compute shader, built on first use (40 bytes of push constants)."""
     info = gpu.types.GPUShaderCreateInfo()
     info.push_constant('IVEC4', "rect")
-    for slot, name in enumerate(PATHS):
+    for slot, (_, name) in enumerate(PATHS):
         info.sampler(slot, 'FLOAT_2D', name)
     scene_tables.declare(info, len(PATHS))
     info.image(0, 'RGBA32F', 'FLOAT_2D', "traced_colors", qualifiers={'WRITE'})
@@ -76,9 +77,8 @@ class SceneTrace:
         shader = trace_shader()
         shader.bind()
         self.tables.bind(shader, images)
-        for name, texture in zip(PATHS, (rays.exits, rays.leaving, rays.back_exits, rays.back_leaving,
-                                         rays.front_points, rays.front_rays)):
-            shader.uniform_sampler(name, texture)
+        for attribute, name in PATHS:
+            shader.uniform_sampler(name, getattr(rays, attribute))
         shader.image("traced_colors", self.colors)
         shader.image("front_colors", self.front_colors)
         for x0, y0, x1, y1 in rects:

@@ -79,7 +79,7 @@ def measure(name: str, width: int, height: int, frames: int, samples: int, folde
     live_seconds, off, pixels = _live_traced(scene, mirrors, frames)
     return {"name": name, "half": "tuning" if name in _halves()[0] else "held-out", "pixels": pixels, "off": off,
             "live": live_seconds, "render": sum(seconds) / frames, "workbench": workbench, "labels": labels,
-            "methods": sorted(method.title() for method in methods), "star": _star_shaped(state.captured)}
+            "methods": sorted(method.title() for method in methods), "star": bench_held_out_family._star_shaped(state)}
 
 
 def _live_traced(scene, mirrors, frames: int) -> tuple[float, float, int]:
@@ -113,12 +113,6 @@ def _live_traced(scene, mirrors, frames: int) -> tuple[float, float, int]:
         offscreen.free()
         live.clear(scene)
     return float(np.median(seconds[1:])), off, pixels
-
-
-def _star_shaped(captured) -> bool:
-    from curved_reflections.blender import star_maps
-
-    return all(star_maps.star_map(r)[0].star_shaped for r in captured.reflectors)
 
 
 def _off_exact(state, view, read_texture) -> tuple[float, int]:
