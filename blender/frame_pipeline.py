@@ -119,8 +119,9 @@ class FramePipeline:
     plan_warnings: list = field(default_factory=list)
     #: The capture's glass and its renderer (``glass_layer.GlassLayer``), None without glass.
     glass: object = None
-    #: Whether the refraction search draws the glass (the live view's picture); Render
-    #: Image traces it per pixel, Fresnel and all.
+    #: Whether the refraction search draws the convex glass the GPU's trace cannot (past
+    #: ``scene_tables.MAX_IMAGES`` image textures: the live view); Render Image then
+    #: traces it on the CPU.
     SEARCHES_GLASS: ClassVar[bool] = False
 
     def plan_reflectors(self, scene, captured, bake_missing: bool = False, final_render: bool | None = None) -> None:
@@ -132,7 +133,8 @@ class FramePipeline:
                                        warnings=self.plan_warnings)
         self.plan = method_plan.plan(scene, captured.reflectors, self.settings.accuracy_px,
                                      grids={grid.reflector_name: (grid, matrix) for grid, matrix in loaded},
-                                     final_render=bake_missing if final_render is None else final_render)
+                                     final_render=bake_missing if final_render is None else final_render,
+                                     max_order=self.settings.max_order)
         self.grids = self.plan.drawn_grids()
 
     def new_renderer(self, scene, captured, properties: dict | None = None, seal: bool = True) -> None:

@@ -2,30 +2,25 @@
 """Glass: what lies behind a glass object, refracted, and what it reflects.
 
 The layer's renderer holds the glass as its "mirrors" and every other surface as meshes.
-Live, through convex glass, each glass pixel's path is followed on the GPU and its rays
-(the one leaving the glass, the one the glass reflects where it is seen, the one it
-reflects back inside where the path leaves) are met with the scene there
-(``drawing/methods/scene_trace.py``). Where the meshes have more image textures than it
-samples, the refraction search draws every diffuse vertex where it appears instead
-(``drawing/methods/refraction_draw.py``), each fragment a ray cast along its pixel's path,
-and the iterative search draws the glass's reflections as a mirror's (:func:`glass_mirror`).
-The refraction is weighed by 1 minus the glass's exact Fresnel reflectance over its
-reflection, and is black where glass that does not reflect must reflect totally.
+Each glass pixel is ray traced on the GPU every frame, live and in Render Image
+(``drawing/methods/glass_trace.py``): its eye ray followed through the glass's own
+triangles (Snell's law at every interface, total internal reflection), any glass solid or
+sheet, met with the scene (mirrors reflecting to the scene's Max Order), and mixed by the
+exact dielectric Fresnel reflectance with the ray the glass reflects where the eye meets
+it and the one it reflects back inside where the path leaves, as Cycles' Glass BSDF shows
+them; glass of a Refraction BSDF reflects nothing (and where it should reflect totally,
+shows black, as Cycles does).
 
-Render Image ray traces each pixel where a glass object is in front: its eye ray is
-followed through the glass (``engine/glass/paths.py``: Snell's law at every interface,
-total internal reflection), and the ray that comes out is met with the scene, mirrors
-included (``band_trace.BandTracer.trace_rays``: a mirror seen through glass shows its
-reflections, to the scene's Max Order). The exact dielectric Fresnel reflectance
-(``snell.fresnel_dielectric``) mixes in the ray reflected off the glass at the first
-interface and the one reflected back inside at the last (followed out once), as Cycles'
-Glass BSDF shows them; glass of a Refraction BSDF reflects nothing (and where it should
-reflect totally, shows black, as Cycles does). Those pixels replace the frame's (where
-the mirrors' renderer drew the glass as a solid object); a scene of glass alone is the
-layer's frame. Render Image does not use the search: close behind a strong lens (near
-its focus) a triangle's image strays far from straight, and the live view's stand-ins
-there are approximate (the glass demo's cube, 0.1 behind the ball). Mirrors reflect glass
-as a solid object, and the panel says so.
+Where the meshes have more image textures than the trace samples
+(``scene_tables.MAX_IMAGES``), the live view draws convex glass by the refraction search
+instead (``drawing/methods/refraction_draw.py``: every diffuse vertex where it appears,
+each fragment a ray cast along its pixel's path) with the iterative search drawing the
+glass's reflections as a mirror's (:func:`glass_mirror`), and shows other glass as a solid
+object; Render Image then traces each glass pixel on the CPU
+(``engine/glass/paths.py``, ``band_trace.BandTracer.trace_rays``), the same model. Those
+pixels replace the frame's (where the mirrors' renderer drew the glass as a solid
+object); a scene of glass alone is the layer's frame. Mirrors reflect glass as a solid
+object, and the panel says so. A camera inside glass (under water) sees out through it.
 """
 
 from __future__ import annotations
@@ -35,9 +30,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..drawing.gpu_data import read_depth, read_texture
+from ..drawing.methods.glass_trace import GlassTracePass
 from ..drawing.methods.iterative_draw import IterativePass
 from ..drawing.methods.refraction_draw import RefractionPass
-from ..drawing.methods.scene_tables import MAX_IMAGES, TracedScene
+from ..drawing.methods.scene_tables import MAX_IMAGES, TracedScene, samples_every_image
 from ..drawing.reflection_draw import ReflectionRenderer
 from ..drawing.screen_space import pixel_box
 from ..engine.errors import SceneInputError
@@ -47,7 +43,7 @@ from ..engine.geometry.raytrace import reflect
 from ..engine.glass import GlassSet, fresnel_dielectric
 from ..engine.glass.refraction_search import refracted_glass
 from ..engine.methods.iterative import IterativeReflector
-from ..engine.methods.sbc.sbc_build import check_view_outside_reflectors
+from ..engine.methods.sbc.sbc_build import check_view_outside_reflectors, enclosing_reflector
 from ..engine.scene import DiffuseMesh
 from ..engine.view import View
 from . import star_maps
@@ -62,10 +58,14 @@ class GlassLayer:
     glass: GlassSet
     renderer: ReflectionRenderer
     tracer: BandTracer
-    #: Names of the glass objects the last frame's rays met inside another glass (glass
+    #: Names of the glass objects the last render's rays met inside another glass (glass
     #: in glass, or overlapping): a ray leaving the inner one is taken to leave into air.
     nested: tuple = ()
-    #: {name: reason} of the glass the refraction search cannot draw (open, not convex...).
+    #: Whether the GPU traces every glass pixel (:mod:`..drawing.methods.glass_trace`);
+    #: else the refraction search draws convex glass live and Render Image traces on the CPU.
+    traced: bool = True
+    #: {name: reason} of the glass neither the trace nor the search draws live (open, not
+    #: convex... in a scene of more image textures than the trace samples).
     unsearched: dict = field(default_factory=dict)
     #: The live view's renderer of the glass as mirrors (:func:`glass_mirror`): what the
     #: searched glass that reflects shows by its Fresnel reflectance where the trace cannot
@@ -74,9 +74,10 @@ class GlassLayer:
 
     def draw(self, view: View, world, accuracy_px: float, exact: bool) -> None:
         """The live view's glass over the bound framebuffer (an overlay, as
-        ``ReflectionRenderer.draw`` with ``reflectors_only``): the refracted images, over
-        the glass's own reflections by the Fresnel reflectance (traced by the refraction
-        pass, or drawn first offscreen by :attr:`mirror`). ``exact``: nothing snaps."""
+        ``ReflectionRenderer.draw`` with ``reflectors_only``): the traced glass pixels, or
+        the refracted images over the glass's own reflections by the Fresnel reflectance
+        (drawn first offscreen by :attr:`mirror`). ``exact``: nothing snaps."""
+        self._place_eye(view)
         beneath = None
         if self.mirror is not None:
             targets = self.mirror.targets(view.width, view.height)
@@ -92,17 +93,25 @@ class GlassLayer:
 
     def render(self, view: View, world, max_order: int) -> tuple[np.ndarray, np.ndarray]:
         """((H, W, 4) linear RGBA rows bottom to top, (H, W) bool where a glass object is
-        in front) of ``view``; the image holds the traced colours there, the renderer's
-        frame (the scene without the glass) elsewhere."""
-        try:
-            check_view_outside_reflectors(self.glass.surfaces, view)
-        except SceneInputError as error:
-            raise SceneInputError(error.object_name, "the view is inside this glass object; move the camera outside "
-                                  "it (the inside of glass is not drawn)") from None
+        in front) of ``view``; the image holds the traced colours there (on the GPU, or on
+        the CPU without :attr:`traced`), the renderer's frame (the scene without the
+        glass) elsewhere. A view from inside glass is traced from there on the GPU; the
+        CPU's trace refuses it, naming the glass."""
+        if not self.traced:
+            try:
+                check_view_outside_reflectors(self.glass.surfaces, view)
+            except SceneInputError as error:
+                raise SceneInputError(error.object_name, "the view is inside this glass object; move the camera "
+                                      "outside it (the CPU's trace of glass, in a scene of more than "
+                                      f"{MAX_IMAGES} image textures, starts in air)") from None
+        self._place_eye(view)
         image = self.renderer.render(view, None, world, trace=False)
         targets = self.renderer.targets(view.width, view.height)
         labels = read_texture(targets.prepass_labels, view.width, view.height)
         in_front = labels[..., 0] >= 0.5
+        if self.traced:
+            self.nested = self.renderer.pass_named(GlassTracePass.name).nested(labels)
+            return image, in_front
         rows, columns = np.nonzero(in_front)
         depth = read_depth(targets.prepass, view.width, view.height)
         pixels = np.stack([columns, rows], axis=1) + 0.5
@@ -110,6 +119,12 @@ class GlassLayer:
         image[rows, columns, :3] = colors
         image[rows, columns, 3] = 1.0
         return image, in_front
+
+    def _place_eye(self, view: View) -> None:
+        """Tell the GPU's trace which glass the (perspective) eye of ``view`` is inside."""
+        if self.traced:
+            inside = enclosing_reflector(self.glass.surfaces, view.eye, -view.backward) if view.is_perspective else None
+            self.renderer.pass_named(GlassTracePass.name).eye_glass = -1 if inside is None else inside
 
     def trace(self, view: View, pixels: np.ndarray, world, max_order: int, surface=None) -> np.ndarray:
         """(K, 3) linear RGB of the glass seen through ``pixels`` (K, 2): the refracted
@@ -127,8 +142,8 @@ class GlassLayer:
             share = fresnel_dielectric(-np.einsum("ij,ij->i", directions[met], normal),
                                        1.0 / self.glass.iors[paths.history[met, 0]])
             mirrored = reflect(directions[met], normal)
-            reflected = self.tracer.trace_rays(paths.first_position[met] + self._nudge * mirrored, mirrored,
-                                               max_order, world)[:, :3]
+            reflected = self._through_glass(paths.first_position[met] + self._nudge * mirrored, mirrored, max_order,
+                                            world)
             color[met] = share[:, None] * reflected + (1.0 - share[:, None]) * color[met]
         return color
 
@@ -141,20 +156,34 @@ class GlassLayer:
         """(K, 3) what the rays of ``paths`` show once they leave the glass, with the ray
         reflected back inside at their last interface mixed in by its Fresnel
         reflectance (followed until it leaves in turn, once)."""
-        color = self.tracer.trace_rays(paths.origin, paths.direction, max_order, world)[:, :3]
-        # A glass that does not reflect (a Refraction BSDF) cannot reflect totally either:
-        # that light is lost, as Cycles renders it.
-        lost = (paths.total_reflections > 0) & ~self.glass.reflecting(paths.history[:, 0])
-        color[lost | paths.trapped] = 0.0
+        color = self._met(paths, max_order, world)
         out = np.flatnonzero(self.glass.reflecting(paths.exit_glass) & ~paths.trapped)
         if len(out):
             incoming, normal, glass = paths.exit_incoming[out], paths.exit_normal[out], paths.exit_glass[out]
             share = fresnel_dielectric(-np.einsum("ij,ij->i", incoming, normal), self.glass.iors[glass])
             inside = reflect(incoming, normal)
-            again = self.glass.trace(paths.exit_position[out] + self._nudge * inside, inside, media=glass)
-            back = self.tracer.trace_rays(again.origin, again.direction, max_order, world)[:, :3]
-            back[again.trapped | (again.exit_glass < 0)] = 0.0
+            back = self._through_glass(paths.exit_position[out] + self._nudge * inside, inside, max_order, world,
+                                       media=glass)
             color[out] = share[:, None] * back + (1.0 - share[:, None]) * color[out]
+        return color
+
+    def _through_glass(self, origins, directions, max_order: int, world, media=None) -> np.ndarray:
+        """(K, 3) what rays show followed through the glass (starting in ``media``, as
+        ``GlassSet.trace``) and then met with the scene; black where a ray stays in glass,
+        or, starting in it, never leaves it."""
+        paths = self.glass.trace(origins, directions, media=media)
+        color = self._met(paths, max_order, world)
+        if media is not None:
+            color[paths.exit_glass < 0] = 0.0
+        return color
+
+    def _met(self, paths, max_order: int, world) -> np.ndarray:
+        """(K, 3) what the last segments of ``paths`` meet in the scene, black where the
+        path is trapped in glass or reflected totally inside glass that does not reflect
+        (a Refraction BSDF: that light is lost, as Cycles renders it)."""
+        color = self.tracer.trace_rays(paths.origin, paths.direction, max_order, world)[:, :3]
+        lost = (paths.total_reflections > 0) & ~self.glass.reflecting(paths.history[:, 0])
+        color[lost | paths.trapped] = 0.0
         return color
 
 
@@ -163,12 +192,13 @@ def glass_layer(previous: GlassLayer | None, captured, key: tuple, world=(0.0, 0
     """The glass of ``captured`` (``None`` without any): ``previous`` while its ``key``
     holds (the capture's, ``frame_pipeline.captured_key``, with each glass's name, index
     of refraction and whether it reflects, the ``world`` colour, the Accuracy and the
-    scene's Max Order, the mirror reflections a ray through glass follows live).
+    scene's Max Order, the mirror reflections a ray through glass follows).
 
     Its renderer holds the glass as its reflectors and every other surface as meshes, and
-    draws each convex glass solid through its refraction pass (:func:`glass_renderer`):
-    the live view's picture of glass. Without ``searched`` (Render Image, which traces
-    the glass on the CPU) no glass is searched, and the renderer only finds it on screen."""
+    traces every glass pixel on the GPU (:func:`glass_renderer`). Where the meshes have
+    more image textures than the trace samples, it draws each convex glass solid by the
+    refraction search instead, with ``searched`` (the live view; Render Image traces that
+    glass on the CPU, and the renderer only finds it on screen)."""
     if not captured.glass:
         return None
     world = tuple(float(c) for c in world)[:3]
@@ -178,14 +208,15 @@ def glass_layer(previous: GlassLayer | None, captured, key: tuple, world=(0.0, 0
         return previous
     names = {glass.name for glass in captured.glass}
     meshes = [mesh for mesh in captured.meshes if mesh.name not in names]
+    traced = samples_every_image(meshes)
     searches = ([prepared_search(glass, index, accuracy_px) for index, glass in enumerate(captured.glass)]
-                if searched else [])
+                if searched and not traced else [])
     methods = [method for method, _ in searches if method is not None]
-    renderer = glass_renderer(captured.glass, meshes, methods, world, mirrors=captured.reflectors,
+    renderer = glass_renderer(captured.glass, meshes, methods, world, traced=traced, mirrors=captured.reflectors,
                               max_order=max_order)
     unsearched = {glass.name: reason for glass, (method, reason) in zip(captured.glass, searches) if method is None}
     return GlassLayer(key, GlassSet(list(captured.glass)), renderer, BandTracer(captured.reflectors, meshes),
-                      unsearched=unsearched,
+                      traced=traced, unsearched=unsearched,
                       mirror=glass_mirror(captured.glass, meshes + _solids(captured.reflectors), methods, world))
 
 
@@ -193,14 +224,11 @@ def glass_mirror(glasses, meshes, methods, world=(0.0, 0.0, 0.0)) -> ReflectionR
     """The renderer of ``glasses`` as perfect mirrors reflecting ``meshes``, each searched
     one (``methods``) that reflects (a Glass BSDF) by the iterative search on its cube
     map (Roger & Holzschuch 2006: convex glass is star-shaped), the others showing the
-    ``world`` colour: what the live view shows beneath the refracted images, weighed by
-    the Fresnel reflectance (:meth:`GlassLayer.draw`), where the meshes have more image
-    textures than the trace samples (``scene_tables.MAX_IMAGES``). None without such
-    glass, or without that many: the refraction pass then meets each pixel's reflected
-    ray with the scene (``drawing/methods/scene_trace.py``)."""
+    ``world`` colour: what the live view shows beneath the refraction search's images,
+    weighed by the Fresnel reflectance (:meth:`GlassLayer.draw`). None without such glass."""
     searched = [IterativeReflector(method.index, method.name, method.reflector_map, method.accuracy_px)
                 for method in methods if method.reflects]
-    if not searched or sum(getattr(mesh, "image", None) is not None for mesh in meshes) <= MAX_IMAGES:
+    if not searched:
         return None
     count = len(glasses)
     return ReflectionRenderer([glass.surface for glass in glasses], meshes,
@@ -208,28 +236,31 @@ def glass_mirror(glasses, meshes, methods, world=(0.0, 0.0, 0.0)) -> ReflectionR
                               reflectivity=np.ones(count, np.float32), passes=(IterativePass.factory(searched),))
 
 
-def glass_renderer(glasses, meshes, methods, world=(0.0, 0.0, 0.0),
+def glass_renderer(glasses, meshes, methods=(), world=(0.0, 0.0, 0.0),
                    edge_fraction: float | None = subdivision.EDGE_FRACTION, traced: bool = True, mirrors=(),
                    max_order: int = 1) -> ReflectionRenderer:
     """The renderer of ``glasses`` (``engine.glass.Glass`` each) as its reflectors and
-    ``meshes``, drawing through the searched ones (``methods``,
-    ``refraction_search.RefractedGlass`` each) the refraction search's images, weighed by
-    1 minus each glass's exact Fresnel reflectance (from its IOR; none for glass that does
-    not reflect) over the ``world`` colour, or over what its :class:`GlassLayer.draw` puts
-    beneath; ``edge_fraction`` as ``ReflectionRenderer``'s; ``traced``: each glass pixel's
-    rays are met with the scene on the GPU (``RefractionPass``'s). ``mirrors``
-    (``engine.Reflector`` each) are drawn as solid meshes (in front of glass they hide
-    it); the trace reflects off them ``max_order`` times at most."""
+    ``meshes``: with ``traced``, each glass pixel ray traced on the GPU
+    (``drawing/methods/glass_trace.py``, mirrors reflecting ``max_order`` times at most); else
+    through the searched glass (``methods``, ``refraction_search.RefractedGlass`` each)
+    the refraction search's images, weighed by 1 minus each glass's exact Fresnel
+    reflectance (from its IOR; none for glass that does not reflect) over the ``world``
+    colour, or over what its :class:`GlassLayer.draw` puts beneath. ``edge_fraction`` as
+    ``ReflectionRenderer``'s. ``mirrors`` (``engine.Reflector`` each) are drawn as solid
+    meshes (in front of glass they hide it)."""
     count = len(glasses)
     iors = np.array([glass.ior for glass in glasses], dtype=np.float64)
     f0 = np.where([glass.reflects for glass in glasses], ((iors - 1.0) / (iors + 1.0)) ** 2, np.nan)
-    scene = TracedScene(world, frozenset(mirror.name for mirror in mirrors), max_order) if traced else None
+    if traced:
+        passes = (GlassTracePass.factory(glasses, TracedScene(world, frozenset(m.name for m in mirrors), max_order)),)
+    else:
+        passes = (RefractionPass.factory(methods),) if methods else ()
     return ReflectionRenderer([glass.surface for glass in glasses], list(meshes) + _solids(mirrors),
                               edge_fraction=edge_fraction,
                               reflector_colors=np.tile(world, (count, 1)).astype(np.float32),
                               reflectivity=np.ones(count, np.float32), fresnel_f0=f0.astype(np.float32),
                               transmits=np.ones(count, bool), attenuation_distance=np.zeros(count, np.float32),
-                              passes=(RefractionPass.factory(methods, scene),) if methods else ())
+                              passes=passes)
 
 
 def prepared_search(glass, index: int, accuracy_px: float) -> tuple:

@@ -103,17 +103,18 @@ def choose(inputs: PlanInputs, index: int, reflector, mode: str) -> tuple:
 
 
 def plan(scene, reflectors, accuracy_px: float | None = None, grids: dict | None = None,
-         final_render: bool = False) -> MethodPlan:
+         final_render: bool = False, max_order: int | None = None) -> MethodPlan:
     """Every reflector's method. ``grids``: {reflector name: (grid, object matrix)} of the
     loaded baked grids (``morph_bake.load_grids``); ``final_render``: for Render Image's
-    frames (``PlanInputs.final_render``)."""
+    frames (``PlanInputs.final_render``); ``max_order``: the frame's (default: the scene's)."""
+    max_order = int(scene.curved_reflections.max_order if max_order is None else max_order)
     accuracy = float(scene.curved_reflections.accuracy_px if accuracy_px is None else accuracy_px)
     status = status_of(scene)
     result = MethodPlan()
     for index, reflector in enumerate(reflectors):
         mode = mode_of(scene, reflector.name)
         outside = status.outside_accuracy.get(reflector.name, {})
-        inputs = PlanInputs(scene, accuracy, grids or {}, outside, final_render, mode)
+        inputs = PlanInputs(scene, accuracy, grids or {}, outside, final_render, mode, len(reflectors), max_order)
         choice, engine = choose(inputs, index, reflector, mode)
         result.choices.append(choice)
         if engine is not None:

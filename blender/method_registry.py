@@ -45,7 +45,8 @@ class PlanInputs:
     """What a method's offer may read: the scene (its objects' settings), the Accuracy,
     the loaded grids ({reflector name: (grid, object matrix)}), for Auto what the live
     check measured of methods passed over ({method: what was measured}), whether the
-    frame is Render Image's, and the reflector's mode."""
+    frame is Render Image's, the reflector's mode, how many reflectors the scene has and
+    the frame's Max Order."""
 
     scene: object
     accuracy_px: float
@@ -56,6 +57,10 @@ class PlanInputs:
     final_render: bool = False
     #: The reflector's mode (AUTO or a method's name).
     mode: str = AUTO
+    #: How many reflectors the scene has (the reflector's among them).
+    reflectors: int = 1
+    #: The frame's Max Order (the scene's, or a render's own).
+    max_order: int = 1
 
 
 @dataclass(frozen=True)
@@ -149,7 +154,14 @@ def _offer_iterative(inputs: PlanInputs, index: int, reflector) -> Offer:
     rasteriser, where the trace costs about a Workbench frame and is exact). A folded
     star-shaped mirror is searched for every image from each of its patches
     (``fold_patches.py``) likewise, in Iterative mode only: Auto leaves it to the trace,
-    which draws every image at that cost."""
+    which draws every image at that cost. In a Render Image frame of several mirrors at
+    Max Order 2 or more, Auto leaves every mirror to the trace: their reflections in each
+    other would take a sample-based camera built every frame (several Workbench frames
+    on a CPU rasteriser), which the trace draws in its one pass."""
+    if inputs.mode == AUTO and inputs.final_render and inputs.reflectors > 1 and inputs.max_order > 1:
+        return refuse(f"Render Image at Max Order {inputs.max_order} with {inputs.reflectors - 1} other "
+                      f"reflector{'s' if inputs.reflectors > 2 else ''}: their reflections in each other would "
+                      "take a sample-based camera every frame")
     shape, reflector_map = star_maps.star_map(reflector)
     if reflector_map is None and (shape.crossings or shape.hidden_share > 0):
         if not star_maps.closed_surface(reflector):
@@ -169,9 +181,9 @@ def _offer_iterative(inputs: PlanInputs, index: int, reflector) -> Offer:
     if reflector_map.images > 1:
         if inputs.mode != ITERATIVE:
             return refuse(f"star-shaped around ({centre}), but it folds its reflections: every image is searched "
-                          f"from each of its {len(reflector_map.patches)} patches in Iterative mode (each frame "
-                          "would search each patch)")
-        found = f"{found}, every image (it folds its reflections)"
+                          "from each of its patches in Iterative mode (each frame would search each patch)")
+        reflector_map = star_maps.star_map(reflector, patched=True)[1]
+        found = f"{found}, every image (it folds its reflections), from {len(reflector_map.patches)} patches"
     return Offer(True, found, IterativeReflector(index, reflector.name, reflector_map, inputs.accuracy_px))
 
 

@@ -202,20 +202,21 @@ def glass_note(name: str, state) -> str:
     """What draws glass object ``name`` in the viewport (the live ``state``'s glass layer,
     None before a Start) and in Render Image, and why."""
     layer = None if state is None else state.glass
-    rendered = "Render Image ray traces it exactly (refraction, total internal reflection, Fresnel)."
     if layer is None or name not in {glass.name for glass in layer.glass.glasses}:
-        return f"{rendered} The viewport draws it once reflections are started."
+        return ("Render Image ray traces it (refraction, total internal reflection, Fresnel); the viewport does "
+                "once reflections are started.")
+    if layer.traced:
+        return ("The viewport and Render Image trace it on the GPU every frame: each pixel's path through the glass "
+                "(any shape, glass behind glass too) and what its rays meet, mirrors' reflections too, mixed by "
+                "Fresnel. Mirrors reflect it as a solid object.")
+    rendered = (f"The scene has more than {MAX_IMAGES} image textures: Render Image ray traces it on the CPU "
+                "(refraction, total internal reflection, Fresnel).")
     if name in layer.unsearched:
         return (f"The viewport shows it as a solid object: {layer.unsearched[name]}. {rendered} "
                 "Mirrors reflect it as a solid object.")
-    if layer.renderer.pass_named("refraction").searches_vertices:
-        drawn = ("The viewport draws what lies behind it by the refraction search (a convex solid; the scene has "
-                 f"more than {MAX_IMAGES} image textures), mixed by Fresnel with what it reflects, drawn as a mirror's; mirrors "
-                 "behind it show as solid objects")
-    else:
-        drawn = ("The viewport traces it on the GPU every frame (a convex solid): each pixel's path through it and "
-                 "what its rays meet, mirrors' reflections too, mixed by Fresnel as Render Image mixes them")
-    return f"{drawn}. {rendered} Mirrors reflect it as a solid object."
+    return ("The viewport draws what lies behind it by the refraction search (a convex solid), mixed by Fresnel with "
+            f"what it reflects, drawn as a mirror's; mirrors behind it show as solid objects. {rendered} Mirrors "
+            "reflect it as a solid object.")
 
 
 class VIEW3D_PT_curved_reflections_reflectors(_SubPanel, bpy.types.Panel):

@@ -32,8 +32,8 @@ class CurvedReflectionsObjectSettings(bpy.types.PropertyGroup):
     )
     is_refractor: BoolProperty(
         name="Glass",
-        description="Treat this object as glass: objects behind it are drawn refracted through it (Render Image; "
-                    "the viewport shows it as a solid object)",
+        description="Treat this object as glass: objects behind it are drawn refracted through it, and what it "
+                    "reflects mixed in by Fresnel (the viewport and Render Image)",
         default=False,
         update=_reflector_toggled,
     )

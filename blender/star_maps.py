@@ -23,7 +23,7 @@ import numpy as np
 from ..engine.geometry.closed_surfaces import winding
 from ..engine.geometry.raytrace import ReflectorSet
 from ..engine.methods.iterative import StarShape, check_star_shaped
-from ..engine.methods.iterative.fold_patches import folded
+from ..engine.methods.iterative.fold_patches import fold_patches, folded
 from ..engine.methods.iterative.reflector_map import bake_reflector_map
 from ..engine.methods.iterative.pieces import StarPieces, map_first_surface, split_into_pieces
 from ..engine.methods.iterative.star import verdict
@@ -119,18 +119,26 @@ def _entry(reflector, face_size: int | None) -> _Entry:
     if shape.star_shaped:
         bake = _bake(reflector, shape.centre, face_size)
         shape = verdict(reflector.name, shape.centre, bake, shape.hidden_share)
-        rmap = folded(bake.reflector_map) if shape.star_shaped else None
+        rmap = folded(bake.reflector_map, patched=False) if shape.star_shaped else None
     _maps.append(_Entry(topology, face_size, reflector.vertices - reflector.vertices[0], reflector.normals.copy(),
                         reflector.vertices[0].copy(), shape, rmap))
     del _maps[:-CACHED_MAPS]
     return _maps[-1]
 
 
-def star_map(reflector, face_size: int | None = None):
+def star_map(reflector, face_size: int | None = None, patched: bool = False):
     """(StarShape, ReflectorMap or None) of one reflector, cached by its shape: a mirror
     moved without turning reuses its verdict and its map, moved with it
-    (``face_size``: default :data:`FACE_SIZE`)."""
-    return _entry(reflector, face_size).moved_to(reflector)
+    (``face_size``: default :data:`FACE_SIZE`). A map that folds its reflections says so
+    (``images``); the search's starts on it (``patches``) come with ``patched``, made
+    once (a second's work on a 20k-triangle mirror that Auto, which traces it, skips)."""
+    entry = _entry(reflector, face_size)
+    rmap = entry.reflector_map
+    if patched and rmap is not None and rmap.images > 1 and rmap.patches is None:
+        # _entry left the entry last (most recently used): it is replaced there.
+        entry = _maps[-1] = dataclasses.replace(entry, reflector_map=dataclasses.replace(
+            rmap, patches=fold_patches(rmap)))
+    return entry.moved_to(reflector)
 
 
 def closed_surface(reflector, face_size: int | None = None) -> bool:

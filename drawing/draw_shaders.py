@@ -175,6 +175,7 @@ def _build_composite():
     info.sampler(3, 'FLOAT_2D', "traced_colors")
     info.sampler(4, 'FLOAT_2D', "prepass_depth")
     info.sampler(5, 'FLOAT_2D', "prepass_normals")
+    info.sampler(6, 'FLOAT_2D', "beneath_colors")
     info.vertex_in(0, 'VEC2', "position")
     info.fragment_out(0, 'VEC4', "color_out")
     info.depth_write('ANY')  # the pre-pass depth of each pixel, for the overlay's depth test

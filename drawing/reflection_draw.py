@@ -294,10 +294,10 @@ class ReflectionRenderer:
         camera's down-sampling), where :meth:`render` traces instead; ``traced``
         (:class:`.traced_pixels.TracedPixels`) are drawn over the reflections where
         they were traced for this very view. ``exact``: nothing snaps (a resting view's
-        draw, placed as a render places it). ``beneath``: with ``reflectors_only``, a
-        texture of the view's size whose colours the reflector pixels show beneath their
-        reflections instead of the reflectors' own (a glass's reflection beneath its
-        refraction, ``blender/glass_layer.py``); default: a pass's (``targets.beneath``).
+        draw, placed as a render places it). ``beneath``: a texture of the view's size
+        whose colours the reflector pixels show beneath their reflections instead of the
+        reflectors' own (what glass reflects beneath its refraction,
+        ``blender/glass_layer.py``); default: a pass's (``targets.beneath``).
 
         ``reflectors_only`` (the viewport overlay): the pre-pass draws the reflectors
         alone, and the composite is depth-tested against the bound framebuffer's depth,
@@ -318,7 +318,7 @@ class ReflectionRenderer:
         origin = (x, y) if (width, height) == (targets.width, targets.height) else None
         self.composite(targets, world_color, reflectors_only, fill_radius, origin,
                        scene_depth=view if reflectors_only else None, rect=rect,
-                       beneath=(targets.beneath if beneath is None else beneath) if reflectors_only else None)
+                       beneath=targets.beneath if beneath is None else beneath)
         return targets
 
     def mirrors_rect(self, view, targets: FrameTargets) -> tuple:
@@ -449,7 +449,8 @@ class ReflectionRenderer:
             shader.uniform_int("reflectors_only", int(bool(reflectors_only)))
             shader.uniform_int("fill_radius", max(0, int(fill_radius)))
             shader.uniform_int("origin", (int(origin[0]), int(origin[1])))
-            shader.uniform_sampler("prepass_colors", targets.prepass_colors if beneath is None else beneath)
+            shader.uniform_sampler("prepass_colors", targets.prepass_colors)
+            shader.uniform_sampler("beneath_colors", targets.prepass_colors if beneath is None else beneath)
             shader.uniform_sampler("prepass_labels", targets.prepass_labels)
             shader.uniform_sampler("reflection_colors", targets.reflection_colors)
             shader.uniform_sampler("traced_colors", targets.traced if targets.traced is not None else targets.no_trace)
@@ -582,7 +583,7 @@ class ReflectionRenderer:
         band = time.perf_counter()
         texture, framebuffer = targets.output
         with framebuffer.bind():
-            self.composite(targets, world_color, False, fill_radius)
+            self.composite(targets, world_color, False, fill_radius, beneath=targets.beneath)
         image = read_texture(texture, targets.width, targets.height)
         end = time.perf_counter()
         for frame_pass in self.passes:

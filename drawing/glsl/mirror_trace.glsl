@@ -24,14 +24,10 @@ void main()
   if (mirror < 0 || table_texel(traced_reflectors, mirror).x < 0.5) {
     return;
   }
-  vec2 ndc = (vec2(pixel) + 0.5) / vec2(textureSize(prepass_labels, 0)) * 2.0 - 1.0;
-  vec4 near = inverse_view_projection * vec4(ndc, -1.0, 1.0);
-  vec4 far = inverse_view_projection * vec4(ndc, 1.0, 1.0);
-  vec3 direction = normalize(far.xyz / far.w - near.xyz / near.w);
-  /* Perspective: from the eye, at eye depth 0; orthographic: from the near plane. */
-  vec3 origin = camera.w > 0.5 ? camera.xyz : near.xyz / near.w;
-  float depth = label.w - (camera.w > 0.5 ? 0.0 : -dot(origin, camera.xyz));
-  vec3 point = origin + depth * direction;
+  vec3 origin, direction;
+  float start;
+  pixel_ray(inverse_view_projection, camera, pixel, vec2(textureSize(prepass_labels, 0)), origin, direction, start);
+  vec3 point = origin + (label.w - start) * direction;
   vec3 normal = normalize(texelFetch(prepass_normals, pixel, 0).xyz);
   normal = dot(normal, direction) > 0.0 ? -normal : normal;
   bool known;

@@ -7,9 +7,11 @@
  * drawn (reflection alpha 1), else the world colour (the reflected ray leaves the
  * scene), blended with the reflector's own colour by its reflectivity (1 = perfect
  * mirror; SBC paper, Popescu, Sacks, Mei 2006, section V-D: "the diffuse component
- * and the reflection are blended with a simple shader"). Elsewhere the pre-pass
- * colour (the world where nothing was drawn), or nothing when `reflectors_only`
- * (a viewport overlay over Blender's own drawing).
+ * and the reflection are blended with a simple shader"); the reflector's colour comes
+ * from `beneath_colors`, the pre-pass's colours unless a pass made others (what glass
+ * reflects, beneath its refraction). Elsewhere the pre-pass colour (the world where
+ * nothing was drawn), or nothing when `reflectors_only` (a viewport overlay over
+ * Blender's own drawing).
  *
  * The band along the footprint's edge: a sample-based camera projects a point only
  * between four rays of its group (engine/methods/sbc/sbc.py), so no reflection can land in the last
@@ -62,7 +64,7 @@ void main()
     gl_FragDepth = gl_FragCoord.z;  /* a render's composite: no depth test */
     return;
   }
-  vec4 base = texelFetch(prepass_colors, texel, 0);
+  vec4 base = texelFetch(beneath_colors, texel, 0);
   float depth = texelFetch(prepass_depth, texel, 0).r;
   gl_FragDepth = depth - depth_bias.y * (depth_bias.x - depth);
   vec4 reflection = texelFetch(reflection_colors, texel, 0);

@@ -56,6 +56,21 @@ vec3 view_ray_point(mat4 inverse_view_projection, vec2 view_size, vec2 pixel, fl
   return origin + first_depth * normalize(far.xyz / far.w - origin);
 }
 
+/* The eye's ray through the centre of `pixel` of a view of `view_size` pixels: its origin
+ * (the eye where `camera.w` is 1, perspective; the near plane, orthographic), unit
+ * direction, and in `start` the origin's eye depth (eye_depth's measure), so that the
+ * point of eye depth d along it lies at origin + (d - start) direction. */
+void pixel_ray(mat4 inverse_view_projection, vec4 camera, ivec2 pixel, vec2 view_size, out vec3 origin,
+               out vec3 direction, out float start)
+{
+  vec2 ndc = (vec2(pixel) + 0.5) / view_size * 2.0 - 1.0;
+  vec4 near = inverse_view_projection * vec4(ndc, -1.0, 1.0);
+  vec4 far = inverse_view_projection * vec4(ndc, 1.0, 1.0);
+  direction = normalize(far.xyz / far.w - near.xyz / near.w);
+  origin = camera.w > 0.5 ? camera.xyz : near.xyz / near.w;
+  start = camera.w > 0.5 ? 0.0 : -dot(origin, camera.xyz);
+}
+
 /* `ndc` moved to the centre of its cell of a grid `cells` across and up the view: the live
  * view's snapping of reflected vertices within their Accuracy (reflected_meshes.SNAP_SHARE),
  * so that a triangle inside one cell collapses and is dropped before set-up. */

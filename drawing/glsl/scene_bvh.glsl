@@ -1,6 +1,6 @@
 /* SPDX-License-Identifier: GPL-3.0-or-later */
 /* The nearest triangle along a ray, through a bounding volume hierarchy on the GPU
- * (drawing/methods/scene_trace.py packs it from engine/geometry/bvh.py's tree).
+ * (drawing/methods/scene_tables.py packs it from engine/geometry/bvh.py's tree).
  *
  * The tree is complete: node h's children are 2h and 2h + 1, the root is 1 and the leaves
  * are `leaf_first` + i, each holding LEAF_SIZE triangle slots. `bvh_boxes` holds two texels
@@ -38,15 +38,15 @@ bool left_first(int parent, vec3 direction)
   return (split > 0.0) == (direction[axis] >= 0.0);
 }
 
-/* The nearest hit of the ray past `t_min`, slot `skip` aside (the triangle a reflected ray
- * leaves; -1: none): its slot (-1 for none), distance and barycentric (u, v) of its second
- * and third corners (Moller & Trumbore 1997). Children are visited nearer first, so that
- * a near hit prunes the boxes behind it. */
-int nearest_hit(vec3 origin, vec3 direction, float t_min, int skip, out float t_hit, out vec2 hit_uv)
+/* The nearest hit of the ray past `t_min` and before `t_hit` (in: how far to look, e.g.
+ * 3e38), slot `skip` aside (the triangle a reflected ray leaves; -1: none): its slot (-1
+ * for none), distance (out, in `t_hit`) and barycentric (u, v) of its second and third
+ * corners (Moller & Trumbore 1997). Children are visited nearer first, so that a near hit
+ * prunes the boxes behind it. */
+int nearest_hit(vec3 origin, vec3 direction, float t_min, int skip, inout float t_hit, out vec2 hit_uv)
 {
   vec3 safe = mix(direction, vec3(1e-30), lessThan(abs(direction), vec3(1e-30)));
   vec3 inverse = 1.0 / safe;
-  t_hit = 3.0e38;
   hit_uv = vec2(0.0);
   int hit = -1;
   int node = 1;
@@ -77,7 +77,8 @@ int nearest_hit(vec3 origin, vec3 direction, float t_min, int skip, out float t_
         vec3 q = cross(s, e1);
         float v = dot(direction, q);
         float t = dot(e2, q);
-        if (u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t > t_min && t < t_hit) {
+        /* EDGE_SLACK: a ray along the edge two triangles share meets one of them in float32. */
+        if (u >= -EDGE_SLACK && v >= -EDGE_SLACK && u + v <= 1.0 + EDGE_SLACK && t > t_min && t < t_hit) {
           t_hit = t;
           hit_uv = vec2(u, v);
           hit = slot;

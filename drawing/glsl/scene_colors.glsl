@@ -37,6 +37,32 @@ vec4 scene_image(int image, vec2 uv)
   return vec4(1.0);
 }
 
+/* Farther than any hit: a segment looked along to its end. */
+#define NOWHERE 3.0e38
+
+/* Where a followed ray crossed glass (followed_color): the first glass surface it met
+ * (the glass's index, -1 for none; its slot, the point, the normal there facing the ray,
+ * the ratio of the indices of refraction before and after it, and whether the glass
+ * reflects) and its last crossing out of glass into air (the same, with the direction it
+ * came in along and the glass's index); `nested`: it met one glass while inside another,
+ * and went on as if it had left the first. */
+struct GlassCrossings {
+  int first_glass;
+  int first_slot;
+  vec3 first_position;
+  vec3 first_normal;
+  float first_ratio;
+  bool first_reflects;
+  int exit_glass;
+  int exit_slot;
+  vec3 exit_position;
+  vec3 exit_incoming;
+  vec3 exit_normal;
+  float exit_ior;
+  bool exit_reflects;
+  bool nested;
+};
+
 /* The lit colour the ray meets (the refracted or reflected meshes' shading: vertex colour
  * times image texture, lit with the true direction back along the ray, SBC paper section
  * V-C), or WORLD_COLOR, and in `distance` how far along its last segment (-1: the world).
@@ -44,15 +70,33 @@ vec4 scene_image(int image, vec2 uv)
  * caller leaves that pixel to another method). A mirror reflects the ray off its smooth
  * normal, `bounces` times at most, as band_trace.BandTracer.trace_rays follows it: where
  * it would reflect once more, or the reflection turns through its face, the world shows.
- * `skip`: a slot the ray leaves (-1: none). */
-vec3 traced_color(vec3 origin, vec3 direction, int skip, int bounces, out bool known, out float distance)
+ * Glass (GLASS_CODE) bends the ray by Snell's law off its smooth normal, from the index of
+ * the medium the ray is in (`medium`, the glass's index, -1 for air, of index
+ * `medium_ior`) into the other's, or past the critical angle reflects it inside (total
+ * internal reflection), as engine/glass/paths.py follows Render Image's rays; glass that
+ * does not reflect (a Refraction BSDF) loses that light, and a ray still meeting glass
+ * after MAX_INTERFACES interfaces is trapped: both black, as Cycles shows them.
+ * `skip`: a slot the ray leaves (-1: none); `reach`: how far its first segment is looked
+ * along first (a surface known to lie that near is met without walking the tree beyond
+ * it; past it, the rest of the segment is looked along too). */
+vec3 followed_color(vec3 origin, vec3 direction, int skip, int bounces, int medium, float medium_ior, float reach,
+                    out GlassCrossings crossings, out bool known, out float distance)
 {
   known = true;
   distance = -1.0;
-  for (int order = 0; order <= bounces; order++) {
-    float t;
+  crossings = GlassCrossings(-1, -1, vec3(0.0), vec3(0.0), 1.0, false, -1, -1, vec3(0.0), vec3(0.0), vec3(0.0), 1.0,
+                             false, false);
+  int order = 0;
+  int interfaces = 0;
+  for (int step = 0; step <= bounces + MAX_INTERFACES; step++) {
+    float t = reach;
     vec2 uv;
     int slot = nearest_hit(origin, direction, t_min, skip, t, uv);
+    if (slot < 0 && reach < NOWHERE) {
+      t = NOWHERE;
+      slot = nearest_hit(origin, direction, t_min, skip, t, uv);
+    }
+    reach = NOWHERE;
     if (slot < 0) {
       break;
     }
@@ -75,15 +119,68 @@ vec3 traced_color(vec3 origin, vec3 direction, int skip, int bounces, out bool k
       distance = t;
       return shade(albedo.rgb, n0.w, normal, -direction);
     }
+    vec3 hit = origin + t * direction;
+    if (corners.w < GLASS_CODE + 0.5) {
+      vec4 glass = table_texel(vertex_colors, v.x); /* index of refraction, reflects, index */
+      int index = int(round(glass.z));
+      vec3 facing = normalize(normal);
+      facing = dot(facing, direction) > 0.0 ? -facing : facing;
+      if (crossings.first_glass < 0) {
+        crossings.first_glass = index;
+        crossings.first_slot = slot;
+        crossings.first_position = hit;
+        crossings.first_normal = facing;
+        crossings.first_ratio = medium_ior / (medium == index ? 1.0 : glass.x);
+        crossings.first_reflects = glass.y > 0.5;
+      }
+      if (interfaces == MAX_INTERFACES) {
+        return vec3(0.0);
+      }
+      interfaces++;
+      bool leaving = medium == index;
+      crossings.nested = crossings.nested || (medium >= 0 && !leaving);
+      float ior = leaving ? 1.0 : glass.x;
+      vec3 bent = refract(direction, facing, medium_ior / ior);
+      origin = hit;
+      skip = slot;
+      if (dot(bent, bent) == 0.0) {
+        if (glass.y < 0.5) {
+          return vec3(0.0);
+        }
+        direction = reflect(direction, facing);
+        continue;
+      }
+      if (leaving) {
+        crossings.exit_glass = index;
+        crossings.exit_slot = slot;
+        crossings.exit_position = hit;
+        crossings.exit_incoming = direction;
+        crossings.exit_normal = facing;
+        crossings.exit_ior = glass.x;
+        crossings.exit_reflects = glass.y > 0.5;
+      }
+      medium = leaving ? -1 : index;
+      medium_ior = ior;
+      direction = normalize(bent);
+      continue;
+    }
     vec3 a = table_texel(scene_vertices, v.x).xyz;
     vec3 face = cross(table_texel(scene_vertices, v.y).xyz - a, table_texel(scene_vertices, v.z).xyz - a);
     vec3 reflected = reflect(direction, normalize(normal));
     if (order == bounces || dot(direction, face) * dot(reflected, face) >= 0.0) {
       break;
     }
-    origin += t * direction;
+    order++;
+    origin = hit;
     direction = reflected;
     skip = slot;
   }
   return WORLD_COLOR;
+}
+
+/* followed_color from air, its crossings dropped: what a mirror's reflected ray shows. */
+vec3 traced_color(vec3 origin, vec3 direction, int skip, int bounces, out bool known, out float distance)
+{
+  GlassCrossings crossings;
+  return followed_color(origin, direction, skip, bounces, -1, 1.0, NOWHERE, crossings, known, distance);
 }

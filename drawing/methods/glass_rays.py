@@ -1,7 +1,6 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Each pixel's own path through convex glass, on the GPU every frame: what the scene is
-traced along (``scene_trace.py``), what the refracted meshes are tested against, and
-where glass shows black.
+"""Each pixel's own path through convex glass, on the GPU every frame: what the refracted
+meshes of the refraction search are tested against, and where glass shows black.
 
 The refraction search (``refraction_draw.py``) answers per vertex; a refracted triangle
 is then filled between its corners' images, and through a strong lens two corners may be
@@ -17,8 +16,7 @@ pass each vertex nearest (``glsl/refraction_search.glsl``). Where the
 path must reflect totally inside a glass that does not reflect (a Refraction BSDF),
 Cycles shows black, and so does the frame (``settled_draw.py``); glass that
 reflects (a Glass BSDF) reflects the path inside (up to ``PIXEL_INSIDE_REFLECTIONS``
-times), and it leaves where it next can; what it reflects where the pixel sees it, and
-back inside where the path leaves, is kept for the trace too.
+times), and it leaves where it next can.
 """
 
 from __future__ import annotations
@@ -44,9 +42,7 @@ LOCAL_SIZE = 8
 PIXEL_INSIDE_REFLECTIONS = 4
 #: (attribute of :class:`GlassRays`, the shader's image) of each per-pixel texture, in
 #: binding order (``glsl/glass_rays.glsl`` says what each holds).
-PATHS = (("exits", "exit_rays"), ("leaving", "leaving_rays"), ("entries", "entry_rays"),
-         ("back_exits", "back_exits"), ("back_leaving", "back_leaving_rays"), ("front_points", "front_points"),
-         ("front_rays", "front_rays"))
+PATHS = (("exits", "exit_rays"), ("leaving", "leaving_rays"), ("entries", "entry_rays"))
 
 
 @cached_shader
@@ -60,7 +56,7 @@ def rays_shader():
     info.push_constant('FLOAT', "glass_id")
     info.push_constant('INT', "self_map")
     info.push_constant('INT', "reflects")
-    for slot, name in enumerate(("reflector_maps", "map_params", "prepass_labels", "prepass_normals")):
+    for slot, name in enumerate(("reflector_maps", "map_params", "prepass_labels")):
         info.sampler(slot, 'FLOAT_2D', name)
     for slot, (_, name) in enumerate(PATHS):
         info.image(slot, 'RGBA32F', 'FLOAT_2D', name, qualifiers={'WRITE'})
@@ -75,22 +71,13 @@ class GlassRays:
     """The per-pixel paths of one renderer's searched glass: RGBA32F textures of the
     view's size (:attr:`exits`: exit point and status; :attr:`leaving`: the leaving ray,
     and the glass's bounding radius, negative where dark; :attr:`entries`: the entry's
-    direction from the glass's centre, and the glass's id; :attr:`back_exits`,
-    :attr:`back_leaving`, :attr:`front_points` and :attr:`front_rays` below), made again
-    when the size changes."""
+    direction from the glass's centre, and the glass's id), made again when the size
+    changes."""
 
     def __init__(self):
         self.exits = None
         self.leaving = None
         self.entries = None
-        #: Where glass that reflects lets a path out: where the ray it reflects back inside
-        #: leaves, with the share reflected (0 elsewhere); and the ray leaving, with its status.
-        self.back_exits = None
-        self.back_leaving = None
-        #: Where glass that reflects is seen: the point, with the share reflected (0
-        #: elsewhere); and the ray reflected there.
-        self.front_points = None
-        self.front_rays = None
         self._size = None
 
     def trace(self, frame, methods, atlas, shift) -> None:
@@ -114,7 +101,6 @@ class GlassRays:
         shader.uniform_sampler("reflector_maps", atlas.texture)
         shader.uniform_sampler("map_params", atlas.params)
         shader.uniform_sampler("prepass_labels", targets.prepass_labels)
-        shader.uniform_sampler("prepass_normals", targets.prepass_normals)
         for attribute, name in PATHS:
             shader.image(name, getattr(self, attribute))
         groups = (-(-size[0] // LOCAL_SIZE), -(-size[1] // LOCAL_SIZE), 1)
@@ -130,12 +116,11 @@ class GlassRays:
         """(exits, leaving): what the refracted meshes' ray cast reads."""
         return self.exits, self.leaving
 
-    def draw_settled(self, traced) -> None:
+    def draw_settled(self) -> None:
         """Into the bound reflection target, before the refracted meshes: black where the
-        last paths marked it dark, and the colours of ``traced`` (RGBA32F of the view's
-        size, ``scene_trace.SceneTrace.colors``; None: none) where they were traced."""
+        last paths marked it dark."""
         if self.leaving is not None:
-            draw_settled(traced, self.leaving)
+            draw_settled(dark_rays=self.leaving)
 
     def read(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The last paths read back, rows bottom up: (H, W, 3) exit points (relative to

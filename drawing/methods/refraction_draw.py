@@ -15,12 +15,11 @@ to holds the glass as its reflectors (``blender/glass_layer.py``), so its pre-pa
 confine each refracted image to its glass's visible footprint, as a reflection to its
 mirror's. What is uploaded once: the vertices (shared with the other passes) and every
 glass's cube map (:class:`.iterative_draw.MapAtlas`); per frame, two dispatches and one
-draw per glass.
+draw per glass. It draws where the scene has more image textures than the per-pixel trace
+samples (``glass_trace.py``, which draws glass otherwise).
 """
 
 from __future__ import annotations
-
-import functools
 
 import gpu
 import numpy as np
@@ -33,8 +32,6 @@ from ..reflected_meshes import FLIPPED_CODE, PLACED_CODE, AnswerSet
 from ..shader_cache import cached_shader
 from ..shader_sources import glsl_source
 from .glass_rays import GlassRays
-from .scene_tables import MAX_IMAGES, TracedScene
-from .scene_trace import SceneTrace
 from .iterative_draw import MapSearchPass, map_search_info, map_search_prelude
 
 #: The search's status codes that are not the mirror search's (the rest are shared).
@@ -67,22 +64,12 @@ class RefractionPass(MapSearchPass):
     hidden_fraction = float("inf")
 
     @classmethod
-    def factory(cls, methods, traced: TracedScene | None = TracedScene()):
-        """The pass's factory (``frame_pass.FramePass.factory``), ``traced`` as below."""
-        return functools.partial(cls.of_inputs, tuple(methods), traced=traced)
+    def of_inputs(cls, methods: tuple, inputs: PassInputs) -> "RefractionPass":
+        return cls(inputs.geometry, methods, inputs.meshes)
 
-    @classmethod
-    def of_inputs(cls, methods: tuple, inputs: PassInputs,
-                  traced: TracedScene | None = TracedScene()) -> "RefractionPass":
-        return cls(inputs.geometry, methods, inputs.meshes, traced, inputs.diffuse)
-
-    def __init__(self, geometry, methods, meshes=None, traced: TracedScene | None = TracedScene(), diffuse=()):
+    def __init__(self, geometry, methods, meshes=None):
         super().__init__(geometry, methods, meshes)
         self.rays = GlassRays()
-        #: The glass pixels' rays met with the ``diffuse`` meshes as given on the GPU
-        #: (``scene_trace.py``, what else they show as ``traced`` says); None: every pixel
-        #: is left to the search's meshes.
-        self.scene_trace = None if traced is None else SceneTrace(diffuse, self.geometry, traced)
         #: {glass index: (x0, y0, x1, y1)}: each glass's box on screen in pixels this frame,
         #: where the search reads the pixels' paths (none: a search without a frame).
         self._pixel_rects = {}
@@ -102,35 +89,19 @@ class RefractionPass(MapSearchPass):
             x, y, width, height = pixel_box(box_on_screen(corners, view, 0.0, view.width, view.height),
                                             view.width, view.height, 0)
             self._pixel_rects[method.index] = (x, y, x + width, y + height)
-        if self.scene_trace is not None:
-            self.scene_trace.trace(self.rays, self._pixel_rects.values(), (frame.targets.width, frame.targets.height),
-                                   frame.images)
-            frame.targets.beneath = self.scene_trace.front_colors
-        if not self.searches_vertices:
-            self._pixel_rects = {}
-            return
         try:
             self.search(view, frame.warm)
         finally:
             self._pixel_rects = {}
 
     def draw(self, frame: Frame) -> None:
-        """Black where a glass that does not reflect must reflect totally, the pixels
-        whose rays were traced, then the refracted meshes, each fragment held to its
-        pixel's path."""
+        """Black where a glass that does not reflect must reflect totally, then the
+        refracted meshes, each fragment held to its pixel's path."""
         if self.rays.exits is None:
             return
-        self.rays.draw_settled(None if self.scene_trace is None else self.scene_trace.colors)
-        if self.searches_vertices:
-            setup = {**self.reflected_setup(frame), "glass_rays": self.rays.textures}
-            self.meshes.draw(frame.world_to_clip, frame.targets, setup, frame.images, self.answers())
-
-    @property
-    def searches_vertices(self) -> bool:
-        """Whether the search runs and its meshes are drawn: without the trace, or where a
-        mesh has an image texture past the trace's first ``MAX_IMAGES`` (the trace leaves
-        the pixels that meet it to them)."""
-        return self.scene_trace is None or len(self.geometry.images) > MAX_IMAGES
+        self.rays.draw_settled()
+        setup = {**self.reflected_setup(frame), "glass_rays": self.rays.textures}
+        self.meshes.draw(frame.world_to_clip, frame.targets, setup, frame.images, self.answers())
 
     @property
     def folded_reflectors(self) -> list:
@@ -168,9 +139,7 @@ class RefractionPass(MapSearchPass):
 
     def answers(self) -> list:
         """The AnswerSet (glass index, entry texture, exit texture, its slots) of the last
-        search per glass (none where only the trace draws)."""
-        if not self.searches_vertices:
-            return []
+        search per glass."""
         return [AnswerSet(index, entry, leave, search_module.IMAGES) for index, (entry, leave) in self._results.items()]
 
     def read(self, glass_index: int, slot: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -194,7 +163,7 @@ class RefractionPass(MapSearchPass):
         one by why."""
         counts = {}
         for method in self.methods:
-            if method.index not in self._results or not self.searches_vertices:
+            if method.index not in self._results:
                 continue
             status = self.read(method.index)[2]
             found = (status == FOUND).any(axis=0)

@@ -6,8 +6,9 @@ tree) packed into textures: two texels per node, one per triangle slot, and the
 vertices' positions, colours, normals and texture coordinates. ``glsl/scene_bvh.glsl``
 finds a ray's nearest triangle without a stack, and ``glsl/scene_colors.glsl`` lights
 what it meets as the reflected meshes are lit, reflecting off mirrors to the scene's Max
-Order as Render Image does (``engine/geometry/band_trace.py``). The glass's trace
-(``scene_trace.py``) and the mirrors' (``traced_pass.py``) meet their pixels' rays with it.
+Order as Render Image does (``engine/geometry/band_trace.py``) and refracting through
+glass as it does (``engine/glass/paths.py``). The glass's trace
+(``glass_trace.py``) and the mirrors' (``traced_pass.py``) meet their pixels' rays with it.
 """
 
 from __future__ import annotations
@@ -28,8 +29,18 @@ LEAF_SIZE = 4
 #: A ray meets triangles from this share of the scene's diameter on (past the surface it
 #: leaves, which an object may touch).
 START_SHARE = 1e-7
+#: Barycentric slack of the ray-triangle test: in float32 a ray through the edge two
+#: triangles share can miss both (a glass box's ray escaping through its face's diagonal);
+#: this keeps the mesh closed, at a millionth of a triangle's size.
+EDGE_SLACK = 1e-6
 #: A slot's image index for a mirror's triangle (``glsl/scene_bvh.glsl``; -1: no image).
 MIRROR_CODE = -2
+#: A slot's image index for a glass triangle: the ray crosses it (its vertices' colours
+#: hold the glass's index of refraction, whether it reflects, and its index).
+GLASS_CODE = -3
+#: Glass interfaces a ray crosses or reflects totally at before it is given up as trapped
+#: and black (Render Image's ``engine/glass/paths.MAX_INTERFACES``).
+MAX_INTERFACES = 8
 #: Image textures a trace samples (one sampler each); a ray meeting a mesh with a later
 #: image is left to another method.
 MAX_IMAGES = 4
@@ -51,6 +62,12 @@ class TracedScene:
     max_order: int = 1
 
 
+def samples_every_image(meshes) -> bool:
+    """Whether a trace samples every image texture of ``meshes`` (``DiffuseMesh`` each):
+    no more than :data:`MAX_IMAGES` of them have one."""
+    return sum(getattr(mesh, "image", None) is not None for mesh in meshes) <= MAX_IMAGES
+
+
 def declare(info, first_sampler: int, world: bool = True) -> None:
     """The tables' samplers (from slot ``first_sampler`` on) and push constants (12 bytes:
     ``t_min``, ``leaf_first``, ``max_order``; 16 more for ``world`` with ``world``) on a
@@ -69,18 +86,21 @@ def prelude(world: bool = True) -> str:
     """The GLSL a trace calls: ``nearest_hit`` and ``traced_color``, with their defines
     (without ``world``, a ray that meets nothing is black: the caller tells it by its
     distance)."""
-    defines = {"LEAF_SIZE": LEAF_SIZE, "MIRROR_CODE": f"{MIRROR_CODE:.1f}", "MAX_IMAGES": MAX_IMAGES,
+    defines = {"LEAF_SIZE": LEAF_SIZE, "EDGE_SLACK": f"{EDGE_SLACK:.9e}", "MIRROR_CODE": f"{MIRROR_CODE:.1f}",
+               "GLASS_CODE": f"{GLASS_CODE:.1f}", "MAX_INTERFACES": MAX_INTERFACES, "MAX_IMAGES": MAX_IMAGES,
                "TABLE_ROW": 1 << TABLE_ROW_BITS, "TABLE_ROW_BITS": TABLE_ROW_BITS,
                "WORLD_COLOR": "world.rgb" if world else "vec3(0.0)"}
     return shading_source() + glsl_source("scene_bvh.glsl", defines) + glsl_source("scene_colors.glsl")
 
 
-def bvh_tables(vertices: np.ndarray, triangles: np.ndarray, codes: np.ndarray) -> tuple:
+def bvh_tables(vertices: np.ndarray, triangles: np.ndarray, codes: np.ndarray,
+               groups: np.ndarray | None = None) -> tuple:
     """((2 n, 4) node texels, (slots, 4) slot texels, first leaf's node index) of the tree
     over ``triangles`` (``glsl/scene_bvh.glsl`` says what they hold: an inner node's
     highest corner carries the axis its children are ordered on); ``codes`` (T,) each
-    triangle's image index, -1 for none, or :data:`MIRROR_CODE`."""
-    bvh = build_bvh(vertices, triangles, leaf_size=LEAF_SIZE)
+    triangle's image index, -1 for none, :data:`MIRROR_CODE` or :data:`GLASS_CODE`;
+    ``groups`` (T,): each group (an object) a subtree of its own (``bvh.grouped_order``)."""
+    bvh = build_bvh(vertices, triangles, leaf_size=LEAF_SIZE, groups=groups)
     leaf_first = 1 << bvh.depth
     boxes = np.zeros((4 * leaf_first, 4), np.float32)
     for level, rows in enumerate(bvh.box_rows):  # one slice per level, not per node
@@ -101,30 +121,43 @@ def bvh_tables(vertices: np.ndarray, triangles: np.ndarray, codes: np.ndarray) -
     return boxes, slots, leaf_first
 
 
+def _surface_part(surface, code: float, colour: tuple) -> tuple:
+    """A mirror's or glass's part of the tables: its vertices and triangles, ``code``, one
+    ``colour`` for every vertex, its smooth normals (lit) and no texture coordinates."""
+    count = len(surface.vertices)
+    return (surface.vertices, surface.triangles, code, np.tile(colour, (count, 1)),
+            np.c_[surface.normals, np.ones(count)], np.zeros((count, 2)))
+
+
 class SceneTables:
     """One renderer's scene on the GPU for traces: its diffuse ``meshes`` as given
     (``engine.scene.DiffuseMesh`` each: a trace needs no subdivision, and a wall of two
-    triangles keeps its tree shallow; those named in ``scene.mirrors`` are mirrors) and
-    ``surfaces``, mirrors (``engine.Reflector`` each) not among them; positions relative
-    to the renderer's ``geometry`` (``draw_geometry.DrawGeometry``: its shift, size and
-    images). Uploaded on first :meth:`bind`."""
+    triangles keeps its tree shallow; those named in ``scene.mirrors`` are mirrors),
+    ``surfaces``, mirrors (``engine.Reflector`` each) not among them, and ``glasses``
+    (``engine.glass.Glass`` each, the k-th glass index k: rays refract through them);
+    positions relative to the renderer's ``geometry`` (``draw_geometry.DrawGeometry``:
+    its shift, size and images). Uploaded on first :meth:`bind`."""
 
-    def __init__(self, meshes, geometry, scene: TracedScene = TracedScene(), surfaces=()):
+    def __init__(self, meshes, geometry, scene: TracedScene = TracedScene(), surfaces=(), glasses=()):
         self.meshes = tuple(meshes)
         self.geometry = geometry
         self.scene = scene
         self.surfaces = tuple(surfaces)
+        self.glasses = tuple(glasses)
         self.world = tuple(float(c) for c in scene.world)[:3] + (1.0,)
         self._textures = None
 
     @property
     def empty(self) -> bool:
-        return not any(len(part.triangles) for part in self.meshes + self.surfaces)
+        surfaces = self.surfaces + tuple(glass.surface for glass in self.glasses)
+        return not any(len(part.triangles) for part in self.meshes + surfaces)
 
     def _arrays(self) -> tuple:
-        """(vertices relative to the shift, triangles, codes, colours, normals and lit, uvs)
-        of the meshes, then the surfaces; a mesh's code is its image's index in the
-        geometry's images (meshes with an image, in order), -1, or :data:`MIRROR_CODE`."""
+        """(vertices relative to the shift, triangles, codes, colours, normals and lit, uvs,
+        each triangle's part) of the meshes, the surfaces, then the glass; a mesh's code is
+        its image's index in the geometry's images (meshes with an image, in order), -1, or
+        :data:`MIRROR_CODE`; a glass vertex's colour is (index of refraction, 1 where it
+        reflects, its index, 0)."""
         shift = self.geometry.shift
         parts, count, image = [], 0, 0
         for mesh in self.meshes:
@@ -132,28 +165,30 @@ class SceneTables:
             code = MIRROR_CODE if mesh.name in self.scene.mirrors else (-1 if mesh.image is None else image)
             image += mesh.image is not None
             parts.append((mesh.vertices, mesh.triangles, code, mesh.colors, np.c_[normals, lit], uvs))
-        for surface in self.surfaces:
-            parts.append((surface.vertices, surface.triangles, MIRROR_CODE, np.full((len(surface.vertices), 4), 0.5),
-                          np.c_[surface.normals, np.ones(len(surface.vertices))], np.zeros((len(surface.vertices), 2))))
-        vertices, triangles, codes, colors, normals, uvs = [], [], [], [], [], []
+        parts += [_surface_part(surface, MIRROR_CODE, (0.5, 0.5, 0.5, 0.5)) for surface in self.surfaces]
+        parts += [_surface_part(glass.surface, GLASS_CODE,
+                                (float(glass.ior), float(glass.reflects), float(index), 0.0))
+                  for index, glass in enumerate(self.glasses)]
+        vertices, triangles, codes, colors, normals, uvs, groups = [], [], [], [], [], [], []
         for points, faces, code, colour, normal, uv in parts:
             vertices.append(np.asarray(points, np.float64) - shift)
             triangles.append(np.asarray(faces, np.int64).reshape(-1, 3) + count)
             codes.append(np.full(len(faces), code))
+            groups.append(np.full(len(faces), len(groups)))
             colors.append(colour)
             normals.append(normal)
             uvs.append(uv)
             count += len(points)
         if not parts:
             return (np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0), np.zeros((0, 4)), np.zeros((0, 4)),
-                    np.zeros((0, 2)))
-        return tuple(np.concatenate(arrays) for arrays in (vertices, triangles, codes, colors, normals, uvs))
+                    np.zeros((0, 2)), np.zeros(0, np.int64))
+        return tuple(np.concatenate(arrays) for arrays in (vertices, triangles, codes, colors, normals, uvs, groups))
 
     def _ensure(self) -> None:
         if self._textures is not None:
             return
-        vertices, triangles, codes, colors, normals, uvs = self._arrays()
-        boxes, slots, leaf_first = bvh_tables(vertices, triangles, codes)
+        vertices, triangles, codes, colors, normals, uvs, groups = self._arrays()
+        boxes, slots, leaf_first = bvh_tables(vertices, triangles, codes, groups)
         self._textures = ([data_texture(table, 1 << TABLE_ROW_BITS)
                            for table in (boxes, slots, vertices, colors, normals, uvs)], leaf_first)
 

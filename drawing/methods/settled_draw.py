@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Pixels whose reflection is settled per pixel, drawn before any reflected mesh.
 
-A trace on the GPU (``scene_trace.py`` through glass, ``traced_pass.py`` off mirrors)
+A trace on the GPU (``glass_trace.py`` through glass, ``traced_pass.py`` off mirrors)
 knows each of its pixels' colour exactly; glass that does not reflect shows black where
 it must reflect totally (``glass_rays.py``). One full-screen triangle writes those
 pixels into the bound reflection target at depth 0, which no reflected mesh drawn after

@@ -132,21 +132,49 @@ def _blocks(n_slots: int, leaf_size: int) -> tuple[int, int, int]:
     return block_leaves, block_leaves * leaf_size, depth - int(np.log2(block_leaves))
 
 
+def _leaves_for(n_triangles: int, leaf_size: int) -> int:
+    """The leaves of a complete tree over ``n_triangles``: a power of two."""
+    return 1 << max(0, int(np.ceil(np.log2(max(1, -(-n_triangles // leaf_size))))))
+
+
+def grouped_order(vertices: np.ndarray, triangles: np.ndarray, groups: np.ndarray, leaf_size: int) -> np.ndarray:
+    """Slots -> triangle index (-1 for padding) of a complete tree in which each group of
+    triangles (``groups`` (T,), e.g. one id per object) fills a subtree of its own,
+    Morton-sorted in its own box, the larger subtrees first (each then starts on a
+    boundary of its size). Sorted over the whole scene, a floor's few big triangles
+    share leaves with the small ones around them, and their boxes swell every node above;
+    apart, a ray crossing a glass ball descends the ball's subtree alone."""
+    members = [np.flatnonzero(groups == group) for group in np.unique(groups)]  # per object, not per triangle
+    sorted_members = [m[np.argsort(morton_codes(vertices[triangles[m]].mean(axis=1)), kind="stable")] for m in members]
+    blocks = sorted(((_leaves_for(len(m), leaf_size), m) for m in sorted_members), key=lambda block: -block[0])
+    leaves = _leaves_for(sum(count for count, _ in blocks) * leaf_size, leaf_size)
+    order = np.full(leaves * leaf_size, -1, dtype=np.int64)
+    start = 0
+    for count, ordered in blocks:
+        order[start:start + len(ordered)] = ordered
+        start += count * leaf_size
+    return order
+
+
 def build_bvh(vertices: np.ndarray, triangles: np.ndarray, normals: np.ndarray | None = None,
-              leaf_size: int = 4) -> BVH:
-    """Build the BVH of a triangle mesh; ``normals`` (N, 3) unit vertex normals for the cones.
+              leaf_size: int = 4, groups: np.ndarray | None = None) -> BVH:
+    """Build the BVH of a triangle mesh; ``normals`` (N, 3) unit vertex normals for the
+    cones; ``groups`` (T,): each group a subtree of its own (:func:`grouped_order`).
 
     Streamed over blocks of slots (:data:`BLOCK`): no (M, 3, 3) array of every
     triangle's corners is made (a million-triangle mirror's cost 300 MB at once with
     the corner normals). The boxes above the leaves are the smaller of their
     children's bounds (exact), so the tree is the same as one built all at once."""
     n_triangles = len(triangles)
-    n_leaves = 1 << max(0, int(np.ceil(np.log2(max(1, -(-n_triangles // leaf_size))))))
-    n_slots = n_leaves * leaf_size
+    if groups is None:
+        order = np.full(_leaves_for(n_triangles, leaf_size) * leaf_size, -1, dtype=np.int64)
+        order[:n_triangles] = np.argsort(_morton_codes(
+            lambda start: vertices[triangles[start:start + BLOCK]].mean(axis=1), n_triangles), kind="stable")
+    else:
+        order = grouped_order(vertices, triangles, np.asarray(groups), leaf_size)
+    n_slots = len(order)
+    n_leaves = n_slots // leaf_size
     depth = int(np.log2(n_leaves))
-    order = np.full(n_slots, -1, dtype=np.int64)
-    order[:n_triangles] = np.argsort(_morton_codes(
-        lambda start: vertices[triangles[start:start + BLOCK]].mean(axis=1), n_triangles), kind="stable")
     _, block_slots, _ = _blocks(n_slots, leaf_size)
     leaf_lo, leaf_hi = np.empty((n_leaves, 3)), np.empty((n_leaves, 3))
     for start in range(0, n_slots, block_slots):

@@ -13,9 +13,10 @@ draws each diffuse vertex at A (``drawing/methods/refraction_draw.py``), in as m
 slots as it has images. Convexity is what makes two interfaces the whole path: a ray
 inside leaves once and never meets the solid again, unless it meets the surface past the
 critical angle, where glass that reflects (a Glass BSDF) reflects it inside and it
-leaves farther on. Glass that is open, not star-shaped or not convex has no search, and
-the viewport shows it as a solid object; Render Image traces all glass per pixel
-(``blender/glass_layer.py``).
+leaves farther on. The search draws glass where the scene has more image textures than
+the GPU's per-pixel trace samples (``drawing/methods/glass_trace.py``, which draws glass
+otherwise); there, glass that is open, not star-shaped or not convex has no search, and
+the viewport shows it as a solid object (``blender/glass_layer.py``).
 """
 
 from __future__ import annotations

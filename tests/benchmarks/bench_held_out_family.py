@@ -303,7 +303,9 @@ def _mode_cell(mode: dict) -> str:
 
 def _check_cell(row: dict) -> str:
     if not row["checks"]:
-        return "not checked (Runtime from the start: the check measures per-frame methods)"
+        drew = sorted({method.title() for frame in row["frames"] for method in frame["methods"].values()})
+        why = "; the trace follows each pixel's exact ray" if drew == ["Traced"] else ""
+        return f"not checked ({', '.join(drew)}: the check measures methods that place vertices each frame{why})"
     several = len(row["frames"][0]["methods"]) > 1
     return "<br>".join(f"{n}: {line}" if several else line for n, line in row["checks"].items())
 

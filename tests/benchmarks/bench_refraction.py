@@ -1,15 +1,16 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Glass (issue 47): ours against Cycles and EEVEE on a glass ball, a thick lens and a
-glass box, each with an object close behind it.
+"""Glass (issue 47): ours against Cycles and EEVEE on a glass ball, a thick lens, a
+glass box and a glass torus, each with an object close behind it.
 
     .venv/bin/python tests/benchmarks/bench_refraction.py          # docs/benchmarks/refraction.md
     .venv/bin/python tests/benchmarks/bench_refraction.py --quick --out /tmp/refraction.md
 
 The glass demo (``demo_scenes.build_glass``: a checker floor, columns, a panel, a cube 0.1
 behind the glass, Glass BSDF of IOR 1.45) with one glass object at a time: the ball, the
-lens (a sphere squashed to 0.4 along the view), or a box in the ball's place. Cycles
-(Glass BSDF, 8 glossy and 8 transmission bounces) is the reference; EEVEE (screen-space
-ray tracing, refraction on) and ours (Render Image, the second frame timed) are measured
+lens (a sphere squashed to 0.4 along the view), or a box or a torus in the ball's place.
+Cycles (Glass BSDF, 8 glossy and 8 transmission bounces) is the reference; EEVEE
+(screen-space ray tracing, refraction on) and ours (Render Image, an animation's second
+frame timed, and the live view's draw) are measured
 by label disagreement on the glass's pixels (Workbench's mask of the view,
 ``tools/metrics.py``), and ours also against a Workbench frame of the same scene.
 """
@@ -33,7 +34,14 @@ TARGET = 0.02
 #: (name, what it is) of the glass objects measured one at a time.
 GLASSES = (("ball", "a glass ball of radius 1, the cube 0.1 behind it"),
            ("lens", "a thick lens: a sphere of radius 0.9 squashed to 0.4 along the view"),
-           ("box", "a glass box of 1.5 in the ball's place, flat faces, the cube 0.1 behind it"))
+           ("box", "a glass box of 1.5 in the ball's place, flat faces, the cube 0.1 behind it"),
+           ("torus", "a glass torus (radii 0.8 and 0.3, not convex) in the ball's place, tilted to show its hole"))
+#: Cycles samples on a Refraction BSDF, whose paths do not branch. A Glass BSDF picks
+#: reflection or refraction per sample: at 128 samples its tint is noisy enough that 2.9 %
+#: of the ball's labels differ from 1024 samples' (1024 against 4096: 1.0 %).
+REFRACTION_SAMPLES = 128
+#: Issue 47's bars on a frame's time, in Workbench frames: convex glass, and any other.
+CONVEX_TIMES, OTHER_TIMES = 2.0, 3.0
 
 
 #: (name, camera eye or None) of the views measured: the demo's camera, which the live
@@ -62,12 +70,17 @@ def _stage(kind: str, width: int, height: int, bsdf: str = "ShaderNodeBsdfGlass"
     ball, lens = bpy.data.objects["GlassBall"], bpy.data.objects["GlassLens"]
     keep = lens if kind == "lens" else ball
     bpy.data.objects.remove(lens if keep is ball else ball)
-    if kind == "box":
+    if kind in ("box", "torus"):
         material = ball.active_material
         bpy.data.objects.remove(ball)
-        bpy.ops.mesh.primitive_cube_add(size=1.5, location=(-1.1, 0.35, 0.95))
+        if kind == "box":
+            bpy.ops.mesh.primitive_cube_add(size=1.5, location=(-1.1, 0.35, 0.95))
+        else:
+            bpy.ops.mesh.primitive_torus_add(location=(-1.1, 0.35, 0.95), rotation=(1.1, 0.0, 0.4), major_radius=0.8,
+                                             minor_radius=0.3)
+            bpy.context.active_object.data.shade_smooth()
         keep = bpy.context.active_object
-        keep.name = "GlassBox"
+        keep.name = f"Glass{kind.title()}"
         keep.data.materials.append(material)
         keep.curved_reflections.is_refractor = True
     nodes = keep.active_material.node_tree.nodes
@@ -92,7 +105,7 @@ def measure_glass(kind: str, bsdf: str, width: int, height: int, samples: int, e
 
     from curved_reflections.blender import demo_scenes
     from curved_reflections.blender.png import write_png
-    from curved_reflections.blender.render_image import render_scene
+    from curved_reflections.blender.render_image import FrameState, render_scene
     from curved_reflections.tools import metrics, reference_render as rr
 
     import animation_runs
@@ -102,6 +115,7 @@ def measure_glass(kind: str, bsdf: str, width: int, height: int, samples: int, e
     palette = _seen_through_glass(demo_scenes.palette(scene), demo_scenes.GLASS_IOR if bsdf == BSDFS[0][0] else 1.0,
                                   demo_scenes.WORLD_KEY)
     mask, _ = rr.render_mask(scene, folder / f"{slug}_mask.png", [glass])
+    samples = samples if bsdf == BSDFS[0][0] else min(samples, REFRACTION_SAMPLES)
     cycles = rr.render_cycles(scene, folder / f"{slug}_cycles.png", samples=samples, transmission_bounces=8)
     truth = _object_labels(metrics.label_image(cycles.image, palette, max_distance=0.25), palette)
     workbench = animation_runs.workbench_seconds(scene, folder, 1)
@@ -121,9 +135,10 @@ def measure_glass(kind: str, bsdf: str, width: int, height: int, samples: int, e
         result = rr.render_eevee(scene, "eevee_raytrace", folder / f"{slug}_eevee.png", [glass])
         rows.append(row("EEVEE (screen-space ray tracing)", result.image, result.seconds))
     depsgraph = bpy.context.evaluated_depsgraph_get()
-    render_scene(scene, depsgraph)  # caches filled
+    state = FrameState()
+    render_scene(scene, depsgraph, state=state)  # an animation's first frame: its pipeline made
     start = time.perf_counter()
-    ours = render_scene(scene, depsgraph)
+    ours = render_scene(scene, depsgraph, state=state)
     seconds = time.perf_counter() - start
     path = write_png(folder / f"{slug}_ours.png", ours.display)
     rows.append(row("ours: Render Image", rr.read_png(path), seconds))
@@ -214,15 +229,18 @@ def report(result: dict, command: str, picture: str) -> str:
              f"Generated {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC by `{command}` on "
              f"{bench_draw._machine()}.", "",
              f"The glass demo at {result['width']}x{result['height']} with one glass object at a time; Cycles "
-             f"({result['samples']} samples, 8 glossy and 8 transmission bounces) is the reference, the glass a "
+             f"({result['samples']} samples on Glass BSDF, {min(result['samples'], REFRACTION_SAMPLES)} on "
+             "Refraction BSDF, 8 glossy and 8 transmission bounces) is the reference, the glass a "
              "Glass BSDF (refraction and reflection, mixed by Fresnel) or a Refraction BSDF (refraction alone: "
              "where things appear through the glass). "
              "Label disagreement: the share of the glass's pixels (Workbench's mask) whose label differs from "
-             "Cycles' (`tools/metrics.py`). Ours: Render Image, which ray traces the glass's pixels on the CPU "
-             "(refraction at every interface, total internal reflection, Fresnel at the first), the second frame "
-             "timed, and its time over a Workbench frame of the same scene; the live view: the glass drawn as the "
-             "viewport draws it (each glass pixel traced on the GPU, every frame; the rest of the frame is "
-             f"Blender's), one draw timed. Target: <= {100 * TARGET:g} %. On "
+             "Cycles' (`tools/metrics.py`). Ours: Render Image, which ray traces the glass's pixels on the GPU "
+             "through the glass's own triangles (refraction at every interface, total internal reflection, "
+             "Fresnel at the first and the last), a frame of an animation timed (the pipeline kept from the frame "
+             "before), and its time over a Workbench frame of the same scene; the live view: the glass drawn as "
+             "the viewport draws it (the same trace, every frame; the rest of the frame is "
+             f"Blender's), one draw timed. Targets: <= {100 * TARGET:g} %; a frame <= {CONVEX_TIMES:g}x a "
+             f"Workbench frame on convex glass, <= {OTHER_TIMES:g}x on the torus. On "
              "Glass BSDF the palette also holds each object's colour as the glass shows it head on, tinted by "
              "the world it reflects (3.4 % for IOR 1.45, about 0.2 of blue in display units: enough to move the "
              "orange panel halfway to the salmon tiles); both colours label the object. Views: the demo's "
@@ -239,16 +257,16 @@ def report(result: dict, command: str, picture: str) -> str:
                      f"**{100 * r['disagreement']:.1f} %** | "
                      f"{r['seconds']:.2f} | {_times(r['seconds'] / r['workbench'])} | {r['cycles_seconds']:.1f} |")
     lines += ["", f"![Left to right: Cycles, ours (Render Image), ours (the live view), EEVEE; top to bottom: ball, "
-              f"lens, box; the tuned view, Glass BSDF]({picture})", ""]
+              f"lens, box, torus; the tuned view, Glass BSDF]({picture})", ""]
     for r in result["rows"]:
         if r["renderer"].startswith("ours"):
             met = "met" if r["disagreement"] <= TARGET else "not met"
             ratio = r["seconds"] / r["workbench"]
-            fast = "met" if ratio <= 2.0 else ("not met: the glass is ray traced in numpy" if "Render" in r["renderer"]
-                                               else "not met")
+            bar = OTHER_TIMES if r["glass"] == "torus" else CONVEX_TIMES
+            fast = "met" if ratio <= bar else "not met"
             lines.append(f"- {r['view']}, {r['glass']}, {r['bsdf']}, {r['renderer'][len('ours: '):]}: "
                          f"**{100 * r['disagreement']:.1f} %** (target <= {100 * TARGET:g} %: {met}); "
-                         f"{_times(ratio)} a Workbench frame (target 2x convex: {fast}).")
+                         f"{_times(ratio)} a Workbench frame (target {bar:g}x: {fast}).")
     lines.append("")
     return "\n".join(lines)
 
@@ -266,8 +284,8 @@ def parse_args(argv):
                         help="the picture the report shows")
     parser.add_argument("--width", type=int, default=480)
     parser.add_argument("--height", type=int, default=320)
-    parser.add_argument("--samples", type=int, default=128,
-                        help="Cycles samples (a Glass BSDF picks reflection or refraction per sample: fewer leave its tint noisy)")
+    parser.add_argument("--samples", type=int, default=1024,
+                        help=f"Cycles samples on Glass BSDF (at most {REFRACTION_SAMPLES} on Refraction BSDF)")
     parser.add_argument("--no-eevee", action="store_true", help="leave EEVEE out")
     parser.add_argument("--quick", action="store_true", help="small: 96x64, 8 Cycles samples, no EEVEE")
     args = parser.parse_args(argv)

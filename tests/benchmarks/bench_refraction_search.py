@@ -10,8 +10,8 @@ solved exactly (``tools/exact_refraction.py``, a grid half a pixel apart); cover
 share of exact images within a pixel of an answer, *points* the share of points with an
 image that got one, p99 the error of the answers that have an exact image. The ball is
 the scene the search was tuned on; the thick lens, the flat ellipsoid and the box are
-held out (the viewport searches where a mesh has an image texture; otherwise it meets
-each glass pixel's rays with the scene, ``drawing/methods/scene_trace.py``). Cost: the
+held out (the viewport searches where the scene has more image textures than its trace
+samples; otherwise it traces each glass pixel, ``drawing/methods/glass_trace.py``). Cost: the
 glass demo (``demo_scenes.build_glass``) drawn as the viewport draws it, the view
 orbiting a degree a frame, against a Workbench frame of the same scene.
 """
@@ -173,10 +173,11 @@ def report(rows: list, frames: dict, command: str, machine: str, size: tuple) ->
              f"Command: `{command}`", "", f"Machine: {machine}", "",
              f"Points behind each glass solid (IOR {IOR:g}) against the exact solver, a {size[0]}x{size[1]} view; "
              f"targets: p99 <= {TARGET_P99_PX:g} px, coverage >= {100 * TARGET_COVERAGE:g} % of the exact images. "
-             "The search runs in the glass layer's frame, as the viewport runs it where a mesh has an image "
-             "texture (the pixels' paths through the glass first: its starts come from them too; without image "
-             "textures the pixels' rays are met with the scene instead, below). *Exact images*: the exact solver's images in and "
-             "straight out of the glass (two interfaces); *inside*: those reflected inside first (a Glass "
+             "The search runs in the glass layer's frame, as the viewport runs it where the scene has more image "
+             "textures than its per-pixel trace samples (the pixels' paths through the glass first: its starts "
+             "come from them too; otherwise each glass pixel is traced instead, below). *Exact images*: the "
+             "exact solver's images in and straight out of the glass (two interfaces); *inside*: those "
+             "reflected inside first (a Glass "
              "BSDF's, three interfaces or more; the search follows one reflection), and the share of them "
              "answered; *coverage*: exact images (two "
              f"interfaces) within a pixel of an answer (the search keeps up to {search_images()} images per "
@@ -200,8 +201,8 @@ def report(rows: list, frames: dict, command: str, machine: str, size: tuple) ->
     lines += ["", "## The viewport", "",
               f"The glass demo (the ball and the thick lens, {frames['vertices']:,} diffuse vertices after "
               "subdivision, no image texture) drawn as the viewport draws it, the view orbiting a degree a frame: "
-              "each glass pixel's path followed and its rays (through the glass, and reflected off it) met with "
-              "the scene on the GPU, no search: "
+              "each glass pixel's ray followed through the glass's own triangles and met with the scene on the "
+              "GPU, with the rays the glass reflects, no search: "
               f"**{frames['draw']:.3f} s** a draw, **{frames['draw'] / frames['workbench']:.1f}x** a Workbench "
               f"frame of the same scene ({frames['workbench']:.3f} s).", ""]
     return "\n".join(lines)

@@ -90,8 +90,9 @@ def test_iterative_mode_searches_every_image_of_a_folded_mirror_and_auto_traces_
     """With bumps of 15 % of the ball's radius a column is seen two or three times.
     Iterative mode searches every image of the folded mirror, and the check keeps it
     (exact where drawn, at most 5 % of the exact images missed); Auto traces it per pixel
-    (every image, no camera) and says why: each frame would search each patch."""
-    from curved_reflections.blender import method_plan
+    (every image, no camera) and says why: each frame would search each patch. The
+    search's starts on the folds are made only for Iterative mode."""
+    from curved_reflections.blender import method_plan, star_maps
     from curved_reflections.blender.frame_pipeline import FramePipeline
 
     _fold(bpy.data.objects["MirrorSphere"], 0.15)
@@ -103,10 +104,15 @@ def test_iterative_mode_searches_every_image_of_a_folded_mirror_and_auto_traces_
     [choice] = pipeline.plan.choices
     assert choice.method == method_plan.TRACED and "but it folds its reflections" in choice.reason, choice.reason
     assert pipeline.camera_job(view) is None  # the trace draws every order
+    [mirror] = pipeline.captured.reflectors
+    traced_map = star_maps.star_map(mirror)[1]
+    assert traced_map.images > 1 and traced_map.patches is None
     bpy.data.objects["MirrorSphere"].curved_reflections.mode = method_plan.ITERATIVE
     pipeline.update(fig3, bpy.context.evaluated_depsgraph_get(), settings_of(fig3))
     [choice] = pipeline.plan.choices
     assert choice.method == method_plan.ITERATIVE and "every image" in choice.reason
+    [engine] = pipeline.plan.engines_of(method_plan.ITERATIVE)
+    assert len(engine.reflector_map.patches) > 50 and f"from {len(engine.reflector_map.patches)} patches" in choice.reason
     searched = pipeline.renderer
     searched.render(view, None, pipeline.world)
     assert not pipeline.check_methods(fig3, view) and pipeline.renderer is searched

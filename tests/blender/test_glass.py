@@ -88,13 +88,14 @@ def test_a_glass_objects_index_of_refraction_comes_from_its_material_unless_set(
         capture_scene(bpy.context.evaluated_depsgraph_get())
 
 
-def _traced_labels(captured, view, pixels, through_glass: bool = True) -> np.ndarray:
+def _traced_labels(captured, view, pixels, through_glass: bool = True, rays=None) -> np.ndarray:
     """Index into COLOURS of the panel each pixel's eye ray meets, refracted through the
     glass (-2 where it meets no glass) or, without ``through_glass``, straight on (-1:
-    none), traced exactly."""
+    none), traced exactly; ``rays``: (origins, directions) to meet the panels with
+    instead of the pixels' (with ``through_glass`` off)."""
     from curved_reflections.engine.glass import GlassSet
 
-    origins, directions = view.pixel_rays(pixels + 0.5)
+    origins, directions = view.pixel_rays(pixels + 0.5) if rays is None else rays
     paths = GlassSet(list(captured.glass)).trace(origins, directions)
     if through_glass:
         origins, directions = paths.origin, paths.direction
@@ -163,16 +164,32 @@ def test_the_glass_reflects_the_world_by_the_fresnel_reflectance(empty_scene, re
                        atol=2e-3)
 
 
-def test_a_scene_of_glass_alone_renders_and_a_camera_inside_glass_is_named(empty_scene, registered, gpu_ready):
-    """With no mirror the glass's renderer draws the whole frame; from inside the glass
-    Render Image says so instead of drawing garbage."""
-    scene = _glass_scene()
+def test_a_scene_of_glass_alone_renders_and_a_camera_inside_glass_sees_out_through_it(empty_scene, registered,
+                                                                                      gpu_ready):
+    """With no mirror the glass's renderer draws the whole frame. From inside the ball
+    (a Refraction BSDF: no reflection) Render Image and the live view trace each ray out
+    of the glass: the panels show where exact paths starting inside the glass meet them
+    (measured: all of the pixels whose path leaves without reflecting totally)."""
+    from curved_reflections.engine.glass import GlassSet
+
+    scene = _refraction_scene()
     result = render_scene(scene, bpy.context.evaluated_depsgraph_get())
     assert result.image.shape == (HEIGHT, WIDTH, 4) and result.stats["methods"] == {}
     scene.camera.location = (0.0, -0.2, 1.0)
     bpy.context.view_layer.update()
-    with pytest.raises(SceneInputError, match="'Ball': the view is inside this glass object"):
-        render_scene(scene, bpy.context.evaluated_depsgraph_get())
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    result = render_scene(scene, depsgraph)
+    rows, columns = np.nonzero(np.ones((HEIGHT, WIDTH), dtype=bool))
+    pixels = np.stack([columns, rows], axis=1)
+    captured = capture_scene(depsgraph)
+    inside = np.zeros(len(pixels), int)  # the ball's index
+    paths = GlassSet(list(captured.glass)).trace(*result.view.pixel_rays(pixels + 0.5), media=inside)
+    truth = _traced_labels(captured, result.view, pixels, through_glass=False, rays=(paths.origin, paths.direction))
+    leaves = ((paths.total_reflections == 0) & (paths.exit_glass == 0)).reshape(HEIGHT, WIDTH)
+    judged = _inner(leaves & (truth.reshape(HEIGHT, WIDTH) >= 0))
+    assert judged.sum() > 1000 and (_labels(result.image) == truth.reshape(HEIGHT, WIDTH))[judged].mean() > 0.995
+    _, live_image = _live_image(scene)
+    assert (_labels(live_image) == truth.reshape(HEIGHT, WIDTH))[judged].mean() > 0.995
 
 
 def test_the_live_view_draws_a_scene_of_glass_alone(empty_scene, registered, gpu_ready):
@@ -265,15 +282,27 @@ def _live_image(scene):
     return view, np.array(pixels, dtype=np.float32).reshape(HEIGHT, WIDTH, 4)
 
 
-def test_the_live_view_draws_what_lies_behind_convex_glass(empty_scene, registered, gpu_ready):
-    """The viewport traces the ball on the GPU every frame (its pixels' paths through it,
-    met with the scene): its inner pixels show the panel exact rays meet through it
-    (measured: all of them), and the panel says it is traced. A mirror elsewhere in the
-    view is what starts the live view."""
+@pytest.mark.parametrize("shape", ["ball", "torus"])
+def test_the_live_view_draws_what_lies_behind_glass_of_any_shape(empty_scene, registered, gpu_ready, shape):
+    """The viewport traces the glass on the GPU every frame (its pixels' paths through
+    it, met with the scene), a ball or a torus (not convex: rays leave and enter it
+    again): its inner pixels show the panel exact rays meet through it (measured: all
+    of them, on either), and the panel says it is traced. A
+    mirror elsewhere in the view is what starts the live view."""
     from curved_reflections.blender import live
     from curved_reflections.blender.panel import glass_note
 
     scene = _refraction_scene()
+    if shape == "torus":
+        material = bpy.data.objects["Ball"].data.materials[0]
+        bpy.data.objects.remove(bpy.data.objects["Ball"])
+        bpy.ops.mesh.primitive_torus_add(location=(0.0, 0.0, 1.0), rotation=(1.2, 0.0, 0.3), major_radius=1.0,
+                                         minor_radius=0.4)
+        torus = bpy.context.active_object
+        torus.name = "Ball"
+        torus.data.materials.append(material)
+        torus.data.shade_smooth()
+        torus.curved_reflections.is_refractor = True
     mirror = _ball("Mirror", location=(-3.2, 2.0, 3.0), radius=0.5)
     mirror.curved_reflections.is_refractor = False
     mirror.curved_reflections.is_reflector = True
@@ -285,7 +314,7 @@ def test_the_live_view_draws_what_lies_behind_convex_glass(empty_scene, register
     inner = _inner(truth > -2)
     assert inner.sum() > 1500 and (_labels(image) == truth)[inner].mean() > 0.995
     state = live.start(scene, bpy.context.evaluated_depsgraph_get(), wait=True)
-    assert "traces it on the GPU every frame (a convex solid)" in glass_note("Ball", state)
+    assert glass_note("Ball", state).startswith("The viewport and Render Image trace it on the GPU every frame")
     live.clear(scene)
 
 

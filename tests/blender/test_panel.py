@@ -196,7 +196,7 @@ def test_the_glass_panel_shows_the_index_of_refraction_in_use_and_what_draws_the
     ball.curved_reflections.ior = 1.33
     log = _draw(GLASS, empty_scene, ball)
     assert not log["greyed"] and _texts(log)[0].startswith("Render Image ray traces it")
-    assert " ".join(_texts(log)).endswith("The viewport draws it once reflections are started.")
+    assert " ".join(_texts(log)).endswith("the viewport does once reflections are started.")
     bpy.ops.object.camera_add()
     assert _draw(GLASS, empty_scene, bpy.context.active_object)["labels"] == [("No active object with a surface",
                                                                                 'INFO')]
@@ -204,23 +204,23 @@ def test_the_glass_panel_shows_the_index_of_refraction_in_use_and_what_draws_the
 
 def test_the_glass_note_names_what_draws_each_glass_in_the_viewport_and_why():
     """Once reflections are started, the note follows the live state's glass layer: the
-    GPU's trace for convex glass (the refraction search past four image textures), the
-    reason it has neither for other glass."""
+    GPU's trace for any glass; past four image textures, the refraction search for convex
+    glass and the reason it has neither for other glass."""
     from types import SimpleNamespace
 
     from curved_reflections.blender.panel import glass_note
 
     reason = "'Bottle' is not convex: a ray inside it may leave and enter it again"
-    refraction = SimpleNamespace(searches_vertices=False)
-    layer = SimpleNamespace(glass=SimpleNamespace(glasses=[SimpleNamespace(name="Ball"), SimpleNamespace(name="Bottle")]),
-                            unsearched={"Bottle": reason}, renderer=SimpleNamespace(pass_named=lambda name: refraction))
+    glasses = [SimpleNamespace(name="Ball"), SimpleNamespace(name="Bottle")]
+    layer = SimpleNamespace(glass=SimpleNamespace(glasses=glasses), unsearched={}, traced=True)
     state = SimpleNamespace(glass=layer)
-    assert glass_note("Ball", state).startswith("The viewport traces it on the GPU every frame")
-    refraction.searches_vertices = True
+    for name in ("Ball", "Bottle"):
+        assert glass_note(name, state).startswith("The viewport and Render Image trace it on the GPU every frame")
+    layer.traced, layer.unsearched = False, {"Bottle": reason}
     assert glass_note("Ball", state).startswith("The viewport draws what lies behind it by the refraction search")
-    assert glass_note("Bottle", state).startswith(f"The viewport shows it as a solid object: {reason}. Render Image")
-    assert glass_note("Lamp", state).endswith("The viewport draws it once reflections are started.")
-    assert glass_note("Ball", None).endswith("The viewport draws it once reflections are started.")
+    assert glass_note("Bottle", state).startswith(f"The viewport shows it as a solid object: {reason}. The scene has")
+    assert glass_note("Lamp", state).endswith("once reflections are started.")
+    assert glass_note("Ball", None).endswith("once reflections are started.")
 
 
 def test_panels_on_a_baked_scene_show_methods_stats_and_status(empty_scene, registered, gpu_ready):

@@ -177,15 +177,23 @@ def test_auto_traces_a_torus_and_iterative_mode_searches_it_as_pieces_as_runtime
 
 def test_second_orders_of_searched_mirrors_get_a_camera_without_their_first_orders(empty_scene, registered,
                                                                                   monkeypatch):
-    """Two facing balls, both searched, at Max Order 2: the frame's camera is made for
-    their images of each other alone, and the frame is the one a whole camera gives."""
+    """Two facing balls, both searched (Iterative mode), at Max Order 2: the frame's
+    camera is made for their images of each other alone, and the frame is the one a
+    whole camera gives. Auto traces both instead, every order in one pass, the same
+    frame on nearly every pixel (measured: all but 0.16 %)."""
     from curved_reflections.blender import frame_pipeline, render_image
 
     scene = demo_scenes.build("two_spheres", bpy.context.scene, 96, 64)
     assert scene.curved_reflections.max_order == 2
     depsgraph = bpy.context.evaluated_depsgraph_get()
+    traced = render_image.render_scene(scene, depsgraph)
+    assert set(traced.stats["methods"].values()) == {"TRACED"} and traced.camera is None
+    assert all("would take a sample-based camera every frame" in c.reason for c in method_plan.last_choices(scene))
+    for name in traced.stats["methods"]:
+        scene.objects[name].curved_reflections.mode = 'ITERATIVE'
     higher = render_image.render_scene(scene, depsgraph)
     assert set(higher.stats["methods"].values()) == {"ITERATIVE"}
+    assert (np.abs(traced.image[..., :3] - higher.image[..., :3]).max(axis=2) > 0.05).mean() < 0.01
     assert higher.camera.first_order_left_out == {0, 1}
     assert sorted(map(tuple, higher.camera.groups)) == [(0, 1), (1, 0)]
     build = frame_pipeline.build_sample_based_camera

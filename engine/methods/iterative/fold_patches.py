@@ -130,13 +130,22 @@ def fold_patches(rmap: ReflectorMap, classes: np.ndarray | None = None, cells: i
     return grouped_patches(rmap, sampled, group)
 
 
-def folded(rmap: ReflectorMap) -> ReflectorMap:
-    """The map searched for every image (:data:`MAX_IMAGES` slots, from
-    :func:`fold_patches`) where concave or saddle texels make at least
-    :data:`FOLDED_SHARE` of it; else the map as it is (one image per point)."""
+def fold_classes(rmap: ReflectorMap) -> np.ndarray | None:
+    """The curvature classes (:func:`curvature_classes`) of a map that folds its
+    reflections: concave or saddle texels make at least :data:`FOLDED_SHARE` of it; None
+    where it does not."""
     if rmap.convex:
-        return rmap
+        return None
     classes = curvature_classes(rmap)
-    if np.isin(classes, (1, 2)).mean() < FOLDED_SHARE:
+    return classes if np.isin(classes, (1, 2)).mean() >= FOLDED_SHARE else None
+
+
+def folded(rmap: ReflectorMap, patched: bool = True) -> ReflectorMap:
+    """The map searched for every image (:data:`MAX_IMAGES` slots, from
+    :func:`fold_patches`, unless not ``patched``: what says that it folds, without the
+    search's starts) where it folds (:func:`fold_classes`); else the map as it is (one
+    image per point)."""
+    classes = fold_classes(rmap)
+    if classes is None:
         return rmap
-    return dataclasses.replace(rmap, patches=fold_patches(rmap, classes), images=MAX_IMAGES)
+    return dataclasses.replace(rmap, patches=fold_patches(rmap, classes) if patched else None, images=MAX_IMAGES)

@@ -160,7 +160,7 @@ def check_view_outside_reflectors(reflector_set: ReflectorSet, view: View) -> No
     """
     if not view.is_perspective:
         return
-    inside = _enclosing(reflector_set, view.eye, -view.backward)
+    inside = enclosing_reflector(reflector_set, view.eye, -view.backward)
     if inside is not None:
         name = reflector_set.reflectors[inside].name
         raise SceneInputError(name, "the view is inside this reflector; move the camera outside it")
@@ -184,7 +184,7 @@ def clip_start_inside(reflector_set: ReflectorSet, view: View) -> list:
     return [reflector_set.reflectors[k].name for k in inside if k >= 0 and reflector_set.sealed[k]]
 
 
-def _enclosing(reflector_set: ReflectorSet, point, forward) -> int | None:
+def enclosing_reflector(reflector_set: ReflectorSet, point, forward) -> int | None:
     """The reflector around ``point``, if any: rays in every direction (the six axis
     directions and ``forward``) meet the back of that one reflector first."""
     inside = int(_enclosing_each(reflector_set, np.asarray(point, dtype=np.float64)[None], forward)[0])
@@ -192,8 +192,8 @@ def _enclosing(reflector_set: ReflectorSet, point, forward) -> int | None:
 
 
 def _enclosing_each(reflector_set: ReflectorSet, points, forward) -> np.ndarray:
-    """(P,) the reflector around each of ``points`` (P, 3) as :func:`_enclosing` finds it,
-    -1 where none; their rays traced together."""
+    """(P,) the reflector around each of ``points`` (P, 3) as :func:`enclosing_reflector`
+    finds it, -1 where none; their rays traced together."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     directions = np.concatenate([np.eye(3), -np.eye(3), [np.asarray(forward, dtype=np.float64)]])
     origins = np.repeat(points, len(directions), axis=0)

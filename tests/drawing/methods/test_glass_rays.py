@@ -17,16 +17,16 @@ N = 1.5
 WIDTH, HEIGHT = 160, 120
 
 
-def _renderer(surface, meshes, reflects=True, traced=False):
-    """The glass layer's renderer of one glass solid (``blender/glass_layer.py``), its
-    pixels drawn by the search's meshes alone unless ``traced``."""
+def _renderer(surface, meshes, reflects=True):
+    """The glass layer's renderer of one glass solid (``blender/glass_layer.py``) by the
+    refraction search (a scene of more image textures than the GPU's trace samples)."""
     from curved_reflections.blender import star_maps
     from curved_reflections.blender.glass_layer import glass_renderer
 
     glass = Glass(surface, N, reflects)
     method, reason = refracted_glass(glass, 0, *star_maps.star_map(surface))
     assert method is not None, reason
-    return glass_renderer([glass], meshes, [method], traced=traced)
+    return glass_renderer([glass], meshes, [method], traced=False)
 
 
 def _paths(renderer, view):

@@ -93,3 +93,32 @@ def test_ray_box_test_matches_a_plain_slab_test_and_rejects_empty_nodes():
         assert not got[empty[nodes]].any()
     assert empty_seen > 0
     assert got.any() and not got.all()  # at the leaves, the rays both meet and miss boxes
+
+
+def test_grouped_triangles_fill_aligned_subtrees_of_their_own_largest_first():
+    """Three objects of 80, 20 and 3 triangles: each group's triangles fill one block of
+    leaves, a power of two starting on a multiple of its size (a subtree), the largest
+    first; every triangle once; each block's leaves bounded by its own object alone."""
+    big, middle, small = (icosphere((3.0 * k, 0.0, 0.0), 1.0, level, f"S{k}") for k, level in enumerate((1, 0, 0)))
+    parts = [big, middle, small]
+    vertices = np.concatenate([p.vertices for p in parts])
+    offsets = np.cumsum([0] + [len(p.vertices) for p in parts])
+    triangles = np.concatenate([p.triangles + o for p, o in zip(parts, offsets)])
+    triangles = triangles[: len(big.triangles) + len(middle.triangles) + 3]
+    groups = np.repeat([0, 1, 2], [len(big.triangles), len(middle.triangles), 3])
+    bvh = build_bvh(vertices, triangles, leaf_size=4, groups=groups)
+    order = bvh.order
+    assert sorted(order[order >= 0].tolist()) == list(range(len(triangles)))
+    starts = {}
+    for group, count in ((0, 80), (1, 20), (2, 3)):
+        slots = np.flatnonzero(np.isin(order, np.flatnonzero(groups == group)))
+        leaves = 1 << int(np.ceil(np.log2(-(-count // 4))))
+        first_leaf = slots.min() // 4
+        assert slots.max() // 4 < first_leaf + leaves and first_leaf % leaves == 0
+        starts[group] = first_leaf
+        level = bvh.depth - int(np.log2(leaves))
+        node = first_leaf // leaves
+        box = bvh.box_rows[level][:, node]
+        points = vertices[triangles[groups == group]].reshape(-1, 3)
+        assert np.allclose(box[:3], points.min(axis=0)) and np.allclose(box[3:], points.max(axis=0))
+    assert starts[0] < starts[1] < starts[2]
