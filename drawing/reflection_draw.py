@@ -317,8 +317,7 @@ class ReflectionRenderer:
         # A viewport of the view's size is drawn into where it is; otherwise from (0, 0).
         origin = (x, y) if (width, height) == (targets.width, targets.height) else None
         self.composite(targets, world_color, reflectors_only, fill_radius, origin,
-                       scene_depth=view if reflectors_only else None, rect=rect,
-                       beneath=targets.beneath if beneath is None else beneath)
+                       scene_depth=view if reflectors_only else None, rect=rect, beneath=beneath)
         return targets
 
     def mirrors_rect(self, view, targets: FrameTargets) -> tuple:
@@ -431,7 +430,10 @@ class ReflectionRenderer:
         (:func:`depth_bias`), with the depth test (depth writes off): hidden where the
         scene has a nearer surface. ``rect``: the part of the view drawn (normalised
         device coordinates, :meth:`mirrors_rect`; ``None``: all of it). ``beneath``: the
-        pre-pass colours' stand-in (:meth:`draw`)."""
+        colours the reflector pixels show beneath their reflections (:meth:`draw`);
+        default: a pass's (``targets.beneath``), else the pre-pass's."""
+        if beneath is None:
+            beneath = targets.prepass_colors if targets.beneath is None else targets.beneath
         if self._batches is None:
             self._batches = self._make_batches()
         with saved_state():
@@ -450,7 +452,7 @@ class ReflectionRenderer:
             shader.uniform_int("fill_radius", max(0, int(fill_radius)))
             shader.uniform_int("origin", (int(origin[0]), int(origin[1])))
             shader.uniform_sampler("prepass_colors", targets.prepass_colors)
-            shader.uniform_sampler("beneath_colors", targets.prepass_colors if beneath is None else beneath)
+            shader.uniform_sampler("beneath_colors", beneath)
             shader.uniform_sampler("prepass_labels", targets.prepass_labels)
             shader.uniform_sampler("reflection_colors", targets.reflection_colors)
             shader.uniform_sampler("traced_colors", targets.traced if targets.traced is not None else targets.no_trace)
@@ -583,7 +585,7 @@ class ReflectionRenderer:
         band = time.perf_counter()
         texture, framebuffer = targets.output
         with framebuffer.bind():
-            self.composite(targets, world_color, False, fill_radius, beneath=targets.beneath)
+            self.composite(targets, world_color, False, fill_radius)
         image = read_texture(texture, targets.width, targets.height)
         end = time.perf_counter()
         for frame_pass in self.passes:

@@ -47,7 +47,7 @@ void main()
     bool back_known;
     vec3 back = followed_color(path.exit_position, reflect(path.exit_incoming, path.exit_normal), path.exit_slot,
                                max_order, path.exit_glass, path.exit_ior, NOWHERE, back_path, back_known, distance);
-    known = known && back_known;
+    known = back_known;
     color = mix(color, back_path.exit_glass >= 0 ? back : vec3(0.0),
                 dielectric_reflectance(-dot(path.exit_incoming, path.exit_normal), path.exit_ior));
   }

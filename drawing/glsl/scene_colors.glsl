@@ -125,21 +125,21 @@ vec3 followed_color(vec3 origin, vec3 direction, int skip, int bounces, int medi
       int index = int(round(glass.z));
       vec3 facing = normalize(normal);
       facing = dot(facing, direction) > 0.0 ? -facing : facing;
+      bool leaving = medium == index;
+      float ior = leaving ? 1.0 : glass.x;
       if (crossings.first_glass < 0) {
         crossings.first_glass = index;
         crossings.first_slot = slot;
         crossings.first_position = hit;
         crossings.first_normal = facing;
-        crossings.first_ratio = medium_ior / (medium == index ? 1.0 : glass.x);
+        crossings.first_ratio = medium_ior / ior;
         crossings.first_reflects = glass.y > 0.5;
       }
       if (interfaces == MAX_INTERFACES) {
         return vec3(0.0);
       }
       interfaces++;
-      bool leaving = medium == index;
       crossings.nested = crossings.nested || (medium >= 0 && !leaving);
-      float ior = leaving ? 1.0 : glass.x;
       vec3 bent = refract(direction, facing, medium_ior / ior);
       origin = hit;
       skip = slot;

@@ -111,7 +111,7 @@ class GlassTracePass(FramePass):
             points = np.concatenate([glass.surface.vertices for glass in self.glasses]) - self.geometry.shift
             self._corners = box_corners(points)
         x, y, width, height = pixel_box(box_on_screen(self._corners, view, self.geometry.shift, *size), *size, 0)
-        if width <= 0 or height <= 0 or self.tables.empty:
+        if width <= 0 or height <= 0:
             return
         shader = trace_shader()
         shader.bind()

@@ -147,11 +147,6 @@ class SceneTables:
         self.world = tuple(float(c) for c in scene.world)[:3] + (1.0,)
         self._textures = None
 
-    @property
-    def empty(self) -> bool:
-        surfaces = self.surfaces + tuple(glass.surface for glass in self.glasses)
-        return not any(len(part.triangles) for part in self.meshes + surfaces)
-
     def _arrays(self) -> tuple:
         """(vertices relative to the shift, triangles, codes, colours, normals and lit, uvs,
         each triangle's part) of the meshes, the surfaces, then the glass; a mesh's code is
