@@ -84,7 +84,8 @@ def measure(plan, reflector_set, renderer, view, camera, sample: int | None = No
     them already. Per reflector, of a pool of the answered points, half of them the
     nearest to the mirror (``spot_check.checked_points``): the answers the picture shows
     (``shown_answers``), their error (``spot_check``) and the exact images they miss,
-    object by object (``coverage_check``)."""
+    object by object (``coverage_check``; a camera's band along the mirror's outline,
+    which the render traces, not counted)."""
     vertices = renderer.geometry.vertices
     planned = {choice.reflector: choice.method for choice in plan.choices}
     options = {} if sample is None else {"sample": sample}
@@ -103,8 +104,9 @@ def measure(plan, reflector_set, renderer, view, camera, sample: int | None = No
         check = spot_check(reflector_set, view, index, points, answers, **options)
         owners = renderer.geometry.vertex_mesh[answered.vertices[pool]]
         contact = CONTACT_SHARE * float(renderer.geometry.reflector_sizes[index])
+        band = 0 if answered.per_frame or camera is None else camera.ray_map.downsample
         coverage = coverage_check(reflector_set, view, index, points, answers, groups=owners,
-                                  distances=distances[pool], contact_distance=contact)
+                                  distances=distances[pool], contact_distance=contact, band_px=band)
         check = check.with_coverage(coverage, renderer.geometry.mesh_names[coverage.group] if coverage.group >= 0
                                     else "")
         found[name] = Measured(method, check)

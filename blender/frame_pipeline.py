@@ -37,6 +37,7 @@ from ..drawing.reflection_draw import ReflectionRenderer
 from . import accuracy, method_plan, morph_bake
 from .capture import capture_scene
 from .glass_layer import glass_layer
+from .picture_check import TracedReference, check_picture
 from .render_inputs import BOUNDS_MARGIN, reflector_properties, world_color
 
 
@@ -119,6 +120,10 @@ class FramePipeline:
     plan_warnings: list = field(default_factory=list)
     #: The capture's glass and its renderer (``glass_layer.GlassLayer``), None without glass.
     glass: object = None
+    #: The reflectors' looks the renderer was made with (``render_inputs.reflector_properties``).
+    properties: dict = field(default_factory=dict)
+    #: The picture check's renderer with every reflector traced (``picture_check.py``).
+    traced_reference: TracedReference = field(default_factory=TracedReference)
     #: Whether the refraction search draws the convex glass the GPU's trace cannot (past
     #: ``scene_tables.MAX_IMAGES`` image textures: the live view); Render Image then
     #: traces it on the CPU.
@@ -143,6 +148,7 @@ class FramePipeline:
         if seal:
             self.reflector_set.seal_empty_interiors(captured.meshes)
         properties = reflector_properties(captured.reflectors, scene) if properties is None else properties
+        self.properties = properties
         self.renderer = ReflectionRenderer(captured.reflectors, captured.meshes, passes=self.plan.pass_factories(),
                                            settings=self.settings, reflector_set=self.reflector_set, **properties)
         self.captured = captured
@@ -211,17 +217,19 @@ class FramePipeline:
             return None
         return CameraJob(self.reflector_set, view, self.camera_bounds(), self.settings, per_frame)
 
-    def check_methods(self, scene, view: View) -> bool:
+    def check_methods(self, scene, view: View, image: np.ndarray | None = None) -> bool:
         """Measure the reflectors a per-frame method drew in the frame just drawn of
         ``view`` (``accuracy.measure``: the answers' error and the exact images they
-        missed, against exactly traced rays); where one fails the scene's Accuracy, its
-        method is passed over (``method_plan.note_measured``: Auto's next, or Runtime) and
-        the plan and the renderer are made again. Returns whether they were: the frame is
-        drawn again."""
-        if all(choice.method == method_plan.RUNTIME for choice in self.plan.choices):
-            return False
-        found = accuracy.measure(self.plan, self.reflector_set, self.renderer, view, None)
-        if not method_plan.note_measured(scene, found):
+        missed, against exactly traced rays), then, given the frame's ``image``, a chosen
+        mode's picture against the trace's (``picture_check.check_picture``); where one
+        fails, its method is passed over (Auto's next, or the trace) and the plan and the
+        renderer are made again. Returns whether they were: the frame is drawn again."""
+        per_frame = any(c.method not in (method_plan.RUNTIME, method_plan.TRACED) for c in self.plan.choices)
+        replaced = per_frame and method_plan.note_measured(
+            scene, accuracy.measure(self.plan, self.reflector_set, self.renderer, view, None))
+        if not replaced and image is not None:
+            replaced = check_picture(scene, self, view, image, self.traced_reference, self.properties)
+        if not replaced:
             return False
         self.plan_reflectors(scene, self.captured, final_render=True)
         self.new_renderer(scene, self.captured, seal=False)

@@ -4,16 +4,17 @@
 A reflector's ``obj.curved_reflections.mode`` names a method of the registry
 (:mod:`.method_registry`: Iterative, Runtime, Morphing, Octree, Perturbation and any
 registered later) or Auto. :func:`plan` asks the mode's method whether it takes the
-reflector (its *offer*); a method that refuses (the iterative search on a mirror that is
-not star-shaped, a grid mode without a baked grid) hands the reflector to Runtime, and
-the panel line says why. Auto asks the methods marked ``in_auto`` in registry order
-(the iterative search, a baked morphing grid, then the trace per pixel, which takes any
-mirror) and falls back to Runtime.
+reflector (its *offer*); a method that refuses (the iterative search on an open mirror
+that is not star-shaped, a grid mode without a baked grid) hands the reflector to the
+trace per pixel, and the panel line says why. Auto asks the methods marked ``in_auto``
+in registry order (the iterative search, a baked morphing grid, then the trace, which
+takes any mirror) and falls back to Runtime.
 
-The live view checks each drawn method's answers against exactly traced rays when the
-view settles (``blender/accuracy.py``); an Auto reflector whose method measured
-outside the scene's Accuracy there is passed to the next method until Refresh
-(:func:`note_measured`).
+Each drawn method's answers are checked against exactly traced rays, in the live view
+when it settles and in Render Image's frames (``blender/accuracy.py``), and in Render
+Image a chosen mode's picture against the trace's (``blender/picture_check.py``); a
+reflector whose method failed is passed to Auto's next method, or in an explicit mode to
+the trace, until Refresh (:func:`note_measured`, :func:`note_outside`).
 
 Higher orders: the per-frame methods draw first-order reflections (the trace draws every
 order its rays reach); reflections of order 2 and more come from the sample-based camera,
@@ -30,6 +31,10 @@ from .scene_status import status_of
 
 #: The modes drawn from a baked grid (``morph_bake``; the renderer's ``MorphPass`` draws both).
 GRID_MODES = tuple(m.name for m in method_registry.registered() if m.grid is not None)
+
+
+#: The panel's words for a reflector an explicit mode refused or measured outside the Accuracy.
+EXPLICIT_FALLBACK = "ray traced instead"
 
 
 @dataclass(frozen=True)
@@ -83,13 +88,14 @@ def _candidates(mode: str) -> list:
 def choose(inputs: PlanInputs, index: int, reflector, mode: str) -> tuple:
     """(MethodChoice, engine) of one reflector in ``mode``: the first candidate that
     offers to draw it and was not measured outside the Accuracy on it
-    (``inputs.outside``, :func:`note_measured`), else Runtime; the reason lists the
-    refusals first."""
+    (``inputs.outside``, :func:`note_measured`); else, in an explicit mode, the trace
+    (exact per pixel, every image, about a Workbench frame: a mode that cannot draw the
+    mirror right must not leave it wrong, nor wait seconds a view for Runtime's camera);
+    else Runtime. The reason lists the refusals first."""
     refusals = []
     for method in _candidates(mode):
         if method.name in inputs.outside:
-            refusals.append(f"{method.label}: {inputs.outside[method.name]} in a view "
-                            f"(Accuracy {inputs.accuracy_px:g} px)")
+            refusals.append(f"{method.label}: {inputs.outside[method.name]}")
             continue
         offer = method.offer(inputs, index, reflector)
         if offer.draws:
@@ -98,6 +104,10 @@ def choose(inputs: PlanInputs, index: int, reflector, mode: str) -> tuple:
                 reason = f"Runtime mode: {offer.reason}"
             return MethodChoice(reflector.name, method.name, reason), offer.engine
         refusals.append(offer.reason)
+    if mode not in (AUTO, TRACED) and TRACED not in inputs.outside:
+        offer = method_registry.get(TRACED).offer(inputs, index, reflector)
+        if offer.draws:
+            return MethodChoice(reflector.name, TRACED, "; ".join(refusals + [EXPLICIT_FALLBACK])), offer.engine
     fallback = "Runtime" if mode == AUTO else "drawn in Runtime mode"
     return MethodChoice(reflector.name, RUNTIME, "; ".join(refusals + [fallback])), None
 
@@ -144,22 +154,42 @@ def wants_grid(scene, reflector) -> bool:
 
 def note_measured(scene, measured: dict) -> bool:
     """Keep the checks (``accuracy.measure``: {reflector: Measured}) for the panel; a
-    reflector whose method measured outside the scene's Accuracy (95 % of its checked
-    answers within it and at most 5 % of the exact images missed, ``SpotCheck.within``)
-    is drawn by the next method Auto tries, or in an explicit mode by Runtime, from then
-    on until Refresh. Returns whether that happened now (the caller plans again)."""
-    status = status_of(scene)
-    status.measured = dict(measured)
+    reflector whose per-frame method measured outside the scene's Accuracy
+    (``SpotCheck.within``: its checked answers within it, and few exact images missed)
+    is drawn by the next method Auto tries, or in an explicit mode by the trace, from
+    then on until Refresh (:func:`note_outside`). Returns whether that happened now (the
+    caller plans again). A sample-based camera's figures are kept for the panel only:
+    the band along a mirror's outline and the cells it marks unreliable, which renders
+    trace, are where it leaves images out (Render Image's picture check judges it)."""
+    status_of(scene).measured = dict(measured)
     accuracy = float(scene.curved_reflections.accuracy_px)
     replaced = False
     for name, found in measured.items():
         if found.method == RUNTIME or found.check.within(accuracy):
             continue
-        failed = status.outside_accuracy.setdefault(name, {})
-        if found.method not in failed:
-            failed[found.method] = found.check.shortfall()
-            replaced = True
+        replaced |= note_outside(scene, name, found.method,
+                                 f"{found.check.shortfall()} in a view (Accuracy {accuracy:g} px)")
     return replaced
+
+
+def note_outside(scene, name: str, method: str, shortfall: str) -> bool:
+    """Pass ``method`` over for reflector ``name`` until Refresh (``shortfall``: what was
+    measured and where, for its panel line). Returns whether it was not already."""
+    failed = status_of(scene).outside_accuracy.setdefault(name, {})
+    if method in failed:
+        return False
+    failed[method] = shortfall
+    return True
+
+
+def note_picture(scene, name: str, check) -> None:
+    """Keep Render Image's check of reflector ``name``'s picture (``picture_check.PictureCheck``)."""
+    status_of(scene).pictures[name] = check
+
+
+def pictures(scene) -> dict:
+    """Render Image's last picture checks of ``scene`` ({reflector: picture_check.PictureCheck})."""
+    return status_of(scene).pictures
 
 
 def measured(scene) -> dict:
@@ -168,9 +198,20 @@ def measured(scene) -> dict:
 
 
 def forget_measurements(scene) -> None:
-    """Drop the checks and give Auto's replaced methods another chance (Refresh)."""
+    """Drop the checks and give the replaced methods another chance (Refresh)."""
     status = status_of(scene)
-    status.measured, status.outside_accuracy = {}, {}
+    status.measured, status.pictures, status.outside_accuracy = {}, {}, {}
+
+
+def traced_plan(reflectors) -> MethodPlan:
+    """A plan that ray traces every reflector (``picture_check``'s reference)."""
+    traced = method_registry.get(TRACED)
+    result = MethodPlan()
+    for index, reflector in enumerate(reflectors):
+        offer = traced.offer(None, index, reflector)
+        result.choices.append(MethodChoice(reflector.name, TRACED, offer.reason))
+        result.engines.setdefault(TRACED, []).append(offer.engine)
+    return result
 
 
 def last_choices(scene) -> list:

@@ -236,7 +236,7 @@ def register_builtin() -> None:
     """The four papers' methods, in the order Auto tries them."""
     register(Method(ITERATIVE, "Iterative (GPU)", "Find every vertex's reflection on the GPU each frame (Roger & "
                     "Holzschuch 2006); star-shaped reflectors, closed ones as pieces seen from inside; open ones "
-                    "use Runtime", 'SHADERFX',
+                    "are ray traced", 'SHADERFX',
                     _offer_iterative, _iterative_pass, in_auto=True, summary="searched on the GPU every frame"))
     register(Method(RUNTIME, "Runtime", "Rebuild the sample-based camera for every new view (SBC paper IV)",
                     'CAMERA_DATA', _offer_runtime))

@@ -47,10 +47,10 @@ PREFETCHED_NODES = 2
 #: Frames ahead whose cells an animation's prefetch serves first, the camera's last move
 #: extrapolated.
 PREDICTED_FRAMES = 6
-#: An animation checks the per-frame methods (``FramePipeline.check_methods``) on its
-#: first frame and every this many frames after: a check costs a fraction of a frame on
-#: a folded mirror (the exact solver on a hundred points), and a mirror's folds do not
-#: come and go from one frame to the next.
+#: An animation checks its methods (``FramePipeline.check_methods``) on its first frame
+#: and every this many frames after: a check costs a fraction of a frame on a folded
+#: mirror (the exact solver on a hundred points; a chosen mode's picture, a traced frame),
+#: and a mirror's folds do not come and go from one frame to the next.
 CHECK_EVERY_FRAMES = 8
 
 
@@ -106,10 +106,10 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
     between the frames of an animation, and with it the passes' work for the next
     frames (the grids' nodes around the camera) runs on a worker thread while the frame
     is drawn (:func:`_prefetch`). The reflectors a per-frame method drew are checked in
-    the frame (their error and the exact images they missed,
-    ``FramePipeline.check_methods``; an animation every :data:`CHECK_EVERY_FRAMES`
-    frames): a method that fails the Accuracy is passed over, and the frame is drawn
-    again with the next. Bad input (no camera, no reflector, a reflector without faces,
+    the frame (their error and the exact images they missed, and in a chosen mode the
+    picture against the trace's: ``FramePipeline.check_methods``; an animation every
+    :data:`CHECK_EVERY_FRAMES` frames): a method that fails is passed over, and the
+    frame is drawn again with the next. Bad input (no camera, no reflector, a reflector without faces,
     the camera inside a reflector) raises :class:`SceneInputError` naming the object;
     the GPU is initialised if needed.
     """
@@ -163,7 +163,7 @@ def _mirrors_frame(scene, state: FrameState, view: View, animating: bool, trace_
         release_freed_memory()  # the ray map's and the trees' temporaries
         build_seconds += time.perf_counter() - started
         image = state.renderer.render(view, sbc, state.world, trace_edges=trace_edges, trace_gaps=trace_gaps)
-        if not (checking and state.check_methods(scene, view)):
+        if not (checking and state.check_methods(scene, view, image)):
             return image, sbc, build_seconds
 
 

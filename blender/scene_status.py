@@ -21,7 +21,10 @@ class SceneStatus:
     choices: list = field(default_factory=list)
     #: {reflector: ``accuracy.Measured``}: the live view's last checks.
     measured: dict = field(default_factory=dict)
-    #: {reflector: {method: what was measured}}: methods Auto passed over (until Refresh).
+    #: {reflector: ``picture_check.PictureCheck``}: Render Image's last checks of a chosen
+    #: mode's picture against the trace.
+    pictures: dict = field(default_factory=dict)
+    #: {reflector: {method: what was measured}}: methods passed over (until Refresh).
     outside_accuracy: dict = field(default_factory=dict)
     #: The morphing bake in progress or last done: running, done, total, reflector, message.
     bake: dict = field(default_factory=dict)

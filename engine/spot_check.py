@@ -188,7 +188,7 @@ class Coverage:
 def coverage_check(reflector_set: ReflectorSet, view: View, reflector_index: int, points: np.ndarray,
                    answers: np.ndarray, sample: int = COVERAGE_SAMPLE, seed: int = 0,
                    groups: np.ndarray | None = None, distances: np.ndarray | None = None,
-                   contact_distance: float = 0.0) -> Coverage:
+                   contact_distance: float = 0.0, band_px: int = 0) -> Coverage:
     """The exact images a method's first-order answers for one reflector leave out.
 
     ``points`` and ``answers`` as :func:`spot_check`: every point the method answered
@@ -199,7 +199,9 @@ def coverage_check(reflector_set: ReflectorSet, view: View, reflector_index: int
     :func:`mirror_distances`): a method that fails on one object (the near face of a
     cube almost touching the mirror) fails there, however small the object. Each
     visible, not grazing, exact image of a chosen point on this reflector is missed
-    unless an answer of the same point lies within :data:`COVERED_PX` of it on screen.
+    unless an answer of the same point lies within :data:`COVERED_PX` of it on screen,
+    or, with ``band_px``, it lies within that many pixels of the reflector's outline (a
+    sample-based camera's band, which a render ray traces: :func:`near_outline`).
     """
     points = np.asarray(points, dtype=np.float64)
     answers = np.asarray(answers, dtype=np.float64).reshape(-1, len(points), 3)
@@ -221,6 +223,8 @@ def coverage_check(reflector_set: ReflectorSet, view: View, reflector_index: int
     drawn = drawn.reshape(len(answers), len(exact.point), 2)
     distance = np.linalg.norm(drawn - exact.pixel[None], axis=2)  # (K, S), NaN where no answer
     missed = ~(np.nan_to_num(distance, nan=np.inf) <= COVERED_PX).any(axis=0)
+    if band_px > 0 and missed.any():
+        missed[missed] = ~near_outline(reflector_set, view, reflector_index, exact.pixel[missed], band_px)
     worst = Coverage(len(missed), int(np.count_nonzero(missed)))
     group_of = None if groups is None else groups[chosen[exact.point]]
     for group in () if groups is None else np.unique(group_of):
@@ -231,6 +235,19 @@ def coverage_check(reflector_set: ReflectorSet, view: View, reflector_index: int
                 worst.group < 0 or counted.missed * worst.images > worst.missed * counted.images):
             worst = counted
     return worst
+
+
+def near_outline(reflector_set: ReflectorSet, view: View, reflector_index: int, pixels: np.ndarray,
+                 radius: int) -> np.ndarray:
+    """(N,) bool: whether a pixel within ``radius`` (Chebyshev, as
+    ``band_trace.band_pixels`` picks a render's band) of each of ``pixels`` sees
+    something other than this reflector: the eye rays of the square's corners and edge
+    midpoints."""
+    offsets = radius * np.array([(dx, dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1) if dx or dy], np.float64)
+    around = (np.asarray(pixels, np.float64)[:, None] + offsets[None]).reshape(-1, 2)
+    origins, directions = view.pixel_rays(around)
+    hits = reflector_set.intersect(origins, directions)
+    return (hits.reflector != reflector_index).reshape(len(pixels), len(offsets)).any(axis=1)
 
 
 def _per_object_sample(groups: np.ndarray, distances: np.ndarray | None, contact_distance: float,

@@ -42,6 +42,10 @@ alone (search and reflected meshes), against the plain draw of the same meshes
 the frames; and the same pass drawing every triangle, the far sides of closed solids
 included (``ReflectedMeshes.draw`` culls them in mirrored images), on the same frames. Then ``render_image(animation=True)`` at 480x320 with the camera moving
 every frame against Workbench's ``render.render(animation=True)`` on the same scene.
+
+**Mirrors that are not star-shaped** (issue 44, ``view_change_shapes.py``): a torus and a
+monkey head in Auto mode, the live view's first frame after each view change timed
+against a Workbench frame, and compared with the same view's once rested.
 """
 
 from __future__ import annotations
@@ -58,6 +62,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_draw  # noqa: E402  (same folder: machine facts with the GPU)
 import bench_sbc  # noqa: E402  (same folder: package import)
+import view_change_shapes  # noqa: E402  (same folder: the rows of mirrors that are not star-shaped)
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_OUT = REPO_ROOT / "docs" / "benchmarks" / "view_change.md"
@@ -200,20 +205,6 @@ def report(result: dict, command: str, machine: str) -> str:
 ITERATIVE_SCENES = ("sbc_fig3", "two_spheres")
 
 
-def _orbit(view, degrees: float, frames: int) -> list:
-    """``frames`` views turning about the world's vertical axis through the origin."""
-    from curved_reflections.engine.view import View
-
-    views = []
-    for k in range(frames):
-        angle = np.radians(degrees * k)
-        rotation = np.eye(4)
-        rotation[:2, :2] = [[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]]
-        views.append(View(np.asarray(view.view_matrix) @ rotation, view.projection_matrix, view.width,
-                          view.height))
-    return views
-
-
 def measure_iterative(kind: str, width: int, height: int, target_vertices: int, frames: int,
                       orbit_degrees: float) -> dict:
     """Per frame of an orbit: the viewport's draw and the iterative pass against a plain draw."""
@@ -241,7 +232,7 @@ def measure_iterative(kind: str, width: int, height: int, target_vertices: int, 
     searched = renderer.pass_named("iterative")
     g = renderer.geometry
     world = world_color(scene)
-    views = _orbit(view_from_camera(scene.camera, scene, depsgraph), orbit_degrees, frames)
+    views = view_change_shapes.orbit_views(view_from_camera(scene.camera, scene, depsgraph), orbit_degrees, frames)
     plain = bench_draw.PlainDraw(g)
 
     def matrix(view):
@@ -494,6 +485,8 @@ def parse_args(argv):
     parser.add_argument("--orbit-degrees", type=float, default=2.0, help="view turn per frame (Iterative rows)")
     parser.add_argument("--iterative-only", action="store_true", help="only the Iterative rows and the animation")
     parser.add_argument("--morph-only", action="store_true", help="only the Morphing rows on the GPU")
+    parser.add_argument("--shapes-only", action="store_true",
+                        help="only the rows of mirrors that are not star-shaped (view_change_shapes.py)")
     parser.add_argument("--quick", action="store_true", help="small: 160x120, 2 arcs of 3 views")
     args = parser.parse_args(argv)
     if args.quick:
@@ -502,12 +495,22 @@ def parse_args(argv):
     return args
 
 
+def _shapes(args, command: str) -> list:
+    """The section of the mirrors that are not star-shaped (``view_change_shapes.py``)."""
+    return view_change_shapes.shapes_report(
+        [view_change_shapes.measure_shape(kind, args.width, args.height, args.steps, args.orbit_degrees)
+         for kind in view_change_shapes.SHAPES], command)
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     args = parse_args(argv)
     bench_sbc.import_package()
     command = bench_draw.command_line("bench_view_change.py", argv)
     previous = args.out.read_text(encoding="utf-8") if args.out.exists() else "# Cost of a view change\n"
+    if args.shapes_only:
+        return bench_draw.write_report(args.out, replace_section(previous, view_change_shapes.SHAPES_HEADING,
+                                                                 _shapes(args, command)))
     if not args.iterative_only:
         morph = morph_report(measure_morph_frames(args.width, args.height, args.vertices, args.frames,
                                                   args.orbit_degrees), command)
@@ -525,7 +528,7 @@ def main(argv=None) -> int:
     else:
         result = measure(args.width, args.height, args.steps, args.jumps)
         text = (report(result, command, bench_draw._machine()) + "\n" + "\n".join(morph) + "\n"
-                + "\n".join(iterative_report(rows, animations)))
+                + "\n".join(iterative_report(rows, animations)) + "\n" + "\n".join(_shapes(args, command)))
     return bench_draw.write_report(args.out, text)
 
 

@@ -120,11 +120,11 @@ def test_iterative_mode_searches_every_image_of_a_folded_mirror_and_auto_traces_
     assert check.within(1.0) and check.images > 60 and check.missed <= 0.05 * check.images, check.summary()
 
 
-def test_an_explicit_mode_that_leaves_out_a_near_objects_images_falls_back_to_runtime(fig3):
+def test_an_explicit_mode_that_leaves_out_a_near_objects_images_falls_back_to_the_trace(fig3):
     """sbc_fig3's cube almost touches the ball (3 % of its radius away). Perturbation
     leaves out part of the cube's near face: the check, which samples each object's
     points, finds the cube's images missing (a uniform sample of the scene's vertices
-    would hardly meet the cube), and the explicit mode falls back to Runtime with the
+    would hardly meet the cube), and the explicit mode falls back to the trace with the
     reason; the iterative search, in Auto, draws the cube and is kept."""
     from curved_reflections.blender import method_plan
     from curved_reflections.blender.frame_pipeline import FramePipeline
@@ -145,6 +145,6 @@ def test_an_explicit_mode_that_leaves_out_a_near_objects_images_falls_back_to_ru
             assert choice.method == method_plan.ITERATIVE and check.missed_in == ""
             continue
         assert check.missed_in == "Cube" and check.missed >= 2
-        assert choice.method == method_plan.RUNTIME
+        assert choice.method == method_plan.TRACED and pipeline.camera_job(view) is None
         assert choice.reason == (f"Perturbation: {check.missed} of {check.images} exact images of Cube not drawn in a "
-                                 "view (Accuracy 1 px); drawn in Runtime mode")
+                                 "view (Accuracy 1 px); ray traced instead")

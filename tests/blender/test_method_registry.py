@@ -119,14 +119,15 @@ def test_a_method_registered_by_a_test_draws_a_reflector(flat_scene, flat_method
     assert differing.mean() < 0.01  # the plug-in draws what the sample-based camera draws
 
 
-def test_a_reflector_the_method_refuses_is_drawn_in_runtime_mode_with_the_reason(empty_scene, registered,
-                                                                                 gpu_ready, flat_method):
+def test_a_reflector_the_method_refuses_is_ray_traced_with_the_reason(empty_scene, registered, gpu_ready,
+                                                                      flat_method):
     scene = demo_scenes.build("sbc_fig3", bpy.context.scene, WIDTH, HEIGHT)
     bpy.data.objects["MirrorSphere"].curved_reflections.mode = FLAT
     rendered = render_scene(scene, bpy.context.evaluated_depsgraph_get())
     [choice] = method_plan.last_choices(scene)
-    assert choice.method == method_plan.RUNTIME and rendered.camera is not None
-    assert choice.reason == "'MirrorSphere' is not flat; drawn in Runtime mode"
+    assert choice.method == method_plan.TRACED and rendered.camera is None  # the trace draws every order
+    assert choice.reason == "'MirrorSphere' is not flat; ray traced instead"
+    assert rendered.stats["methods"] == {"MirrorSphere": method_plan.TRACED}
 
 
 def test_auto_tries_the_registered_methods_in_order_and_the_enum_follows_the_registry(flat_method):

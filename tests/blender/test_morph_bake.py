@@ -252,8 +252,8 @@ def test_a_reshaped_mirror_is_baked_afresh_and_drawn_from_its_new_shape(empty_sc
     from curved_reflections.blender.render_image import render_scene
 
     # What the cache serves is under test, not the accuracy of this 2x2x2, 16-texel grid:
-    # the accuracy check would pass the mirror on to Runtime mode.
-    monkeypatch.setattr(FramePipeline, "check_methods", lambda self, scene, view: False)
+    # the accuracy check would pass the mirror on to the trace.
+    monkeypatch.setattr(FramePipeline, "check_methods", lambda self, scene, view, image=None: False)
 
     ball = _mirror_scene(empty_scene)
     _render_camera(empty_scene)

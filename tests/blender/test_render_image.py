@@ -383,7 +383,8 @@ def test_a_frame_is_drawn_again_when_auto_passes_a_method_over(fig3, monkeypatch
     checks, renders = [], []
     check, render = render_image.FrameState.check_methods, ReflectionRenderer.render
     monkeypatch.setattr(render_image.FrameState, "check_methods",
-                        lambda self, scene, view: checks.append(check(self, scene, view)) or len(checks) == 1)
+                        lambda self, scene, view, image: checks.append(check(self, scene, view, image)) or
+                        len(checks) == 1)
     monkeypatch.setattr(ReflectionRenderer, "render", lambda self, *a, **k: renders.append(1) or render(self, *a, **k))
     state = render_image.FrameState()
     depsgraph = bpy.context.evaluated_depsgraph_get()

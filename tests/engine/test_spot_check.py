@@ -9,6 +9,7 @@ from curved_reflections.engine import look_at_view
 from curved_reflections.engine.reference.exact import solve_reflections
 from curved_reflections.engine.geometry.raytrace import ReflectorSet
 from curved_reflections.engine.spot_check import (COVERED_PX, MAX_ERROR_PX, MAX_MISSED_SHARE, SpotCheck, coverage_check,
+                                                   near_outline,
                                                   shown_answers, spot_check)
 from curved_reflections.engine.geometry.sphere import bumpy_icosphere, icosphere
 
@@ -182,3 +183,25 @@ def test_one_object_whose_images_are_left_out_fails_however_small(folded):
     check = SpotCheck(96, np.zeros(96)).with_coverage(grouped, "Cube")
     assert not check.within(1.0) and check.shortfall() == f"{grouped.missed} of {grouped.images} exact images of Cube not drawn"
     assert coverage_check(reflector_set, view, 0, points, answers, groups=groups).group == -1
+
+
+def test_images_near_the_outline_are_left_to_a_cameras_traced_band(case):
+    """A pixel sees the ball's outline within ``radius`` when one of the eight pixels
+    that far around it misses the ball; a sample-based camera's answers left out there
+    (the band Render Image traces) are not missed with ``band_px``, those inside are."""
+    reflector_set, view, points, answers = case
+    row = np.array([(x + 0.5, 120.5) for x in range(320)])
+    origins, directions = view.pixel_rays(row)
+    on_ball = np.flatnonzero(reflector_set.intersect(origins, directions).reflector == 0)
+    rim, inner = row[on_ball[0]], row[on_ball[0] + 6]
+    assert near_outline(reflector_set, view, 0, np.array([rim, inner]), 2).tolist() == [True, False]
+    assert near_outline(reflector_set, view, 0, np.array([rim, inner]), 8).tolist() == [True, True]
+    exact = solve_reflections(reflector_set, view, points)
+    exact = exact.select(exact.visible)
+    banded = near_outline(reflector_set, view, 0, exact.pixel, 3)
+    assert 0.02 < banded.mean() < 0.5
+    camera = answers.copy()
+    camera[0, exact.point[banded]] = np.nan  # the camera reaches nothing along the outline
+    without_band = coverage_check(reflector_set, view, 0, points, camera)
+    with_band = coverage_check(reflector_set, view, 0, points, camera, band_px=3)
+    assert without_band.missed > 0 and with_band.missed == 0 and with_band.images == without_band.images
