@@ -27,7 +27,7 @@ from ..engine.methods.iterative.fold_patches import fold_patches, folded
 from ..engine.methods.iterative.reflector_map import bake_reflector_map
 from ..engine.methods.iterative.pieces import StarPieces, map_first_surface, split_into_pieces
 from ..engine.methods.iterative.star import verdict
-from ..drawing.methods.iterative_bake import GPUMapBaker, bake_reflector_map_gpu
+from ..drawing.methods.iterative_bake import GPUMapBaker
 from .gpu_init import gpu_ready
 
 #: Cube-map face size of the iterative search's reflector maps (texels along a side).
@@ -41,11 +41,13 @@ CHOOSE_FACE_SIZE = 64
 _maps: list = []  # _Entry, most recently used last
 
 
-def _bake(reflector, centre, face_size: int):
-    """The full-resolution map: on the GPU when it is ready, else traced on the CPU."""
+def _baker(reflector):
+    """``bake(centre, face_size) -> MapBake`` of the reflector's maps: rasterised on the
+    GPU when it is ready (one upload for every map), else traced on the CPU."""
     if gpu_ready():
-        return bake_reflector_map_gpu(reflector, centre, face_size)
-    return bake_reflector_map(ReflectorSet([reflector]), centre, face_size)
+        return GPUMapBaker(reflector).bake
+    reflector_set = ReflectorSet([reflector])
+    return lambda centre, face_size: bake_reflector_map(reflector_set, centre, face_size)
 
 
 #: Vertex positions of two captures of one shape (relative to their first vertex) may
@@ -114,10 +116,11 @@ def _entry(reflector, face_size: int | None) -> _Entry:
         if entry.matches(reflector, topology, face_size):
             _maps.append(_maps.pop(index))
             return entry
-    shape = check_star_shaped(reflector)
+    bake_map = _baker(reflector)
+    shape = check_star_shaped(reflector, bake_map=bake_map)
     rmap = None
     if shape.star_shaped:
-        bake = _bake(reflector, shape.centre, face_size)
+        bake = bake_map(shape.centre, face_size)
         shape = verdict(reflector.name, shape.centre, bake, shape.hidden_share)
         rmap = folded(bake.reflector_map, patched=False) if shape.star_shaped else None
     _maps.append(_Entry(topology, face_size, reflector.vertices - reflector.vertices[0], reflector.normals.copy(),
@@ -158,12 +161,9 @@ def piece_maps(reflector, face_size: int | None = None) -> tuple[StarPieces, lis
     entry = _entry(reflector, face_size)
     if entry.pieces is None:
         face_size = entry.face_size
-        if gpu_ready():  # one upload of the mirror for every candidate's and piece's map
-            baker = GPUMapBaker(reflector)
-            choose = map_first_surface(lambda centre: baker.bake(centre, CHOOSE_FACE_SIZE))
-            shape, maps = split_into_pieces(reflector, lambda _, centre: baker.bake(centre, face_size), choose)
-        else:
-            shape, maps = split_into_pieces(reflector, lambda mirror, centre: _bake(mirror, centre, face_size))
+        bake_map = _baker(reflector)  # on the GPU, one upload for every candidate's and piece's map
+        choose = map_first_surface(lambda centre: bake_map(centre, CHOOSE_FACE_SIZE)) if gpu_ready() else None
+        shape, maps = split_into_pieces(reflector, lambda _, centre: bake_map(centre, face_size), choose)
         # Kept where the entry's shape was first captured, as its map is.
         pieces = _pieces_moved((shape, maps), entry.origin - reflector.vertices[0])
         _maps[-1] = entry = dataclasses.replace(entry, pieces=pieces)

@@ -114,14 +114,19 @@ def verdict(name: str, centre, bake: MapBake, hidden: float) -> StarShape:
                      bake.min_cosine)
 
 
-def check_star_shaped(reflector: Reflector, reflector_set: ReflectorSet | None = None) -> StarShape:
+def check_star_shaped(reflector: Reflector, reflector_set: ReflectorSet | None = None, bake_map=None) -> StarShape:
     """The first candidate centre that passes the coarse checks, or the best one tried
-    (fewest crossings and hidden samples, then the largest cosine) with the reason."""
+    (fewest crossings and hidden samples, then the largest cosine) with the reason.
+    ``bake_map(centre, face_size)``: the coarse maps' bake (default
+    ``bake_reflector_map`` on the CPU; the GPU's rasterised twin is faster)."""
     reflector_set = reflector_set or ReflectorSet([reflector])
+    if bake_map is None:
+        def bake_map(centre, face_size):
+            return bake_reflector_map(reflector_set, centre, face_size)
     samples = _surface_samples(reflector)
     best, best_key = None, None
     for centre in centre_candidates(reflector):
-        bake = bake_reflector_map(reflector_set, centre, CHECK_FACE_SIZE)
+        bake = bake_map(centre, CHECK_FACE_SIZE)
         hidden = _hidden_share(reflector_set, centre, samples) if not bake.crossings else 1.0
         shape = verdict(reflector.name, centre, bake, hidden)
         if shape.star_shaped:

@@ -66,6 +66,17 @@ def test_a_bumpy_ball_folds_into_convex_concave_and_saddle_regions(star):
     assert len(searched.patches) > len(regions) > 20  # each region cut by the cells
 
 
+def test_whether_a_map_folds_is_decided_on_a_quarter_of_its_texels(star, sphere_map):
+    """The strided classes are the full classification's at the texels they keep; on
+    them the bumpy ball folds and the sphere does not."""
+    _, rmap = star
+    size, stride = rmap.face_size, fold_patches.DECISION_STRIDE
+    full = fold_patches.curvature_classes(rmap).reshape(6, size, size)
+    strided = fold_patches.curvature_classes(rmap, stride)
+    assert np.array_equal(strided, full[:, ::stride, ::stride].reshape(-1))
+    assert fold_patches.folds(rmap) and not fold_patches.folds(sphere_map)
+
+
 def _images(exact, ours):
     """Our projection ``ours`` against the ``exact`` visible images: (coverage of the exact
     images within 1 px, pixel errors of our answers that have an exact image, share of
