@@ -150,7 +150,8 @@ class FramePipeline:
         properties = reflector_properties(captured.reflectors, scene) if properties is None else properties
         self.properties = properties
         self.renderer = ReflectionRenderer(captured.reflectors, captured.meshes, passes=self.plan.pass_factories(),
-                                           settings=self.settings, reflector_set=self.reflector_set, **properties)
+                                           settings=self.settings, reflector_set=self.reflector_set,
+                                           glasses=captured.glass, **properties)
         self.captured = captured
         self.world = world_color(scene)
         self.bounds = scene_bounds(captured.reflectors, captured.meshes)

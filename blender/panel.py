@@ -198,6 +198,11 @@ class VIEW3D_PT_curved_reflections_glass(_SubPanel, bpy.types.Panel):
             _wrapped(layout, glass_note(obj.name, live.state_of(context.scene)), 'INFO')
 
 
+#: How mirrors show glass (``drawing/methods/traced_pass.py`` refracts through it).
+IN_MIRRORS = ("Mirrors drawn by the trace (Ray Traced) show what lies behind it, refracted, without its own "
+              "reflection; mirrors drawn by other methods reflect it as a solid object.")
+
+
 def glass_note(name: str, state) -> str:
     """What draws glass object ``name`` in the viewport (the live ``state``'s glass layer,
     None before a Start) and in Render Image, and why."""
@@ -208,15 +213,13 @@ def glass_note(name: str, state) -> str:
     if layer.traced:
         return ("The viewport and Render Image trace it on the GPU every frame: each pixel's path through the glass "
                 "(any shape, glass behind glass too) and what its rays meet, mirrors' reflections too, mixed by "
-                "Fresnel. Mirrors reflect it as a solid object.")
+                f"Fresnel. {IN_MIRRORS}")
     rendered = (f"The scene has more than {MAX_IMAGES} image textures: Render Image ray traces it on the CPU "
                 "(refraction, total internal reflection, Fresnel).")
     if name in layer.unsearched:
-        return (f"The viewport shows it as a solid object: {layer.unsearched[name]}. {rendered} "
-                "Mirrors reflect it as a solid object.")
+        return f"The viewport shows it as a solid object: {layer.unsearched[name]}. {rendered} {IN_MIRRORS}"
     return ("The viewport draws what lies behind it by the refraction search (a convex solid), mixed by Fresnel with "
-            f"what it reflects, drawn as a mirror's; mirrors behind it show as solid objects. {rendered} Mirrors "
-            "reflect it as a solid object.")
+            f"what it reflects, drawn as a mirror's; mirrors behind it show as solid objects. {rendered} {IN_MIRRORS}")
 
 
 class VIEW3D_PT_curved_reflections_reflectors(_SubPanel, bpy.types.Panel):

@@ -82,7 +82,8 @@ class TracedReference:
             plan = method_plan.traced_plan(pipeline.captured.reflectors)
             self._renderer = ReflectionRenderer(pipeline.captured.reflectors, pipeline.captured.meshes,
                                                 passes=plan.pass_factories(), settings=pipeline.settings,
-                                                reflector_set=pipeline.reflector_set, **properties)
+                                                reflector_set=pipeline.reflector_set,
+                                                glasses=pipeline.captured.glass, **properties)
             self._of = pipeline.renderer
         image = self._renderer.render(view, None, pipeline.world)
         targets = self._renderer.targets(view.width, view.height)

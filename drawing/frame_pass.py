@@ -51,6 +51,8 @@ class PassInputs:
     #: The diffuse meshes as given (``engine.scene.DiffuseMesh`` each), before subdivision:
     #: what a trace meets rays with.
     diffuse: tuple = ()
+    #: The glass among them (``engine.glass.Glass`` each): a trace's rays refract through it.
+    glasses: tuple = ()
 
 
 @dataclass(frozen=True)

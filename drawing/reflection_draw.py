@@ -69,9 +69,8 @@ make it (until that camera lands), and a triangle with a reflector point behind 
 view is dropped.
 
 Not done: creases of a reflector (a lid's rim) can leave a line of pixels without (or
-with a wrong) reflection, where the engine's rays straddle the crease; for reflections
-of order k > 1 the eye vector of lighting runs to the first reflector point, not the
-last.
+with a wrong) reflection, where the engine's rays straddle the crease; for reflections of
+order k > 1 the eye vector of lighting runs to the first reflector point, not the last.
 
 :class:`ReflectionRenderer` holds one scene's geometry (subdivided once), its GPU
 batches and its passes (the last cameras' reflected triangles kept); :meth:`ReflectionRenderer.draw`
@@ -173,13 +172,14 @@ class ReflectionRenderer:
     reflections they draw in its view are not projected, and where they draw every
     reflector the renderer draws with no camera at all. ``transmits`` (R,) bool: the
     reflector is glass, its drawn image the refracted one, weighed by 1 minus its
-    Fresnel term (``draw_geometry.prepare_geometry``).
+    Fresnel term (``draw_geometry.prepare_geometry``). ``glasses``: the scene's glass
+    among ``meshes`` (``engine.glass.Glass`` each), which a trace's rays refract through.
     """
 
     def __init__(self, reflectors, meshes, reflector_colors=None, reflectivity=None,
                  edge_fraction: float | None = subdivision.EDGE_FRACTION, *, fresnel_f0=None,
                  attenuation_distance=None, mixed_subdivisions: int = MIXED_SUBDIVISIONS, cull: bool = True,
-                 passes=(), settings: FrameSettings = PLAIN_SETTINGS, reflector_set=None, transmits=None):
+                 passes=(), settings: FrameSettings = PLAIN_SETTINGS, reflector_set=None, transmits=None, glasses=()):
         self.geometry = prepare_geometry(reflectors, meshes, reflector_colors, reflectivity, edge_fraction,
                                          fresnel_f0, attenuation_distance,
                                          None if reflector_set is None else reflector_set.sealed, transmits)
@@ -188,7 +188,7 @@ class ReflectionRenderer:
         self.meshes = ReflectedMeshes(self.geometry)
         self.convex_mirrors = convex = ConvexMirrors(reflectors)  # tested once, for every pass
         inputs = PassInputs(self.geometry, self.meshes, tuple(reflectors), reflector_set, convex, settings,
-                            tuple(meshes))
+                            tuple(meshes), tuple(glasses))
         per_frame = tuple(make(inputs) for make in passes)
         self.stats = dict(self.geometry.stats)
         self.counts = {"projections": 0, "frames": 0}

@@ -8,8 +8,10 @@ reflections (a point seen two or three times in it) or is not star-shaped (a tor
 teapot) is where they miss images or need seconds per view. Here each pixel the pre-pass
 saw a traced mirror on is met with the mirror's own triangles (the exact point and its
 smooth normal), its eye ray reflected there and met with the scene
-(``scene_tables.py``: a bounding volume hierarchy over the diffuse meshes and the
-mirrors, ``glsl/mirror_trace.glsl``), reflecting off mirrors to the scene's Max Order:
+(``scene_tables.py``: a bounding volume hierarchy over the diffuse meshes, the mirrors
+and the glass, ``glsl/mirror_trace.glsl``), reflecting off mirrors to the scene's Max
+Order and refracting through glass (its own reflection left out, drawn where the eye
+meets the glass by ``glass_trace.py``):
 the exact answer the band trace of Render Image gives (``engine/geometry/band_trace.py``)
 for every pixel, every image, every order. The cost follows the pixels, not the
 geometry's vertices: a tree descent or two per mirror pixel.
@@ -77,15 +79,19 @@ class TracedPass(FramePass):
     @classmethod
     def of_inputs(cls, methods: tuple, inputs: PassInputs) -> "TracedPass":
         return cls(inputs.geometry, methods, inputs.meshes, inputs.reflectors, inputs.diffuse,
-                   inputs.settings.max_order)
+                   inputs.settings.max_order, inputs.glasses)
 
-    def __init__(self, geometry, methods, meshes, reflectors, diffuse, max_order: int = 1):
+    def __init__(self, geometry, methods, meshes, reflectors, diffuse, max_order: int = 1, glasses=()):
         self.geometry = geometry
         self.methods = list(methods)
         self.meshes = meshes
         self.reflectors = tuple(reflectors)
         self.max_order = int(max_order)
-        self.tables = SceneTables(diffuse, geometry, TracedScene(max_order=self.max_order), surfaces=self.reflectors)
+        # The glass refracts the rays (``glsl/scene_colors.glsl``): its own triangles, not
+        # the solid object the diffuse meshes hold of it.
+        glass_names = {glass.name for glass in glasses}
+        self.tables = SceneTables([mesh for mesh in diffuse if mesh.name not in glass_names], geometry,
+                                  TracedScene(max_order=self.max_order), surfaces=self.reflectors, glasses=glasses)
         #: RGBA32F of the view's size: the last frame's traced pixels (``glsl/mirror_trace.glsl``).
         self.colors = None
         self._size = None

@@ -351,3 +351,39 @@ def test_live_glass_that_reflects_shows_what_it_reflects_by_its_fresnel_reflecta
     on_panel = paths.first_position[0] + (3.5 - paths.first_position[0][0]) / mirrored[0] * mirrored
     assert share > 0.1 and mirrored[0] > 0.0 and abs(on_panel[1] + 2.0) < 5.0 and abs(on_panel[2] - 1.0) < 5.0
     assert np.allclose(image[rim[1], rim[0], :3], exact[rim[1], rim[0], :3], atol=0.03)
+
+
+def test_a_traced_mirror_shows_what_lies_behind_the_glass_it_reflects(empty_scene, registered, gpu_ready):
+    """A mirror ball in Ray Traced mode beside the glass ball reflects it: its rays
+    refract through the glass's own triangles. Glass of index 1 bends nothing, so the
+    mirror shows what it shows with the glass hidden, pixel for pixel, where the glass
+    drawn as a solid object (not marked as glass) covers a part of its reflection."""
+    scene = _glass_scene(world=(0.0, 0.0, 0.0))
+    glass = bpy.data.objects["Ball"]
+    glass.active_material = _material("Refraction", 1.0)
+    mirror = _ball("Mirror", location=(1.9, -2.6, 1.0), radius=0.7)
+    mirror.curved_reflections.is_refractor = False
+    mirror.curved_reflections.is_reflector = True
+    mirror.curved_reflections.mode = 'TRACED'
+    mirror.data.materials.append(demo_scenes._mirror_material())
+    bpy.context.view_layer.update()
+
+    def render():
+        return render_scene(scene, bpy.context.evaluated_depsgraph_get()).image[..., :3]
+
+    clear = render()
+    glass.hide_render = glass.hide_viewport = True
+    hidden = render()
+    glass.hide_render = glass.hide_viewport = False
+    glass.curved_reflections.is_refractor = False
+    solid = render()
+    glass.hide_render = glass.hide_viewport = True
+    mirror.curved_reflections.reflectivity = 0.0
+    in_mirror = np.abs(render() - hidden).max(axis=2) > 0.05  # the mirror's pixels: it shows its colour
+    assert in_mirror.sum() > 300
+
+    def unlike(image):
+        return np.abs(image - hidden).max(axis=2) > 0.05
+
+    assert (unlike(solid) & in_mirror).sum() > 50  # the solid ball in the mirror
+    assert unlike(clear).sum() == 0  # the mirror sees through the glass as through air
