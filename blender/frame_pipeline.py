@@ -229,7 +229,7 @@ class FramePipeline:
         replaced = per_frame and method_plan.note_measured(
             scene, accuracy.measure(self.plan, self.reflector_set, self.renderer, view, None))
         if not replaced and image is not None:
-            replaced = check_picture(scene, self, view, image, self.traced_reference, self.properties)
+            replaced = check_picture(scene, self, view, image)
         if not replaced:
             return False
         self.plan_reflectors(scene, self.captured, final_render=True)

@@ -75,15 +75,16 @@ class TracedReference:
         self._renderer = None
         self._of = None
 
-    def render(self, pipeline, view, properties: dict) -> tuple:
-        """(image, labels) of ``view``: the trace's frame and the reflector index + 1 of
-        each pixel (as :func:`compare` reads them)."""
+    def render(self, pipeline, view) -> tuple:
+        """(image, labels) of ``view`` (``pipeline``: a ``frame_pipeline.FramePipeline``):
+        the trace's frame and the reflector index + 1 of each pixel (as :func:`compare`
+        reads them)."""
         if self._of is not pipeline.renderer:
             plan = method_plan.traced_plan(pipeline.captured.reflectors)
             self._renderer = ReflectionRenderer(pipeline.captured.reflectors, pipeline.captured.meshes,
                                                 passes=plan.pass_factories(), settings=pipeline.settings,
                                                 reflector_set=pipeline.reflector_set,
-                                                glasses=pipeline.captured.glass, **properties)
+                                                glasses=pipeline.captured.glass, **pipeline.properties)
             self._of = pipeline.renderer
         image = self._renderer.render(view, None, pipeline.world)
         targets = self._renderer.targets(view.width, view.height)
@@ -91,15 +92,17 @@ class TracedReference:
         return image, np.where(targets.outside_box(), 0.0, labels)
 
 
-def check_picture(scene, pipeline, view, image: np.ndarray, reference: TracedReference, properties: dict) -> bool:
-    """Compare the frame ``image`` of ``view`` with the trace where a chosen mode drew a
-    reflector with another method; pass that method over where the picture differs
-    (``method_plan.note_outside``). Returns whether one was: the caller plans again."""
+def check_picture(scene, pipeline, view, image: np.ndarray) -> bool:
+    """Compare the frame ``image`` of ``view`` that ``pipeline`` (a
+    ``frame_pipeline.FramePipeline``) drew with the trace (its ``traced_reference``)
+    where a chosen mode drew a reflector with another method; pass that method over
+    where the picture differs (``method_plan.note_outside``). Returns whether one was:
+    the caller plans again."""
     chosen = [index for index, choice in enumerate(pipeline.plan.choices)
               if choice.method != method_plan.TRACED and method_plan.mode_of(scene, choice.reflector) != method_plan.AUTO]
     if not chosen:
         return False
-    traced, labels = reference.render(pipeline, view, properties)
+    traced, labels = pipeline.traced_reference.render(pipeline, view)
     replaced = False
     for index, check in compare(image, traced, labels, chosen).items():
         choice = pipeline.plan.choices[index]
