@@ -440,7 +440,7 @@ def draw(scene, key, view: View) -> bool:
             return False
         if state.level == 'ERROR' and "the view is inside" in state.status:
             state.report('INFO', "Reflections up to date")
-        drawn = _draw_with(state, view, None)
+        drawn = _draw_with(state, scene, view, None)
         damaged = [grid for grid, _ in covering if grid.failure is not None]
         for grid in damaged:  # the panel names the file
             morph_bake.note_cache_fault(state.scene_status, grid.reflector_name, grid.failure)
@@ -456,7 +456,7 @@ def draw(scene, key, view: View) -> bool:
     if camera is None:
         return False
     camera.last_drawn = time.monotonic()
-    return _draw_with(state, view, camera)
+    return _draw_with(state, scene, view, camera)
 
 
 def _projection_source(state: LiveScene, camera: ViewCamera | None):
@@ -478,9 +478,10 @@ def _projection_source(state: LiveScene, camera: ViewCamera | None):
     return camera.source
 
 
-def _draw_with(state: LiveScene, view: View, camera: ViewCamera | None) -> bool:
+def _draw_with(state: LiveScene, scene, view: View, camera: ViewCamera | None) -> bool:
     """One draw of ``view`` with ``camera``'s projection (``None``: the per-frame passes
-    alone); then the morphing nodes around the eye are prefetched."""
+    alone); then the morphing nodes around the eye are prefetched, and at rest a chosen
+    mode's picture is checked (``live_check.check_picture_at_rest``)."""
     start = time.perf_counter()
     projections = state.renderer.counts["projections"]  # a projection made or adopted now counts
     sbc = None if camera is None else camera.sbc
@@ -498,6 +499,8 @@ def _draw_with(state: LiveScene, view: View, camera: ViewCamera | None) -> bool:
     if state.last_view is None or not state.last_view[0].same_as(view) or state.last_view[2] is not sbc:
         state.last_view = (view, time.monotonic(), sbc, False)
         ensure_timer()  # the timer checks it once it settles
+    elif live_check.check_picture_at_rest(state, scene, view, sbc):
+        ensure_timer()  # the timer plans again
     for frame_pass in state.renderer.passes:
         frame_pass.collect()
         if frame_pass.prefetch(view, live_workers.prefetcher().submit):

@@ -5,7 +5,10 @@ The answers the view drew are read back from the GPU on the drawing thread and m
 (``accuracy.measure``: their error and the exact images they missed) on a worker: exact
 solves take tenths of a second, which the viewport must not wait for. A later call of
 the timer takes the figures up for the panel, and Auto plans again where a method
-measured outside the Accuracy (``method_plan.note_measured``).
+measured outside the Accuracy (``method_plan.note_measured``). Once that check has
+started, the next draw of the resting view compares a chosen mode's picture with the
+same view ray traced (``picture_check.py``), once per renderer: two frames drawn
+offscreen, on the drawing thread (the GPU's).
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ from concurrent.futures import Future
 
 from . import accuracy, live_workers, method_plan
 from .live_state import LiveScene
+from .picture_check import check_picture, judged
 
 
 def check_when_settled(state: LiveScene, scene, now: float, wait: bool) -> tuple[bool, bool]:
@@ -67,3 +71,21 @@ def _take_check(state: LiveScene, scene) -> tuple[bool, bool]:
     if method_plan.note_measured(scene, found):
         state.dirty_reflectors = True  # plan again: the replaced method's reflector changes hands
     return state.dirty_reflectors, True
+
+
+def check_picture_at_rest(state: LiveScene, scene, view, camera) -> bool:
+    """Draw ``view`` (with ``camera``, the sample-based camera it was drawn with, or None)
+    offscreen and compare a chosen mode's picture with the trace's
+    (``picture_check.check_picture``) once per renderer, when the view has rested (its
+    accuracy check started). Returns whether a method was passed over: the timer plans
+    again."""
+    if state.picture_checked is state.renderer or state.last_view is None or not state.last_view[3]:
+        return False
+    state.picture_checked = state.renderer
+    if not judged(scene, state.plan):
+        return False
+    image = state.renderer.render(view, camera, state.world)
+    if not check_picture(scene, state, view, image):
+        return False
+    state.dirty_reflectors = True
+    return True

@@ -107,6 +107,8 @@ class LiveScene(FramePipeline):
     last_view: tuple | None = None
     #: (the check of the last view running on a worker, the renderer it measures).
     checking: tuple | None = None
+    #: The renderer whose chosen modes' picture was checked (``live_check.check_picture_at_rest``).
+    picture_checked: object = None
     #: The band of the last resting view, traced (``live_traces.BandTrace``).
     band: object = None
     SEARCHES_GLASS: ClassVar[bool] = True

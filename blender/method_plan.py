@@ -11,8 +11,8 @@ in registry order (the iterative search, a baked morphing grid, then the trace, 
 takes any mirror) and falls back to Runtime.
 
 Each drawn method's answers are checked against exactly traced rays, in the live view
-when it settles and in Render Image's frames (``blender/accuracy.py``), and in Render
-Image a chosen mode's picture against the trace's (``blender/picture_check.py``); a
+when it settles and in Render Image's frames (``blender/accuracy.py``), and a chosen
+mode's picture against the trace's (``blender/picture_check.py``); a
 reflector whose method failed is passed to Auto's next method, or in an explicit mode to
 the trace, until Refresh (:func:`note_measured`, :func:`note_outside`).
 

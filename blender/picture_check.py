@@ -7,8 +7,9 @@ reflections, two neighbouring vertices of a mesh can take different images of it
 the reflected triangle between them spans the fold: a shard across the mirror, with
 every vertex checked right (perturbation on a bumpy ball, a sample-based camera whose
 rays cross). Auto draws its per-vertex methods only on mirrors that do not fold (it
-traces the others); a chosen mode may draw any. So in Render Image a frame drawn in a
-chosen mode is also drawn with every reflector ray traced (each pixel's exact ray,
+traces the others); a chosen mode may draw any. So a frame drawn in a chosen mode (in
+Render Image, and once per renderer in the resting live view: ``live_check.py``) is also
+drawn with every reflector ray traced (each pixel's exact ray,
 ``drawing/methods/traced_pass.py``), and a reflector whose pixels differ from the
 trace's on more than :data:`MAX_UNLIKE_SHARE` of them is passed over like a method the
 spot check failed (``method_plan.note_outside``): the trace draws it.
@@ -54,7 +55,7 @@ class PictureCheck:
         return self.pixels < MIN_PIXELS or self.share <= MAX_UNLIKE_SHARE
 
     def shortfall(self) -> str:
-        return f"{100.0 * self.share:.1f} % of its pixels unlike the same view ray traced (Render Image)"
+        return f"{100.0 * self.share:.1f} % of its pixels unlike the same view ray traced"
 
 
 def compare(image: np.ndarray, traced: np.ndarray, labels: np.ndarray, indices) -> dict:
@@ -92,14 +93,20 @@ class TracedReference:
         return image, np.where(targets.outside_box(), 0.0, labels)
 
 
+def judged(scene, plan) -> list:
+    """The indices of the reflectors a chosen mode draws with another method than the
+    trace: the ones whose picture is checked."""
+    return [index for index, choice in enumerate(plan.choices)
+            if choice.method != method_plan.TRACED and method_plan.mode_of(scene, choice.reflector) != method_plan.AUTO]
+
+
 def check_picture(scene, pipeline, view, image: np.ndarray) -> bool:
     """Compare the frame ``image`` of ``view`` that ``pipeline`` (a
     ``frame_pipeline.FramePipeline``) drew with the trace (its ``traced_reference``)
     where a chosen mode drew a reflector with another method; pass that method over
     where the picture differs (``method_plan.note_outside``). Returns whether one was:
     the caller plans again."""
-    chosen = [index for index, choice in enumerate(pipeline.plan.choices)
-              if choice.method != method_plan.TRACED and method_plan.mode_of(scene, choice.reflector) != method_plan.AUTO]
+    chosen = judged(scene, pipeline.plan)
     if not chosen:
         return False
     traced, labels = pipeline.traced_reference.render(pipeline, view)
