@@ -122,3 +122,27 @@ def test_grouped_triangles_fill_aligned_subtrees_of_their_own_largest_first():
         points = vertices[triangles[groups == group]].reshape(-1, 3)
         assert np.allclose(box[:3], points.min(axis=0)) and np.allclose(box[3:], points.max(axis=0))
     assert starts[0] < starts[1] < starts[2]
+
+
+def test_median_splits_halve_every_node_across_its_longest_side():
+    """A complete tree's layout: each node's points split at the median of the longest
+    side of their box (the first child full, the padding last), and the leaves' boxes
+    smaller than the Morton curve's."""
+    from curved_reflections.engine.geometry.bvh import median_split_order, morton_codes
+
+    points = np.random.default_rng(3).random((1000, 3)) * (4.0, 1.0, 0.5)  # longest along x
+    order = median_split_order(points, 4)
+    assert np.array_equal(np.sort(order), np.arange(1000))
+    placed = points[order]
+    assert placed[:512, 0].max() <= placed[512:, 0].min()  # the root: 512 slots left, 488 right
+    left = placed[:512]
+    axis = np.argmax(left.max(axis=0) - left.min(axis=0))
+    assert left[:256, axis].max() <= left[256:, axis].min()
+
+    def leaf_area(ordered):  # 250 full leaves, the padding after them
+        leaves = ordered.reshape(-1, 4, 3)
+        extent = leaves.max(axis=1) - leaves.min(axis=1)
+        return np.sum(extent[:, 0] * extent[:, 1] + extent[:, 1] * extent[:, 2] + extent[:, 0] * extent[:, 2])
+
+    morton = points[np.argsort(morton_codes(points), kind="stable")]
+    assert leaf_area(placed) < 0.9 * leaf_area(morton)
