@@ -183,12 +183,12 @@ def note_outside(scene, name: str, method: str, shortfall: str) -> bool:
 
 
 def note_picture(scene, name: str, check) -> None:
-    """Keep Render Image's check of reflector ``name``'s picture (``picture_check.PictureCheck``)."""
+    """Keep the last check of reflector ``name``'s picture (``picture_check.PictureCheck``)."""
     status_of(scene).pictures[name] = check
 
 
 def pictures(scene) -> dict:
-    """Render Image's last picture checks of ``scene`` ({reflector: picture_check.PictureCheck})."""
+    """The last picture checks of ``scene`` ({reflector: picture_check.PictureCheck})."""
     return status_of(scene).pictures
 
 

@@ -109,9 +109,9 @@ def render_scene(scene, depsgraph, *, max_order: int | None = None, downsample: 
     the frame (their error and the exact images they missed, and in a chosen mode the
     picture against the trace's: ``FramePipeline.check_methods``; an animation every
     :data:`CHECK_EVERY_FRAMES` frames): a method that fails is passed over, and the
-    frame is drawn again with the next. Bad input (no camera, no reflector, a reflector without faces,
-    the camera inside a reflector) raises :class:`SceneInputError` naming the object;
-    the GPU is initialised if needed.
+    frame is drawn again with the next. Bad input (no camera, no reflector, a reflector
+    without faces, the camera inside a reflector) raises :class:`SceneInputError` naming
+    the object; the GPU is initialised if needed.
     """
     settings = settings_of(scene, max_order=max_order, downsample=downsample, accuracy_px=accuracy_px)
     animating = state is not None

@@ -21,8 +21,8 @@ class SceneStatus:
     choices: list = field(default_factory=list)
     #: {reflector: ``accuracy.Measured``}: the live view's last checks.
     measured: dict = field(default_factory=dict)
-    #: {reflector: ``picture_check.PictureCheck``}: Render Image's last checks of a chosen
-    #: mode's picture against the trace.
+    #: {reflector: ``picture_check.PictureCheck``}: the last checks of a chosen mode's
+    #: picture against the trace (Render Image's, the resting live view's).
     pictures: dict = field(default_factory=dict)
     #: {reflector: {method: what was measured}}: methods passed over (until Refresh).
     outside_accuracy: dict = field(default_factory=dict)

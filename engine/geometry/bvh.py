@@ -183,9 +183,9 @@ def grouped_order(vertices: np.ndarray, triangles: np.ndarray, groups: np.ndarra
     """Slots -> triangle index (-1 for padding) of a complete tree in which each group of
     triangles (``groups`` (T,), e.g. one id per object) fills a subtree of its own, split
     at medians in its own box (:func:`_object_order`), the larger subtrees first (each
-    then starts on a boundary of its size). Sorted over the whole scene, a floor's few big triangles
-    share leaves with the small ones around them, and their boxes swell every node above;
-    apart, a ray crossing a glass ball descends the ball's subtree alone."""
+    then starts on a boundary of its size). Sorted over the whole scene, a floor's few
+    big triangles share leaves with the small ones around them, and their boxes swell
+    every node above; apart, a ray crossing a glass ball descends the ball's subtree alone."""
     members = [np.flatnonzero(groups == group) for group in np.unique(groups)]  # per object, not per triangle
     sorted_members = [m[_object_order(vertices[triangles[m]].mean(axis=1), leaf_size)] for m in members]
     blocks = sorted(((_leaves_for(len(m), leaf_size), m) for m in sorted_members), key=lambda block: -block[0])
