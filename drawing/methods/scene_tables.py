@@ -83,7 +83,7 @@ def declare(info, first_sampler: int, world: bool = True) -> None:
 
 
 def prelude(world: bool = True) -> str:
-    """The GLSL a trace calls: ``nearest_hit`` and ``traced_color``, with their defines
+    """The GLSL a trace calls: ``nearest_hit``, ``followed_color`` and ``traced_color``, with their defines
     (without ``world``, a ray that meets nothing is black: the caller tells it by its
     distance)."""
     defines = {"LEAF_SIZE": LEAF_SIZE, "EDGE_SLACK": f"{EDGE_SLACK:.9e}", "MIRROR_CODE": f"{MIRROR_CODE:.1f}",
@@ -134,7 +134,8 @@ class SceneTables:
     (``engine.scene.DiffuseMesh`` each: a trace needs no subdivision, and a wall of two
     triangles keeps its tree shallow; those named in ``scene.mirrors`` are mirrors),
     ``surfaces``, mirrors (``engine.Reflector`` each) not among them, and ``glasses``
-    (``engine.glass.Glass`` each, the k-th glass index k: rays refract through them);
+    (``engine.glass.Glass`` each, the k-th glass index k: rays refract through them; a
+    mesh of a glass's name, the solid object other renderers draw of it, is left out);
     positions relative to the renderer's ``geometry`` (``draw_geometry.DrawGeometry``:
     its shift, size and images). Uploaded on first :meth:`bind`."""
 
@@ -154,11 +155,14 @@ class SceneTables:
         :data:`MIRROR_CODE`; a glass vertex's colour is (index of refraction, 1 where it
         reflects, its index, 0)."""
         shift = self.geometry.shift
+        glass_names = {glass.name for glass in self.glasses}
         parts, count, image = [], 0, 0
         for mesh in self.meshes:
-            normals, uvs, lit = mesh_attributes(mesh)
             code = MIRROR_CODE if mesh.name in self.scene.mirrors else (-1 if mesh.image is None else image)
-            image += mesh.image is not None
+            image += mesh.image is not None  # the geometry's images count a glass's solid mesh too
+            if mesh.name in glass_names:
+                continue
+            normals, uvs, lit = mesh_attributes(mesh)
             parts.append((mesh.vertices, mesh.triangles, code, mesh.colors, np.c_[normals, lit], uvs))
         parts += [_surface_part(surface, MIRROR_CODE, (0.5, 0.5, 0.5, 0.5)) for surface in self.surfaces]
         parts += [_surface_part(glass.surface, GLASS_CODE,

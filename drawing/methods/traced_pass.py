@@ -87,11 +87,8 @@ class TracedPass(FramePass):
         self.meshes = meshes
         self.reflectors = tuple(reflectors)
         self.max_order = int(max_order)
-        # The glass refracts the rays (``glsl/scene_colors.glsl``): its own triangles, not
-        # the solid object the diffuse meshes hold of it.
-        glass_names = {glass.name for glass in glasses}
-        self.tables = SceneTables([mesh for mesh in diffuse if mesh.name not in glass_names], geometry,
-                                  TracedScene(max_order=self.max_order), surfaces=self.reflectors, glasses=glasses)
+        self.tables = SceneTables(diffuse, geometry, TracedScene(max_order=self.max_order), surfaces=self.reflectors,
+                                  glasses=glasses)
         #: RGBA32F of the view's size: the last frame's traced pixels (``glsl/mirror_trace.glsl``).
         self.colors = None
         self._size = None

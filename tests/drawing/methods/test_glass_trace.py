@@ -186,3 +186,28 @@ def test_glass_inside_glass_is_traced_and_named(gpu_ready):
 
     labels = read_texture(renderer.targets(WIDTH, HEIGHT).prepass_labels, WIDTH, HEIGHT)
     assert renderer.pass_named("glass trace").nested(labels) == ("Ball",)
+
+
+def test_a_glass_objects_solid_mesh_is_left_out_of_the_tables_and_the_image_indices_kept():
+    """A renderer of mirrors draws glass as a solid mesh too (its geometry's images count
+    that mesh's texture); the trace's tables hold the glass's own triangles instead, and
+    the meshes after it keep their images' indices."""
+    from types import SimpleNamespace
+
+    from curved_reflections.drawing.methods.scene_tables import GLASS_CODE, SceneTables
+
+    ball = icosphere((0.0, 0.0, 0.0), 1.0, 2, "Ball")
+    panel = flat_box("Panel", (-1.0, 3.0, -1.0), (1.0, 3.1, 1.0))
+    image = np.ones((2, 2, 4), np.float32)
+
+    def mesh(name, shape):
+        count = len(shape.vertices)
+        return DiffuseMesh(name, shape.vertices, shape.triangles, np.ones((count, 4), np.float32),
+                           uvs=np.zeros((count, 2)), image=image)
+
+    tables = SceneTables([mesh("Ball", ball), mesh("Panel", panel)], SimpleNamespace(shift=np.zeros(3)),
+                         glasses=[Glass(ball, 1.5, True)])
+    _, triangles, codes, *_ = tables._arrays()
+    assert len(triangles) == len(panel.triangles) + len(ball.triangles)
+    assert set(codes[:len(panel.triangles)]) == {1.0}  # the panel's image is the geometry's second
+    assert set(codes[len(panel.triangles):]) == {GLASS_CODE}
