@@ -18,9 +18,7 @@ the same scene and size.
 
 from __future__ import annotations
 
-import statistics
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
@@ -39,18 +37,19 @@ JUMP_DEGREES = 35.0
 STALE_COLOUR = 0.05
 
 
-def orbit_views(view, degrees: float, frames: int) -> list:
-    """``frames`` views turning about the world's vertical axis through the origin."""
+def turned_view(view, degrees: float):
+    """``view`` turned by ``degrees`` about the world's vertical axis through the origin."""
     from curved_reflections.engine.view import View
 
-    views = []
-    for k in range(frames):
-        angle = np.radians(degrees * k)
-        rotation = np.eye(4)
-        rotation[:2, :2] = [[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]]
-        views.append(View(np.asarray(view.view_matrix) @ rotation, view.projection_matrix, view.width,
-                          view.height))
-    return views
+    angle = np.radians(degrees)
+    rotation = np.eye(4)
+    rotation[:2, :2] = [[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]]
+    return View(np.asarray(view.view_matrix) @ rotation, view.projection_matrix, view.width, view.height)
+
+
+def orbit_views(view, degrees: float, frames: int) -> list:
+    """``frames`` views, each turned ``degrees`` further (:func:`turned_view`)."""
+    return [turned_view(view, degrees * k) for k in range(frames)]
 
 
 def measure_shape(kind: str, width: int, height: int, steps: int, orbit_degrees: float) -> dict:
@@ -74,15 +73,12 @@ def measure_shape(kind: str, width: int, height: int, steps: int, orbit_degrees:
     offscreen = gpu.types.GPUOffScreen(width, height, format='RGBA32F')
     try:
         for degrees in turns:
-            view = orbit_views(base, degrees, 2)[1]
+            view = turned_view(base, degrees)
             with offscreen.bind():
                 framebuffer = gpu.state.active_framebuffer_get()
                 framebuffer.clear(color=(0.0, 0.0, 0.0, 1.0), depth=1.0)
-                start = time.perf_counter()
-                live.process(scene, bpy.context.evaluated_depsgraph_get())
-                live.draw(scene, live.CAMERA_KEY, view)
-                framebuffer.read_color(0, 0, 1, 1, 4, 0, 'FLOAT')  # waits for the GPU to finish
-                seconds = time.perf_counter() - start
+                seconds = bench_draw.timed(lambda: (live.process(scene, bpy.context.evaluated_depsgraph_get()),
+                                                    live.draw(scene, live.CAMERA_KEY, view)), framebuffer)
             first = bench_real_mirrors.live_overlay(scene, view)
             rested = bench_real_mirrors.live_rested(scene, view)[0]
             # Drawn over black, the overlay covers the mirror's pixels only.
@@ -95,7 +91,7 @@ def measure_shape(kind: str, width: int, height: int, steps: int, orbit_degrees:
     methods = {c.reflector: c.method for c in method_plan.last_choices(scene)}
     live.clear(scene)
     return {"kind": kind, "width": width, "height": height, "workbench": workbench, "methods": methods,
-            "rows": rows, "median": statistics.median(r["seconds"] for r in rows)}
+            "rows": rows}
 
 
 SHAPES_HEADING = "## Mirrors that are not star-shaped (Auto)"
