@@ -4,7 +4,8 @@ Workbench's on the same frames, and sampled frames against Cycles.
 
 Used by bench_morph_animation.py (Morphing and Octree mode), bench_perturbation.py
 (Perturbation mode) and bench_methods.py (every mode); each sets its scene up, the camera
-path often with :func:`orbit`, then calls these.
+path often with :func:`orbit` (a view without a camera: :func:`turned_view`), then calls
+these.
 """
 
 from __future__ import annotations
@@ -13,6 +14,22 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+
+def turned_view(view, degrees: float):
+    """``view`` (``engine.view.View``) turned by ``degrees`` about the world's vertical
+    axis through the origin: the live view's orbit without a camera."""
+    from curved_reflections.engine.view import View
+
+    angle = np.radians(degrees)
+    rotation = np.eye(4)
+    rotation[:2, :2] = [[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]]
+    return View(np.asarray(view.view_matrix) @ rotation, view.projection_matrix, view.width, view.height)
+
+
+def orbit_views(view, degrees: float, frames: int) -> list:
+    """``frames`` views, each turned ``degrees`` further (:func:`turned_view`)."""
+    return [turned_view(view, degrees * k) for k in range(frames)]
 
 
 def orbit(scene, target, frames: int, degrees: float, radius: float | None = None) -> None:

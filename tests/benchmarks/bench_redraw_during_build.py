@@ -32,9 +32,8 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import animation_runs  # noqa: E402  (same folder: a view turned without a camera)
 import bench_draw  # noqa: E402  (same folder: machine facts with the GPU, the plain draw)
 import bench_sbc  # noqa: E402  (same folder: package import)
 
@@ -42,15 +41,6 @@ REPO_ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_OUT = REPO_ROOT / "docs" / "benchmarks" / "redraw_during_build.md"
 #: Target of a redraw during a build over the plain draw (issue 17).
 TARGET_RATIO = 2.0
-
-
-def _turned(view, degrees: float):
-    from curved_reflections.engine.view import View
-
-    angle = np.radians(degrees)
-    rotation = np.eye(4)
-    rotation[:2, :2] = [[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]]
-    return View(np.asarray(view.view_matrix) @ rotation, view.projection_matrix, view.width, view.height)
 
 
 def measure(width: int, height: int, builds: int, degrees: float, idle_repeats: int) -> dict:
@@ -80,11 +70,11 @@ def measure(width: int, height: int, builds: int, degrees: float, idle_repeats: 
                 view = base
                 live.draw(scene, key, view)  # the first camera's projection, shaders built
                 for turn in range(1, builds + 1):
-                    view = _turned(base, degrees * turn)
+                    view = animation_runs.turned_view(base, degrees * turn)
                     bench_draw.scene_depth(framebuffer, plain, view)  # as Blender drew it (the plain draws keep it)
                     state.requests.pop(key, None)
                     live._start_camera(state, key, view, wait=False)  # what the debounced timer starts
-                    future = state.jobs[key][0]
+                    future = state.jobs[key].future
                     start = time.perf_counter()
                     while not future.done():
                         times["during"].append(bench_draw.timed(lambda: live.draw(scene, key, view), framebuffer))

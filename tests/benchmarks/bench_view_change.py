@@ -60,6 +60,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import animation_runs  # noqa: E402  (same folder: views turned without a camera)
 import bench_draw  # noqa: E402  (same folder: machine facts with the GPU)
 import bench_sbc  # noqa: E402  (same folder: package import)
 import view_change_shapes  # noqa: E402  (same folder: the rows of mirrors that are not star-shaped)
@@ -141,14 +142,12 @@ def measure(width: int, height: int, steps: int, jumps: int) -> dict:
             previous = tet
             key = "morph_gpu" if face_images is not None else "morph_numpy"
             row[key] = projection_ms(MorphSource([(grid, matrix)], view), view)
-            row["morph_sub_triangles"] = renderer.stats["mixed_sub_triangles"]
             if face_images is not None:
                 begin = time.perf_counter()
                 sbc = build_sample_based_camera(captured.reflectors, view, bounds, downsample=settings.downsample,
                                                 accuracy_px=settings.accuracy_px)
                 row["build"] = 1000.0 * (time.perf_counter() - begin)
                 row["runtime_projection"] = projection_ms(SBCTextures(sbc), view, sbc)
-                row["runtime_sub_triangles"] = renderer.stats["mixed_sub_triangles"]
                 row["runtime"] = row["build"] + row["runtime_projection"]
                 rows.append(row)
     return {"width": width, "height": height, "vertices": int(len(renderer.geometry.vertices)),
@@ -211,6 +210,7 @@ def measure_iterative(kind: str, width: int, height: int, target_vertices: int, 
     import gpu
     from mathutils import Matrix
 
+    from curved_reflections.drawing.frame_pass import Frame
     from curved_reflections.drawing.reflection_draw import ReflectionRenderer
     from curved_reflections.engine.frame_settings import FrameSettings
     from curved_reflections.drawing.methods.morph_pass import MorphPass
@@ -232,7 +232,7 @@ def measure_iterative(kind: str, width: int, height: int, target_vertices: int, 
     searched = renderer.pass_named("iterative")
     g = renderer.geometry
     world = world_color(scene)
-    views = view_change_shapes.orbit_views(view_from_camera(scene.camera, scene, depsgraph), orbit_degrees, frames)
+    views = animation_runs.orbit_views(view_from_camera(scene.camera, scene, depsgraph), orbit_degrees, frames)
     plain = bench_draw.PlainDraw(g)
 
     def matrix(view):
@@ -329,6 +329,7 @@ def measure_morph_frames(width: int, height: int, target_vertices: int, frames: 
     from curved_reflections.engine.methods.morphing import morph_grid, morphing
     from curved_reflections.drawing.methods.morph_source import GPUFaceImages
     from curved_reflections.drawing.methods.polish_gpu import GPUImagePolish
+    from curved_reflections.drawing.frame_pass import Frame
     from curved_reflections.drawing.reflection_draw import ReflectionRenderer
     from curved_reflections.engine.frame_settings import FrameSettings
     from curved_reflections.drawing.methods.morph_pass import MorphPass

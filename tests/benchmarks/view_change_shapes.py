@@ -37,21 +37,6 @@ JUMP_DEGREES = 35.0
 STALE_COLOUR = 0.05
 
 
-def turned_view(view, degrees: float):
-    """``view`` turned by ``degrees`` about the world's vertical axis through the origin."""
-    from curved_reflections.engine.view import View
-
-    angle = np.radians(degrees)
-    rotation = np.eye(4)
-    rotation[:2, :2] = [[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]]
-    return View(np.asarray(view.view_matrix) @ rotation, view.projection_matrix, view.width, view.height)
-
-
-def orbit_views(view, degrees: float, frames: int) -> list:
-    """``frames`` views, each turned ``degrees`` further (:func:`turned_view`)."""
-    return [turned_view(view, degrees * k) for k in range(frames)]
-
-
 def measure_shape(kind: str, width: int, height: int, steps: int, orbit_degrees: float) -> dict:
     """One mirror's view changes (see the module docstring)."""
     import bpy
@@ -73,7 +58,7 @@ def measure_shape(kind: str, width: int, height: int, steps: int, orbit_degrees:
     offscreen = gpu.types.GPUOffScreen(width, height, format='RGBA32F')
     try:
         for degrees in turns:
-            view = turned_view(base, degrees)
+            view = animation_runs.turned_view(base, degrees)
             with offscreen.bind():
                 framebuffer = gpu.state.active_framebuffer_get()
                 framebuffer.clear(color=(0.0, 0.0, 0.0, 1.0), depth=1.0)
