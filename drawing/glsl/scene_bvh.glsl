@@ -4,13 +4,16 @@
  *
  * The tree is complete: node h's children are 2h and 2h + 1, the root is 1 and the leaves
  * are `leaf_first` + i, each holding LEAF_SIZE triangle slots. `bvh_boxes` holds two texels
- * per node (lowest corner with w 1 where the node holds a triangle, else 0; highest
- * corner), `bvh_slots` one per slot (the triangle's three vertex indices, and the index
- * of its mesh's image, -1 for none, MIRROR_CODE for a mirror's; x -1 for an empty slot),
- * `scene_vertices` the
- * vertices (relative to the renderer's shift, as the ray). A complete tree is walked
- * without a stack: past a node, climb while it is the second child its parent visits,
- * then go to its sibling (`left_first` says which is first, from the ray's direction). */
+ * per node: its lowest corner, with in w the order its parent visits its children in
+ * (`split`, below; EMPTY further from 0 where the node holds no triangle), and its highest corner,
+ * with in w the order it visits its own (`split`: +(axis + 1) where its left child's box
+ * lies lower along that axis, -(axis + 1) where the right one's does). `bvh_slots` holds
+ * one texel per slot (the triangle's three vertex indices, and the index of its mesh's
+ * image, -1 for none, MIRROR_CODE for a mirror's; x -1 for an empty slot),
+ * `scene_vertices` the vertices (relative to the renderer's shift, as the ray). A complete
+ * tree is walked without a stack: past a node, climb while it is the second child its
+ * parent visits, then go to its sibling. Each node carries its parent's order, so the
+ * walk reads two texels a node it visits, and one more a level it climbs past the first. */
 
 /* Texel `index` of a table of TABLE_ROW texels a row (a power of two: no division). */
 vec4 table_texel(sampler2D table, int index)
@@ -28,13 +31,12 @@ bool meets_box(vec3 origin, vec3 inverse, vec3 low, vec3 high, float near, float
   return max(max(near3.x, near3.y), max(near3.z, near)) <= min(min(far3.x, far3.y), min(far3.z, far));
 }
 
-/* Whether a ray along `direction` visits node `parent`'s left child first: the child
- * whose box lies lower along the axis the two differ most on (the parent's highest-corner
- * texel's w: +(axis + 1) where the left one is lower, -(axis + 1) where the right one is). */
-bool left_first(int parent, vec3 direction)
+/* Whether a ray along `direction` visits the left child first of a node whose children are
+ * ordered by `split` (their lower one along axis |split| - 1 first; EMPTY aside). */
+bool left_first(float split, vec3 direction)
 {
-  float split = table_texel(bvh_boxes, 2 * parent + 1).w;
-  int axis = clamp(int(abs(split)) - 1, 0, 2);
+  int code = int(abs(split));
+  int axis = clamp(((code - 1) & 3), 0, 2);
   return (split > 0.0) == (direction[axis] >= 0.0);
 }
 
@@ -53,9 +55,9 @@ int nearest_hit(vec3 origin, vec3 direction, float t_min, int skip, inout float 
   for (int visits = 0; visits < 4 * leaf_first; visits++) {
     vec4 low = table_texel(bvh_boxes, 2 * node);
     vec4 high = table_texel(bvh_boxes, 2 * node + 1);
-    if (low.w > 0.5 && meets_box(origin, inverse, low.xyz, high.xyz, t_min, t_hit)) {
+    if (abs(low.w) < float(EMPTY) && meets_box(origin, inverse, low.xyz, high.xyz, t_min, t_hit)) {
       if (node < leaf_first) {
-        node = 2 * node + (left_first(node, direction) ? 0 : 1);
+        node = 2 * node + (left_first(high.w, direction) ? 0 : 1);
         continue;
       }
       for (int k = 0; k < LEAF_SIZE; k++) {
@@ -86,8 +88,10 @@ int nearest_hit(vec3 origin, vec3 direction, float t_min, int skip, inout float 
       }
     }
     /* Up while this node is its parent's second child visited, then to its sibling. */
-    while (node > 1 && ((node & 1) == 0) != left_first(node >> 1, direction)) {
+    float order = low.w;
+    while (node > 1 && ((node & 1) == 0) != left_first(order, direction)) {
       node >>= 1;
+      order = table_texel(bvh_boxes, 2 * node).w;
     }
     if (node <= 1) {
       break;

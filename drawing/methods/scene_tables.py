@@ -33,6 +33,9 @@ START_SHARE = 1e-7
 #: triangles share can miss both (a glass box's ray escaping through its face's diagonal);
 #: this keeps the mesh closed, at a millionth of a triangle's size.
 EDGE_SLACK = 1e-6
+#: Added to the size of a node's parent order (``glsl/scene_bvh.glsl``'s ``split``, at
+#: most 3) where the node holds no triangle: one texel says both.
+EMPTY_NODE = 4
 #: A slot's image index for a mirror's triangle (``glsl/scene_bvh.glsl``; -1: no image).
 MIRROR_CODE = -2
 #: A slot's image index for a glass triangle: the ray crosses it (its vertices' colours
@@ -87,7 +90,7 @@ def prelude(world: bool = True) -> str:
     (without ``world``, a ray that meets nothing is black: the caller tells it by its
     distance)."""
     defines = {"LEAF_SIZE": LEAF_SIZE, "EDGE_SLACK": f"{EDGE_SLACK:.9e}", "MIRROR_CODE": f"{MIRROR_CODE:.1f}",
-               "GLASS_CODE": f"{GLASS_CODE:.1f}", "MAX_INTERFACES": MAX_INTERFACES, "MAX_IMAGES": MAX_IMAGES,
+               "GLASS_CODE": f"{GLASS_CODE:.1f}", "EMPTY": EMPTY_NODE, "MAX_INTERFACES": MAX_INTERFACES, "MAX_IMAGES": MAX_IMAGES,
                "TABLE_ROW": 1 << TABLE_ROW_BITS, "TABLE_ROW_BITS": TABLE_ROW_BITS,
                "WORLD_COLOR": "world.rgb" if world else "vec3(0.0)"}
     return shading_source() + glsl_source("scene_bvh.glsl", defines) + glsl_source("scene_colors.glsl")
@@ -97,16 +100,20 @@ def bvh_tables(vertices: np.ndarray, triangles: np.ndarray, codes: np.ndarray,
                groups: np.ndarray | None = None) -> tuple:
     """((2 n, 4) node texels, (slots, 4) slot texels, first leaf's node index) of the tree
     over ``triangles`` (``glsl/scene_bvh.glsl`` says what they hold: an inner node's
-    highest corner carries the axis its children are ordered on); ``codes`` (T,) each
+    highest corner carries the axis its children are ordered on, each node's lowest
+    corner its parent's, :data:`EMPTY_NODE` further from 0 where it holds no triangle,
+    so that a walk climbing past it need not read its parent); ``codes`` (T,) each
     triangle's image index, -1 for none, :data:`MIRROR_CODE` or :data:`GLASS_CODE`;
     ``groups`` (T,): each group (an object) a subtree of its own (``bvh.grouped_order``)."""
     bvh = build_bvh(vertices, triangles, leaf_size=LEAF_SIZE, groups=groups)
     leaf_first = 1 << bvh.depth
     boxes = np.zeros((4 * leaf_first, 4), np.float32)
+    orders = np.ones(1, np.float32)  # the root's: it has no parent
     for level, rows in enumerate(bvh.box_rows):  # one slice per level, not per node
         nodes = (1 << level) + np.arange(1 << level)
+        empty = np.isnan(rows[0])
         boxes[2 * nodes, :3] = np.nan_to_num(rows[:3].T)
-        boxes[2 * nodes, 3] = ~np.isnan(rows[0])
+        boxes[2 * nodes, 3] = orders + np.sign(orders) * EMPTY_NODE * empty
         boxes[2 * nodes + 1, :3] = np.nan_to_num(rows[3:].T)
         if level < bvh.depth:  # the axis its children's boxes differ most on, signed by which is lower
             below = bvh.box_rows[level + 1]
@@ -114,6 +121,7 @@ def bvh_tables(vertices: np.ndarray, triangles: np.ndarray, codes: np.ndarray,
             apart = centres[:, 1] - centres[:, 0]
             axis = np.argmax(np.abs(apart), axis=1)
             boxes[2 * nodes + 1, 3] = np.where(apart[np.arange(len(axis)), axis] >= 0.0, 1.0, -1.0) * (axis + 1)
+            orders = np.repeat(boxes[2 * nodes + 1, 3], 2)
     slots = np.full((len(bvh.order), 4), -1.0, np.float32)
     filled = bvh.order >= 0
     slots[filled, :3] = triangles[bvh.order[filled]]

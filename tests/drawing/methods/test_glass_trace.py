@@ -7,7 +7,7 @@ paths through the glass (engine/glass/paths.py) met with the scene by the CPU's 
 
 import numpy as np
 
-from curved_reflections.drawing.methods.scene_tables import LEAF_SIZE, MAX_IMAGES, bvh_tables
+from curved_reflections.drawing.methods.scene_tables import EMPTY_NODE, LEAF_SIZE, MAX_IMAGES, bvh_tables
 from curved_reflections.engine.geometry import shapes
 from curved_reflections.engine.geometry.sphere import icosphere
 from curved_reflections.engine.glass import Glass, GlassSet
@@ -23,7 +23,8 @@ CLOSE = 0.02
 
 def test_the_packed_tree_holds_every_triangle_once_within_its_nodes_boxes():
     """Each triangle in one slot, with its image; each slot's corners inside its leaf's
-    box, and each node's box inside its parent's; empty nodes marked."""
+    box, and each node's box inside its parent's; empty nodes marked; each node carries
+    the order its parent visits its children in."""
     ball = icosphere((0.3, -0.2, 1.0), 1.0, 2, "Ball")
     triangles = ball.triangles[: len(ball.triangles) - 7]  # not a power of two: empty slots
     images = np.arange(len(triangles)) % 3 - 1
@@ -40,9 +41,12 @@ def test_the_packed_tree_holds_every_triangle_once_within_its_nodes_boxes():
     assert (corners >= boxes[2 * leaves, None, :3] - eps).all()
     assert (corners <= boxes[2 * leaves + 1, None, :3] + eps).all()
     nodes = np.arange(2, 2 * leaf_first)
-    used = boxes[2 * nodes, 3] > 0.5
+    used = np.abs(boxes[2 * nodes, 3]) < EMPTY_NODE
     parents = nodes[used] // 2
-    assert (boxes[2 * parents, 3] > 0.5).all() and (~used).any()
+    assert (np.abs(boxes[2 * parents, 3]) < EMPTY_NODE).all() and (~used).any()
+    orders = boxes[2 * (nodes // 2) + 1, 3]
+    assert np.isin(np.abs(orders), (1, 2, 3)).all()
+    assert (boxes[2 * nodes, 3] == np.where(used, orders, orders + np.sign(orders) * EMPTY_NODE)).all()
     assert (boxes[2 * nodes[used], :3] >= boxes[2 * parents, :3] - eps).all()
     assert (boxes[2 * nodes[used] + 1, :3] <= boxes[2 * parents + 1, :3] + eps).all()
 
