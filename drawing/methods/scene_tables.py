@@ -90,8 +90,8 @@ def prelude(world: bool = True) -> str:
     (without ``world``, a ray that meets nothing is black: the caller tells it by its
     distance)."""
     defines = {"LEAF_SIZE": LEAF_SIZE, "EDGE_SLACK": f"{EDGE_SLACK:.9e}", "MIRROR_CODE": f"{MIRROR_CODE:.1f}",
-               "GLASS_CODE": f"{GLASS_CODE:.1f}", "EMPTY": EMPTY_NODE, "MAX_INTERFACES": MAX_INTERFACES, "MAX_IMAGES": MAX_IMAGES,
-               "TABLE_ROW": 1 << TABLE_ROW_BITS, "TABLE_ROW_BITS": TABLE_ROW_BITS,
+               "GLASS_CODE": f"{GLASS_CODE:.1f}", "EMPTY": EMPTY_NODE, "MAX_INTERFACES": MAX_INTERFACES,
+               "MAX_IMAGES": MAX_IMAGES, "TABLE_ROW": 1 << TABLE_ROW_BITS, "TABLE_ROW_BITS": TABLE_ROW_BITS,
                "WORLD_COLOR": "world.rgb" if world else "vec3(0.0)"}
     return shading_source() + glsl_source("scene_bvh.glsl", defines) + glsl_source("scene_colors.glsl")
 
