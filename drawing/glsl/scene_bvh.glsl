@@ -8,8 +8,9 @@
  * (`split`, below; EMPTY further from 0 where the node holds no triangle), and its highest corner,
  * with in w the order it visits its own (`split`: +(axis + 1) where its left child's box
  * lies lower along that axis, -(axis + 1) where the right one's does). `bvh_slots` holds
- * one texel per slot (the triangle's three vertex indices, and the index of its mesh's
- * image, -1 for none, MIRROR_CODE for a mirror's; x -1 for an empty slot),
+ * SLOT_TEXELS per slot: its triangle's first corner and its two edges from it, each
+ * with in w a corner's vertex index (-1 for an empty slot); `vertex_uvs` z the index of
+ * a vertex's mesh's image (-1 for none, MIRROR_CODE for a mirror's, GLASS_CODE for glass),
  * `scene_vertices` the vertices (relative to the renderer's shift, as the ray). A complete
  * tree is walked without a stack: past a node, climb while it is the second child its
  * parent visits, then go to its sibling. Each node carries its parent's order, so the
@@ -40,6 +41,13 @@ bool left_first(float split, vec3 direction)
   return (split > 0.0) == (direction[axis] >= 0.0);
 }
 
+/* The vertex indices of slot `slot`'s triangle's corners. */
+ivec3 slot_corners(int slot)
+{
+  return ivec3(table_texel(bvh_slots, SLOT_TEXELS * slot).w, table_texel(bvh_slots, SLOT_TEXELS * slot + 1).w,
+               table_texel(bvh_slots, SLOT_TEXELS * slot + 2).w);
+}
+
 /* The nearest hit of the ray past `t_min` and before `t_hit` (in: how far to look, e.g.
  * 3e38), slot `skip` aside (the triangle a reflected ray leaves; -1: none): its slot (-1
  * for none), distance (out, in `t_hit`) and barycentric (u, v) of its second and third
@@ -62,13 +70,13 @@ int nearest_hit(vec3 origin, vec3 direction, float t_min, int skip, inout float 
       }
       for (int k = 0; k < LEAF_SIZE; k++) {
         int slot = (node - leaf_first) * LEAF_SIZE + k;
-        vec4 corners = table_texel(bvh_slots, slot);
-        if (corners.x < 0.0 || slot == skip) {
+        vec4 corner = table_texel(bvh_slots, SLOT_TEXELS * slot);
+        if (corner.w < 0.0 || slot == skip) {
           continue;
         }
-        vec3 a = table_texel(scene_vertices, int(corners.x)).xyz;
-        vec3 e1 = table_texel(scene_vertices, int(corners.y)).xyz - a;
-        vec3 e2 = table_texel(scene_vertices, int(corners.z)).xyz - a;
+        vec3 a = corner.xyz;
+        vec3 e1 = table_texel(bvh_slots, SLOT_TEXELS * slot + 1).xyz;
+        vec3 e2 = table_texel(bvh_slots, SLOT_TEXELS * slot + 2).xyz;
         vec3 p = cross(direction, e2);
         float det = dot(e1, p);
         if (abs(det) < 1e-30) {

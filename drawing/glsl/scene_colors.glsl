@@ -100,19 +100,19 @@ vec3 followed_color(vec3 origin, vec3 direction, int skip, int bounces, int medi
     if (slot < 0) {
       break;
     }
-    vec4 corners = table_texel(bvh_slots, slot);
     vec3 weights = vec3(1.0 - uv.x - uv.y, uv);
-    ivec3 v = ivec3(corners.xyz);
+    ivec3 v = slot_corners(slot);
+    vec4 uv0 = table_texel(vertex_uvs, v.x); /* z: the mesh's image index, or MIRROR_CODE, GLASS_CODE */
     vec4 n0 = table_texel(vertex_normals, v.x);
     vec3 normal = weights.x * n0.xyz + weights.y * table_texel(vertex_normals, v.y).xyz +
                   weights.z * table_texel(vertex_normals, v.z).xyz;
-    if (corners.w > MIRROR_CODE + 0.5) {
+    if (uv0.z > MIRROR_CODE + 0.5) {
       vec4 albedo = weights.x * table_texel(vertex_colors, v.x) + weights.y * table_texel(vertex_colors, v.y) +
                     weights.z * table_texel(vertex_colors, v.z);
-      int image = int(corners.w);
+      int image = int(uv0.z);
       if (image >= 0) {
         known = image < MAX_IMAGES;
-        vec2 texel_uv = weights.x * table_texel(vertex_uvs, v.x).xy + weights.y * table_texel(vertex_uvs, v.y).xy +
+        vec2 texel_uv = weights.x * uv0.xy + weights.y * table_texel(vertex_uvs, v.y).xy +
                         weights.z * table_texel(vertex_uvs, v.z).xy;
         albedo *= scene_image(image, texel_uv);
       }
@@ -120,7 +120,7 @@ vec3 followed_color(vec3 origin, vec3 direction, int skip, int bounces, int medi
       return shade(albedo.rgb, n0.w, normal, -direction);
     }
     vec3 hit = origin + t * direction;
-    if (corners.w < GLASS_CODE + 0.5) {
+    if (uv0.z < GLASS_CODE + 0.5) {
       vec4 glass = table_texel(vertex_colors, v.x); /* index of refraction, reflects, index */
       int index = int(round(glass.z));
       vec3 facing = normalize(normal);

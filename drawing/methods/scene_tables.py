@@ -17,12 +17,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...engine.errors import SceneInputError
 from ...engine.geometry.bvh import build_bvh
 from ..draw_geometry import mesh_attributes
 from ..draw_shaders import shading_source
 from ..gpu_data import data_texture
+from .sbc_pack import MAX_TEXTURE_HEIGHT
 from ..shader_sources import glsl_source
 
+#: Texels a slot of the tree: its triangle's first corner and its two edges from it, what
+#: the walk reads (w: the corners' vertex indices; -1 for an empty slot).
+SLOT_TEXELS = 3
 #: Triangles per leaf of the tree: the slab tests of a deeper tree cost more than the
 #: triangle tests of a fuller leaf.
 LEAF_SIZE = 4
@@ -48,8 +53,9 @@ MAX_INTERFACES = 8
 #: image is left to another method.
 MAX_IMAGES = 4
 #: log2 of the texels in a row of every table (``glsl/scene_bvh.glsl``'s ``table_texel``
-#: finds a texel by shifts and masks; integer division costs llvmpipe more).
-TABLE_ROW_BITS = 10
+#: finds a texel by shifts and masks; integer division costs llvmpipe more): 4096 texels,
+#: so that the slots of about 5 million triangles fit the rows every OpenGL 4.5 allows.
+TABLE_ROW_BITS = 12
 #: The samplers of the tables, in the order :meth:`SceneTables.bind` binds them.
 TABLES = ("bvh_boxes", "bvh_slots", "scene_vertices", "vertex_colors", "vertex_normals", "vertex_uvs")
 
@@ -90,21 +96,21 @@ def prelude(world: bool = True) -> str:
     (without ``world``, a ray that meets nothing is black: the caller tells it by its
     distance)."""
     defines = {"LEAF_SIZE": LEAF_SIZE, "EDGE_SLACK": f"{EDGE_SLACK:.9e}", "MIRROR_CODE": f"{MIRROR_CODE:.1f}",
-               "GLASS_CODE": f"{GLASS_CODE:.1f}", "EMPTY": EMPTY_NODE, "MAX_INTERFACES": MAX_INTERFACES,
+               "GLASS_CODE": f"{GLASS_CODE:.1f}", "EMPTY": EMPTY_NODE, "SLOT_TEXELS": SLOT_TEXELS, "MAX_INTERFACES": MAX_INTERFACES,
                "MAX_IMAGES": MAX_IMAGES, "TABLE_ROW": 1 << TABLE_ROW_BITS, "TABLE_ROW_BITS": TABLE_ROW_BITS,
                "WORLD_COLOR": "world.rgb" if world else "vec3(0.0)"}
     return shading_source() + glsl_source("scene_bvh.glsl", defines) + glsl_source("scene_colors.glsl")
 
 
-def bvh_tables(vertices: np.ndarray, triangles: np.ndarray, codes: np.ndarray,
-               groups: np.ndarray | None = None) -> tuple:
-    """((2 n, 4) node texels, (slots, 4) slot texels, first leaf's node index) of the tree
+def bvh_tables(vertices: np.ndarray, triangles: np.ndarray, groups: np.ndarray | None = None) -> tuple:
+    """((2 n, 4) node texels, (3 slots, 4) slot texels, first leaf's node index) of the tree
     over ``triangles`` (``glsl/scene_bvh.glsl`` says what they hold: an inner node's
     highest corner carries the axis its children are ordered on, each node's lowest
     corner its parent's, :data:`EMPTY_NODE` further from 0 where it holds no triangle,
-    so that a walk climbing past it need not read its parent); ``codes`` (T,) each
-    triangle's image index, -1 for none, :data:`MIRROR_CODE` or :data:`GLASS_CODE`;
-    ``groups`` (T,): each group (an object) a subtree of its own (``bvh.grouped_order``)."""
+    so that a walk climbing past it need not read its parent; a slot its triangle's first
+    corner and two edges from it, in float32 as the GPU would subtract them, with the
+    corners' vertex indices); ``groups`` (T,): each group (an object) a subtree of its
+    own (``bvh.grouped_order``)."""
     bvh = build_bvh(vertices, triangles, leaf_size=LEAF_SIZE, groups=groups)
     leaf_first = 1 << bvh.depth
     boxes = np.zeros((4 * leaf_first, 4), np.float32)
@@ -122,11 +128,14 @@ def bvh_tables(vertices: np.ndarray, triangles: np.ndarray, codes: np.ndarray,
             axis = np.argmax(np.abs(apart), axis=1)
             boxes[2 * nodes + 1, 3] = np.where(apart[np.arange(len(axis)), axis] >= 0.0, 1.0, -1.0) * (axis + 1)
             orders = np.repeat(boxes[2 * nodes + 1, 3], 2)
-    slots = np.full((len(bvh.order), 4), -1.0, np.float32)
+    slots = np.full((len(bvh.order), SLOT_TEXELS, 4), -1.0, np.float32)
     filled = bvh.order >= 0
-    slots[filled, :3] = triangles[bvh.order[filled]]
-    slots[filled, 3] = codes[bvh.order[filled]]
-    return boxes, slots, leaf_first
+    held = triangles[bvh.order[filled]]
+    corners = np.asarray(vertices, np.float32)[held]
+    slots[filled, 0, :3] = corners[:, 0]
+    slots[filled, 1:, :3] = corners[:, 1:] - corners[:, :1]
+    slots[filled, :, 3] = held
+    return boxes, slots.reshape(-1, 4), leaf_first
 
 
 def _surface_part(surface, code: float, colour: tuple) -> tuple:
@@ -195,9 +204,17 @@ class SceneTables:
         if self._textures is not None:
             return
         vertices, triangles, codes, colors, normals, uvs, groups = self._arrays()
-        boxes, slots, leaf_first = bvh_tables(vertices, triangles, codes, groups)
+        boxes, slots, leaf_first = bvh_tables(vertices, triangles, groups)
+        if len(slots) > MAX_TEXTURE_HEIGHT << TABLE_ROW_BITS:
+            largest = max(self.meshes, key=lambda mesh: len(mesh.triangles))
+            raise SceneInputError(largest.name, f"the scene's {len(triangles):,} triangles are more than the GPU's "
+                                  "ray trace holds (about 5 million); lower this mesh's resolution (e.g. its "
+                                  "subdivision levels), or hide objects the mirrors and glass need not show")
+        vertex_codes = np.zeros(len(vertices))
+        vertex_codes[triangles] = codes[:, None]  # a vertex is one mesh's: its code
         self._textures = ([data_texture(table, 1 << TABLE_ROW_BITS)
-                           for table in (boxes, slots, vertices, colors, normals, uvs)], leaf_first)
+                           for table in (boxes, slots, vertices, colors, normals, np.c_[uvs, vertex_codes])],
+                          leaf_first)
 
     def bind(self, shader, images, bounces: int | None = None, world: bool = True,
              start_share: float = START_SHARE) -> None:

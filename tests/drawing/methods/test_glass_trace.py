@@ -7,7 +7,8 @@ paths through the glass (engine/glass/paths.py) met with the scene by the CPU's 
 
 import numpy as np
 
-from curved_reflections.drawing.methods.scene_tables import EMPTY_NODE, LEAF_SIZE, MAX_IMAGES, bvh_tables
+from curved_reflections.drawing.methods.scene_tables import (EMPTY_NODE, LEAF_SIZE, MAX_IMAGES, SLOT_TEXELS,
+                                                              bvh_tables)
 from curved_reflections.engine.geometry import shapes
 from curved_reflections.engine.geometry.sphere import icosphere
 from curved_reflections.engine.glass import Glass, GlassSet
@@ -22,21 +23,24 @@ CLOSE = 0.02
 
 
 def test_the_packed_tree_holds_every_triangle_once_within_its_nodes_boxes():
-    """Each triangle in one slot, with its image; each slot's corners inside its leaf's
-    box, and each node's box inside its parent's; empty nodes marked; each node carries
-    the order its parent visits its children in."""
+    """Each triangle in one slot, as its first corner and two edges (float32) with its
+    corners' indices; each slot's corners inside its leaf's box, and each node's box
+    inside its parent's; empty nodes and slots marked; each node carries the order its
+    parent visits its children in."""
     ball = icosphere((0.3, -0.2, 1.0), 1.0, 2, "Ball")
     triangles = ball.triangles[: len(ball.triangles) - 7]  # not a power of two: empty slots
-    images = np.arange(len(triangles)) % 3 - 1
-    boxes, slots, leaf_first = bvh_tables(ball.vertices, triangles, images)
-    filled = slots[:, 0] >= 0
-    held = slots[filled, :3].astype(int)
+    boxes, slots, leaf_first = bvh_tables(ball.vertices, triangles)
+    slots = slots.reshape(-1, SLOT_TEXELS, 4)
+    filled = slots[:, 0, 3] >= 0
+    held = slots[filled, :, 3].astype(int)
     assert filled.sum() == len(triangles) and len(slots) == leaf_first * LEAF_SIZE
+    assert (slots[~filled] == -1.0).all()
     index = {tuple(t): k for k, t in enumerate(triangles.tolist())}
-    held_index = np.array([index[tuple(t)] for t in held.tolist()])
-    assert len(set(held_index.tolist())) == len(triangles) and (slots[filled, 3] == images[held_index]).all()
+    assert len({index[tuple(t)] for t in held.tolist()}) == len(triangles)
+    corners = ball.vertices[held].astype(np.float32)
+    assert (slots[filled, 0, :3] == corners[:, 0]).all()
+    assert (slots[filled, 1:, :3] == corners[:, 1:] - corners[:, :1]).all()
     leaves = leaf_first + np.flatnonzero(filled) // LEAF_SIZE
-    corners = ball.vertices[held]
     eps = 1e-6
     assert (corners >= boxes[2 * leaves, None, :3] - eps).all()
     assert (corners <= boxes[2 * leaves + 1, None, :3] + eps).all()
@@ -60,12 +64,12 @@ def test_each_object_fills_a_subtree_of_its_own():
     vertices = np.concatenate([ball.vertices, floor])
     triangles = np.concatenate([ball.triangles, len(ball.vertices) + np.array([[0, 1, 2], [0, 2, 3]])])
     groups = np.r_[np.zeros(len(ball.triangles), int), np.ones(2, int)]
-    boxes, slots, leaf_first = bvh_tables(vertices, triangles, np.full(len(triangles), -1), groups)
+    boxes, slots, leaf_first = bvh_tables(vertices, triangles, groups)
     ball_leaves = 1 << int(np.ceil(np.log2(len(ball.triangles) / LEAF_SIZE)))
     node = leaf_first // ball_leaves  # the ball's subtree: the first node of its level
     assert np.allclose(boxes[2 * node, :3], ball.vertices.min(axis=0), atol=1e-6)
     assert np.allclose(boxes[2 * node + 1, :3], ball.vertices.max(axis=0), atol=1e-6)
-    held = slots[: ball_leaves * LEAF_SIZE, 0]
+    held = slots.reshape(-1, SLOT_TEXELS, 4)[: ball_leaves * LEAF_SIZE, 0, 3]
     assert ((held >= 0) == (np.arange(len(held)) < len(ball.triangles))).all()
 
 
@@ -215,3 +219,23 @@ def test_a_glass_objects_solid_mesh_is_left_out_of_the_tables_and_the_image_indi
     assert len(triangles) == len(panel.triangles) + len(ball.triangles)
     assert set(codes[:len(panel.triangles)]) == {1.0}  # the panel's image is the geometry's second
     assert set(codes[len(panel.triangles):]) == {GLASS_CODE}
+
+
+def test_a_scene_too_large_for_the_tables_is_refused_naming_its_largest_mesh(monkeypatch):
+    """Tables taller than a texture may be are refused with the mesh to simplify, before
+    any texture is made (rows cut to one here: 4096 texels, fewer than the slots)."""
+    from types import SimpleNamespace
+
+    import pytest
+
+    from curved_reflections.drawing.methods import scene_tables
+    from curved_reflections.engine.errors import SceneInputError
+
+    monkeypatch.setattr(scene_tables, "MAX_TEXTURE_HEIGHT", 1)
+    ball = icosphere((0.0, 0.0, 0.0), 1.0, 4, "Ball")  # 5,120 triangles: 15,360 slot texels
+    meshes = [DiffuseMesh(name, shape.vertices, shape.triangles, np.ones((len(shape.vertices), 4), np.float32))
+              for name, shape in (("Panel", flat_box("Panel", (-1.0, 3.0, -1.0), (1.0, 3.1, 1.0))), ("Ball", ball))]
+    tables = scene_tables.SceneTables(meshes, SimpleNamespace(shift=np.zeros(3)))
+    with pytest.raises(SceneInputError, match="more than the GPU's ray trace holds") as error:
+        tables._ensure()
+    assert error.value.object_name == "Ball"
