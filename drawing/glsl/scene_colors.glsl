@@ -1,9 +1,9 @@
 /* SPDX-License-Identifier: GPL-3.0-or-later */
 /* What a ray meets in the scene, lit (drawing/methods/scene_tables.py; scene_bvh.glsl and
  * reflection_shading.glsl before this). Expects the push constants `t_min`, `leaf_first`
- * and `max_order`, WORLD_COLOR (the `world` push constant's, or black), the tables `vertex_colors` and `vertex_normals` (normal,
- * lit) beside the tree's, the image samplers `scene_image0` .. `scene_image<MAX_IMAGES - 1>`
- * and `vertex_uvs`. */
+ * and `max_order`, WORLD_COLOR (the `world` push constant's, or black), the tables
+ * `vertex_colors`, `vertex_normals` (normal, lit) and `vertex_uvs` (uv, the mesh's image
+ * code) beside the tree's, the image samplers `scene_image0` .. `scene_image<MAX_IMAGES - 1>`. */
 
 /* Bilinear lookup of `image` at `uv`, repeating, texel centres at (k + 0.5) / size: the CPU
  * tracer's (band_trace.sample_image), whatever the sampler's state. */

@@ -22,8 +22,8 @@ from ...engine.geometry.bvh import build_bvh
 from ..draw_geometry import mesh_attributes
 from ..draw_shaders import shading_source
 from ..gpu_data import data_texture
-from .sbc_pack import MAX_TEXTURE_HEIGHT
 from ..shader_sources import glsl_source
+from .sbc_pack import MAX_TEXTURE_HEIGHT
 
 #: Texels a slot of the tree: its triangle's first corner and its two edges from it, what
 #: the walk reads (w: the corners' vertex indices; -1 for an empty slot).
@@ -41,9 +41,9 @@ EDGE_SLACK = 1e-6
 #: Added to the size of a node's parent order (``glsl/scene_bvh.glsl``'s ``split``, at
 #: most 3) where the node holds no triangle: one texel says both.
 EMPTY_NODE = 4
-#: A slot's image index for a mirror's triangle (``glsl/scene_bvh.glsl``; -1: no image).
+#: A mesh's image index for a mirror's triangles (``glsl/scene_bvh.glsl``; -1: no image).
 MIRROR_CODE = -2
-#: A slot's image index for a glass triangle: the ray crosses it (its vertices' colours
+#: A mesh's image index for a glass's triangles: the ray crosses them (their vertices' colours
 #: hold the glass's index of refraction, whether it reflects, and its index).
 GLASS_CODE = -3
 #: Glass interfaces a ray crosses or reflects totally at before it is given up as trapped
@@ -54,7 +54,8 @@ MAX_INTERFACES = 8
 MAX_IMAGES = 4
 #: log2 of the texels in a row of every table (``glsl/scene_bvh.glsl``'s ``table_texel``
 #: finds a texel by shifts and masks; integer division costs llvmpipe more): 4096 texels,
-#: so that the slots of about 5 million triangles fit the rows every OpenGL 4.5 allows.
+#: so that a tree of 22 million slots (some 16 million triangles) fits the rows every
+#: OpenGL 4.5 allows.
 TABLE_ROW_BITS = 12
 #: The samplers of the tables, in the order :meth:`SceneTables.bind` binds them.
 TABLES = ("bvh_boxes", "bvh_slots", "scene_vertices", "vertex_colors", "vertex_normals", "vertex_uvs")
@@ -96,14 +97,15 @@ def prelude(world: bool = True) -> str:
     (without ``world``, a ray that meets nothing is black: the caller tells it by its
     distance)."""
     defines = {"LEAF_SIZE": LEAF_SIZE, "EDGE_SLACK": f"{EDGE_SLACK:.9e}", "MIRROR_CODE": f"{MIRROR_CODE:.1f}",
-               "GLASS_CODE": f"{GLASS_CODE:.1f}", "EMPTY": EMPTY_NODE, "SLOT_TEXELS": SLOT_TEXELS, "MAX_INTERFACES": MAX_INTERFACES,
-               "MAX_IMAGES": MAX_IMAGES, "TABLE_ROW": 1 << TABLE_ROW_BITS, "TABLE_ROW_BITS": TABLE_ROW_BITS,
+               "GLASS_CODE": f"{GLASS_CODE:.1f}", "EMPTY": EMPTY_NODE, "SLOT_TEXELS": SLOT_TEXELS,
+               "MAX_INTERFACES": MAX_INTERFACES, "MAX_IMAGES": MAX_IMAGES, "TABLE_ROW": 1 << TABLE_ROW_BITS,
+               "TABLE_ROW_BITS": TABLE_ROW_BITS,
                "WORLD_COLOR": "world.rgb" if world else "vec3(0.0)"}
     return shading_source() + glsl_source("scene_bvh.glsl", defines) + glsl_source("scene_colors.glsl")
 
 
 def bvh_tables(vertices: np.ndarray, triangles: np.ndarray, groups: np.ndarray | None = None) -> tuple:
-    """((2 n, 4) node texels, (3 slots, 4) slot texels, first leaf's node index) of the tree
+    """((2 n, 4) node texels, (SLOT_TEXELS slots, 4) slot texels, first leaf's node index) of the tree
     over ``triangles`` (``glsl/scene_bvh.glsl`` says what they hold: an inner node's
     highest corner carries the axis its children are ordered on, each node's lowest
     corner its parent's, :data:`EMPTY_NODE` further from 0 where it holds no triangle,
@@ -207,9 +209,11 @@ class SceneTables:
         boxes, slots, leaf_first = bvh_tables(vertices, triangles, groups)
         if len(slots) > MAX_TEXTURE_HEIGHT << TABLE_ROW_BITS:
             largest = max(self.meshes, key=lambda mesh: len(mesh.triangles))
-            raise SceneInputError(largest.name, f"the scene's {len(triangles):,} triangles are more than the GPU's "
-                                  "ray trace holds (about 5 million); lower this mesh's resolution (e.g. its "
-                                  "subdivision levels), or hide objects the mirrors and glass need not show")
+            raise SceneInputError(largest.name, f"the scene's {len(triangles):,} triangles need a tree of "
+                                  f"{len(slots) // SLOT_TEXELS:,} slots, more than the GPU's ray trace holds "
+                                  f"({(MAX_TEXTURE_HEIGHT << TABLE_ROW_BITS) // SLOT_TEXELS:,}); lower this mesh's "
+                                  "resolution (e.g. its subdivision levels), or hide objects the mirrors and glass "
+                                  "need not show")
         vertex_codes = np.zeros(len(vertices))
         vertex_codes[triangles] = codes[:, None]  # a vertex is one mesh's: its code
         self._textures = ([data_texture(table, 1 << TABLE_ROW_BITS)
