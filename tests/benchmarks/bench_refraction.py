@@ -9,10 +9,10 @@ The glass demo (``demo_scenes.build_glass``: a checker floor, columns, a panel, 
 behind the glass, Glass BSDF of IOR 1.45) with one glass object at a time: the ball, the
 lens (a sphere squashed to 0.4 along the view), or a box or a torus in the ball's place.
 Cycles (Glass BSDF, 8 glossy and 8 transmission bounces) is the reference; EEVEE
-(screen-space ray tracing, refraction on) and ours (Render Image, an animation's second
-frame timed, and the live view's draw) are measured
-by label disagreement on the glass's pixels (Workbench's mask of the view,
-``tools/metrics.py``), and ours also against a Workbench frame of the same scene.
+(screen-space ray tracing, refraction on) and ours (Render Image, an animation's frames
+timed with the camera turning, and the live view's draw) are measured by label
+disagreement on the glass's pixels (Workbench's mask of the view, ``tools/metrics.py``),
+and ours also against a Workbench frame of the same scene (its own settings).
 """
 
 from __future__ import annotations
