@@ -124,8 +124,8 @@ class FramePipeline:
     properties: dict = field(default_factory=dict)
     #: The picture check's renderer with every reflector traced (``picture_check.py``).
     traced_reference: TracedReference = field(default_factory=TracedReference)
-    #: Whether the refraction search draws the convex glass the GPU's trace cannot (past
-    #: ``scene_tables.MAX_IMAGES`` image textures: the live view); Render Image then
+    #: Whether the refraction search draws the convex glass the GPU's trace cannot (image
+    #: textures past its atlas, ``image_atlas.py``: the live view); Render Image then
     #: traces it on the CPU.
     SEARCHES_GLASS: ClassVar[bool] = False
 

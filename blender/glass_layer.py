@@ -11,8 +11,8 @@ it and the one it reflects back inside where the path leaves, as Cycles' Glass B
 them; glass of a Refraction BSDF reflects nothing (and where it should reflect totally,
 shows black, as Cycles does).
 
-Where the meshes have more image textures than the trace samples
-(``scene_tables.MAX_IMAGES``), the live view draws convex glass by the refraction search
+Where the meshes' image textures do not fit the trace's atlas
+(``drawing/methods/image_atlas.py``: some 64 million texels), the live view draws convex glass by the refraction search
 instead (``drawing/methods/refraction_draw.py``: every diffuse vertex where it appears,
 each fragment a ray cast along its pixel's path) with the iterative search drawing the
 glass's reflections as a mirror's (:func:`glass_mirror`), and shows other glass as a solid
@@ -33,7 +33,7 @@ from ..drawing.gpu_data import read_depth, read_texture
 from ..drawing.methods.glass_trace import GlassTracePass
 from ..drawing.methods.iterative_draw import IterativePass
 from ..drawing.methods.refraction_draw import RefractionPass
-from ..drawing.methods.scene_tables import MAX_IMAGES, TracedScene, samples_every_image
+from ..drawing.methods.scene_tables import TracedScene, samples_every_image
 from ..drawing.reflection_draw import ReflectionRenderer
 from ..drawing.screen_space import pixel_box
 from ..engine.errors import SceneInputError
@@ -102,8 +102,8 @@ class GlassLayer:
                 check_view_outside_reflectors(self.glass.surfaces, view)
             except SceneInputError as error:
                 raise SceneInputError(error.object_name, "the view is inside this glass object; move the camera "
-                                      "outside it (the CPU's trace of glass, in a scene of more than "
-                                      f"{MAX_IMAGES} image textures, starts in air)") from None
+                                      "outside it (the CPU's trace of glass, in a scene of more image "
+                                      f"textures than the GPU's trace holds, starts in air)") from None
         self._place_eye(view)
         image = self.renderer.render(view, None, world, trace=False)
         targets = self.renderer.targets(view.width, view.height)

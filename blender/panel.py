@@ -19,7 +19,6 @@ import textwrap
 
 import bpy
 
-from ..drawing.methods.scene_tables import MAX_IMAGES
 from . import accuracy, live, method_plan, method_registry, morph_bake
 from .capture import SURFACE_TYPES
 from .material_ior import glass_ior
@@ -214,8 +213,8 @@ def glass_note(name: str, state) -> str:
         return ("The viewport and Render Image trace it on the GPU every frame: each pixel's path through the glass "
                 "(any shape, glass behind glass too) and what its rays meet, mirrors' reflections too, mixed by "
                 f"Fresnel. {IN_MIRRORS}")
-    rendered = (f"The scene has more than {MAX_IMAGES} image textures: Render Image ray traces it on the CPU "
-                "(refraction, total internal reflection, Fresnel).")
+    rendered = ("The scene's image textures are more than the GPU's trace holds (some 64 million texels): Render "
+                "Image ray traces it on the CPU (refraction, total internal reflection, Fresnel).")
     if name in layer.unsearched:
         return f"The viewport shows it as a solid object: {layer.unsearched[name]}. {rendered} {IN_MIRRORS}"
     return ("The viewport draws what lies behind it by the refraction search (a convex solid), mixed by Fresnel with "

@@ -15,8 +15,8 @@
  * ray reflected back inside is followed until it leaves in turn (black where it does not)
  * and mixed into what the path shows; where the eye's ray first meets glass that
  * reflects, the ray reflected there is followed and mixed in likewise. Output: the
- * pixel's colour in `traced_colors` (alpha 1; 0 where a ray meets an image texture past
- * the first MAX_IMAGES: nothing is drawn there) and in `front_colors` (what the composite
+ * pixel's colour in `traced_colors` (alpha 1; 0 where a ray meets an image texture that
+ * did not fit the atlas: nothing is drawn there) and in `front_colors` (what the composite
  * shows beneath it: the same colour, whatever the pre-pass's Fresnel weight), its alpha
  * 2 where the path met one glass inside another (glass in glass: a ray leaving the inner
  * glass goes on as if into air), else 1. */

@@ -11,7 +11,7 @@
  * point, folds and all, as Render Image traces its band (engine/geometry/band_trace.py).
  * Output `traced_colors`: (colour, 1 + its distance from the last mirror), or MISSED
  * where the ray meets nothing (the composite shows the world); 0 where the ray meets an
- * image texture past the first MAX_IMAGES (nothing is drawn there). */
+ * image texture that did not fit the atlas (nothing is drawn there). */
 
 void main()
 {

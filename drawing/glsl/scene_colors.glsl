@@ -2,39 +2,27 @@
 /* What a ray meets in the scene, lit (drawing/methods/scene_tables.py; scene_bvh.glsl and
  * reflection_shading.glsl before this). Expects the push constants `t_min`, `leaf_first`
  * and `max_order`, WORLD_COLOR (the `world` push constant's, or black), the tables
- * `vertex_colors`, `vertex_normals` (normal, lit) and `vertex_uvs` (uv, the mesh's image
- * code) beside the tree's, the image samplers `scene_image0` .. `scene_image<MAX_IMAGES - 1>`. */
+ * `vertex_colors`, `vertex_normals` (normal, lit), `vertex_uvs` (uv, the mesh's image
+ * code) and `image_rects` beside the tree's, and the image textures' atlas `scene_images`
+ * (drawing/methods/image_atlas.py). */
 
-/* Bilinear lookup of `image` at `uv`, repeating, texel centres at (k + 0.5) / size: the CPU
- * tracer's (band_trace.sample_image), whatever the sampler's state. */
-vec4 bilinear(sampler2D image, vec2 uv)
+/* Image texture `rect` (its rectangle in the atlas `scene_images`: lower left texel,
+ * width and height) at `uv`: bilinear, repeating within it, texel centres at (k + 0.5) /
+ * size, as the CPU's tracer samples the image (band_trace.sample_image). */
+vec4 scene_image(vec4 rect, vec2 uv)
 {
-  ivec2 size = textureSize(image, 0);
+  ivec2 origin = ivec2(rect.xy);
+  ivec2 size = ivec2(rect.zw);
   vec2 x = uv * vec2(size) - 0.5;
   vec2 low = floor(x);
   vec2 w = x - low;
-  ivec2 a = (ivec2(low) % size + size) % size;
+  /* mod of floats: GLSL leaves % of a negative int undefined (llvmpipe's is off but for
+   * sizes that are powers of two). */
+  ivec2 a = min(ivec2(mod(low, vec2(size))), size - 1);
   ivec2 b = (a + 1) % size;
-  return mix(mix(texelFetch(image, a, 0), texelFetch(image, ivec2(b.x, a.y), 0), w.x),
-             mix(texelFetch(image, ivec2(a.x, b.y), 0), texelFetch(image, b, 0), w.x), w.y);
-}
-
-/* The first MAX_IMAGES image textures at `uv` (white past them). */
-vec4 scene_image(int image, vec2 uv)
-{
-  if (image == 0) {
-    return bilinear(scene_image0, uv);
-  }
-  if (image == 1) {
-    return bilinear(scene_image1, uv);
-  }
-  if (image == 2) {
-    return bilinear(scene_image2, uv);
-  }
-  if (image == 3) {
-    return bilinear(scene_image3, uv);
-  }
-  return vec4(1.0);
+  return mix(mix(texelFetch(scene_images, origin + a, 0), texelFetch(scene_images, origin + ivec2(b.x, a.y), 0), w.x),
+             mix(texelFetch(scene_images, origin + ivec2(a.x, b.y), 0), texelFetch(scene_images, origin + b, 0), w.x),
+             w.y);
 }
 
 /* Farther than any hit: a segment looked along to its end. */
@@ -66,7 +54,7 @@ struct GlassCrossings {
 /* The lit colour the ray meets (the refracted or reflected meshes' shading: vertex colour
  * times image texture, lit with the true direction back along the ray, SBC paper section
  * V-C), or WORLD_COLOR, and in `distance` how far along its last segment (-1: the world).
- * `known` is false where it meets an image texture past the first MAX_IMAGES (the
+ * `known` is false where it meets an image texture that did not fit the atlas (the
  * caller leaves that pixel to another method). A mirror reflects the ray off its smooth
  * normal, `bounces` times at most, as band_trace.BandTracer.trace_rays follows it: where
  * it would reflect once more, or the reflection turns through its face, the world shows.
@@ -111,10 +99,11 @@ vec3 followed_color(vec3 origin, vec3 direction, int skip, int bounces, int medi
                     weights.z * table_texel(vertex_colors, v.z);
       int image = int(uv0.z);
       if (image >= 0) {
-        known = image < MAX_IMAGES;
+        vec4 rect = table_texel(image_rects, image);
+        known = rect.z > 0.5; /* else it did not fit the atlas */
         vec2 texel_uv = weights.x * uv0.xy + weights.y * table_texel(vertex_uvs, v.y).xy +
                         weights.z * table_texel(vertex_uvs, v.z).xy;
-        albedo *= scene_image(image, texel_uv);
+        albedo *= known ? scene_image(rect, texel_uv) : vec4(1.0);
       }
       distance = t;
       return shade(albedo.rgb, n0.w, normal, -direction);

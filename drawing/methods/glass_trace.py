@@ -9,8 +9,8 @@ to the scene's Max Order, what the glass reflects where the ray meets it and bac
 where it leaves, mixed by the exact Fresnel reflectance (``glsl/glass_trace.glsl``): the
 picture Render Image's CPU trace gives (``blender/glass_layer.py``), convex or not, one
 glass seen through another, whatever the number of images a point has through the glass.
-The cost follows the glass's pixels, not the scene's vertices. Scenes with more image
-textures than a trace samples (``scene_tables.MAX_IMAGES``) are drawn by the refraction
+The cost follows the glass's pixels, not the scene's vertices. Scenes whose image
+textures do not fit a trace's atlas (``image_atlas.py``) are drawn by the refraction
 search instead (``refraction_draw.py``).
 
 What is uploaded once per renderer: the scene's tables; per frame, one dispatch over the
@@ -115,7 +115,7 @@ class GlassTracePass(FramePass):
             return
         shader = trace_shader()
         shader.bind()
-        self.tables.bind(shader, frame.images)
+        self.tables.bind(shader)
         shader.uniform_float("inverse_view_projection", frame.world_to_clip.inverted())
         shader.uniform_float("camera", camera_position(view, self.geometry.shift))
         shader.uniform_int("rect_origin", (x, y))

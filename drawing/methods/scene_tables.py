@@ -23,6 +23,7 @@ from ..draw_geometry import mesh_attributes
 from ..draw_shaders import shading_source
 from ..gpu_data import data_texture
 from ..shader_sources import glsl_source
+from . import image_atlas
 from .sbc_pack import MAX_TEXTURE_HEIGHT
 
 #: Texels a slot of the tree: its triangle's first corner and its two edges from it, what
@@ -49,16 +50,14 @@ GLASS_CODE = -3
 #: Glass interfaces a ray crosses or reflects totally at before it is given up as trapped
 #: and black (Render Image's ``engine/glass/paths.MAX_INTERFACES``).
 MAX_INTERFACES = 8
-#: Image textures a trace samples (one sampler each); a ray meeting a mesh with a later
-#: image is left to another method.
-MAX_IMAGES = 4
 #: log2 of the texels in a row of every table (``glsl/scene_bvh.glsl``'s ``table_texel``
 #: finds a texel by shifts and masks; integer division costs llvmpipe more): 4096 texels,
 #: so that a tree of 22 million slots (some 16 million triangles) fits the rows every
 #: OpenGL 4.5 allows.
 TABLE_ROW_BITS = 12
 #: The samplers of the tables, in the order :meth:`SceneTables.bind` binds them.
-TABLES = ("bvh_boxes", "bvh_slots", "scene_vertices", "vertex_colors", "vertex_normals", "vertex_uvs")
+TABLES = ("bvh_boxes", "bvh_slots", "scene_vertices", "vertex_colors", "vertex_normals", "vertex_uvs",
+          "image_rects", "scene_images")
 
 
 @dataclass(frozen=True)
@@ -74,8 +73,8 @@ class TracedScene:
 
 def samples_every_image(meshes) -> bool:
     """Whether a trace samples every image texture of ``meshes`` (``DiffuseMesh`` each):
-    no more than :data:`MAX_IMAGES` of them have one."""
-    return sum(getattr(mesh, "image", None) is not None for mesh in meshes) <= MAX_IMAGES
+    they all fit its atlas (:mod:`.image_atlas`)."""
+    return image_atlas.fits([mesh.image.shape[1::-1] for mesh in meshes if getattr(mesh, "image", None) is not None])
 
 
 def declare(info, first_sampler: int, world: bool = True) -> None:
@@ -87,8 +86,7 @@ def declare(info, first_sampler: int, world: bool = True) -> None:
     info.push_constant('FLOAT', "t_min")
     info.push_constant('INT', "leaf_first")
     info.push_constant('INT', "max_order")
-    names = TABLES + tuple(f"scene_image{k}" for k in range(MAX_IMAGES))
-    for slot, name in enumerate(names, first_sampler):
+    for slot, name in enumerate(TABLES, first_sampler):
         info.sampler(slot, 'FLOAT_2D', name)
 
 
@@ -98,7 +96,7 @@ def prelude(world: bool = True) -> str:
     distance)."""
     defines = {"LEAF_SIZE": LEAF_SIZE, "EDGE_SLACK": f"{EDGE_SLACK:.9e}", "MIRROR_CODE": f"{MIRROR_CODE:.1f}",
                "GLASS_CODE": f"{GLASS_CODE:.1f}", "EMPTY": EMPTY_NODE, "SLOT_TEXELS": SLOT_TEXELS,
-               "MAX_INTERFACES": MAX_INTERFACES, "MAX_IMAGES": MAX_IMAGES, "TABLE_ROW": 1 << TABLE_ROW_BITS,
+               "MAX_INTERFACES": MAX_INTERFACES, "TABLE_ROW": 1 << TABLE_ROW_BITS,
                "TABLE_ROW_BITS": TABLE_ROW_BITS,
                "WORLD_COLOR": "world.rgb" if world else "vec3(0.0)"}
     return shading_source() + glsl_source("scene_bvh.glsl", defines) + glsl_source("scene_colors.glsl")
@@ -216,23 +214,20 @@ class SceneTables:
                                   "need not show")
         vertex_codes = np.zeros(len(vertices))
         vertex_codes[triangles] = codes[:, None]  # a vertex is one mesh's: its code
+        atlas, rects = image_atlas.image_atlas(self.geometry.images)
         self._textures = ([data_texture(table, 1 << TABLE_ROW_BITS)
-                           for table in (boxes, slots, vertices, colors, normals, np.c_[uvs, vertex_codes])],
-                          leaf_first)
+                           for table in (boxes, slots, vertices, colors, normals, np.c_[uvs, vertex_codes], rects)]
+                          + [data_texture(atlas)], leaf_first)
 
-    def bind(self, shader, images, bounces: int | None = None, world: bool = True,
-             start_share: float = START_SHARE) -> None:
-        """The tables, the first :data:`MAX_IMAGES` images (``images(k)``, a frame's; -1:
-        none) and the push constants of :func:`declare` (``world`` as there) on a bound
-        ``shader``; a ray reflects off mirrors ``bounces`` times at most (default: the
-        scene's Max Order) and meets triangles from ``start_share`` of the scene's
-        diameter on."""
+    def bind(self, shader, bounces: int | None = None, world: bool = True, start_share: float = START_SHARE) -> None:
+        """The tables (the images' atlas among them) and the push constants of
+        :func:`declare` (``world`` as there) on a bound ``shader``; a ray reflects off
+        mirrors ``bounces`` times at most (default: the scene's Max Order) and meets
+        triangles from ``start_share`` of the scene's diameter on."""
         self._ensure()
         textures, leaf_first = self._textures
         for name, texture in zip(TABLES, textures):
             shader.uniform_sampler(name, texture)
-        for k in range(MAX_IMAGES):
-            shader.uniform_sampler(f"scene_image{k}", images(k if k < len(self.geometry.images) else -1))
         if world:
             shader.uniform_float("world", self.world)
         shader.uniform_float("t_min", start_share * self.geometry.diameter)

@@ -114,7 +114,7 @@ class TracedPass(FramePass):
         shader = trace_shader()
         shader.bind()
         # A mirror hit is one bounce: the scene's tables follow the rest of Max Order.
-        self.tables.bind(shader, frame.images, bounces=self.max_order - 1, world=False,
+        self.tables.bind(shader, bounces=self.max_order - 1, world=False,
                          start_share=REFLECTED_START_SHARE)
         shader.uniform_float("inverse_view_projection", frame.world_to_clip.inverted())
         shader.uniform_float("camera", camera_position(view, self.geometry.shift))

@@ -204,7 +204,7 @@ def test_the_glass_panel_shows_the_index_of_refraction_in_use_and_what_draws_the
 
 def test_the_glass_note_names_what_draws_each_glass_in_the_viewport_and_why():
     """Once reflections are started, the note follows the live state's glass layer: the
-    GPU's trace for any glass; past four image textures, the refraction search for convex
+    GPU's trace for any glass; past the image textures its atlas holds, the refraction search for convex
     glass and the reason it has neither for other glass."""
     from types import SimpleNamespace
 
@@ -218,7 +218,7 @@ def test_the_glass_note_names_what_draws_each_glass_in_the_viewport_and_why():
         assert glass_note(name, state).startswith("The viewport and Render Image trace it on the GPU every frame")
     layer.traced, layer.unsearched = False, {"Bottle": reason}
     assert glass_note("Ball", state).startswith("The viewport draws what lies behind it by the refraction search")
-    assert glass_note("Bottle", state).startswith(f"The viewport shows it as a solid object: {reason}. The scene has")
+    assert glass_note("Bottle", state).startswith(f"The viewport shows it as a solid object: {reason}. The scene's image")
     assert glass_note("Lamp", state).endswith("once reflections are started.")
     assert glass_note("Ball", None).endswith("once reflections are started.")
 

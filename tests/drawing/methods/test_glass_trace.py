@@ -7,8 +7,7 @@ paths through the glass (engine/glass/paths.py) met with the scene by the CPU's 
 
 import numpy as np
 
-from curved_reflections.drawing.methods.scene_tables import (EMPTY_NODE, LEAF_SIZE, MAX_IMAGES, SLOT_TEXELS,
-                                                              bvh_tables)
+from curved_reflections.drawing.methods.scene_tables import EMPTY_NODE, LEAF_SIZE, SLOT_TEXELS, bvh_tables
 from curved_reflections.engine.geometry import shapes
 from curved_reflections.engine.geometry.sphere import icosphere
 from curved_reflections.engine.glass import Glass, GlassSet
@@ -135,24 +134,31 @@ def _textured(mesh, image):
                        uvs=0.25 * mesh.vertices[:, :2], image=image)
 
 
-def test_image_textures_are_sampled_and_past_the_first_four_left_to_the_search(gpu_ready):
-    """The floor under the box with a checker image texture: traced as the CPU samples
-    it. With more meshes of image textures than the trace samples, the layer draws the
-    glass by the refraction search (and Render Image traces it on the CPU)."""
+def test_every_image_texture_is_sampled_and_past_the_atlas_left_to_the_search(gpu_ready, monkeypatch):
+    """The floor and the panel behind the box with image textures of other sizes, after
+    five other textured meshes out of sight (their images the seventh and sixth of the
+    scene's, in the atlas beside five others): traced as the CPU samples them. Where the
+    images do not fit the atlas (its rows cut to one here), the layer draws the glass by
+    the refraction search (and Render Image traces it on the CPU)."""
     from curved_reflections.blender.glass_layer import glass_layer
+    from curved_reflections.drawing.methods import image_atlas
     from types import SimpleNamespace
 
     floor, panel = _floor_and_panel()
-    checker = np.ones((2, 2, 4), np.float32)
-    checker[0, 0, :3] = checker[1, 1, :3] = (0.2, 0.2, 0.9)
+    checker = np.ones((2, 3, 4), np.float32)
+    checker[0, 0, :3] = checker[1, 1, :3] = checker[0, 2, :3] = (0.2, 0.2, 0.9)
+    stripes = np.ones((5, 1, 4), np.float32)
+    stripes[::2, 0, :3] = (0.9, 0.6, 0.1)
+    hidden = [_textured(DiffuseMesh(f"Hidden{k}", panel.vertices - (0.0, 0.0, 50.0), panel.triangles, panel.colors),
+                        np.full((k + 1, 4, 4), 0.5, np.float32)) for k in range(5)]
+    meshes = hidden + [_textured(floor, checker), _textured(panel, stripes)]
     view = look_at_view((2.5, -5.0, 3.5), (0.0, 0.0, 0.0), fov_y_deg=35.0, width=WIDTH, height=HEIGHT)
     box = Glass(flat_box("Box", (-0.8, -0.8, -0.8), (0.8, 0.8, 0.8)), N, True)
-    (rows, _), wrong, _ = _against_the_cpu([box], [_textured(floor, checker), panel], view)
+    (rows, _), wrong, _ = _against_the_cpu([box], meshes, view)
     assert len(rows) > 3000 and wrong.mean() < 0.005, wrong.mean()
-    many = [_textured(floor, checker * (k + 1) / (MAX_IMAGES + 1)) for k in range(MAX_IMAGES + 1)]
-    for meshes, traced in (([floor, panel], True), (many, False)):
-        captured = SimpleNamespace(glass=[box], meshes=meshes, reflectors=[])
-        layer = glass_layer(None, captured, ())
+    for limit, traced in ((image_atlas.MAX_TEXTURE_HEIGHT, True), (1, False)):
+        monkeypatch.setattr(image_atlas, "MAX_TEXTURE_HEIGHT", limit)
+        layer = glass_layer(None, SimpleNamespace(glass=[box], meshes=meshes, reflectors=[]), ())
         assert layer.traced == traced and [p.name for p in layer.renderer.passes][1:] == (
             ["glass trace"] if traced else ["refraction"])
 

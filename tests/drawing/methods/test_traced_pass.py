@@ -36,18 +36,32 @@ def _scene(mirror_shape):
     return mirror, meshes
 
 
-@pytest.mark.parametrize("shape, max_order", [("torus", 1), ("bumpy", 1), ("torus", 2)])
-def test_every_mirror_pixel_shows_what_the_exact_trace_of_its_ray_meets(gpu_ready, shape, max_order):
+def _textured(meshes):
+    """``meshes`` each with an image texture of its own size (none square), after three
+    textured meshes out of sight: seven images, the visible ones the fourth to seventh."""
+    rng = np.random.default_rng(5)
+    hidden = [DiffuseMesh(f"Hidden{k}", meshes[1].vertices - (0.0, 0.0, 60.0), meshes[1].triangles, meshes[1].colors)
+              for k in range(3)]
+    return [DiffuseMesh(m.name, m.vertices, m.triangles, m.colors, uvs=0.3 * m.vertices[:, :2] + 0.2 * m.vertices[:, 2:],
+                        image=rng.uniform(0.2, 1.0, (2 + k, 5 - k % 3, 4)).astype(np.float32))
+            for k, m in enumerate(hidden + meshes)]
+
+
+@pytest.mark.parametrize("shape, max_order, textured", [("torus", 1, False), ("bumpy", 1, False), ("torus", 2, False),
+                                                        ("bumpy", 1, True)])
+def test_every_mirror_pixel_shows_what_the_exact_trace_of_its_ray_meets(gpu_ready, shape, max_order, textured):
     """A torus (not star-shaped: it sees itself, second orders at Max Order 2) and a ball
-    with bumps of 15 % of its radius (its reflections fold): every mirror pixel the GPU
-    traces shows the colour the CPU's exact trace of its eye ray gives (measured: all
-    but 0.1 %, on the silhouette, where the rasteriser and the ray disagree on the
-    mirror; 94-99 % of the pixels show the room, the rest the world)."""
+    with bumps of 15 % of its radius (its reflections fold), the room and the columns
+    also with image textures (seven in the scene): every mirror pixel the GPU traces
+    shows the colour the CPU's exact trace of its eye ray gives (measured: all but 0.1 %,
+    on the silhouette, where the rasteriser and the ray disagree on the mirror; 94-99 %
+    of the pixels show the room, the rest the world)."""
     from curved_reflections.drawing.gpu_data import read_texture
     from curved_reflections.engine.frame_settings import FrameSettings
 
     surface = mirror_family.torus() if shape == "torus" else mirror_family.bumpy_ball(0.15)
     mirror, meshes = _scene(surface)
+    meshes = _textured(meshes) if textured else meshes
     settings = FrameSettings(max_order=max_order)
     renderer = ReflectionRenderer([mirror], meshes, settings=settings,
                                   passes=(TracedPass.factory([TracedMirror(0, "Mirror")]),))
