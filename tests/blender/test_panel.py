@@ -218,7 +218,7 @@ def test_the_glass_note_names_what_draws_each_glass_in_the_viewport_and_why():
         assert glass_note(name, state).startswith("The viewport and Render Image trace it on the GPU every frame")
     layer.traced, layer.unsearched = False, {"Bottle": reason}
     assert glass_note("Ball", state).startswith("The viewport draws what lies behind it by the refraction search")
-    assert glass_note("Bottle", state).startswith(f"The viewport shows it as a solid object: {reason}. The scene's image")
+    assert glass_note("Bottle", state).startswith(f"The viewport shows it as a solid object: {reason}. The scene's")
     assert glass_note("Lamp", state).endswith("once reflections are started.")
     assert glass_note("Ball", None).endswith("once reflections are started.")
 

@@ -42,7 +42,8 @@ def _textured(meshes):
     rng = np.random.default_rng(5)
     hidden = [DiffuseMesh(f"Hidden{k}", meshes[1].vertices - (0.0, 0.0, 60.0), meshes[1].triangles, meshes[1].colors)
               for k in range(3)]
-    return [DiffuseMesh(m.name, m.vertices, m.triangles, m.colors, uvs=0.3 * m.vertices[:, :2] + 0.2 * m.vertices[:, 2:],
+    return [DiffuseMesh(m.name, m.vertices, m.triangles, m.colors,
+                        uvs=0.3 * m.vertices[:, :2] + 0.2 * m.vertices[:, 2:],
                         image=rng.uniform(0.2, 1.0, (2 + k, 5 - k % 3, 4)).astype(np.float32))
             for k, m in enumerate(hidden + meshes)]
 
