@@ -12,11 +12,11 @@ them; glass of a Refraction BSDF reflects nothing (and where it should reflect t
 shows black, as Cycles does).
 
 Where the meshes' image textures do not fit the trace's atlas
-(``drawing/methods/image_atlas.py``: some 64 million texels), the live view draws convex glass by the refraction search
-instead (``drawing/methods/refraction_draw.py``: every diffuse vertex where it appears,
-each fragment a ray cast along its pixel's path) with the iterative search drawing the
-glass's reflections as a mirror's (:func:`glass_mirror`), and shows other glass as a solid
-object; Render Image then traces each glass pixel on the CPU
+(``drawing/methods/image_atlas.py``: some 64 million texels), the live view draws convex
+glass by the refraction search instead (``drawing/methods/refraction_draw.py``: every
+diffuse vertex where it appears, each fragment a ray cast along its pixel's path) with the
+iterative search drawing the glass's reflections as a mirror's (:func:`glass_mirror`), and
+shows other glass as a solid object; Render Image then traces each glass pixel on the CPU
 (``engine/glass/paths.py``, ``band_trace.BandTracer.trace_rays``), the same model. Those
 pixels replace the frame's (where the mirrors' renderer drew the glass as a solid
 object); a scene of glass alone is the layer's frame. Mirrors reflect glass as a solid
