@@ -8,7 +8,7 @@ the command line; the figures themselves are the full run's (docs/benchmarks/tra
 
 import re
 
-ROW = re.compile(r"^\| (?P<name>[a-z_0-9]+) \| (?:yes|no) \| [A-Za-z, ]+ \| \*\*[\d.]+x\*\* \| "
+ROW = re.compile(r"^\| (?P<name>[a-z_0-9]+) \| (?:yes|no) \| [A-Za-z, ]+ \| \*\*[\d.]+x\*\* \| [\d.]+x \| "
                  r"[\d.]+ %(?: / [\d.]+ %)? \| \*\*[\d.]+x\*\* \| (?P<pixels>[\d,]+) \| (?P<off>[\d.]+) % \|",
                  flags=re.MULTILINE)
 
