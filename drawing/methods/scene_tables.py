@@ -206,8 +206,10 @@ class SceneTables:
         vertices, triangles, codes, colors, normals, uvs, groups = self._arrays()
         boxes, slots, leaf_first = bvh_tables(vertices, triangles, groups)
         if len(slots) > MAX_TEXTURE_HEIGHT << TABLE_ROW_BITS:
-            largest = max(self.meshes, key=lambda mesh: len(mesh.triangles))
-            raise SceneInputError(largest.name, f"the scene's {len(triangles):,} triangles need a tree of "
+            parts = [(part.name, len(part.triangles)) for part in self.meshes + self.surfaces]
+            parts += [(glass.name, len(glass.surface.triangles)) for glass in self.glasses]
+            largest = max(parts, key=lambda part: part[1])[0]
+            raise SceneInputError(largest, f"the scene's {len(triangles):,} triangles need a tree of "
                                   f"{len(slots) // SLOT_TEXELS:,} slots, more than the GPU's ray trace holds "
                                   f"({(MAX_TEXTURE_HEIGHT << TABLE_ROW_BITS) // SLOT_TEXELS:,}); lower this mesh's "
                                   "resolution (e.g. its subdivision levels), or hide objects the mirrors and glass "

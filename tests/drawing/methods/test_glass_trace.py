@@ -228,8 +228,9 @@ def test_a_glass_objects_solid_mesh_is_left_out_of_the_tables_and_the_image_indi
 
 
 def test_a_scene_too_large_for_the_tables_is_refused_naming_its_largest_mesh(monkeypatch):
-    """Tables taller than a texture may be are refused with the mesh to simplify, before
-    any texture is made (rows cut to one here: 4096 texels, fewer than the slots)."""
+    """Tables taller than a texture may be are refused naming the largest object to
+    simplify (a mesh, a mirror or glass), before any texture is made (rows cut to one
+    here: 4096 texels, fewer than the slots)."""
     from types import SimpleNamespace
 
     import pytest
@@ -242,6 +243,11 @@ def test_a_scene_too_large_for_the_tables_is_refused_naming_its_largest_mesh(mon
     meshes = [DiffuseMesh(name, shape.vertices, shape.triangles, np.ones((len(shape.vertices), 4), np.float32))
               for name, shape in (("Panel", flat_box("Panel", (-1.0, 3.0, -1.0), (1.0, 3.1, 1.0))), ("Ball", ball))]
     tables = scene_tables.SceneTables(meshes, SimpleNamespace(shift=np.zeros(3)))
+    with pytest.raises(SceneInputError, match="more than the GPU's ray trace holds") as error:
+        tables._ensure()
+    assert error.value.object_name == "Ball"
+    # Glass alone, no diffuse mesh: the glass is named.
+    tables = scene_tables.SceneTables([], SimpleNamespace(shift=np.zeros(3)), glasses=[Glass(ball, N, True)])
     with pytest.raises(SceneInputError, match="more than the GPU's ray trace holds") as error:
         tables._ensure()
     assert error.value.object_name == "Ball"
